@@ -1,0 +1,43 @@
+# cdh_planner: venv, demo, tests, benchmarks.
+# `make demo` and `make test` work from a fresh clone: they build .venv themselves.
+
+SHELL := /bin/bash
+VENV   := .venv
+PY     := $(VENV)/bin/python
+STAMP  := $(VENV)/.installed
+# Prefer python3.11; fall back to python3.
+PYTHON ?= $(shell command -v python3.11 2>/dev/null || command -v python3)
+
+# ROS isolation: discovery stays on this machine; ament_index finds the
+# message definitions that the PyPI wheels install into the venv.
+export ROS_AUTOMATIC_DISCOVERY_RANGE := LOCALHOST
+export AMENT_PREFIX_PATH := $(abspath $(VENV))
+export PIP_DISABLE_PIP_VERSION_CHECK := 1
+
+.PHONY: venv demo test bench clean
+
+venv: $(STAMP)
+
+$(VENV)/bin/python:
+	$(PYTHON) -m venv $(VENV)
+
+# Always use the venv's own python (ros-wheels-bootstrapper re-execs it).
+$(STAMP): $(VENV)/bin/python requirements.txt setup.py setup.cfg package.xml
+	$(PY) -m pip install -r requirements.txt
+	$(PY) -m pip install -e .
+	touch $(STAMP)
+
+demo: venv
+	$(VENV)/bin/cdh-planner demo
+
+test: venv
+	$(PY) -m pytest
+
+bench: venv
+	@set -e; shopt -s nullglob; files=(benchmarks/*.py); \
+	if [ $${#files[@]} -eq 0 ]; then echo "no benchmarks/*.py"; fi; \
+	for f in "$${files[@]}"; do echo "== $$f"; $(PY) "$$f"; done
+
+clean:
+	rm -rf $(VENV) build install log .pytest_cache *.egg-info
+	find . -name __pycache__ -type d -prune -exec rm -rf {} +

@@ -1,0 +1,20 @@
+"""Subcommands of ``cdh-planner``, one module per subcommand.
+
+``cdh_planner.cli`` imports ``cdh_planner.commands.<name>`` for each name in
+``cdh_planner.cli.COMMANDS`` that exists, and calls its ``add_parser(subparsers)``.
+A module adds its own parser and sets ``func`` with ``set_defaults(func=run)``,
+where ``run(args) -> int`` returns the process exit code. Raise
+``cdh_planner.errors.InputError`` for bad user input: the CLI prints it as one line
+and exits 2, with no traceback.
+
+Example::
+
+    def add_parser(subparsers):
+        p = subparsers.add_parser('verify', help='check a robot / problem file')
+        p.add_argument('file')
+        p.set_defaults(func=run)
+
+    def run(args) -> int:
+        ...
+        return 0
+"""

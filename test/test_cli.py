@@ -1,0 +1,104 @@
+"""The CLI registry: --help, subcommand discovery, one-line user errors."""
+import subprocess
+import sys
+import types
+
+import pytest
+
+from cdh_planner import __version__, cli
+from cdh_planner.errors import InputError
+
+
+def _fake_command(name, run):
+    """A module like cdh_planner.commands.<name>, with add_parser/run."""
+    mod = types.ModuleType(f'cdh_planner.commands.{name}')
+
+    def add_parser(subparsers):
+        p = subparsers.add_parser(name, help=f'fake {name} command')
+        p.add_argument('--value', default='x')
+        p.set_defaults(func=run)
+
+    mod.add_parser = add_parser
+    mod.run = run
+    return mod
+
+
+@pytest.fixture
+def fake(monkeypatch):
+    """Register fake subcommands under names of our own (not the real COMMANDS)."""
+    def install(name, run):
+        monkeypatch.setitem(sys.modules, f'cdh_planner.commands.{name}', _fake_command(name, run))
+        monkeypatch.setattr(cli, 'COMMANDS', list(cli.COMMANDS) + [name])
+    return install
+
+
+def test_help_exits_0_and_lists_existing_commands(fake, capsys):
+    fake('fakeok', lambda args: 0)
+    assert cli.main(['--help']) == 0
+    out = capsys.readouterr().out
+    assert 'fakeok' in out
+    for name in cli.COMMANDS:
+        if cli._command_module(name) is not None:
+            assert name in out
+
+
+def test_missing_command_modules_are_skipped(monkeypatch):
+    monkeypatch.setattr(cli, 'COMMANDS', ['no_such_command_xyz'])
+    parser = cli.build_parser()  # must not raise
+    assert 'no_such_command_xyz' not in parser.format_help()
+
+
+def test_version(capsys):
+    assert cli.main(['--version']) == 0
+    assert __version__ in capsys.readouterr().out
+
+
+def test_no_command_is_usage_error(capsys):
+    assert cli.main([]) == 2
+    assert 'usage' in capsys.readouterr().err
+
+
+def test_handler_return_code_is_passed_through(fake):
+    fake('fakerc', lambda args: 7)
+    assert cli.main(['fakerc']) == 7
+
+
+def test_input_error_is_one_line_exit_2(fake, capsys):
+    def run(args):
+        raise InputError('limits.length_min[2]', -1.0, 'must be positive')
+
+    fake('fakebad', run)
+    assert cli.main(['fakebad']) == 2
+    captured = capsys.readouterr()
+    err = captured.err
+    assert err == "cdh-planner: error: limits.length_min[2] = -1.0: must be positive\n"
+    assert 'Traceback' not in err + captured.out
+
+
+def test_file_not_found_names_the_path(fake, capsys):
+    def run(args):
+        open('/nonexistent/robot.yaml')
+
+    fake('fakefnf', run)
+    assert cli.main(['fakefnf']) == 2
+    err = capsys.readouterr().err
+    assert err.startswith('cdh-planner: error:')
+    assert '/nonexistent/robot.yaml' in err
+    assert 'Traceback' not in err
+    assert len(err.strip().splitlines()) == 1
+
+
+def test_keyboard_interrupt_is_130(fake):
+    def run(args):
+        raise KeyboardInterrupt
+
+    fake('fakeint', run)
+    assert cli.main(['fakeint']) == 130
+
+
+def test_console_script_help_runs():
+    """The module runs as a process (same code path as the cdh-planner script)."""
+    proc = subprocess.run([sys.executable, '-m', 'cdh_planner.cli', '--help'],
+                          capture_output=True, text=True, timeout=60)
+    assert proc.returncode == 0, proc.stderr
+    assert 'usage: cdh-planner' in proc.stdout
