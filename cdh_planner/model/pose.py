@@ -1,0 +1,143 @@
+"""Platform orientation in tilt-and-torsion angles (the paper's tau) and quaternions.
+
+R(tau) = Rz(phi) Ry(theta) Rz(sigma - phi), tau = (phi, theta, sigma) in radians,
+theta in [0, pi]; phi and sigma are 2 pi periodic. Quaternions are (x, y, z, w), as in
+ROS (geometry_msgs/Quaternion) and scipy.
+
+Everything is vectorised over leading axes: tau has shape (..., 3), R (..., 3, 3).
+"""
+
+import numpy as np
+from scipy.spatial.transform import Rotation
+
+from ..errors import InputError
+
+TWO_PI = 2.0 * np.pi
+
+
+def wrap_angle(a):
+    """Wrap angles to [-pi, pi) (radians)."""
+    return (np.asarray(a, dtype=float) + np.pi) % TWO_PI - np.pi
+
+
+def rotation_tt(tau):
+    """Rotation matrix R = Rz(phi) Ry(theta) Rz(sigma - phi), shape (..., 3, 3)."""
+    tau = np.asarray(tau, dtype=float)
+    phi, theta, sigma = tau[..., 0], tau[..., 1], tau[..., 2]
+    psi = sigma - phi
+    cf, sf = np.cos(phi), np.sin(phi)
+    ct, st = np.cos(theta), np.sin(theta)
+    cp, sp = np.cos(psi), np.sin(psi)
+    R = np.empty(tau.shape[:-1] + (3, 3))
+    R[..., 0, 0] = cf * ct * cp - sf * sp
+    R[..., 0, 1] = -cf * ct * sp - sf * cp
+    R[..., 0, 2] = cf * st
+    R[..., 1, 0] = sf * ct * cp + cf * sp
+    R[..., 1, 1] = -sf * ct * sp + cf * cp
+    R[..., 1, 2] = sf * st
+    R[..., 2, 0] = -st * cp
+    R[..., 2, 1] = st * sp
+    R[..., 2, 2] = ct
+    return R
+
+
+def rotation_tt_derivatives(tau):
+    """dR/dphi, dR/dtheta, dR/dsigma stacked as shape (..., 3, 3, 3) (last index = angle)."""
+    tau = np.asarray(tau, dtype=float)
+    phi, theta, sigma = tau[..., 0], tau[..., 1], tau[..., 2]
+    psi = sigma - phi
+    Rz_phi, dRz_phi = _rz(phi)
+    Ry_t, dRy_t = _ry(theta)
+    Rz_psi, dRz_psi = _rz(psi)
+    d_phi = dRz_phi @ Ry_t @ Rz_psi - Rz_phi @ Ry_t @ dRz_psi
+    d_theta = Rz_phi @ dRy_t @ Rz_psi
+    d_sigma = Rz_phi @ Ry_t @ dRz_psi
+    return np.stack([d_phi, d_theta, d_sigma], axis=-1)
+
+
+def _rz(a):
+    c, s = np.cos(a), np.sin(a)
+    z, o = np.zeros_like(a), np.ones_like(a)
+    R = np.stack([np.stack([c, -s, z], -1), np.stack([s, c, z], -1), np.stack([z, z, o], -1)], -2)
+    dR = np.stack([np.stack([-s, -c, z], -1), np.stack([c, -s, z], -1), np.stack([z, z, z], -1)], -2)
+    return R, dR
+
+
+def _ry(a):
+    c, s = np.cos(a), np.sin(a)
+    z, o = np.zeros_like(a), np.ones_like(a)
+    R = np.stack([np.stack([c, z, s], -1), np.stack([z, o, z], -1), np.stack([-s, z, c], -1)], -2)
+    dR = np.stack([np.stack([-s, z, c], -1), np.stack([z, z, z], -1), np.stack([-c, z, -s], -1)], -2)
+    return R, dR
+
+
+def tau_from_rotation(R, phi_hint=0.0):
+    """Tilt-and-torsion angles of rotation matrices, theta in [0, pi].
+
+    At theta = 0 (and theta = pi) phi is not determined by R: ``phi_hint`` (radians) is
+    used there, so a pose on the representation singularity keeps the azimuth the caller
+    meant. Returns shape (..., 3), phi and sigma wrapped to [-pi, pi).
+    """
+    R = np.asarray(R, dtype=float)
+    cos_t = np.clip(R[..., 2, 2], -1.0, 1.0)
+    sin_t = np.hypot(R[..., 0, 2], R[..., 1, 2])
+    theta = np.arctan2(sin_t, cos_t)
+    phi_hint = np.broadcast_to(np.asarray(phi_hint, dtype=float), theta.shape)
+    regular = sin_t > 1e-9
+    phi = np.where(regular, np.arctan2(R[..., 1, 2], R[..., 0, 2]), phi_hint)
+    # psi = sigma - phi from the last row when regular; on the singular set the
+    # product reduces to a plane rotation whose angle gives sigma directly.
+    psi = np.arctan2(R[..., 2, 1], -R[..., 2, 0])
+    sigma_regular = phi + psi
+    angle_xy = np.arctan2(R[..., 1, 0], R[..., 0, 0])
+    sigma_north = angle_xy  # theta = 0: R = Rz(sigma)
+    # theta = pi: R = Rz(phi) Ry(pi) Rz(sigma - phi); R[1,0], -R[0,0] give sigma - 2 phi
+    sigma_south = 2.0 * phi_hint + np.arctan2(R[..., 1, 0], -R[..., 0, 0])
+    sigma = np.where(regular, sigma_regular, np.where(cos_t > 0, sigma_north, sigma_south))
+    return np.stack([wrap_angle(phi), theta, wrap_angle(sigma)], axis=-1)
+
+
+def quaternion_from_tau(tau):
+    """Quaternion (x, y, z, w) of tilt-and-torsion angles, shape (..., 4), w >= 0."""
+    tau = np.asarray(tau, dtype=float)
+    q = Rotation.from_matrix(rotation_tt(tau).reshape(-1, 3, 3)).as_quat()
+    q = np.where(q[:, 3:4] < 0, -q, q)
+    return q.reshape(tau.shape[:-1] + (4,))
+
+
+def check_quaternion(q, field="quaternion", tol=1e-3):
+    """Validate a quaternion (x, y, z, w): finite, non-zero and unit length within ``tol``.
+
+    A non-normalised quaternion is an error, not silently normalised: it usually means the
+    fields were given in the wrong order or in degrees.
+    """
+    q = np.asarray(q, dtype=float)
+    if q.shape != (4,):
+        raise InputError(field, q.tolist(), "expected 4 numbers (x, y, z, w)")
+    if not np.all(np.isfinite(q)):
+        raise InputError(field, q.tolist(), "must be finite numbers")
+    norm = float(np.linalg.norm(q))
+    if norm < 1e-9:
+        raise InputError(field, q.tolist(), "zero quaternion is not a rotation")
+    if abs(norm - 1.0) > tol:
+        raise InputError(field, q.tolist(), f"not normalised (norm {norm:.6g}, expected 1)")
+    return q / norm
+
+
+def tau_from_quaternion(q, phi_hint=0.0):
+    """Tilt-and-torsion angles (radians) of unit quaternions (x, y, z, w), shape (..., 3)."""
+    q = np.asarray(q, dtype=float)
+    R = Rotation.from_quat(q.reshape(-1, 4)).as_matrix().reshape(q.shape[:-1] + (3, 3))
+    return tau_from_rotation(R, phi_hint)
+
+
+def rotation_from_quaternion(q):
+    """Rotation matrices of quaternions (x, y, z, w), shape (..., 3, 3)."""
+    q = np.asarray(q, dtype=float)
+    return Rotation.from_quat(q.reshape(-1, 4)).as_matrix().reshape(q.shape[:-1] + (3, 3))
+
+
+def rotation_angle_between(Ra, Rb):
+    """SO(3) geodesic distance: the angle (radians) of Ra^T Rb, shape (...)."""
+    tr = np.einsum("...ji,...ji->...", Ra, Rb)
+    return np.arccos(np.clip((tr - 1.0) / 2.0, -1.0, 1.0))

@@ -1,0 +1,207 @@
+"""The cable-driven hexapod: anchors, limits, load and wrench ellipsoid (SI units).
+
+A robot file is a ROS 2 parameters file, so the same file configures the node:
+
+    cdh_planner:
+      ros__parameters:
+        robot: {name, winch_names, base_anchors, platform_anchors, length_min, ...}
+
+Arrays are flat because ROS 2 parameters cannot nest lists: ``base_anchors`` holds
+A_1..A_6 as 18 numbers (m, base frame F1), ``platform_anchors`` B_1..B_6 (m, platform
+frame F2); a 6x6 matrix is 36 numbers row-major, or 6 numbers for a diagonal.
+"""
+
+from dataclasses import dataclass, field
+from pathlib import Path
+
+import numpy as np
+import yaml
+
+from ..errors import InputError
+
+N_CABLES = 6
+ELLIPSOID_FRAMES = ("load", "base")
+
+
+@dataclass(frozen=True)
+class Robot:
+    """A cable-driven hexapod. Lengths in m, forces in N, moments in N m.
+
+    The load wrench is ``force`` applied at ``load_point`` (platform frame) plus
+    ``moment``; the wrench ellipsoid K = {w : (w - w0)^T E (w - w0) <= 1} has centre
+    w0 = load wrench + ``ellipsoid_offset`` and shape ``ellipsoid_matrix`` (E), both given
+    in ``ellipsoid_frame``: "load" (F3: parallel to the base, origin at the load point, the
+    paper's App. A) or "base" (F1, moments about the base origin).
+    """
+
+    name: str
+    winch_names: tuple
+    base_anchors: np.ndarray  # (6, 3) A_i in F1
+    platform_anchors: np.ndarray  # (6, 3) B_i in F2
+    length_min: np.ndarray  # (6,)
+    length_max: np.ndarray
+    tension_min: np.ndarray
+    tension_max: np.ndarray
+    force: np.ndarray  # (3,) N, base frame
+    load_point: np.ndarray  # (3,) m, platform frame (the paper's g / p_m)
+    moment: np.ndarray  # (3,) N m, base frame
+    ellipsoid_frame: str
+    ellipsoid_offset: np.ndarray  # (6,)
+    ellipsoid_matrix: np.ndarray  # (6, 6) SPD, combined with the contact ellipsoid if any
+    source: str = field(default="", compare=False)
+
+    @property
+    def wrench_center_local(self):
+        """w0 in the ellipsoid frame before moving to F1: [F; M] + offset (N, N m)."""
+        return np.concatenate([self.force, self.moment]) + self.ellipsoid_offset
+
+
+def combine_contact_ellipsoid(E_w, E_c):
+    """Outer ellipsoid shape of the Minkowski sum of two ellipsoids (paper Eqs. 22-23)."""
+    return 0.5 * E_w @ np.linalg.solve(E_w + E_c, E_c)
+
+
+def load_robot(path):
+    """Read a robot from a ROS 2 parameters YAML file; raise InputError on bad content."""
+    path = Path(path)
+    if not path.is_file():
+        raise InputError("robot", str(path), "file not found")
+    try:
+        doc = yaml.safe_load(path.read_text())
+    except yaml.YAMLError as exc:
+        raise InputError("robot", str(path), f"not valid YAML: {exc}") from None
+    params = ros_parameters(doc, str(path))
+    if "robot" not in params:
+        raise InputError("robot", str(path), "no 'robot:' section under ros__parameters")
+    return robot_from_dict(params["robot"], source=str(path))
+
+
+def ros_parameters(doc, where):
+    """The ``ros__parameters`` mapping of a parameters file (first node entry)."""
+    if not isinstance(doc, dict) or not doc:
+        raise InputError(where, doc, "expected a ROS 2 parameters file (node: ros__parameters: ...)")
+    for node_name, entry in doc.items():
+        if isinstance(entry, dict) and "ros__parameters" in entry:
+            params = entry["ros__parameters"]
+            if not isinstance(params, dict):
+                raise InputError(f"{node_name}.ros__parameters", params, "expected a mapping")
+            return params
+    raise InputError(where, list(doc), "no '<node>: ros__parameters:' entry")
+
+
+ROBOT_KEYS = {
+    "name", "winch_names", "base_anchors", "platform_anchors", "length_min", "length_max",
+    "tension_min", "tension_max", "load", "wrench_ellipsoid", "contact_ellipsoid",
+}
+LOAD_KEYS = {"force", "point", "moment"}
+ELLIPSOID_KEYS = {"frame", "matrix", "offset"}
+CONTACT_KEYS = {"matrix", "center"}
+
+
+def robot_from_dict(d, source=""):
+    """Build and validate a Robot from the ``robot:`` mapping (field names as in YAML)."""
+    _check_keys("robot", d, ROBOT_KEYS, required={"base_anchors", "platform_anchors",
+                                                  "length_min", "length_max", "tension_min",
+                                                  "tension_max", "load", "wrench_ellipsoid"})
+    name = str(d.get("name", Path(source).stem or "robot"))
+    winches = d.get("winch_names", [f"winch_{i + 1}" for i in range(N_CABLES)])
+    if (not isinstance(winches, (list, tuple)) or len(winches) != N_CABLES
+            or not all(isinstance(w, str) and w for w in winches) or len(set(winches)) != N_CABLES):
+        raise InputError("robot.winch_names", winches, "expected 6 distinct non-empty names")
+    A = _vector("robot.base_anchors", d["base_anchors"], 3 * N_CABLES).reshape(N_CABLES, 3)
+    B = _vector("robot.platform_anchors", d["platform_anchors"], 3 * N_CABLES).reshape(N_CABLES, 3)
+    lmin = _per_cable("robot.length_min", d["length_min"], positive=True)
+    lmax = _per_cable("robot.length_max", d["length_max"], positive=True)
+    fmin = _per_cable("robot.tension_min", d["tension_min"], positive=False)
+    fmax = _per_cable("robot.tension_max", d["tension_max"], positive=True)
+    _check_below("robot.length_min", lmin, "robot.length_max", lmax)
+    _check_below("robot.tension_min", fmin, "robot.tension_max", fmax)
+
+    load = d["load"]
+    _check_keys("robot.load", load, LOAD_KEYS, required={"force"})
+    force = _vector("robot.load.force", load["force"], 3)
+    point = _vector("robot.load.point", load.get("point", [0.0, 0.0, 0.0]), 3)
+    moment = _vector("robot.load.moment", load.get("moment", [0.0, 0.0, 0.0]), 3)
+
+    ell = d["wrench_ellipsoid"]
+    _check_keys("robot.wrench_ellipsoid", ell, ELLIPSOID_KEYS, required={"matrix"})
+    frame = ell.get("frame", "load")
+    if frame not in ELLIPSOID_FRAMES:
+        raise InputError("robot.wrench_ellipsoid.frame", frame, f"expected one of {ELLIPSOID_FRAMES}")
+    E = _spd_matrix("robot.wrench_ellipsoid.matrix", ell["matrix"])
+    offset = _vector("robot.wrench_ellipsoid.offset", ell.get("offset", [0.0] * 6), 6)
+    if "contact_ellipsoid" in d:
+        con = d["contact_ellipsoid"]
+        _check_keys("robot.contact_ellipsoid", con, CONTACT_KEYS, required={"matrix"})
+        E_c = _spd_matrix("robot.contact_ellipsoid.matrix", con["matrix"])
+        offset = offset + _vector("robot.contact_ellipsoid.center", con.get("center", [0.0] * 6), 6)
+        E = combine_contact_ellipsoid(E, E_c)
+        E = 0.5 * (E + E.T)
+    return Robot(name=name, winch_names=tuple(winches), base_anchors=A, platform_anchors=B,
+                 length_min=lmin, length_max=lmax, tension_min=fmin, tension_max=fmax,
+                 force=force, load_point=point, moment=moment, ellipsoid_frame=frame,
+                 ellipsoid_offset=offset, ellipsoid_matrix=E, source=source)
+
+
+def _check_keys(where, d, allowed, required=()):
+    if not isinstance(d, dict):
+        raise InputError(where, d, "expected a mapping")
+    unknown = sorted(set(d) - set(allowed))
+    if unknown:
+        raise InputError(f"{where}.{unknown[0]}", d[unknown[0]],
+                         f"unknown key (allowed: {', '.join(sorted(allowed))})")
+    missing = sorted(set(required) - set(d))
+    if missing:
+        raise InputError(f"{where}.{missing[0]}", None, "required key is missing")
+
+
+def _vector(where, value, n):
+    if isinstance(value, (int, float)) and not isinstance(value, bool):
+        value = [value]
+    if not isinstance(value, (list, tuple, np.ndarray)):
+        raise InputError(where, value, f"expected a list of {n} numbers")
+    try:
+        arr = np.asarray(value, dtype=float).ravel()
+    except (TypeError, ValueError):
+        raise InputError(where, value, f"expected a list of {n} numbers") from None
+    if arr.size != n:
+        raise InputError(where, value, f"expected {n} numbers, got {arr.size}")
+    bad = np.flatnonzero(~np.isfinite(arr))
+    if bad.size:
+        raise InputError(f"{where}[{bad[0]}]", float(arr[bad[0]]), "must be a finite number")
+    return arr
+
+
+def _per_cable(where, value, positive):
+    """6 per-cable values; a single number applies to every cable."""
+    if isinstance(value, (int, float)) and not isinstance(value, bool):
+        value = [value] * N_CABLES
+    arr = _vector(where, value, N_CABLES)
+    bad = np.flatnonzero(arr <= 0 if positive else arr < 0)
+    if bad.size:
+        need = "positive" if positive else "non-negative"
+        raise InputError(f"{where}[{bad[0]}]", float(arr[bad[0]]), f"must be {need}")
+    return arr
+
+
+def _check_below(lo_name, lo, hi_name, hi):
+    bad = np.flatnonzero(lo >= hi)
+    if bad.size:
+        i = bad[0]
+        raise InputError(f"{lo_name}[{i}]", float(lo[i]),
+                         f"must be below {hi_name}[{i}] = {float(hi[i])!r}")
+
+
+def _spd_matrix(where, value):
+    """A 6x6 symmetric positive definite matrix from 36 numbers or a 6-number diagonal."""
+    n = len(value) if isinstance(value, (list, tuple)) else -1
+    if n == 6:
+        E = np.diag(_vector(where, value, 6))
+    else:
+        E = _vector(where, value, 36).reshape(6, 6)
+    if not np.allclose(E, E.T, rtol=1e-9, atol=0.0):
+        raise InputError(where, value, "must be symmetric")
+    eig = np.linalg.eigvalsh(E)
+    if eig[0] <= 0:
+        raise InputError(where, value, f"must be positive definite (smallest eigenvalue {eig[0]:.3g})")
+    return E
