@@ -19,7 +19,9 @@ export PIP_DISABLE_PIP_VERSION_CHECK := 1
 venv: $(STAMP)
 
 $(VENV)/bin/python:
-	$(PYTHON) -m venv $(VENV)
+	@test -n "$(PYTHON)" || { echo "python3.11 / python3 not found" >&2; exit 1; }
+	$(PYTHON) -m venv $(VENV) || { rm -rf $(VENV); \
+	  echo "venv creation failed: on Debian, apt-get install python3-venv (or python3.11-venv)" >&2; exit 1; }
 
 # Always use the venv's own python (ros-wheels-bootstrapper re-execs it).
 $(STAMP): $(VENV)/bin/python requirements.txt setup.py setup.cfg package.xml
