@@ -1,0 +1,319 @@
+"""``cdh-planner slice``: draw a 2-D slice of the wrench-feasible C-space to a PNG.
+
+Examples (the README pictures)::
+
+    cdh-planner slice config/robot1.yaml --fixed x=0 y=0 z=0.35 sigma=34deg \\
+        --free phi theta --range phi=-pi:pi theta=0:pi \\
+        --start -2.3 1.6 --goal 1.7 1.7 --start-label q_s --goal-label q_g --segment \\
+        -o docs/robot1_slice.png
+    cdh-planner slice config/robot2.yaml --sphere 0,0,0.306,0.13 \\
+        --range alpha1=-pi:pi alpha2=0:pi/2 --point q1=0.55,pi/2 \\
+        --start 0.55 0.75 --goal 2.63 0.75 --start-label q2 --goal-label q3 --segment \\
+        -o docs/robot2_sphere.png
+
+The task (which poses the picture covers) comes from ``--task-file`` (a problem file with
+``task:`` or a ROS parameters file with ``ros__parameters.task``), ``--sphere``, or
+``--fixed`` alone (a slice task fixing those pose coordinates); with none of them, the
+robot file's own ``task`` is used. With a task file or ``--sphere``, ``--fixed`` holds the
+task's extra free coordinates (e.g. sigma of a free-torsion sphere task).
+Angles accept radians (``0.75``, ``pi/2``, ``-3pi/4``) or degrees (``34deg``); positions
+metres (``0.35``) or ``350mm``. A value starting with '-' that is not a plain number
+(``-pi``) must be attached with '=': ``--start=-pi,1.6``, ``--range phi=-pi:pi`` is fine.
+"""
+
+import math
+import time
+from pathlib import Path
+
+import yaml
+
+from ..errors import InputError
+from ..feasibility import evaluate
+from ..io.plots import DEFAULT_RANGES, FEASIBLE, Marker, SegmentOverlay, SliceView, \
+    compute_slice, plot_slice
+from ..io.poses import parse_angle, parse_length
+from ..model.pose import rotation_tt
+from ..model.robot import load_robot, ros_parameters
+from ..model.task import POSE_NAMES, FreeTask, SliceTask, SphereTask, task_from_dict
+from ..trajectory.verify import DEFAULT_STEP_M, DEFAULT_STEP_RAD, check_task_motion
+
+MAX_RESOLUTION = 4000
+MAX_PIXELS = 8000
+
+
+def add_parser(subparsers):
+    """Register ``slice`` on the top-level subparsers."""
+    p = subparsers.add_parser(
+        "slice", help="draw a 2-D slice of the wrench-feasible C-space to a PNG",
+        description="Classify a grid over two free coordinates of a task (green: feasible, "
+                    "orange: a cable length out of range, blue: a tension out of range; red: "
+                    "det J = 0) and draw it, with optional start/goal and the straight segment.")
+    p.add_argument("robot", help="robot file (ROS 2 parameters YAML)")
+    src = p.add_mutually_exclusive_group()
+    src.add_argument("--task-file", metavar="T.yaml", help="YAML with a 'task:' mapping")
+    src.add_argument("--sphere", metavar="CX,CY,CZ,R",
+                     help="sphere task (paper Eq. 17): centre (m, base frame) and radius (m)")
+    p.add_argument("--fixed", nargs="+", default=[], metavar="NAME=VALUE",
+                   help=f"pose coordinates to fix ({', '.join(POSE_NAMES)}); with a task, "
+                        "values of its extra free coordinates")
+    p.add_argument("--free", nargs=2, metavar=("A", "B"),
+                   help="the two coordinates on the picture axes (default: the task's two free ones)")
+    p.add_argument("--range", nargs="+", default=[], metavar="NAME=LO:HI",
+                   help="axis ranges (default: phi, sigma, alpha1 -pi:pi; theta 0:pi; "
+                        "alpha2 -pi/2:pi/2; positions need one)")
+    p.add_argument("--start", nargs="+", metavar="A B", help="start point on the picture axes")
+    p.add_argument("--goal", nargs="+", metavar="A B", help="goal point on the picture axes")
+    p.add_argument("--start-label", default="start", help="label of the start marker")
+    p.add_argument("--goal-label", default="goal", help="label of the goal marker")
+    p.add_argument("--point", nargs="+", default=[], metavar="LABEL=A,B",
+                   help="further labelled points (a label like q_1 is drawn with a subscript)")
+    p.add_argument("--segment", action="store_true",
+                   help="draw the straight start -> goal segment and check it densely")
+    p.add_argument("--resolution", type=int, default=400, metavar="N", help="N x N grid (default 400)")
+    p.add_argument("--size", default="1000x800", metavar="WxH", help="picture size in pixels")
+    p.add_argument("--title", help="picture title (default: robot and slice)")
+    p.add_argument("-o", "--output", required=True, metavar="OUT.png", help="PNG file to write")
+    p.set_defaults(func=run)
+
+
+def run(args):
+    """Compute, draw and summarise the slice; 0 when the picture was written."""
+    robot = load_robot(args.robot)
+    out = _check_output(args.output)
+    size = _parse_size(args.size)
+    resolution = _check_resolution(args.resolution)
+    view = build_view(args)
+    start = _axis_point("--start", args.start, view) if args.start else None
+    goal = _axis_point("--goal", args.goal, view) if args.goal else None
+    markers = [_parse_point(text, view) for text in args.point]
+    markers += [Marker(args.start_label, *start)] if start else []
+    markers += [Marker(args.goal_label, *goal)] if goal else []
+
+    t0 = time.perf_counter()
+    grid = compute_slice(robot, view, resolution)
+    elapsed = time.perf_counter() - t0
+    overlay = None
+    if args.segment:
+        if start is None or goal is None:
+            raise InputError("--segment", True, "needs both --start and --goal")
+        overlay = _segment(robot, view, start, goal, args)
+    plot_slice(grid, out, size=size, title=args.title or _title(robot, view),
+               markers=markers, segment=overlay)
+    _report(robot, view, grid, elapsed, markers, out, size)
+    return 0
+
+
+def build_view(args):
+    """The SliceView of the parsed arguments (task, axes, held values, ranges)."""
+    task, fixed_used = _task(args)
+    names = task.names
+    if args.free:
+        axes = tuple(args.free)
+        for name in axes:
+            if name not in names:
+                raise InputError("--free", name, f"not a free coordinate of the task (free: {', '.join(names)})")
+        if axes[0] == axes[1]:
+            raise InputError("--free", list(axes), "give two different coordinates")
+    elif len(names) == 2:
+        axes = tuple(names)
+    else:
+        raise InputError("--free", None, f"choose two of the task's free coordinates: {', '.join(names)}")
+    held = {} if fixed_used else _assignments("--fixed", args.fixed)
+    for name in held:
+        if name not in names:
+            raise InputError(f"--fixed {name}", held[name], f"not a free coordinate of the task ({', '.join(names)})")
+        if name in axes:
+            raise InputError(f"--fixed {name}", held[name], "is on a picture axis (--free)")
+    for name in names:
+        if name not in axes and name not in held:
+            raise InputError(name, None, f"free coordinate neither on an axis nor fixed: add --fixed {name}=VALUE")
+    ranges = _ranges(args.range, axes)
+    return SliceView(task=task, axes=axes, ranges=ranges, held=held)
+
+
+def _task(args):
+    """(task, whether --fixed was consumed to build it)."""
+    if args.task_file:
+        return _load_task_file(args.task_file), False
+    if args.sphere:
+        return _parse_sphere(args.sphere), False
+    if args.fixed:
+        fixed = _assignments("--fixed", args.fixed)
+        for name in fixed:
+            if name not in POSE_NAMES:
+                raise InputError(f"--fixed {name}", fixed[name], f"unknown pose coordinate (expected {', '.join(POSE_NAMES)})")
+        if len(fixed) >= 6:
+            raise InputError("--fixed", args.fixed, "at least two coordinates must stay free")
+        return SliceTask(fixed=fixed), True
+    task = _task_in_yaml(args.robot)
+    if task is None or isinstance(task, FreeTask):
+        raise InputError("task", args.robot, "no task: give --fixed, --sphere or --task-file")
+    return task, False
+
+
+def _load_task_file(path):
+    task = _task_in_yaml(path)
+    if task is None:
+        raise InputError("--task-file", path, "no 'task:' mapping (top level or under ros__parameters)")
+    return task
+
+
+def _task_in_yaml(path):
+    """The task of a problem file (top-level ``task:``) or of a ROS parameters file."""
+    path = Path(path)
+    if not path.is_file():
+        raise InputError("--task-file", str(path), "file not found")
+    try:
+        doc = yaml.safe_load(path.read_text())
+    except yaml.YAMLError as exc:
+        raise InputError("--task-file", str(path), f"not valid YAML: {exc}") from None
+    if isinstance(doc, dict) and "task" in doc:
+        return task_from_dict(doc["task"])
+    if isinstance(doc, dict) and any(isinstance(v, dict) and "ros__parameters" in v for v in doc.values()):
+        params = ros_parameters(doc, str(path))
+        return task_from_dict(params["task"], "ros__parameters.task") if "task" in params else None
+    return None
+
+
+def _parse_sphere(text):
+    parts = text.split(",")
+    if len(parts) != 4:
+        raise InputError("--sphere", text, "expected CX,CY,CZ,R (m)")
+    values = [parse_length(v, f"--sphere[{i}]") for i, v in enumerate(parts)]
+    if values[3] <= 0:
+        raise InputError("--sphere radius", values[3], "must be positive (m)")
+    return SphereTask(center=tuple(values[:3]), radius=values[3])
+
+
+def parse_value(name, text, where):
+    """A coordinate value: an angle (rad or deg) or a position (m or mm) by name."""
+    if name in ("x", "y", "z"):
+        return parse_length(text, where)
+    return parse_angle(text, where)
+
+
+def _assignments(option, items):
+    """{name: value} from NAME=VALUE strings."""
+    out = {}
+    for item in items:
+        name, sep, text = item.partition("=")
+        if not sep or not name:
+            raise InputError(option, item, "expected NAME=VALUE")
+        if name in out:
+            raise InputError(f"{option} {name}", item, "given twice")
+        out[name] = parse_value(name, text, f"{option} {name}")
+    return out
+
+
+def _ranges(items, axes):
+    given = {}
+    for item in items:
+        name, sep, text = item.partition("=")
+        lo_text, sep2, hi_text = text.partition(":")
+        if not sep or not sep2:
+            raise InputError("--range", item, "expected NAME=LO:HI")
+        if name not in axes:
+            raise InputError(f"--range {name}", item, f"not a picture axis ({', '.join(axes)})")
+        lo = parse_value(name, lo_text, f"--range {name}")
+        hi = parse_value(name, hi_text, f"--range {name}")
+        if not lo < hi:
+            raise InputError(f"--range {name}", item, "LO must be below HI")
+        given[name] = (lo, hi)
+    ranges = []
+    for name in axes:
+        if name not in given and name not in DEFAULT_RANGES:
+            raise InputError("--range", None, f"give a range for {name}: --range {name}=LO:HI")
+        ranges.append(given.get(name, DEFAULT_RANGES.get(name)))
+    return tuple(ranges)
+
+
+def _axis_point(option, values, view):
+    """(a, b) from two values or one 'A,B' string."""
+    if len(values) == 1:
+        values = values[0].split(",")
+    if len(values) != 2:
+        raise InputError(option, values, "expected two values: A B (or A,B)")
+    return tuple(parse_value(n, v, f"{option} {n}") for n, v in zip(view.axes, values))
+
+
+def _parse_point(text, view):
+    label, sep, rest = text.partition("=")
+    if not sep or not label:
+        raise InputError("--point", text, "expected LABEL=A,B")
+    return Marker(label, *_axis_point(f"--point {label}", [rest], view))
+
+
+def _parse_size(text):
+    w, sep, h = text.lower().partition("x")
+    try:
+        size = (int(w), int(h))
+    except ValueError:
+        raise InputError("--size", text, "expected WIDTHxHEIGHT in pixels, e.g. 1000x800") from None
+    if not sep or not all(100 <= v <= MAX_PIXELS for v in size):
+        raise InputError("--size", text, f"expected WIDTHxHEIGHT, each 100 to {MAX_PIXELS} pixels")
+    return size
+
+
+def _check_resolution(n):
+    if not 2 <= n <= MAX_RESOLUTION:
+        raise InputError("--resolution", n, f"must be between 2 and {MAX_RESOLUTION}")
+    return n
+
+
+def _check_output(path):
+    out = Path(path)
+    if out.suffix.lower() != ".png":
+        raise InputError("--output", path, "must be a .png file")
+    if not out.parent.is_dir():
+        raise InputError("--output", path, "directory does not exist")
+    return out
+
+
+def _segment(robot, view, start, goal, args):
+    """Check the straight start -> goal segment (in task coordinates) densely."""
+    check = check_task_motion(robot, view.task, view.coords([start[0], goal[0]], [start[1], goal[1]]),
+                              DEFAULT_STEP_M, DEFAULT_STEP_RAD)[0]
+    s = None if check.first_unsafe is None else check.first_unsafe.s
+    if s is None:
+        print(f"segment {args.start_label} -> {args.goal_label}: stays in C "
+              f"(worst margin {check.worst.margin:+.4f} at s = {check.worst.s:.3f}, {check.samples} samples)")
+    else:
+        print(f"segment {args.start_label} -> {args.goal_label}: leaves C at s = {s:.4f} "
+              f"({check.first_unsafe.binding}); worst margin {check.worst.margin:+.4g} "
+              f"at s = {check.worst.s:.3f} ({check.worst.binding})")
+    return SegmentOverlay(start=start, goal=goal, first_unsafe_s=s)
+
+
+def _title(robot, view):
+    held = dict(view.task.fixed) if isinstance(view.task, SliceTask) else {}
+    held.update(view.held)
+    values = ", ".join(_describe(n, v) for n, v in held.items())
+    if isinstance(view.task, SphereTask):
+        c = ", ".join(f"{v:.4g}" for v in view.task.center)
+        head = f"sphere task, centre [{c}] m, radius {view.task.radius:.4g} m"
+        return f"{robot.name}: {head}" + (f", {values}" if values else "")
+    if isinstance(view.task, SliceTask):
+        return f"{robot.name}: slice {values}"
+    return f"{robot.name}: {view.task.type} task" + (f", {values}" if values else "")
+
+
+def _describe(name, value):
+    """'x = 0 m' or 'sigma = 0.5934 rad (34 deg)' for titles."""
+    if name in ("x", "y", "z"):
+        return f"{name} = {value:.4g} m"
+    return f"{name} = {value:.4g} rad ({math.degrees(value):.4g} deg)"
+
+
+def _report(robot, view, grid, elapsed, markers, out, size):
+    n = grid.classes.size
+    share = (grid.classes == FEASIBLE).sum() / n
+    print(f"{robot.name}: {grid.classes.shape[1]} x {grid.classes.shape[0]} grid over "
+          f"{view.axes[0]} x {view.axes[1]} classified in {elapsed:.2f} s; {100 * share:.1f} % feasible")
+    if markers:
+        coords = view.coords([m.a for m in markers], [m.b for m in markers])
+        p, tau = view.task.pose(coords)
+        f = evaluate(robot, p, R=rotation_tt(tau))
+        for m, ok, margin, binding in zip(markers, f.feasible, f.margin, f.binding):
+            print(f"  {m.label} ({m.a:.4g}, {m.b:.4g}): {'feasible' if ok else 'NOT feasible'}, "
+                  f"margin {margin:+.4f} ({binding})")
+    print(f"wrote {out} ({size[0]} x {size[1]} px)")

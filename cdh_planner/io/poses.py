@@ -1,0 +1,196 @@
+"""Platform poses from files and command-line values, validated field by field.
+
+A poses file is JSON: a list of poses, or ``{"poses": [...]}``. Each pose is
+
+    {"position": [x, y, z], "quaternion": [x, y, z, w]}     (m; ROS order, unit norm)
+    {"position": [x, y, z], "tau": [phi, theta, sigma]}     (m; rad, theta in [0, pi])
+
+Every error is an InputError naming the entry, e.g. ``poses[3].quaternion``. Nothing is
+silently fixed: a non-normalised quaternion or an out-of-range tilt is usually a unit or
+ordering mistake (degrees, w first) and is reported, not normalised away.
+
+Command-line quantities: ``parse_angle`` accepts radians (``0.75``, ``-pi``, ``pi/2``,
+``3pi/4``, ``0.5*pi``) or degrees (``34deg``).
+"""
+
+import json
+import re
+from dataclasses import dataclass
+from pathlib import Path
+
+import numpy as np
+
+from ..errors import InputError
+from ..model.pose import check_quaternion, quaternion_from_tau, rotation_from_quaternion, \
+    rotation_tt, tau_from_quaternion
+
+POSE_KEYS = ("position", "quaternion", "tau")
+# |phi|, |sigma| beyond this (rad) are almost surely degrees; theta must be in [0, pi].
+ANGLE_LIMIT = 2.0 * np.pi + 1e-9
+THETA_TOL = 1e-9
+
+
+@dataclass(frozen=True)
+class PoseList:
+    """N validated poses. ``positions`` (N, 3) m, ``quaternions`` (N, 4) (x, y, z, w) with
+    w >= 0, ``rotations`` (N, 3, 3), ``tau`` (N, 3) rad (as given, or from the quaternion)."""
+
+    positions: np.ndarray
+    quaternions: np.ndarray
+    rotations: np.ndarray
+    tau: np.ndarray
+
+    def __len__(self):
+        return self.positions.shape[0]
+
+
+def load_poses(path, where="poses"):
+    """Read and validate a poses JSON file; InputError on any bad content."""
+    path = Path(path)
+    if not path.is_file():
+        raise InputError(where, str(path), "file not found")
+    try:
+        doc = json.loads(path.read_text())
+    except (json.JSONDecodeError, UnicodeDecodeError) as exc:
+        raise InputError(where, str(path), f"not valid JSON: {exc}") from None
+    return poses_from_obj(doc, where)
+
+
+def poses_from_obj(doc, where="poses"):
+    """Validate a decoded poses document (a list, or a mapping with only ``poses``)."""
+    if isinstance(doc, dict):
+        unknown = sorted(set(doc) - {"poses"})
+        if unknown:
+            raise InputError(f"{unknown[0]}", doc[unknown[0]], "unknown key (expected only 'poses')")
+        if "poses" not in doc:
+            raise InputError(where, None, "required key is missing")
+        doc = doc["poses"]
+    if not isinstance(doc, list):
+        raise InputError(where, _short(doc), "expected a list of poses")
+    if not doc:
+        raise InputError(where, doc, "empty pose list: give at least one pose")
+    parsed = [pose_from_dict(d, f"{where}[{i}]") for i, d in enumerate(doc)]
+    p = np.array([x[0] for x in parsed])
+    q = np.array([x[1] for x in parsed])
+    tau = np.array([x[2] for x in parsed])
+    return PoseList(positions=p, quaternions=q, rotations=rotation_from_quaternion(q), tau=tau)
+
+
+def pose_from_dict(d, where):
+    """One pose: (position (3,) m, quaternion (4,) with w >= 0, tau (3,) rad)."""
+    if not isinstance(d, dict):
+        raise InputError(where, _short(d), "expected a mapping with 'position' and 'quaternion' or 'tau'")
+    unknown = sorted(set(d) - set(POSE_KEYS))
+    if unknown:
+        raise InputError(f"{where}.{unknown[0]}", d[unknown[0]],
+                         f"unknown key (allowed: {', '.join(POSE_KEYS)})")
+    if "position" not in d:
+        raise InputError(f"{where}.position", None, "required key is missing")
+    has_q, has_tau = "quaternion" in d, "tau" in d
+    if has_q == has_tau:
+        raise InputError(where, _short(d), "give exactly one of 'quaternion' or 'tau'")
+    p = number_list(f"{where}.position", d["position"], 3)
+    if has_q:
+        q = check_quaternion(number_list(f"{where}.quaternion", d["quaternion"], 4),
+                             field=f"{where}.quaternion")
+        q = -q if q[3] < 0 else q
+        tau = tau_from_quaternion(q)
+    else:
+        tau = check_tau(number_list(f"{where}.tau", d["tau"], 3), f"{where}.tau")
+        q = quaternion_from_tau(tau)
+    return p, q, tau
+
+
+def number_list(where, value, n):
+    """A list of exactly ``n`` finite numbers (JSON NaN/Infinity and booleans rejected)."""
+    if not isinstance(value, (list, tuple)):
+        raise InputError(where, _short(value), f"expected a list of {n} numbers")
+    if len(value) != n:
+        raise InputError(where, _short(value), f"expected {n} numbers, got {len(value)}")
+    for i, x in enumerate(value):
+        if isinstance(x, bool) or not isinstance(x, (int, float)):
+            raise InputError(f"{where}[{i}]", x, "expected a number")
+        if not np.isfinite(x):
+            raise InputError(f"{where}[{i}]", x, "must be a finite number")
+    return np.asarray(value, dtype=float)
+
+
+def check_tau(tau, where):
+    """Tilt-and-torsion angles in rad: theta in [0, pi], |phi|, |sigma| <= 2 pi."""
+    phi, theta, sigma = tau
+    if not -THETA_TOL <= theta <= np.pi + THETA_TOL:
+        raise InputError(f"{where}[1]", float(theta), "tilt theta must be in [0, pi] rad (degrees given?)")
+    for i, a in ((0, phi), (2, sigma)):
+        if abs(a) > ANGLE_LIMIT:
+            raise InputError(f"{where}[{i}]", float(a), "must be within [-2 pi, 2 pi] rad (degrees given?)")
+    return np.array([phi, np.clip(theta, 0.0, np.pi), sigma])
+
+
+def poses_from_arrays(positions, tau=None, quaternions=None):
+    """A PoseList from arrays (already validated by the caller): tau or quaternions."""
+    p = np.atleast_2d(np.asarray(positions, dtype=float))
+    if quaternions is None:
+        tau = np.atleast_2d(np.asarray(tau, dtype=float))
+        q = quaternion_from_tau(tau)
+        R = rotation_tt(tau)
+    else:
+        q = np.atleast_2d(np.asarray(quaternions, dtype=float))
+        q = np.where(q[:, 3:4] < 0, -q, q)
+        R = rotation_from_quaternion(q)
+        tau = tau_from_quaternion(q)
+    return PoseList(positions=p, quaternions=q, rotations=R, tau=tau)
+
+
+_UNSIGNED = r"(?:\d+\.?\d*|\.\d+)(?:[eE][+-]?\d+)?"
+_NUMBER = r"[+-]?" + _UNSIGNED
+_PI_FORM = re.compile(rf"^(?P<sign>[+-]?)(?P<k>{_UNSIGNED})?\s*\*?\s*pi(?:\s*/\s*(?P<d>{_UNSIGNED}))?$")
+
+
+def parse_angle(text, where="angle"):
+    """An angle in rad from ``0.75``, ``-pi``, ``pi/2``, ``3pi/4``, ``0.5*pi`` or ``34deg``."""
+    s = str(text).strip().lower()
+    try:
+        if s.endswith("deg"):
+            value = np.deg2rad(_plain_number(s[:-3].strip()))
+        else:
+            m = _PI_FORM.match(s)
+            if m:
+                k = float(m["k"]) if m["k"] else 1.0
+                d = float(m["d"]) if m["d"] else 1.0
+                value = (-1.0 if m["sign"] == "-" else 1.0) * k * np.pi / d
+            else:
+                value = _plain_number(s)
+    except (ValueError, ZeroDivisionError):
+        raise InputError(where, text, "expected an angle: radians (0.75, -pi, 3pi/4) or degrees (34deg)") from None
+    if not np.isfinite(value):
+        raise InputError(where, text, "must be a finite angle")
+    return float(value)
+
+
+def parse_length(text, where="length"):
+    """A length in m from a plain number (``0.35``) or with a unit (``350mm``, ``0.35m``)."""
+    s = str(text).strip().lower()
+    scale = 1.0
+    for unit, factor in (("mm", 1e-3), ("cm", 1e-2), ("m", 1.0)):
+        if s.endswith(unit):
+            s, scale = s[: -len(unit)].strip(), factor
+            break
+    try:
+        value = _plain_number(s) * scale
+    except ValueError:
+        raise InputError(where, text, "expected a length in m (0.35) or with a unit (350mm)") from None
+    if not np.isfinite(value):
+        raise InputError(where, text, "must be a finite length")
+    return float(value)
+
+
+def _plain_number(s):
+    if not re.fullmatch(_NUMBER, s):
+        raise ValueError(s)
+    return float(s)
+
+
+def _short(value, limit=80):
+    """A value for an error message, abbreviated when it is long."""
+    text = repr(value)
+    return value if len(text) <= limit else text[: limit - 3] + "..."

@@ -1,0 +1,285 @@
+"""Dense verification of the motion between consecutive poses.
+
+What a controller executes between two waypoints is a continuous motion: here position
+linear and orientation slerp (``check_motion``), or a straight line in a task's free
+coordinates (``check_task_motion``, e.g. the paper's interpolation in the (alpha1, alpha2)
+plane). Feasibility along it is checked by **dense sampling**, not by a proof:
+
+1. each segment is sampled uniformly in s in [0, 1] so that consecutive samples are at
+   most ``max_step_m`` apart in position and ``max_step_rad`` apart in orientation
+   (SO(3) angle), defaults 1 mm and 0.2 deg;
+2. adaptive refinement: the margin m(s) is estimated to be Lipschitz with constant
+   L = the steepest secant slope of the interval and its neighbours; an interval with
+   both ends feasible is subdivided (8 sub-intervals per round) whenever a dip below
+   zero is not excluded with a safety factor of 2, i.e. when m_a + m_b <= 2 L h;
+3. the first unsafe point is located by bisection between the last feasible sample
+   before it and the first infeasible one.
+
+A violation narrower than the sampling that the slope estimate does not anticipate can
+still be missed; ``SegmentCheck.unresolved`` counts the intervals where the slope test
+still allowed a dip when the refinement budget ran out (0 in the normal case).
+The margin is the normalised one of ``feasibility.evaluate`` (positive iff feasible).
+"""
+
+from dataclasses import dataclass
+
+import numpy as np
+from scipy.spatial.transform import Rotation
+
+from ..feasibility import evaluate
+from ..model.pose import rotation_angle_between, rotation_tt
+
+DEFAULT_STEP_M = 1e-3
+DEFAULT_STEP_RAD = np.deg2rad(0.2)
+SAFETY = 2.0  # factor on the estimated Lipschitz constant of the margin along s
+SUBDIVISION = 8  # sub-intervals per flagged interval and refinement round
+MAX_ROUNDS = 8
+MIN_DS = 1e-9  # do not refine intervals shorter than this (in s)
+MAX_SAMPLES = 2_000_000  # budget of evaluated samples per call
+BISECTIONS = 40
+CHUNK = 20_000  # poses per feasibility call (bounds memory)
+SPEED_SAMPLES = 64  # coarse samples per segment to bound the speed of a task line
+
+
+@dataclass(frozen=True)
+class PointCheck:
+    """One point of a segment: ``s`` in [0, 1], normalised ``margin`` (-inf if singular),
+    ``binding`` constraint name, ``position`` (3,) m, ``quaternion`` (4,) (x, y, z, w)."""
+
+    s: float
+    margin: float
+    binding: str
+    position: np.ndarray
+    quaternion: np.ndarray
+
+
+@dataclass(frozen=True)
+class SegmentCheck:
+    """The motion from pose ``index_from`` to ``index_to``: ``feasible`` iff every sample
+    is; ``worst`` the sample of least margin; ``first_unsafe`` None or the first
+    infeasible point (located by bisection); ``samples`` evaluated; ``unresolved``
+    intervals the refinement could not settle (see the module docstring)."""
+
+    index_from: int
+    index_to: int
+    feasible: bool
+    worst: PointCheck
+    first_unsafe: PointCheck
+    samples: int
+    unresolved: int
+
+
+def interpolate_segment(p0, q0, p1, q1, s):
+    """Poses along one segment: position linear, orientation slerp (shortest arc).
+
+    p0, p1 (3,) m; q0, q1 (4,) quaternions (x, y, z, w); s (M,) in [0, 1].
+    Returns positions (M, 3) and quaternions (M, 4) with w >= 0.
+    """
+    path = SlerpPath(np.array([p0, p1], dtype=float), np.array([q0, q1], dtype=float))
+    s = np.atleast_1d(np.asarray(s, dtype=float))
+    p, R = path(np.zeros(s.shape, dtype=int), s)
+    return p, _quaternions(R)
+
+
+class SlerpPath:
+    """Waypoints joined by linear position and slerp orientation, as scipy's Slerp does:
+    r(s) = r0 exp(s log(r0^-1 r1)); evaluated for many segments at once."""
+
+    def __init__(self, positions, quaternions):
+        self.positions = np.atleast_2d(positions)
+        self.rotations = Rotation.from_quat(np.atleast_2d(quaternions))
+        self.rotvecs = (self.rotations[:-1].inv() * self.rotations[1:]).as_rotvec()
+        self.n_segments = self.positions.shape[0] - 1
+
+    def __call__(self, seg, s):
+        """Positions (M, 3) and rotation matrices (M, 3, 3) at s (M,) of segments seg (M,)."""
+        p0, p1 = self.positions[seg], self.positions[seg + 1]
+        p = p0 + s[:, None] * (p1 - p0)
+        r = self.rotations[seg] * Rotation.from_rotvec(s[:, None] * self.rotvecs[seg])
+        return p, r.as_matrix()
+
+    def speeds(self):
+        """Per segment: (position change m, rotation angle rad) per unit s (constant)."""
+        dp = np.linalg.norm(np.diff(self.positions, axis=0), axis=1)
+        return dp, np.linalg.norm(self.rotvecs, axis=1)
+
+
+class TaskLinePath:
+    """Straight lines in a task's free coordinates y (no angle wrapping), mapped to poses
+    by ``task.pose``: the motion of a naive interpolation in (alpha1, alpha2) or (phi, theta)."""
+
+    def __init__(self, task, coords):
+        self.task = task
+        self.coords = np.atleast_2d(np.asarray(coords, dtype=float))
+        self.n_segments = self.coords.shape[0] - 1
+
+    def __call__(self, seg, s):
+        y0, y1 = self.coords[seg], self.coords[seg + 1]
+        p, tau = self.task.pose(y0 + s[:, None] * (y1 - y0))
+        return p, rotation_tt(tau)
+
+    def speeds(self):
+        """Per segment: the largest position / rotation change per unit s, estimated from
+        SPEED_SAMPLES equal steps (the pose map is smooth, so this converges quickly)."""
+        k = SPEED_SAMPLES
+        seg = np.repeat(np.arange(self.n_segments), k + 1)
+        s = np.tile(np.linspace(0.0, 1.0, k + 1), self.n_segments)
+        p, R = self(seg, s)
+        p = p.reshape(self.n_segments, k + 1, 3)
+        R = R.reshape(self.n_segments, k + 1, 3, 3)
+        dp = np.linalg.norm(np.diff(p, axis=1), axis=2).max(axis=1) * k
+        da = rotation_angle_between(R[:, :-1], R[:, 1:]).max(axis=1) * k
+        return dp, da
+
+
+def check_motion(robot, positions, quaternions, max_step_m=DEFAULT_STEP_M,
+                 max_step_rad=DEFAULT_STEP_RAD):
+    """Check the motion through waypoints (positions (N, 3) m, quaternions (N, 4)) with
+    position linear and orientation slerp between consecutive ones: N - 1 SegmentChecks."""
+    path = SlerpPath(np.asarray(positions, dtype=float), np.asarray(quaternions, dtype=float))
+    return check_path(robot, path, max_step_m, max_step_rad)
+
+
+def check_task_motion(robot, task, coords, max_step_m=DEFAULT_STEP_M,
+                      max_step_rad=DEFAULT_STEP_RAD):
+    """Check straight lines between consecutive task coordinates (N, k): N - 1 SegmentChecks."""
+    return check_path(robot, TaskLinePath(task, coords), max_step_m, max_step_rad)
+
+
+def check_path(robot, path, max_step_m=DEFAULT_STEP_M, max_step_rad=DEFAULT_STEP_RAD):
+    """Dense check of every segment of ``path`` (SlerpPath, TaskLinePath or alike:
+    ``path(seg, s) -> (p, R)``, ``path.speeds()``, ``path.n_segments``)."""
+    if path.n_segments < 1:
+        return []
+    samples = _Samples(robot, path)
+    samples.add(*_initial_grid(path, max_step_m, max_step_rad))
+    unresolved = _refine(samples)
+    first = _first_unsafe(samples)
+    return [_segment_result(samples, k, first.get(k), unresolved[k]) for k in range(path.n_segments)]
+
+
+def _initial_grid(path, max_step_m, max_step_rad):
+    """Uniform s grids with steps below max_step_m / max_step_rad along each segment."""
+    dp, da = path.speeds()
+    n = np.maximum(1, np.ceil(np.maximum(dp / max_step_m, da / max_step_rad))).astype(int)
+    seg = np.repeat(np.arange(path.n_segments), n + 1)
+    start = np.repeat(np.cumsum(n + 1) - (n + 1), n + 1)
+    s = (np.arange(seg.size) - start) / np.repeat(n, n + 1)
+    return seg, s
+
+
+class _Samples:
+    """Evaluated samples of all segments, kept sorted by (segment, s)."""
+
+    def __init__(self, robot, path):
+        self.robot, self.path = robot, path
+        self.seg = np.empty(0, dtype=int)
+        self.s = np.empty(0)
+        self.margin = np.empty(0)
+        self.binding = np.empty(0, dtype=object)
+
+    def evaluate(self, seg, s):
+        """Margins and binding constraints at (seg, s), in chunks to bound memory."""
+        margin, binding = np.empty(s.size), np.empty(s.size, dtype=object)
+        for a in range(0, s.size, CHUNK):
+            p, R = self.path(seg[a:a + CHUNK], s[a:a + CHUNK])
+            f = evaluate(self.robot, p, R=R)
+            margin[a:a + CHUNK], binding[a:a + CHUNK] = f.margin, f.binding
+        return np.nan_to_num(margin, nan=-np.inf), binding
+
+    def add(self, seg, s):
+        margin, binding = self.evaluate(seg, s)
+        self.seg = np.concatenate([self.seg, seg])
+        self.s = np.concatenate([self.s, s])
+        self.margin = np.concatenate([self.margin, margin])
+        self.binding = np.concatenate([self.binding, binding])
+        order = np.lexsort((self.s, self.seg))
+        self.seg, self.s = self.seg[order], self.s[order]
+        self.margin, self.binding = self.margin[order], self.binding[order]
+
+
+def _refine(samples):
+    """Subdivide intervals where the margin might dip below zero; returns, per segment,
+    the number of intervals still flagged when the budget ran out."""
+    n_seg = samples.path.n_segments
+    for _ in range(MAX_ROUNDS):
+        flagged, ratio = _flagged_intervals(samples)
+        if not flagged.size:
+            return np.zeros(n_seg, dtype=int)
+        budget = (MAX_SAMPLES - samples.s.size) // (SUBDIVISION - 1)
+        if budget <= 0:
+            break
+        # Most doubtful first when the budget does not cover every flagged interval.
+        flagged = flagged[np.argsort(ratio)][:budget]
+        s_a = samples.s[flagged]
+        h = samples.s[flagged + 1] - s_a
+        frac = np.arange(1, SUBDIVISION) / SUBDIVISION
+        samples.add(np.repeat(samples.seg[flagged], SUBDIVISION - 1),
+                    (s_a[:, None] + h[:, None] * frac).ravel())
+    flagged, _ = _flagged_intervals(samples)
+    return np.bincount(samples.seg[flagged], minlength=n_seg)
+
+
+def _flagged_intervals(samples):
+    """Indices i of intervals [i, i + 1] with both ends feasible whose margin, if
+    Lipschitz with SAFETY times the local secant slope, could reach zero inside; and
+    the ratio (m_a + m_b) / (SAFETY L h) (below 1 when flagged)."""
+    m, s = samples.margin, samples.s
+    same = samples.seg[1:] == samples.seg[:-1]
+    h = np.where(same, s[1:] - s[:-1], np.inf)
+    dm = np.abs(np.diff(m))
+    slope = np.where(same & np.isfinite(dm), dm / np.where(h > 0, h, np.inf), 0.0)
+    # Neighbours' slopes too: a dip between samples shows as steep secants next to it.
+    L = slope.copy()
+    L[1:] = np.maximum(L[1:], np.where(same[:-1], slope[:-1], 0.0))
+    L[:-1] = np.maximum(L[:-1], np.where(same[1:], slope[1:], 0.0))
+    both = same & (m[:-1] > 0) & (m[1:] > 0)
+    bound = SAFETY * L * h
+    flagged = both & (m[:-1] + m[1:] <= bound) & (h > MIN_DS)
+    idx = np.flatnonzero(flagged)
+    return idx, (m[idx] + m[idx + 1]) / np.maximum(bound[idx], 1e-300)
+
+
+def _first_unsafe(samples):
+    """{segment: (s, margin, binding)} of the first infeasible point of each unsafe segment."""
+    bad = samples.margin <= 0
+    seg_bad = samples.seg[bad]
+    if not seg_bad.size:
+        return {}
+    segs, first_pos = np.unique(seg_bad, return_index=True)
+    j = np.flatnonzero(bad)[first_pos]
+    at_start = (j == 0) | (samples.seg[np.maximum(j - 1, 0)] != samples.seg[j])
+    lo = np.where(at_start, samples.s[j], samples.s[np.maximum(j - 1, 0)])
+    hi = samples.s[j].copy()
+    m_hi, b_hi = samples.margin[j].copy(), samples.binding[j].copy()
+    todo = ~at_start
+    for _ in range(BISECTIONS):
+        if not todo.any():
+            break
+        mid = 0.5 * (lo[todo] + hi[todo])
+        m, b = samples.evaluate(segs[todo], mid)
+        idx = np.flatnonzero(todo)
+        unsafe = m <= 0
+        hi[idx[unsafe]], m_hi[idx[unsafe]], b_hi[idx[unsafe]] = mid[unsafe], m[unsafe], b[unsafe]
+        lo[idx[~unsafe]] = mid[~unsafe]
+    return {int(k): (hi[i], m_hi[i], b_hi[i]) for i, k in enumerate(segs)}
+
+
+def _segment_result(samples, k, first, unresolved):
+    a, b = np.searchsorted(samples.seg, [k, k + 1])
+    i = a + int(np.argmin(samples.margin[a:b]))
+    worst = _point(samples, k, samples.s[i], samples.margin[i], samples.binding[i])
+    first_unsafe = None if first is None else _point(samples, k, *first)
+    return SegmentCheck(index_from=k, index_to=k + 1, feasible=first is None, worst=worst,
+                        first_unsafe=first_unsafe, samples=int(b - a), unresolved=int(unresolved))
+
+
+def _point(samples, k, s, margin, binding):
+    p, R = samples.path(np.array([k]), np.array([float(s)]))
+    return PointCheck(s=float(s), margin=float(margin), binding=str(binding),
+                      position=p[0], quaternion=_quaternions(R)[0])
+
+
+def _quaternions(R):
+    q = Rotation.from_matrix(R).as_quat()
+    return np.where(q[:, 3:4] < 0, -q, q)
