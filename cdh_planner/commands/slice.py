@@ -95,7 +95,7 @@ def run(args):
     overlay = None
     if args.segment:
         if start is None or goal is None:
-            raise InputError("--segment", True, "needs both --start and --goal")
+            raise InputError("--segment", "start -> goal", "needs both --start and --goal")
         overlay = _segment(robot, view, start, goal, args)
     plot_slice(grid, out, size=size, title=args.title or _title(robot, view),
                markers=markers, segment=overlay)
@@ -117,7 +117,7 @@ def build_view(args):
     elif len(names) == 2:
         axes = tuple(names)
     else:
-        raise InputError("--free", None, f"choose two of the task's free coordinates: {', '.join(names)}")
+        raise InputError("--free", list(names), "the task has more than two free coordinates: choose two")
     held = {} if fixed_used else _assignments("--fixed", args.fixed)
     for name in held:
         if name not in names:
@@ -126,7 +126,7 @@ def build_view(args):
             raise InputError(f"--fixed {name}", held[name], "is on a picture axis (--free)")
     for name in names:
         if name not in axes and name not in held:
-            raise InputError(name, None, f"free coordinate neither on an axis nor fixed: add --fixed {name}=VALUE")
+            raise InputError("--fixed", name, f"free coordinate neither on an axis (--free) nor fixed: add --fixed {name}=VALUE")
     ranges = _ranges(args.range, axes)
     return SliceView(task=task, axes=axes, ranges=ranges, held=held)
 
@@ -222,7 +222,7 @@ def _ranges(items, axes):
     ranges = []
     for name in axes:
         if name not in given and name not in DEFAULT_RANGES:
-            raise InputError("--range", None, f"give a range for {name}: --range {name}=LO:HI")
+            raise InputError("--range", name, f"no default range: give --range {name}=LO:HI")
         ranges.append(given.get(name, DEFAULT_RANGES.get(name)))
     return tuple(ranges)
 

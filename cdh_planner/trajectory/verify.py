@@ -185,7 +185,7 @@ class _Samples:
             p, R = self.path(seg[a:a + CHUNK], s[a:a + CHUNK])
             f = evaluate(self.robot, p, R=R)
             margin[a:a + CHUNK], binding[a:a + CHUNK] = f.margin, f.binding
-        return np.nan_to_num(margin, nan=-np.inf), binding
+        return np.where(np.isnan(margin), -np.inf, margin), binding
 
     def add(self, seg, s):
         margin, binding = self.evaluate(seg, s)
@@ -227,8 +227,9 @@ def _flagged_intervals(samples):
     m, s = samples.margin, samples.s
     same = samples.seg[1:] == samples.seg[:-1]
     h = np.where(same, s[1:] - s[:-1], np.inf)
-    dm = np.abs(np.diff(m))
-    slope = np.where(same & np.isfinite(dm), dm / np.where(h > 0, h, np.inf), 0.0)
+    with np.errstate(invalid="ignore", over="ignore"):  # -inf margins at singular samples
+        dm = np.abs(np.diff(m))
+        slope = np.where(same & np.isfinite(dm), dm / np.where(h > 0, h, np.inf), 0.0)
     # Neighbours' slopes too: a dip between samples shows as steep secants next to it.
     L = slope.copy()
     L[1:] = np.maximum(L[1:], np.where(same[:-1], slope[:-1], 0.0))

@@ -1,0 +1,181 @@
+"""``cdh-planner verify``: wrench feasibility of poses and of the motion between them.
+
+    cdh-planner verify ROBOT.yaml POSES.json [--json OUT] [--step S] [--angle-step A]
+
+For every pose: feasible or not, normalised margin, binding constraint, cable lengths and
+the tension envelope (min / nominal / max over the wrench ellipsoid). For every pair of
+consecutive poses, the motion a controller executes (position linear, orientation slerp)
+is checked by dense sampling (see cdh_planner.trajectory.verify): worst point and first
+unsafe point. Exit code 0 if everything is feasible, 1 if some pose or segment is not,
+2 for bad input.
+
+``--json OUT`` writes (non-finite numbers as null)::
+
+    {"robot": name, "robot_file": path, "max_step_m": .., "max_step_rad": ..,
+     "poses": [{"position", "quaternion", "tau", "feasible", "margin", "binding",
+                "lengths", "tension_min", "tension_nominal", "tension_max"}],
+     "segments": [{"from", "to", "feasible", "samples", "unresolved",
+                   "worst": {"s", "margin", "binding", "position", "quaternion"},
+                   "first_unsafe": null or {same keys}}],
+     "all_feasible": bool}
+"""
+
+import json
+from pathlib import Path
+
+import numpy as np
+
+from ..errors import InputError
+from ..feasibility import evaluate
+from ..io.poses import load_poses, parse_angle, parse_length
+from ..model.robot import load_robot
+from ..trajectory.verify import DEFAULT_STEP_M, DEFAULT_STEP_RAD, check_motion
+
+EXIT_OK, EXIT_INFEASIBLE = 0, 1
+
+
+def add_parser(subparsers):
+    """Register ``verify`` on the top-level subparsers."""
+    p = subparsers.add_parser(
+        "verify", help="check poses and the motion between them for wrench feasibility",
+        description="Check each pose and, by dense sampling, the motion between consecutive "
+                    "poses (position linear, orientation slerp). Exit 0 if all feasible, 1 if not, "
+                    "2 for bad input.")
+    p.add_argument("robot", help="robot file (ROS 2 parameters YAML)")
+    p.add_argument("poses", help='JSON list of {"position": [x,y,z], "quaternion": [x,y,z,w]} '
+                                 'or {"position": [..], "tau": [phi,theta,sigma]} (m, rad)')
+    p.add_argument("--json", metavar="OUT", help="also write the results as JSON")
+    p.add_argument("--step", default=str(DEFAULT_STEP_M), metavar="S",
+                   help="largest position step between samples, m or with unit (default 0.001 = 1 mm)")
+    p.add_argument("--angle-step", default="0.2deg", metavar="A",
+                   help="largest rotation between samples, rad or deg (default 0.2deg)")
+    p.set_defaults(func=run)
+
+
+def run(args):
+    """Verify, print the tables, optionally write JSON; exit code 0 / 1."""
+    robot = load_robot(args.robot)
+    poses = load_poses(args.poses)
+    step_m = _positive(parse_length(args.step, "--step"), "--step", args.step)
+    step_rad = _positive(parse_angle(args.angle_step, "--angle-step"), "--angle-step", args.angle_step)
+    json_out = _check_json_path(args.json) if args.json else None
+
+    feas = evaluate(robot, poses.positions, R=poses.rotations)
+    segments = check_motion(robot, poses.positions, poses.quaternions, step_m, step_rad)
+    ok = bool(np.all(feas.feasible)) and all(s.feasible for s in segments)
+
+    print_report(robot, poses, feas, segments, ok)
+    if json_out:
+        doc = result_dict(robot, poses, feas, segments, ok, step_m, step_rad)
+        json_out.write_text(json.dumps(finite_or_none(doc), indent=2, allow_nan=False) + "\n")
+        print(f"wrote {json_out}")
+    return EXIT_OK if ok else EXIT_INFEASIBLE
+
+
+def _positive(value, option, text):
+    if value <= 0:
+        raise InputError(option, text, "must be positive")
+    return value
+
+
+def _check_json_path(path):
+    out = Path(path)
+    if not out.parent.is_dir():
+        raise InputError("--json", path, "directory does not exist")
+    return out
+
+
+def result_dict(robot, poses, feas, segments, ok, step_m, step_rad):
+    """The JSON document (plain Python types; non-finite floats still present)."""
+    pose_rows = []
+    for i in range(len(poses)):
+        pose_rows.append({
+            "position": poses.positions[i].tolist(),
+            "quaternion": poses.quaternions[i].tolist(),
+            "tau": poses.tau[i].tolist(),
+            "feasible": bool(feas.feasible[i]),
+            "margin": float(feas.margin[i]),
+            "binding": str(feas.binding[i]),
+            "lengths": feas.lengths[i].tolist(),
+            "tension_min": feas.tension_min[i].tolist(),
+            "tension_nominal": feas.tension_nominal[i].tolist(),
+            "tension_max": feas.tension_max[i].tolist(),
+        })
+    seg_rows = [{
+        "from": s.index_from, "to": s.index_to, "feasible": bool(s.feasible),
+        "samples": s.samples, "unresolved": s.unresolved,
+        "worst": _point_dict(s.worst),
+        "first_unsafe": None if s.first_unsafe is None else _point_dict(s.first_unsafe),
+    } for s in segments]
+    return {"robot": robot.name, "robot_file": robot.source, "max_step_m": step_m,
+            "max_step_rad": step_rad, "poses": pose_rows, "segments": seg_rows,
+            "all_feasible": bool(ok)}
+
+
+def _point_dict(pt):
+    return {"s": pt.s, "margin": pt.margin, "binding": pt.binding,
+            "position": pt.position.tolist(), "quaternion": pt.quaternion.tolist()}
+
+
+def finite_or_none(obj):
+    """Replace NaN and +-inf floats by None, recursively (JSON has no such numbers)."""
+    if isinstance(obj, float):
+        return obj if np.isfinite(obj) else None
+    if isinstance(obj, dict):
+        return {k: finite_or_none(v) for k, v in obj.items()}
+    if isinstance(obj, (list, tuple)):
+        return [finite_or_none(v) for v in obj]
+    return obj
+
+
+def print_report(robot, poses, feas, segments, ok):
+    """Human-readable tables on stdout."""
+    print(f"robot {robot.name} ({robot.source}): {len(poses)} poses, {len(segments)} segments")
+    print()
+    for i in range(len(poses)):
+        _print_pose(robot, poses, feas, i)
+    for s in segments:
+        _print_segment(s)
+    n_pose_ok = int(np.sum(feas.feasible))
+    n_seg_ok = sum(s.feasible for s in segments)
+    verdict = "ALL FEASIBLE" if ok else "NOT FEASIBLE"
+    print(f"summary: {n_pose_ok}/{len(poses)} poses and {n_seg_ok}/{len(segments)} segments "
+          f"feasible: {verdict}")
+
+
+def _print_pose(robot, poses, feas, i):
+    state = "feasible" if feas.feasible[i] else "NOT FEASIBLE"
+    print(f"pose {i}: {state}, margin {_num(feas.margin[i], '+.4f')}, binding {feas.binding[i]}")
+    print(f"  position {_vec(poses.positions[i], '.4f')} m, quaternion {_vec(poses.quaternions[i], '.4f')}, "
+          f"tau {_vec(poses.tau[i], '.4f')} rad")
+    print(f"  {'cable':<10} {'length m':>9} {'f_min N':>9} {'f_nom N':>9} {'f_max N':>9}   limits")
+    for c, name in enumerate(robot.winch_names):
+        lim = (f"d ({robot.length_min[c]:g}, {robot.length_max[c]:g}) "
+               f"f ({robot.tension_min[c]:g}, {robot.tension_max[c]:g})")
+        print(f"  {name:<10} {feas.lengths[i, c]:9.4f} {_num(feas.tension_min[i, c], '9.4f')} "
+              f"{_num(feas.tension_nominal[i, c], '9.4f')} {_num(feas.tension_max[i, c], '9.4f')}   {lim}")
+    print()
+
+
+def _print_segment(s):
+    state = "feasible" if s.feasible else "NOT FEASIBLE"
+    note = f", {s.unresolved} intervals unresolved" if s.unresolved else ""
+    print(f"segment {s.index_from} -> {s.index_to}: {state} ({s.samples} samples{note})")
+    print(f"  worst        {_point_text(s.worst)}")
+    if s.first_unsafe is not None:
+        print(f"  first unsafe {_point_text(s.first_unsafe)}")
+    print()
+
+
+def _point_text(pt):
+    return (f"s = {pt.s:.4f}  margin {_num(pt.margin, '+.4g')}  {pt.binding}  "
+            f"p {_vec(pt.position, '.4f')}  q {_vec(pt.quaternion, '.4f')}")
+
+
+def _num(x, fmt):
+    width = fmt.split(".")[0].lstrip("+")
+    return f"{x:{fmt}}" if np.isfinite(x) else f"{'-inf' if x < 0 else 'inf' if x > 0 else 'nan':>{width or 1}}"
+
+
+def _vec(v, fmt):
+    return "[" + ", ".join(f"{x:{fmt}}" for x in v) + "]"
