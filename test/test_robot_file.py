@@ -1,0 +1,178 @@
+"""Bad robot and pose files: an InputError naming the field and value, and through the CLI
+exit code 2 with a one-line message and no traceback."""
+import copy
+import json
+import subprocess
+import sys
+from pathlib import Path
+
+import numpy as np
+import pytest
+import yaml
+
+from cdh_planner import cli
+from cdh_planner.errors import InputError
+from cdh_planner.io.poses import load_poses
+from cdh_planner.model.robot import load_robot
+
+ROOT = Path(__file__).resolve().parents[1]
+ROBOT1 = ROOT / "config" / "robot1.yaml"
+GOOD_POSES = [{"position": [0.0, 0.0, 0.35], "tau": [-2.3, 1.6, 0.5934]}]
+
+
+def robot_doc():
+    return yaml.safe_load(ROBOT1.read_text())
+
+
+def set_robot(doc, key_path, value):
+    """doc with robot.<key_path> (dotted) set to value; value None deletes the key."""
+    d = doc["cdh_planner"]["ros__parameters"]["robot"]
+    *parents, last = key_path.split(".")
+    for k in parents:
+        d = d[k]
+    if value is None:
+        del d[last]
+    else:
+        d[last] = value
+    return doc
+
+
+def asym_matrix():
+    E = np.diag([1e4, 1e4, 1e4, 1e10, 1e10, 1e10])
+    E[0, 1] = 5.0
+    return E.ravel().tolist()
+
+
+# (id, key path, new value, expected field, text expected in the message)
+BAD_ROBOTS = [
+    ("five_anchors", "base_anchors", [0.1, 0.2, 0.0] * 5, "robot.base_anchors", "expected 18 numbers, got 15"),
+    ("five_platform_anchors", "platform_anchors", [0.1, 0.2, 0.0] * 5, "robot.platform_anchors", "got 15"),
+    ("dmin_ge_dmax", "length_min", [0.1, 0.1, 0.6, 0.1, 0.1, 0.1], "robot.length_min[2]", "must be below robot.length_max[2]"),
+    ("dmin_eq_dmax", "length_min", [0.55] * 6, "robot.length_min[0]", "must be below"),
+    ("fmin_ge_fmax", "tension_min", [0.05, 0.05, 0.05, 0.05, 0.7, 0.05], "robot.tension_min[4]", "must be below robot.tension_max[4]"),
+    ("negative_dmin", "length_min", [-0.1, 0.1, 0.1, 0.1, 0.1, 0.1], "robot.length_min[0]", "must be positive"),
+    ("negative_fmin", "tension_min", [0.05, -0.05, 0.05, 0.05, 0.05, 0.05], "robot.tension_min[1]", "must be non-negative"),
+    ("negative_fmax", "tension_max", [0.5, 0.5, -0.5, 0.5, 0.5, 0.5], "robot.tension_max[2]", "must be positive"),
+    ("E_not_symmetric", "wrench_ellipsoid.matrix", asym_matrix(), "robot.wrench_ellipsoid.matrix", "symmetric"),
+    ("E_not_positive_definite", "wrench_ellipsoid.matrix", [1e4, 1e4, -1e4, 1e10, 1e10, 1e10],
+     "robot.wrench_ellipsoid.matrix", "positive definite"),
+    ("E_singular", "wrench_ellipsoid.matrix", [1e4, 1e4, 0.0, 1e10, 1e10, 1e10],
+     "robot.wrench_ellipsoid.matrix", "positive definite"),
+    ("nan_length", "length_max", [0.55, 0.55, float("nan"), 0.55, 0.55, 0.55], "robot.length_max[2]", "finite"),
+    ("inf_force", "load.force", [0.0, 0.0, float("inf")], "robot.load.force[2]", "finite"),
+    ("minus_inf_anchor", "base_anchors", [float("-inf")] + [0.0] * 17, "robot.base_anchors[0]", "finite"),
+    ("unknown_robot_key", "lenght_max", [0.55] * 6, "robot.lenght_max", "unknown key"),
+    ("unknown_load_key", "load.mass", 1.0, "robot.load.mass", "unknown key"),
+    ("unknown_ellipsoid_key", "wrench_ellipsoid.centre", [0.0] * 6, "robot.wrench_ellipsoid.centre", "unknown key"),
+    ("missing_tension_max", "tension_max", None, "robot.tension_max", "missing"),
+    ("text_instead_of_number", "length_max", [0.55, "long", 0.55, 0.55, 0.55, 0.55], "robot.length_max", "numbers"),
+]
+
+BAD_POSES = [
+    ("zero_quaternion", [{"position": [0, 0, 0.35], "quaternion": [0, 0, 0, 0]}], "poses[0].quaternion", "zero"),
+    ("non_normalised_quaternion", [GOOD_POSES[0], {"position": [0, 0, 0.35], "quaternion": [0, 0, 0.5, 0.5]}],
+     "poses[1].quaternion", "not normalised"),
+    ("empty_list", [], "poses", "empty"),
+    ("empty_mapping_list", {"poses": []}, "poses", "empty"),
+    ("nan_position", [{"position": [0, float("nan"), 0.35], "tau": [0, 0, 0]}], "poses[0].position[1]", "finite"),
+    ("inf_tau", [{"position": [0, 0, 0.35], "tau": [0, 0, float("inf")]}], "poses[0].tau[2]", "finite"),
+    ("short_position", [{"position": [0, 0.35], "tau": [0, 0, 0]}], "poses[0].position", "expected 3 numbers"),
+    ("long_quaternion", [{"position": [0, 0, 0.35], "quaternion": [0, 0, 0, 1, 0]}], "poses[0].quaternion", "expected 4"),
+    ("missing_position", [{"tau": [0, 0, 0]}], "poses[0].position", "missing"),
+    ("both_orientations", [{"position": [0, 0, 0.35], "tau": [0, 0, 0], "quaternion": [0, 0, 0, 1]}],
+     "poses[0]", "exactly one"),
+    ("no_orientation", [{"position": [0, 0, 0.35]}], "poses[0]", "exactly one"),
+    ("unknown_pose_key", [{"position": [0, 0, 0.35], "tau": [0, 0, 0], "speed": 1}], "poses[0].speed", "unknown key"),
+    ("theta_in_degrees", [{"position": [0, 0, 0.35], "tau": [0, 90, 0]}], "poses[0].tau[1]", "[0, pi]"),
+    ("boolean_number", [{"position": [0, 0, True], "tau": [0, 0, 0]}], "poses[0].position[2]", "number"),
+    ("not_a_list", {"poses": 3}, "poses", "list"),
+    ("unknown_top_key", {"poses": GOOD_POSES, "robot": "x"}, "robot", "unknown key"),
+]
+
+
+@pytest.fixture
+def good_poses(tmp_path):
+    path = tmp_path / "poses.json"
+    path.write_text(json.dumps(GOOD_POSES))
+    return path
+
+
+def write_bad_robot(tmp_path, key_path, value):
+    doc = set_robot(copy.deepcopy(robot_doc()), key_path, value)
+    path = tmp_path / "bad_robot.yaml"
+    path.write_text(yaml.safe_dump(doc))
+    return path
+
+
+def test_the_shipped_robot_files_load():
+    for name in ("robot1.yaml", "robot2.yaml"):
+        robot = load_robot(ROOT / "config" / name)
+        assert robot.base_anchors.shape == (6, 3)
+
+
+@pytest.mark.parametrize("case", BAD_ROBOTS, ids=[c[0] for c in BAD_ROBOTS])
+def test_bad_robot_file_names_field_and_value(tmp_path, case):
+    _, key_path, value, field, text = case
+    path = write_bad_robot(tmp_path, key_path, value)
+    with pytest.raises(InputError) as exc:
+        load_robot(path)
+    assert exc.value.field == field
+    assert text in str(exc.value)
+    assert str(exc.value).startswith(f"{field} = ")
+
+
+@pytest.mark.parametrize("case", BAD_ROBOTS, ids=[c[0] for c in BAD_ROBOTS])
+def test_bad_robot_file_through_cli(tmp_path, good_poses, capsys, case):
+    _, key_path, value, field, text = case
+    path = write_bad_robot(tmp_path, key_path, value)
+    assert cli.main(["verify", str(path), str(good_poses)]) == 2
+    out = capsys.readouterr()
+    assert_one_line_error(out.err, field, text)
+    assert "Traceback" not in out.out + out.err
+
+
+@pytest.mark.parametrize("case", BAD_POSES, ids=[c[0] for c in BAD_POSES])
+def test_bad_pose_file_names_field(tmp_path, case):
+    _, doc, field, text = case
+    path = tmp_path / "poses.json"
+    path.write_text(json.dumps(doc))
+    with pytest.raises(InputError) as exc:
+        load_poses(path)
+    assert exc.value.field == field
+    assert text in str(exc.value)
+
+
+@pytest.mark.parametrize("case", BAD_POSES, ids=[c[0] for c in BAD_POSES])
+def test_bad_pose_file_through_cli(tmp_path, capsys, case):
+    _, doc, field, text = case
+    path = tmp_path / "poses.json"
+    path.write_text(json.dumps(doc))
+    assert cli.main(["verify", str(ROBOT1), str(path)]) == 2
+    out = capsys.readouterr()
+    assert_one_line_error(out.err, field, text)
+    assert "Traceback" not in out.out + out.err
+
+
+def test_not_json_and_missing_files(tmp_path, capsys):
+    bad = tmp_path / "poses.json"
+    bad.write_text("[{position: 1}")
+    assert cli.main(["verify", str(ROBOT1), str(bad)]) == 2
+    assert "not valid JSON" in capsys.readouterr().err
+    assert cli.main(["verify", str(tmp_path / "none.yaml"), str(bad)]) == 2
+    assert "file not found" in capsys.readouterr().err
+
+
+def test_subprocess_exit_code_and_stderr(tmp_path, good_poses):
+    path = write_bad_robot(tmp_path, "base_anchors", [0.1, 0.2, 0.0] * 5)
+    proc = subprocess.run([sys.executable, "-m", "cdh_planner.cli", "verify", str(path), str(good_poses)],
+                          capture_output=True, text=True, cwd=ROOT, timeout=60)
+    assert proc.returncode == 2
+    assert "Traceback" not in proc.stderr
+    assert_one_line_error(proc.stderr, "robot.base_anchors", "expected 18 numbers, got 15")
+
+
+def assert_one_line_error(err, field, text):
+    lines = err.splitlines()
+    assert len(lines) == 1, err
+    assert lines[0].startswith(f"cdh-planner: error: {field} = "), err
+    assert text in lines[0]
