@@ -10,14 +10,16 @@ plane). Feasibility along it is checked by **dense sampling**, not by a proof:
    (SO(3) angle), defaults 1 mm and 0.2 deg;
 2. adaptive refinement: the margin m(s) is estimated to be Lipschitz with constant
    L = the steepest secant slope of the interval and its neighbours; an interval with
-   both ends feasible is subdivided (8 sub-intervals per round) whenever a dip below
-   zero is not excluded with a safety factor of 2, i.e. when m_a + m_b <= 2 L h;
+   both ends feasible (before the first infeasible sample) is subdivided (8 sub-intervals
+   per round, up to 8 rounds, down to 1e-9 in s) whenever a dip below zero is not
+   excluded with a safety factor of 2, i.e. when m_a + m_b <= 2 L h;
 3. the first unsafe point is located by bisection between the last feasible sample
    before it and the first infeasible one.
 
 A violation narrower than the sampling that the slope estimate does not anticipate can
 still be missed; ``SegmentCheck.unresolved`` counts the intervals where the slope test
-still allowed a dip when the refinement budget ran out (0 in the normal case).
+still allowed a dip when the refinement stopped (0 in the normal case; a motion tangent
+to the boundary of C, margin touching 0, is one that sampling cannot decide).
 The margin is the normalised one of ``feasibility.evaluate`` (positive iff feasible).
 """
 
@@ -200,32 +202,33 @@ class _Samples:
 
 def _refine(samples):
     """Subdivide intervals where the margin might dip below zero; returns, per segment,
-    the number of intervals still flagged when the budget ran out."""
+    the number of such intervals left when the budget or MIN_DS stopped the refinement."""
     n_seg = samples.path.n_segments
     for _ in range(MAX_ROUNDS):
-        flagged, ratio = _flagged_intervals(samples)
-        if not flagged.size:
-            return np.zeros(n_seg, dtype=int)
+        doubtful, ratio, h = _doubtful_intervals(samples)
+        keep = h > MIN_DS
+        doubtful, ratio = doubtful[keep], ratio[keep]
         budget = (MAX_SAMPLES - samples.s.size) // (SUBDIVISION - 1)
-        if budget <= 0:
+        if not doubtful.size or budget <= 0:
             break
-        # Most doubtful first when the budget does not cover every flagged interval.
-        flagged = flagged[np.argsort(ratio)][:budget]
-        s_a = samples.s[flagged]
-        h = samples.s[flagged + 1] - s_a
+        # Most doubtful first when the budget does not cover every interval.
+        doubtful = doubtful[np.argsort(ratio)][:budget]
+        s_a = samples.s[doubtful]
+        step = samples.s[doubtful + 1] - s_a
         frac = np.arange(1, SUBDIVISION) / SUBDIVISION
-        samples.add(np.repeat(samples.seg[flagged], SUBDIVISION - 1),
-                    (s_a[:, None] + h[:, None] * frac).ravel())
-    flagged, _ = _flagged_intervals(samples)
-    return np.bincount(samples.seg[flagged], minlength=n_seg)
+        samples.add(np.repeat(samples.seg[doubtful], SUBDIVISION - 1),
+                    (s_a[:, None] + step[:, None] * frac).ravel())
+    doubtful, _, _ = _doubtful_intervals(samples)
+    return np.bincount(samples.seg[doubtful], minlength=n_seg)
 
 
-def _flagged_intervals(samples):
-    """Indices i of intervals [i, i + 1] with both ends feasible whose margin, if
-    Lipschitz with SAFETY times the local secant slope, could reach zero inside; and
-    the ratio (m_a + m_b) / (SAFETY L h) (below 1 when flagged)."""
-    m, s = samples.margin, samples.s
-    same = samples.seg[1:] == samples.seg[:-1]
+def _doubtful_intervals(samples):
+    """Intervals [i, i + 1] before the first infeasible sample of their segment, with both
+    ends feasible, where the margin, if Lipschitz with SAFETY times the local secant slope,
+    could reach zero inside. Returns their indices i, the ratios (m_a + m_b) / (SAFETY L h)
+    (below 1) and their lengths h in s."""
+    m, s, seg = samples.margin, samples.s, samples.seg
+    same = seg[1:] == seg[:-1]
     h = np.where(same, s[1:] - s[:-1], np.inf)
     with np.errstate(invalid="ignore", over="ignore"):  # -inf margins at singular samples
         dm = np.abs(np.diff(m))
@@ -234,11 +237,20 @@ def _flagged_intervals(samples):
     L = slope.copy()
     L[1:] = np.maximum(L[1:], np.where(same[:-1], slope[:-1], 0.0))
     L[:-1] = np.maximum(L[:-1], np.where(same[1:], slope[1:], 0.0))
-    both = same & (m[:-1] > 0) & (m[1:] > 0)
+    # Past the first infeasible sample the segment is unsafe anyway: nothing to refine.
+    bad_so_far = _count_within_segments(m <= 0, seg)
     bound = SAFETY * L * h
-    flagged = both & (m[:-1] + m[1:] <= bound) & (h > MIN_DS)
-    idx = np.flatnonzero(flagged)
-    return idx, (m[idx] + m[idx + 1]) / np.maximum(bound[idx], 1e-300)
+    doubtful = same & (bad_so_far[1:] == 0) & (m[:-1] + m[1:] <= bound)
+    idx = np.flatnonzero(doubtful)
+    return idx, (m[idx] + m[idx + 1]) / np.maximum(bound[idx], 1e-300), h[idx]
+
+
+def _count_within_segments(flags, seg):
+    """Running count of True flags from the start of each segment (seg sorted)."""
+    cum = np.cumsum(flags)
+    starts = np.flatnonzero(np.r_[True, seg[1:] != seg[:-1]])
+    before = cum[starts] - flags[starts]
+    return cum - np.repeat(before, np.diff(np.r_[starts, seg.size]))
 
 
 def _first_unsafe(samples):
