@@ -53,19 +53,19 @@ def add_parser(subparsers):
     src.add_argument("--task-file", metavar="T.yaml", help="YAML with a 'task:' mapping")
     src.add_argument("--sphere", metavar="CX,CY,CZ,R",
                      help="sphere task (paper Eq. 17): centre (m, base frame) and radius (m)")
-    p.add_argument("--fixed", nargs="+", default=[], metavar="NAME=VALUE",
+    p.add_argument("--fixed", nargs="+", action="extend", default=[], metavar="NAME=VALUE",
                    help=f"pose coordinates to fix ({', '.join(POSE_NAMES)}); with a task, "
                         "values of its extra free coordinates")
     p.add_argument("--free", nargs=2, metavar=("A", "B"),
                    help="the two coordinates on the picture axes (default: the task's two free ones)")
-    p.add_argument("--range", nargs="+", default=[], metavar="NAME=LO:HI",
+    p.add_argument("--range", nargs="+", action="extend", default=[], metavar="NAME=LO:HI",
                    help="axis ranges (default: phi, sigma, alpha1 -pi:pi; theta 0:pi; "
                         "alpha2 -pi/2:pi/2; positions need one)")
     p.add_argument("--start", nargs="+", metavar="A B", help="start point on the picture axes")
     p.add_argument("--goal", nargs="+", metavar="A B", help="goal point on the picture axes")
     p.add_argument("--start-label", default="start", help="label of the start marker")
     p.add_argument("--goal-label", default="goal", help="label of the goal marker")
-    p.add_argument("--point", nargs="+", default=[], metavar="LABEL=A,B",
+    p.add_argument("--point", nargs="+", action="extend", default=[], metavar="LABEL=A,B",
                    help="further labelled points (a label like q_1 is drawn with a subscript)")
     p.add_argument("--segment", action="store_true",
                    help="draw the straight start -> goal segment and check it densely")
