@@ -146,6 +146,9 @@ def plot_slice(grid, path, size=(1000, 800), title=None, markers=(), segment=Non
         for m in markers:
             _draw_marker(ax, m, grid.view)
         _label_axes(ax, grid.view)
+        (x0, x1), (y0, y1) = grid.view.ranges
+        ax.set_xlim(x0, x1)  # markers or a segment outside the ranges must not widen the view
+        ax.set_ylim(y0, y1)
         if title:
             ax.set_title(title)
         handles = [Patch(color=c, label=l) for c, l in zip(CLASS_COLORS, CLASS_LABELS)]
@@ -188,10 +191,14 @@ def _draw_segment(ax, seg):
 
 
 def _draw_marker(ax, m, view):
+    (x0, x1), (y0, y1) = view.ranges
+    inside = x0 <= m.a <= x1 and y0 <= m.b <= y1
+    # Unclipped inside the ranges so that a point on the edge (a pole) shows whole.
     ax.plot(m.a, m.b, marker="o", markersize=8, color="white", markeredgecolor="black",
-            ls="none", clip_on=False)
+            ls="none", clip_on=not inside)
+    if not inside:
+        return
     # Labels go above right, or below right near the top edge (where the title is).
-    (_, _), (y0, y1) = view.ranges
     dy = -16 if m.b > y1 - 0.08 * (y1 - y0) else 7
     ax.annotate(_math_label(m.label), (m.a, m.b), textcoords="offset points", xytext=(7, dy),
                 fontsize="large", fontweight="bold",
