@@ -21,6 +21,7 @@ metres (``0.35``) or ``350mm``. A value starting with '-' that is not a plain nu
 (``-pi``) must be attached with '=': ``--start=-pi,1.6``, ``--range phi=-pi:pi`` is fine.
 """
 
+import argparse
 import math
 import time
 from pathlib import Path
@@ -37,6 +38,12 @@ from ..model.robot import load_robot, ros_parameters
 from ..model.task import POSE_NAMES, FreeTask, SliceTask, SphereTask, task_from_dict
 from ..trajectory.verify import DEFAULT_STEP_M, DEFAULT_STEP_RAD, check_task_motion
 
+EXAMPLES = """examples:
+  cdh-planner slice config/robot1.yaml --fixed x=0 y=0 z=0.35 sigma=34deg --free phi theta \\
+      --start -2.3 1.6 --goal 1.7 1.7 --start-label q_s --goal-label q_g --segment -o slice.png
+  cdh-planner slice config/robot2.yaml --sphere 0,0,0.306,0.13 --range alpha1=-pi:pi alpha2=0:pi/2 \\
+      --start 0.55 0.75 --goal 2.63 0.75 --segment -o sphere.png
+"""
 MAX_RESOLUTION = 4000
 MAX_PIXELS = 8000
 
@@ -47,7 +54,9 @@ def add_parser(subparsers):
         "slice", help="draw a 2-D slice of the wrench-feasible C-space to a PNG",
         description="Classify a grid over two free coordinates of a task (green: feasible, "
                     "orange: a cable length out of range, blue: a tension out of range; red: "
-                    "det J = 0) and draw it, with optional start/goal and the straight segment.")
+                    "det J = 0) and draw it, with optional start/goal and the straight segment. "
+                    "Angles in rad (0.75, pi/2, -3pi/4) or deg (34deg); positions in m or mm (350mm).",
+        epilog=EXAMPLES, formatter_class=argparse.RawDescriptionHelpFormatter)
     p.add_argument("robot", help="robot file (ROS 2 parameters YAML)")
     src = p.add_mutually_exclusive_group()
     src.add_argument("--task-file", metavar="T.yaml", help="YAML with a 'task:' mapping")
@@ -61,8 +70,10 @@ def add_parser(subparsers):
     p.add_argument("--range", nargs="+", action="extend", default=[], metavar="NAME=LO:HI",
                    help="axis ranges (default: phi, sigma, alpha1 -pi:pi; theta 0:pi; "
                         "alpha2 -pi/2:pi/2; positions need one)")
-    p.add_argument("--start", nargs="+", metavar="A B", help="start point on the picture axes")
-    p.add_argument("--goal", nargs="+", metavar="A B", help="goal point on the picture axes")
+    p.add_argument("--start", nargs="+", metavar="V",
+                   help="start point on the picture axes: A B, or A,B (write --start=-pi,1.6 "
+                        "when a value starts with '-' and is not a plain number)")
+    p.add_argument("--goal", nargs="+", metavar="V", help="goal point on the picture axes, like --start")
     p.add_argument("--start-label", default="start", help="label of the start marker")
     p.add_argument("--goal-label", default="goal", help="label of the goal marker")
     p.add_argument("--point", nargs="+", action="extend", default=[], metavar="LABEL=A,B",

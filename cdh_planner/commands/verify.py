@@ -47,8 +47,9 @@ def add_parser(subparsers):
     p.add_argument("--json", metavar="OUT", help="also write the results as JSON")
     p.add_argument("--step", default=str(DEFAULT_STEP_M), metavar="S",
                    help="largest position step between samples, m or with unit (default 0.001 = 1 mm)")
-    p.add_argument("--angle-step", default="0.2deg", metavar="A",
-                   help="largest rotation between samples, rad or deg (default 0.2deg)")
+    angle_default = f"{np.rad2deg(DEFAULT_STEP_RAD):g}deg"
+    p.add_argument("--angle-step", default=angle_default, metavar="A",
+                   help=f"largest rotation between samples, rad or deg (default {angle_default})")
     p.set_defaults(func=run)
 
 
