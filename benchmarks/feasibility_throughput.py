@@ -3,7 +3,9 @@
 
     python benchmarks/feasibility_throughput.py [--poses N] [--runs K]
 
-Prints the median over K runs (one call with all N poses per run). Target: >= 1e5 poses/s.
+Prints the median over K runs (one call with all N poses per run). Target: >= 1e5 poses/s;
+a miss is printed, not turned into a failing exit code (machines differ; `make bench` runs
+every benchmark).
 """
 
 import argparse
@@ -48,14 +50,12 @@ def main(argv=None):
     parser.add_argument("--runs", type=int, default=5)
     args = parser.parse_args(argv)
     p, tau = random_poses(args.poses)
-    ok = True
     for name in ("robot1", "robot2"):
         robot = load_robot(ROOT / "config" / f"{name}.yaml")
         rate = throughput(robot, p, tau, args.runs)
-        ok &= rate >= TARGET
         print(f"{name}: {rate:,.0f} poses/s (median of {args.runs} runs of {args.poses:,} poses; "
               f"target {TARGET:,.0f}) {'ok' if rate >= TARGET else 'BELOW TARGET'}")
-    return 0 if ok else 1
+    return 0
 
 
 if __name__ == "__main__":

@@ -17,6 +17,7 @@ metres for positions. matplotlib with the Agg backend (no display needed).
 
 import re
 from dataclasses import dataclass, field
+from typing import Optional
 
 import matplotlib
 
@@ -131,7 +132,7 @@ class SegmentOverlay:
 
     start: tuple
     goal: tuple
-    first_unsafe_s: float = None
+    first_unsafe_s: Optional[float] = None
 
 
 def plot_slice(grid, path, size=(1000, 800), title=None, markers=(), segment=None):

@@ -24,6 +24,7 @@ The margin is the normalised one of ``feasibility.evaluate`` (positive iff feasi
 """
 
 from dataclasses import dataclass
+from typing import Optional
 
 import numpy as np
 from scipy.spatial.transform import Rotation
@@ -66,7 +67,7 @@ class SegmentCheck:
     index_to: int
     feasible: bool
     worst: PointCheck
-    first_unsafe: PointCheck
+    first_unsafe: Optional[PointCheck]
     samples: int
     unresolved: int
 
