@@ -34,7 +34,7 @@ from ..model.pose import rotation_tt  # noqa: E402
 
 FEASIBLE, LENGTH_OUT, TENSION_OUT = 0, 1, 2
 CLASS_COLORS = ("#4daf4a", "#ff8c1a", "#3778bf")  # green, orange, blue
-CLASS_LABELS = ("wrench-feasible (C)", "a cable length out of range",
+CLASS_LABELS = ("wrench-feasible (C)", "a cable length out of range (whatever the tensions)",
                 "a tension out of range (lengths in range)")
 SINGULAR_COLOR = "#e41a1c"
 SEGMENT_COLOR = "black"
