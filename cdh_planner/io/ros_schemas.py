@@ -1,0 +1,236 @@
+"""ROS 2 message definitions (``ros2msg`` schemas) and plain-data views of messages.
+
+No rclpy here: definitions are read from the installed ``share/<pkg>/msg|srv`` files through
+the ament index, and messages are handled by duck typing (rosidl-generated Python classes have
+``get_fields_and_field_types``), so the io layer stays importable without a ROS graph.
+
+Schema text layout (rosbag2's ``LocalMessageDefinitionSource``, MCAP ``ros2msg``): the type's
+own text, then for each nested type, sorted by name, depth first, each once::
+
+    <own text>
+    ================================================================================
+    MSG: geometry_msgs/PoseStamped
+    <its text>...
+
+Service types have no .msg files. ``pkg/srv/S_Request`` and ``_Response`` are the two halves
+of ``S.srv``; ``pkg/srv/S_Event`` is the introspection message rosidl generates for every
+service (``service_msgs/ServiceEventInfo info``, ``S_Request[<=1] request``,
+``S_Response[<=1] response``). rosbag2's current source writes service event schemas as the
+raw .srv text behind a ``SRV:`` header, which neither rosbags nor mcap_ros2 (nor Foxglove /
+Lichtblick: ros2/rosbag2#2365, open) can parse; we write the Event as an ordinary message
+definition instead, the form that issue asks for, which all of them decode. (rosbag2 does
+not need the schema text to play a topic back: it goes by the type name.)
+
+Nested service halves are named ``pkg/S_Request`` in ``MSG:`` headers and field types (not
+``pkg/srv/...``): mcap_ros2 rejects three-part field types, and rosbags resolves relative
+names (``Path`` in nav_msgs' GetPlan) against the ``pkg/msg`` namespace only that way.
+"""
+
+import array
+import os
+import re
+import sys
+from functools import lru_cache
+from pathlib import Path
+
+import numpy as np
+
+# ament_index_python finds share/ through AMENT_PREFIX_PATH; a pip venv (see
+# ros-on-pip.md) has the message files under sys.prefix but often no such variable.
+os.environ.setdefault("AMENT_PREFIX_PATH", sys.prefix)
+
+SEPARATOR = "=" * 80
+PRIMITIVES = frozenset({
+    "bool", "byte", "char", "float32", "float64", "int8", "uint8", "int16", "uint16",
+    "int32", "uint32", "int64", "uint64", "string", "wstring"})
+SERVICE_SUFFIXES = ("_Request", "_Response", "_Event")
+
+
+def type_name_of(msg) -> str:
+    """``pkg/msg/Type`` (or ``pkg/srv/S_Request`` ...) of a rosidl-generated message instance.
+
+    The generated module is ``pkg.msg._type`` / ``pkg.srv._service``, so the first two module
+    parts are the package and the interface kind.
+    """
+    cls = type(msg)
+    parts = cls.__module__.split(".")
+    if len(parts) < 2 or not hasattr(cls, "get_fields_and_field_types"):
+        raise TypeError(f"not a ROS 2 message instance: {cls.__module__}.{cls.__name__}")
+    return f"{parts[0]}/{parts[1]}/{cls.__name__}"
+
+
+def split_type_name(type_name: str) -> tuple[str, str, str]:
+    """``pkg/Type`` or ``pkg/ns/Type`` -> (pkg, ns, Type); two-part names are messages."""
+    parts = type_name.split("/")
+    if len(parts) == 2:
+        return parts[0], "msg", parts[1]
+    if len(parts) == 3:
+        return parts[0], parts[1], parts[2]
+    raise ValueError(f"bad ROS type name {type_name!r}")
+
+
+def _share_dir(pkg: str) -> Path:
+    """``share/<pkg>`` through the ament index, as rosbag2 looks definitions up."""
+    from ament_index_python.packages import get_package_share_directory
+    return Path(get_package_share_directory(pkg))
+
+
+def _srv_halves(pkg: str, service: str) -> tuple[str, str]:
+    """Request and response texts of ``pkg/srv/service.srv`` (split on the ``---`` line)."""
+    text = (_share_dir(pkg) / "srv" / f"{service}.srv").read_text()
+    halves = re.split(r"^---[ \t]*\r?\n?", text, maxsplit=1, flags=re.MULTILINE)
+    if len(halves) != 2:
+        raise ValueError(f"{pkg}/srv/{service}.srv has no '---' separator")
+    return halves[0], halves[1]
+
+
+def _field_types(text: str, pkg: str) -> set[str]:
+    """Non-primitive field types of a .msg text, as ``pkg/Type`` (relative names get ``pkg``).
+
+    Constants (``uint8 A = 1``) are always primitive, so only the first token matters.
+    """
+    deps = set()
+    for line in text.splitlines():
+        line = line.split("#", 1)[0].strip()
+        if not line:
+            continue
+        base = re.split(r"[\[<]", line.split()[0], maxsplit=1)[0]
+        if base in PRIMITIVES:
+            continue
+        if "/" not in base:
+            base = f"{pkg}/{base}"
+        p, _, t = split_type_name(base)
+        deps.add(f"{p}/{t}")        # 'pkg/msg/T' in a field type means the same as 'pkg/T'
+    return deps
+
+
+def _service_text(pkg: str, name: str) -> str | None:
+    """Text of ``name`` if it is ``S_Request``, ``S_Response`` or ``S_Event`` of an installed
+    service ``pkg/srv/S``, else None."""
+    for suffix in SERVICE_SUFFIXES:
+        service = name[: -len(suffix)]
+        if not (name.endswith(suffix) and (_share_dir(pkg) / "srv" / f"{service}.srv").is_file()):
+            continue
+        if suffix == "_Event":      # rosidl's generated introspection message, as .msg text
+            return (f"service_msgs/ServiceEventInfo info\n"
+                    f"{pkg}/{service}_Request[<=1] request\n"
+                    f"{pkg}/{service}_Response[<=1] response\n")
+        return _srv_halves(pkg, service)[0 if suffix == "_Request" else 1]
+    return None
+
+
+@lru_cache(maxsize=None)
+def own_definition(type_name: str) -> tuple[str, tuple[str, ...]]:
+    """(text, sorted nested type names) of one type, without its dependencies' texts.
+
+    Nested names are as they appear in ``MSG:`` headers (``pkg/Type``). A two-part name may
+    be a service half (``nav_msgs/GetPlan_Request``): that is how nested ones are written.
+    """
+    pkg, ns, name = split_type_name(type_name)
+    msg_file = _share_dir(pkg) / "msg" / f"{name}.msg"
+    if ns == "msg" and msg_file.is_file():
+        text = msg_file.read_text()
+    elif (text := _service_text(pkg, name)) is None:
+        raise LookupError(f"no definition of {type_name} under {_share_dir(pkg)}")
+    return text, tuple(sorted(_field_types(text, pkg)))
+
+
+@lru_cache(maxsize=None)
+def full_definition(type_name: str) -> str:
+    """Complete ``ros2msg`` schema text of ``type_name`` in rosbag2's layout (see module doc)."""
+    seen: set[str] = set()
+
+    def append(name: str) -> str:
+        text, deps = own_definition(name)
+        for dep in deps:
+            if dep not in seen:
+                seen.add(dep)
+                text += f"\n{SEPARATOR}\nMSG: {dep}\n" + append(dep)
+        return text
+
+    return append(type_name)
+
+
+# a type name with an underscore in its last part: nav_msgs/GetPlan_Request, pkg/srv/S_Event
+_UNDERSCORED_TYPE = re.compile(
+    r"(?<![\w/])([a-z][a-z0-9_]*/(?:[a-z]+/)?)([A-Z][A-Za-z0-9]*(?:_[A-Za-z0-9]+)+)")
+
+
+def mcap_ros2_alias(text: str) -> str:
+    """``text`` (a type name or schema) with underscores dropped from type names.
+
+    mcap_ros2's vendored rosidl parser only accepts ``[A-Z][A-Za-z0-9]*`` message names, so
+    it refuses the service types ``S_Request``, ``S_Response`` and ``S_Event``. CDR does not
+    depend on names, so encoding and decoding under ``SRequest`` ... gives the same bytes;
+    the file keeps the real names.
+    """
+    return _UNDERSCORED_TYPE.sub(lambda m: m[1] + m[2].replace("_", ""), text)
+
+
+@lru_cache(maxsize=None)
+def _char_paths(type_name: str) -> tuple[tuple[str, str | None], ...]:
+    """Fields of ``type_name`` that are, or lead to, ``char`` fields: (field, nested type or
+    None for the char field itself). Empty for the vast majority of types."""
+    pkg, _, _ = split_type_name(type_name)
+    text, _ = own_definition(type_name)
+    out = []
+    for line in text.splitlines():
+        tokens = line.split("#", 1)[0].split()
+        if len(tokens) < 2 or "=" in tokens[1] or (len(tokens) > 2 and tokens[2][0] == "="):
+            continue                                   # blank, or a constant
+        base = re.split(r"[\[<]", tokens[0], maxsplit=1)[0]
+        if base == "char":
+            out.append((tokens[1], None))
+        elif base not in PRIMITIVES:
+            p, _, t = split_type_name(base if "/" in base else f"{pkg}/{base}")
+            if _char_paths(f"{p}/{t}"):
+                out.append((tokens[1], f"{p}/{t}"))
+    return tuple(out)
+
+
+def _sign_chars(plain, type_name: str):
+    """Turn ``char`` values into int8 in place: ROS 2 ``char`` is an unsigned byte (rclpy gives
+    0..255) but mcap_ros2 encodes and decodes it as int8 and rejects values above 127. The
+    bytes on the wire are the same either way."""
+    for name, nested in _char_paths(type_name):
+        value = plain.get(name)
+        if nested is not None:
+            for item in value if isinstance(value, list) else [value]:
+                _sign_chars(item, nested)
+        elif isinstance(value, (bytes, list)):
+            plain[name] = [v - 256 if v > 127 else v for v in value]
+        elif isinstance(value, int):
+            plain[name] = value - 256 if value > 127 else value
+    return plain
+
+
+def encodable(msg, type_name: str) -> dict:
+    """``msg`` (rosidl instance or dict) as plain data mcap_ros2's encoder writes exactly."""
+    return _sign_chars(to_plain(msg), type_name)
+
+
+def to_plain(value):
+    """A rosidl message (or field value) as dicts, lists, bytes and Python scalars.
+
+    mcap_ros2's CDR encoder reads fields by name and accepts lists / tuples / bytes /
+    ``array.array`` for arrays, but rclpy hands out numpy arrays for fixed-size arrays
+    (``float64[36]``, ``char[16]``) and one-byte ``bytes`` for ``byte`` (octet) values, which
+    it rejects or cannot coerce to int. Converting the whole tree also keeps the encoder from
+    padding the caller's lists in place.
+    """
+    if hasattr(value, "get_fields_and_field_types"):
+        return {f: to_plain(getattr(value, f)) for f in value.get_fields_and_field_types()}
+    if isinstance(value, dict):
+        return {k: to_plain(v) for k, v in value.items()}
+    if isinstance(value, (bytes, bytearray)):
+        # rclpy: a scalar 'byte' is bytes of length 1; uint8[] comes as array('B')
+        return value[0] if len(value) == 1 else bytes(value)
+    if isinstance(value, array.array):
+        return value.tobytes() if value.typecode == "B" else value.tolist()
+    if isinstance(value, np.ndarray):
+        return value.tobytes() if value.dtype == np.uint8 else value.tolist()
+    if isinstance(value, (list, tuple)):
+        return [to_plain(v) for v in value]
+    if isinstance(value, np.generic):
+        return value.item()
+    return value
