@@ -1,0 +1,224 @@
+"""Henderson's multiple-hypercube atlas of an implicitly defined manifold F(x) = 0.
+
+Knows nothing of robots. The constraint gives (duck-typed, like OMPL's Constraint):
+    n_vars, dim                      ambient and manifold dimensions
+    residual_and_jacobian(x)         F (n_vars - dim,) and F_x (n_vars - dim, n_vars)
+    periodic                         bool mask: coordinates that are 2 pi periodic
+    lower, upper                     the bounded domain of x (periodic ones ignored)
+    key(x)                           a low-dimensional 1-Lipschitz embedding of x, for the
+                                     spatial index (|key(x) - key(y)| <= |x - y|)
+
+A chart i is a point x_i on M, an orthonormal basis Phi_i of its tangent space, a radius
+r_i and a polytope P_i in tangent coordinates s. phi_i(s) = x_i + Phi_i s; psi_i(s) is its
+Newton projection onto M. New charts are made at the ball's boundary towards a polytope
+vertex outside the ball; the step halves where the manifold curves (distance to the tangent
+space or tangent-space angle too large, or Newton not converging).
+"""
+
+import numpy as np
+from scipy.spatial import cKDTree
+
+from .polytope import Polytope
+
+TWO_PI = 2.0 * np.pi
+
+
+class Chart:
+    """A chart: centre ``x`` (on M), tangent ``basis`` (n_vars, dim), ``radius``, polytope."""
+
+    __slots__ = ("x", "basis", "radius", "polytope", "neighbours", "frontier", "index")
+
+    def __init__(self, index, x, basis, radius):
+        self.index = index
+        self.x = x
+        self.basis = basis
+        self.radius = radius
+        self.polytope = Polytope(basis.shape[1], radius)
+        self.neighbours = set()
+        self.frontier = False  # touches the domain boundary or a place Newton cannot reach
+
+    @property
+    def closed(self):
+        return self.polytope.outside_vertices(self.radius).size == 0
+
+
+class Atlas:
+    """A growing atlas. ``radius`` is the chart radius r in the constraint's scaled units."""
+
+    def __init__(self, constraint, radius=0.1, epsilon=0.25, max_angle=0.5, min_radius_ratio=1 / 16,
+                 newton_tol=1e-9, newton_iters=12):
+        self.c = constraint
+        self.radius = float(radius)
+        self.epsilon = epsilon
+        self.cos_max_angle = np.cos(max_angle)
+        self.min_radius = self.radius * min_radius_ratio
+        self.newton_tol = newton_tol
+        self.newton_iters = newton_iters
+        self.charts = []
+        self.periodic = np.asarray(constraint.periodic, dtype=bool)
+        self._index = _KeyIndex()
+
+    # ----- geometry --------------------------------------------------------------------
+    def diff(self, x, y):
+        """y - x with periodic coordinates wrapped to [-pi, pi)."""
+        d = y - x
+        d[self.periodic] = (d[self.periodic] + np.pi) % TWO_PI - np.pi
+        return d
+
+    def wrap(self, x):
+        x = x.copy()
+        x[self.periodic] = (x[self.periodic] + np.pi) % TWO_PI - np.pi
+        return x
+
+    def in_domain(self, x):
+        free = ~self.periodic
+        return bool(np.all(x[free] >= self.c.lower[free]) and np.all(x[free] <= self.c.upper[free]))
+
+    def tangent_basis(self, x):
+        """Orthonormal basis of ker F_x(x), shape (n_vars, dim)."""
+        _, Fx = self.c.residual_and_jacobian(x)
+        q, _ = np.linalg.qr(Fx.T, mode="complete")
+        return q[:, Fx.shape[0]:]
+
+    def newton(self, x0, basis, s_target, x_start):
+        """psi: solve F(x) = 0, basis^T (x - x0) = s_target from x_start; None if no convergence."""
+        x = x_start.copy()
+        m = self.c.n_vars - self.c.dim
+        A = np.empty((self.c.n_vars, self.c.n_vars))
+        rhs = np.empty(self.c.n_vars)
+        A[m:] = basis.T
+        with np.errstate(all="ignore"):
+            for _ in range(self.newton_iters):
+                F, Fx = self.c.residual_and_jacobian(x)
+                rhs[:m] = F
+                rhs[m:] = basis.T @ self.diff(x0, x) - s_target
+                if not np.all(np.isfinite(rhs)):
+                    return None
+                if np.max(np.abs(rhs)) < self.newton_tol:
+                    return x
+                A[:m] = Fx
+                try:
+                    step = np.linalg.solve(A, rhs)
+                except np.linalg.LinAlgError:
+                    return None
+                if not np.all(np.isfinite(step)):
+                    return None
+                x = x - step
+        F, _ = self.c.residual_and_jacobian(x)
+        ok = np.all(np.isfinite(F)) and np.max(np.abs(F)) < 1e3 * self.newton_tol
+        return x if ok else None
+
+    def psi(self, i, s):
+        """Projection onto M of the point with tangent coordinates s in chart i."""
+        ch = self.charts[i]
+        return self.newton(ch.x, ch.basis, s, ch.x + ch.basis @ s)
+
+    def coordinates(self, i, x):
+        """Tangent coordinates of x in chart i (the inverse of psi_i near x_i)."""
+        ch = self.charts[i]
+        return ch.basis.T @ self.diff(ch.x, x)
+
+    # ----- growth ----------------------------------------------------------------------
+    def add_chart(self, x, radius=None, basis=None):
+        """Add a chart at x (a point on M); links and clips its neighbours. Returns its index."""
+        x = self.wrap(np.asarray(x, dtype=float))
+        radius = self.radius if radius is None else radius
+        i = len(self.charts)
+        ch = Chart(i, x, self.tangent_basis(x) if basis is None else basis, radius)
+        self.charts.append(ch)
+        key = self.c.key(x)
+        for j in self._index.query(key, radius + self.radius):
+            self._link(i, j)
+        self._index.add(key)
+        return i
+
+    def _link(self, i, j):
+        ci, cj = self.charts[i], self.charts[j]
+        d = self.diff(ci.x, cj.x)
+        if np.linalg.norm(d) >= ci.radius + cj.radius:
+            return
+        ci.neighbours.add(j)
+        cj.neighbours.add(i)
+        for a, b, dab in ((ci, cj, d), (cj, ci, -d)):
+            s = a.basis.T @ dab
+            ds = np.linalg.norm(s)
+            if ds < 1e-12:
+                continue
+            beta = (ds * ds + a.radius ** 2 - b.radius ** 2) / (2.0 * ds)
+            # keep a core around the centre: a chart never loses its own centre
+            a.polytope.clip(s / ds, max(beta, 0.05 * a.radius))
+
+    def expand(self, i):
+        """One growth step from chart i. Returns the new chart's index, or None if no chart
+        was made (the chart is closed, or the chosen direction was closed off)."""
+        ch = self.charts[i]
+        out = ch.polytope.outside_vertices(ch.radius)
+        if out.size == 0:
+            return None
+        v = ch.polytope.vertices[out[0]]
+        u = v / np.linalg.norm(v)
+        step = ch.radius
+        while step >= self.min_radius * (1 - 1e-9):
+            x_new = self.psi(i, step * u)
+            basis = None if x_new is None else self._acceptable_basis(ch, step * u, x_new, step)
+            if basis is not None:
+                if not self.in_domain(x_new):
+                    break
+                j = self.add_chart(x_new, radius=min(self.radius, max(step, self.min_radius)), basis=basis)
+                if ch.polytope.vertices.shape[0] and np.any(np.all(np.isclose(ch.polytope.vertices, v), axis=1)):
+                    ch.polytope.clip(u, ch.radius)
+                return j
+            step *= 0.5
+        ch.frontier = True
+        ch.polytope.clip(u, ch.radius)
+        return None
+
+    def _acceptable_basis(self, ch, s, x_new, step):
+        """The tangent basis at x_new if the manifold is flat enough between, else None."""
+        if np.linalg.norm(self.diff(ch.x + ch.basis @ s, x_new)) > self.epsilon * step:
+            return None
+        basis_new = self.tangent_basis(x_new)
+        sv = np.linalg.svd(ch.basis.T @ basis_new, compute_uv=False)
+        return basis_new if sv.min() >= self.cos_max_angle else None
+
+    def closest(self, x, k_radius=None):
+        """Indices of charts whose centre is within (wrapped) distance of its radius of x."""
+        key = self.c.key(x)
+        near = self._index.query(key, self.radius if k_radius is None else k_radius)
+        return [j for j in near if np.linalg.norm(self.diff(self.charts[j].x, x)) < self.charts[j].radius]
+
+    def segment(self, i, j, n_points):
+        """Points on M from the centre of chart i to that of its neighbour j: the first half
+        projected from i's tangent space, the second from j's. None if Newton fails."""
+        si = self.coordinates(i, self.charts[j].x)
+        sj = self.coordinates(j, self.charts[i].x)
+        pts = []
+        for t in np.linspace(0.0, 1.0, n_points):
+            x = self.psi(i, t * si) if t <= 0.5 else self.psi(j, (1.0 - t) * sj)
+            if x is None:
+                return None
+            pts.append(x)
+        return pts
+
+
+class _KeyIndex:
+    """Chart centres' keys: a cKDTree, rebuilt as the atlas doubles, plus a brute-force tail."""
+
+    def __init__(self):
+        self.keys = []
+        self.tree = None
+        self.n_tree = 0
+
+    def add(self, key):
+        self.keys.append(np.asarray(key, dtype=float))
+        if len(self.keys) - self.n_tree > max(64, self.n_tree):
+            self.tree = cKDTree(np.array(self.keys))
+            self.n_tree = len(self.keys)
+
+    def query(self, key, radius):
+        found = list(self.tree.query_ball_point(key, radius)) if self.tree is not None else []
+        if len(self.keys) > self.n_tree:
+            tail = np.array(self.keys[self.n_tree:])
+            near = np.flatnonzero(np.linalg.norm(tail - key, axis=1) <= radius)
+            found.extend((near + self.n_tree).tolist())
+        return found
