@@ -7,9 +7,11 @@ Examples (the README pictures)::
         --start -2.3 1.6 --goal 1.7 1.7 --start-label q_s --goal-label q_g --segment \\
         -o docs/robot1_slice.png
     cdh-planner slice config/robot2.yaml --sphere 0,0,0.306,0.13 \\
-        --range alpha1=-pi:pi alpha2=0:pi/2 --point q1=0.55,pi/2 \\
-        --start 0.55 0.75 --goal 2.63 0.75 --start-label q2 --goal-label q3 --segment \\
+        --range alpha1=-pi:pi alpha2=0:pi/2 --point q_1=0.55,pi/2 \\
+        --start 0.55 0.75 --goal 2.63 0.75 --start-label q_2 --goal-label q_3 --segment \\
         -o docs/robot2_sphere.png
+
+``cdh-planner demo`` draws the same two pictures through ``render_slice``.
 
 The task (which poses the picture covers) comes from ``--task-file`` (a problem file with
 ``task:`` or a ROS parameters file with ``ros__parameters.task``), ``--sphere``, or
@@ -24,19 +26,21 @@ metres (``0.35``) or ``350mm``. A value starting with '-' that is not a plain nu
 import argparse
 import math
 import time
+from dataclasses import dataclass
 from pathlib import Path
+from typing import Optional
 
 import yaml
 
 from ..errors import InputError
 from ..feasibility import evaluate
-from ..io.plots import DEFAULT_RANGES, FEASIBLE, Marker, SegmentOverlay, SliceView, \
+from ..io.plots import DEFAULT_RANGES, FEASIBLE, Marker, SegmentOverlay, SliceGrid, SliceView, \
     compute_slice, plot_slice
 from ..io.poses import parse_angle, parse_length
 from ..model.pose import rotation_tt
 from ..model.robot import load_robot, ros_parameters
 from ..model.task import POSE_NAMES, FreeTask, SliceTask, SphereTask, task_from_dict
-from ..trajectory.verify import DEFAULT_STEP_M, DEFAULT_STEP_RAD, check_task_motion
+from ..trajectory.verify import DEFAULT_STEP_M, DEFAULT_STEP_RAD, SegmentCheck, check_task_motion
 
 EXAMPLES = """examples:
   cdh-planner slice config/robot1.yaml --fixed x=0 y=0 z=0.35 sigma=34deg --free phi theta \\
@@ -99,19 +103,45 @@ def run(args):
     markers = [_parse_point(text, view) for text in args.point]
     markers += [Marker(args.start_label, *start)] if start else []
     markers += [Marker(args.goal_label, *goal)] if goal else []
+    if args.segment and (start is None or goal is None):
+        raise InputError("--segment", "start -> goal", "needs both --start and --goal")
+    segment = (start, goal) if args.segment else None
 
+    result = render_slice(robot, view, out, resolution=resolution, size=size,
+                          title=args.title or _title(robot, view), markers=markers, segment=segment)
+    if result.segment is not None:
+        _print_segment(result.segment, args.start_label, args.goal_label)
+    _report(robot, view, result.grid, result.elapsed, markers, out, size)
+    return 0
+
+
+@dataclass(frozen=True)
+class SliceResult:
+    """What ``render_slice`` computed: the classified ``grid``, the seconds the
+    classification took, and the dense check of the straight segment (or None)."""
+
+    grid: SliceGrid
+    elapsed: float
+    segment: Optional[SegmentCheck]
+
+
+def render_slice(robot, view, out, resolution=400, size=(1000, 800), title=None,
+                 markers=(), segment=None):
+    """Classify the view's grid, check the straight segment ``(start, goal)`` (picture
+    coordinates) densely when given, and draw the PNG ``out``. Prints nothing."""
     t0 = time.perf_counter()
     grid = compute_slice(robot, view, resolution)
     elapsed = time.perf_counter() - t0
-    overlay = None
-    if args.segment:
-        if start is None or goal is None:
-            raise InputError("--segment", "start -> goal", "needs both --start and --goal")
-        overlay = _segment(robot, view, start, goal, args)
-    plot_slice(grid, out, size=size, title=args.title or _title(robot, view),
-               markers=markers, segment=overlay)
-    _report(robot, view, grid, elapsed, markers, out, size)
-    return 0
+    check, overlay = None, None
+    if segment is not None:
+        start, goal = segment
+        check = check_task_motion(robot, view.task, view.coords([start[0], goal[0]], [start[1], goal[1]]),
+                                  DEFAULT_STEP_M, DEFAULT_STEP_RAD)[0]
+        s = None if check.first_unsafe is None else check.first_unsafe.s
+        overlay = SegmentOverlay(start=tuple(start), goal=tuple(goal), first_unsafe_s=s)
+    plot_slice(grid, out, size=size, title=title or _title(robot, view), markers=markers,
+               segment=overlay)
+    return SliceResult(grid=grid, elapsed=elapsed, segment=check)
 
 
 def build_view(args):
@@ -156,20 +186,20 @@ def _task(args):
         if len(fixed) >= 6:
             raise InputError("--fixed", args.fixed, "at least two coordinates must stay free")
         return SliceTask(fixed=fixed), True
-    task = _task_in_yaml(args.robot)
+    task = task_in_yaml(args.robot)
     if task is None or isinstance(task, FreeTask):
         raise InputError("task", args.robot, "no task: give --fixed, --sphere or --task-file")
     return task, False
 
 
 def _load_task_file(path):
-    task = _task_in_yaml(path)
+    task = task_in_yaml(path)
     if task is None:
         raise InputError("--task-file", path, "no 'task:' mapping (top level or under ros__parameters)")
     return task
 
 
-def _task_in_yaml(path):
+def task_in_yaml(path):
     """The task of a problem file (top-level ``task:``) or of a ROS parameters file."""
     path = Path(path)
     if not path.is_file():
@@ -280,19 +310,15 @@ def _check_output(path):
     return out
 
 
-def _segment(robot, view, start, goal, args):
-    """Check the straight start -> goal segment (in task coordinates) densely."""
-    check = check_task_motion(robot, view.task, view.coords([start[0], goal[0]], [start[1], goal[1]]),
-                              DEFAULT_STEP_M, DEFAULT_STEP_RAD)[0]
-    s = None if check.first_unsafe is None else check.first_unsafe.s
-    if s is None:
-        print(f"segment {args.start_label} -> {args.goal_label}: stays in C "
+def _print_segment(check, start_label, goal_label):
+    """One line on the straight segment's dense check."""
+    if check.first_unsafe is None:
+        print(f"segment {start_label} -> {goal_label}: stays in C "
               f"(worst margin {check.worst.margin:+.4f} at s = {check.worst.s:.3f}, {check.samples} samples)")
     else:
-        print(f"segment {args.start_label} -> {args.goal_label}: leaves C at s = {s:.4f} "
+        print(f"segment {start_label} -> {goal_label}: leaves C at s = {check.first_unsafe.s:.4f} "
               f"({check.first_unsafe.binding}); worst margin {check.worst.margin:+.4g} "
               f"at s = {check.worst.s:.3f} ({check.worst.binding})")
-    return SegmentOverlay(start=start, goal=goal, first_unsafe_s=s)
 
 
 def _title(robot, view):
