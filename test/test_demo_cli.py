@@ -1,0 +1,185 @@
+"""``cdh-planner demo`` end to end: the paper's verdicts, the pictures, the exit codes."""
+import contextlib
+import io
+import math
+import struct
+from pathlib import Path
+
+import numpy as np
+import pytest
+
+from cdh_planner import cli
+from cdh_planner.commands import demo as demo_cmd
+from cdh_planner.feasibility import evaluate
+from cdh_planner.trajectory.verify import TaskLinePath
+
+ROOT = Path(__file__).resolve().parents[1]
+CHECK_STEPS = demo_cmd.STEPS[:3]  # robots, poses, motions: everything but the pictures
+
+
+def png_size(path):
+    """(width, height) from a PNG header."""
+    data = Path(path).read_bytes()
+    assert data[:8] == b"\x89PNG\r\n\x1a\n"
+    return struct.unpack(">II", data[16:24])
+
+
+def run_quiet(func, *args, **kwargs):
+    """(return value, stdout text) of func(*args, **kwargs)."""
+    buf = io.StringIO()
+    with contextlib.redirect_stdout(buf):
+        value = func(*args, **kwargs)
+    return value, buf.getvalue()
+
+
+@pytest.fixture(scope="module")
+def full_run(tmp_path_factory):
+    """One whole ``cdh-planner demo --out DIR`` run: (exit code, stdout, DIR)."""
+    out = tmp_path_factory.mktemp("demo") / "out"  # does not exist yet: the demo creates it
+    rc, text = run_quiet(cli.main, ["demo", "--out", str(out)])
+    return rc, text, out
+
+
+@pytest.fixture(scope="module")
+def checked(tmp_path_factory):
+    """The Demo record of the checking steps (no pictures)."""
+    demo, _ = run_quiet(demo_cmd.run_demo, tmp_path_factory.mktemp("checks"), steps=CHECK_STEPS)
+    return demo
+
+
+def line_with(text, robot, *parts):
+    """The one table row of ``robot`` containing all ``parts``."""
+    lines = [line for line in text.splitlines()
+             if line.startswith(f"{robot} ") and all(p in line for p in parts)]
+    assert len(lines) == 1, (parts, lines)
+    return lines[0]
+
+
+def test_demo_exits_0_and_prints_the_papers_verdicts(full_run):
+    rc, text, _ = full_run
+    assert rc == 0
+    for robot, label in [("robot1", "q_s"), ("robot1", "q_g"), ("robot2", "q_1"), ("robot2", "q_2"),
+                         ("robot2", "q_3")]:
+        row = line_with(text, robot, f"  {label}  ").split()
+        assert row[:2] == [robot, label]
+        assert "yes" in row and row[-2:] == ["feasible:", "agrees"]
+    slerp = line_with(text, "robot1", "q_s -> q_g", "linear + slerp")
+    assert "UNSAFE, leaves C at s = 0.1" in slerp and slerp.endswith("unsafe: agrees")
+    assert "UNSAFE, leaves C at s = 0.03" in line_with(text, "robot1", "q_s -> q_g", "line in (phi, theta)")
+    safe = line_with(text, "robot2", "q_1 -> q_2", "line in (alpha1, alpha2)")
+    assert "safe, worst margin +0.05" in safe and safe.endswith("safe: agrees")
+    unsafe = line_with(text, "robot2", "q_2 -> q_3", "line in (alpha1, alpha2)")
+    assert "UNSAFE, leaves C at s = 0.04" in unsafe and unsafe.endswith("unsafe within 10 %: agrees")
+    assert "every verdict is the expected one" in text
+    assert "DIFFERS" not in text
+
+
+def test_demo_writes_the_two_slice_pictures(full_run):
+    rc, text, out = full_run
+    assert rc == 0
+    for name in ("robot1_slice.png", "robot2_sphere.png"):
+        path = out / name
+        assert path.stat().st_size > 20_000  # a real picture, not an empty canvas
+        assert png_size(path) == (1000, 800)
+        assert f"wrote {path}" in text
+    assert f"files in {out.resolve()}/: robot1_slice.png, robot2_sphere.png" in text
+    # The drawn segments are the ones verified: same first unsafe points.
+    assert "segment q_s -> q_g leaves C at 3.2 %" in text
+    assert "segment q_2 -> q_3 leaves C at 4.3 %" in text
+
+
+def test_pose_verdicts_agree_with_the_closed_form_and_the_limits(checked):
+    assert set(checked.poses) == {("robot1", "q_s"), ("robot1", "q_g"), ("robot2", "q_1"),
+                                  ("robot2", "q_2"), ("robot2", "q_3")}
+    # Robot 1 poses on the slice p = [0, 0, 0.35] m, sigma = 34 deg.
+    for label in ("q_s", "q_g"):
+        v = checked.poses[("robot1", label)]
+        np.testing.assert_allclose(v.position, [0.0, 0.0, 0.35])
+        assert v.tau[2] == pytest.approx(math.radians(34))
+    # Robot 2 poses on the sphere of radius 0.13 m around [0, 0, 0.306] m.
+    for label in ("q_1", "q_2", "q_3"):
+        v = checked.poses[("robot2", label)]
+        assert np.linalg.norm(v.position - [0.0, 0.0, 0.306]) == pytest.approx(0.13)
+    for (name, _), v in checked.poses.items():
+        robot = checked.robots[name]
+        assert v.feasible and v.agrees and v.margin > 0
+        # Feasible: the whole tension envelope is strictly inside the limits.
+        assert robot.tension_min.max() < v.tension_low < v.tension_high < robot.tension_max.min()
+        # The margin is the normalised distance to the binding bound.
+        f = evaluate(robot, v.position[None], v.tau[None])
+        kind, cable = v.binding[:-1].split("[")
+        i = int(cable) - 1
+        expected = {
+            "length_min": (f.lengths[0, i] - robot.length_min[i]) / (robot.length_max[i] - robot.length_min[i]),
+            "length_max": (robot.length_max[i] - f.lengths[0, i]) / (robot.length_max[i] - robot.length_min[i]),
+            "tension_min": (f.tension_min[0, i] - robot.tension_min[i]) / (robot.tension_max[i] - robot.tension_min[i]),
+            "tension_max": (robot.tension_max[i] - f.tension_max[0, i]) / (robot.tension_max[i] - robot.tension_min[i]),
+        }[kind]
+        assert v.margin == pytest.approx(expected, rel=1e-12)
+    # math.md section 6: Robot 1's q_s, q_g have a margin of about 0.04 (millimetre units).
+    assert 0.02 < checked.poses[("robot1", "q_s")].margin < 0.06
+    assert 0.02 < checked.poses[("robot1", "q_g")].margin < 0.06
+
+
+def test_motion_verdicts_and_where_they_leave_c(checked):
+    by_key = {(m.motion.robot, m.motion.start, m.motion.goal, m.motion.interpolation): m
+              for m in checked.motions}
+    assert not by_key[("robot1", "q_s", "q_g", "slerp")].safe
+    assert not by_key[("robot1", "q_s", "q_g", "task")].safe
+    assert by_key[("robot2", "q_1", "q_2", "task")].safe
+    q2q3 = by_key[("robot2", "q_2", "q_3", "task")]
+    assert not q2q3.safe and 0.03 < q2q3.leaves_at < 0.06  # math.md: after about 4 % of the way
+    assert all(m.agrees is not False for m in checked.motions)
+    assert checked.differs == []
+    # The first unsafe point is a boundary point of C along the line: feasible just before,
+    # infeasible just after.
+    task = checked.tasks["robot2"]
+    line = TaskLinePath(task, [[0.55, 0.75], [2.63, 0.75]])
+    s = q2q3.leaves_at
+    p, R = line(np.zeros(2, dtype=int), np.array([s - 1e-6, s + 1e-6]))
+    margin = evaluate(checked.robots["robot2"], p, R=R).margin
+    assert margin[0] > 0 > margin[1]
+    # Along q_1 -> q_2 the margin never falls below its value at the worst sample.
+    safe = by_key[("robot2", "q_1", "q_2", "task")].check
+    line = TaskLinePath(task, [[0.55, math.pi / 2], [0.55, 0.75]])
+    s = np.linspace(0.0, 1.0, 2001)
+    p, R = line(np.zeros(s.size, dtype=int), s)
+    assert evaluate(checked.robots["robot2"], p, R=R).margin.min() >= safe.worst.margin - 1e-9
+
+
+def test_a_verdict_that_differs_from_the_paper_gives_exit_1(tmp_path, monkeypatch):
+    flipped = (demo_cmd.PaperPose("robot2", "q_2", (0.55, 0.75), feasible=False),)
+    monkeypatch.setattr(demo_cmd, "PAPER_POSES", demo_cmd.PAPER_POSES + flipped)
+    monkeypatch.setattr(demo_cmd, "STEPS", demo_cmd.STEPS[:2])
+    rc, text = run_quiet(cli.main, ["demo", "--out", str(tmp_path)])
+    assert rc == 1
+    assert "DIFFERS FROM THE EXPECTED" in text
+    assert "robot2 q_2: feasible, expected not feasible" in text
+
+
+def test_steps_can_be_appended(tmp_path):
+    seen = []
+    extra = demo_cmd.Step("later", "A later step", lambda d: seen.append(sorted(d.robots)))
+    demo, text = run_quiet(demo_cmd.run_demo, tmp_path, steps=demo_cmd.STEPS[:1] + [extra])
+    assert seen == [["robot1", "robot2"]]
+    assert "== 2. A later step" in text
+
+
+def test_config_dir_found_from_the_package():
+    path = demo_cmd.find_config_dir()
+    assert (path / "robot1.yaml").is_file() and (path / "robot2.yaml").is_file()
+    if (ROOT / "config" / "robot1.yaml").is_file():  # a checkout / editable install
+        assert path.resolve() == (ROOT / "config").resolve()
+
+
+@pytest.mark.parametrize("args, field", [
+    (["--out", "{file}"], "--out"),
+    (["--out", "{dir}", "--config-dir", "{dir}"], "--config-dir"),
+])
+def test_bad_directories_give_one_line_errors(tmp_path, capsys, args, field):
+    a_file = tmp_path / "a_file"
+    a_file.write_text("x")
+    argv = ["demo"] + [a.format(file=a_file, dir=tmp_path) for a in args]
+    assert cli.main(argv) == 2
+    err = capsys.readouterr().err.strip()
+    assert err.startswith(f"cdh-planner: error: {field} = ") and "\n" not in err
