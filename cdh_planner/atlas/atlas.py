@@ -161,9 +161,7 @@ class Atlas:
         while step >= self.min_radius * (1 - 1e-9):
             x_new = self.psi(i, step * u)
             basis = None if x_new is None else self._acceptable_basis(ch, step * u, x_new, step)
-            if basis is not None:
-                if not self.in_domain(x_new):
-                    break
+            if basis is not None and self.in_domain(x_new):
                 j = self.add_chart(x_new, radius=min(self.radius, max(step, self.min_radius)), basis=basis)
                 if ch.polytope.vertices.shape[0] and np.any(np.all(np.isclose(ch.polytope.vertices, v), axis=1)):
                     ch.polytope.clip(u, ch.radius)

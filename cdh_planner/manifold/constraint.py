@@ -12,7 +12,7 @@ import numpy as np
 
 from ..model.pose import wrap_angle
 from ..model.task import POSE_NAMES, SliceTask, SphereTask
-from .navigation import I_G, I_P, I_TAU, KAPPA, N_EQS, N_VARS, NavigationManifold
+from .navigation import I_G, I_P, I_TAU, N_EQS, N_VARS, NavigationManifold
 
 PHI, THETA, SIGMA = 3, 4, 5
 # Length of the cos/sin embedding of periodic coordinates in the spatial-index key.
@@ -25,8 +25,8 @@ class TaskConstraint:
     the atlas never places charts there (the resolution of the "no path" answer).
     """
 
-    def __init__(self, robot, task, margin_floor=1e-3):
-        self.nav = NavigationManifold(robot)
+    def __init__(self, robot, task, margin_floor=1e-3, kappa=None):
+        self.nav = NavigationManifold(robot) if kappa is None else NavigationManifold(robot, kappa)
         self.task = task
         self.n_task_vars = 2 if isinstance(task, SphereTask) else 0
         self.n_vars = N_VARS + self.n_task_vars
@@ -102,7 +102,7 @@ class TaskConstraint:
         lo[I_P:I_TAU] = robot.base_anchors.min(axis=0) - reach
         hi[I_P:I_TAU] = robot.base_anchors.max(axis=0) + reach
         lo[THETA], hi[THETA] = 0.0, np.pi
-        lo[I_G:N_VARS] = KAPPA * np.log(margin_floor)
+        lo[I_G:N_VARS] = self.nav.kappa * np.log(margin_floor)
         if self.n_task_vars:
             lo[N_VARS + 1], hi[N_VARS + 1] = -np.pi / 2, np.pi / 2
         return lo / self.scale, hi / self.scale

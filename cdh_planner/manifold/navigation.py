@@ -2,18 +2,25 @@
 
 Physical variables X (90, SI units), in this order:
     p (3, m) | tau (3, rad) | d_1..d_6 cable vectors (18, m) | lengths l (6, m) |
-    f0 (6, N) | v_1..v_6 (36, N) | g (6) | s (6) | t (6)
+    f0 (6, N) | G (36, N, row-major) | g (6) | s (6) | t (6)
 followed by the task's variables (e.g. the sphere's alpha1, alpha2). Equations, in order:
     (1) d_i - (p + R b_i - a_i) = 0                       18
     (2) l_i^2 - d_i . d_i = 0                              6
     (4) J f0 - w0 = 0                                      6
-    (5) v_i^T B v_i - 1 = 0,  B = J^T E J                  6
-    (6) (B v_i)_k = 0 for k != i                          30
+    (5-6) P J G - I = 0                                   36
     (10) mu_l,i = exp(g_i / kappa)   length margin         6
     (11) mu_f-,i = exp(s_i / kappa)  lower tension margin  6
     (12) mu_f+,i = exp(t_i / kappa)  upper tension margin  6
 with normalised margins mu_l = (l - dmin)(dmax - l) / ((dmax - dmin) / 2)^2,
 mu_f- = (f0_i - v_ii - fmin) / (fmax - fmin), mu_f+ = (fmax - f0_i - v_ii) / (fmax - fmin).
+
+Eqs. 5-6 are restated (same solution set in the pose, same count: 36 variables, 36
+equations). With E = P^T P in the base frame (P = L3^T e(c), E3 = L3 L3^T constant in F3)
+the tensions over the ellipsoid are f = f0 + G z, |z| <= 1, G = (P J)^-1, so the paper's
+v_ii = |row i of G|. The paper's v_i solve B v_i = e_i / v_ii with B = J^T E J, whose
+condition number is that of E squared (1e6 for the paper's robots): its v_i swing fast with
+the pose and Newton from a chart's tangent space diverges at any useful radius. P J G = I
+is bilinear and as well conditioned as J: charts can be about 10x larger.
 
 Eqs. 10-12 are the paper's slack equations in logarithmic form: mu = exp(g / kappa) has
 the same solution set as the paper's mu g' = 1 (both force mu > 0) and its derivative in
@@ -27,21 +34,22 @@ over the platform radius, tensions over the tension range, angles in radians, sl
 
 import numpy as np
 
-from ..feasibility import evaluate, skew
+from ..feasibility import evaluate, skew, wrench_transform
 from ..model.pose import rotation_tt, rotation_tt_derivatives
 
 N_POSE = 6
 I_P, I_TAU, I_D, I_L, I_F, I_V, I_G, I_S, I_T = 0, 3, 6, 24, 30, 36, 72, 78, 84
 N_VARS = 90
 N_EQS = 84
-KAPPA = 0.1  # slack scale: a chart radius of r changes a margin by a factor exp(r / KAPPA)
+KAPPA = 0.1  # default slack scale kappa (see NavigationManifold)
 
 
 class NavigationManifold:
     """F(X) and F_X(X) of the robot's navigation manifold in physical variables."""
 
-    def __init__(self, robot):
+    def __init__(self, robot, kappa=KAPPA):
         self.robot = robot
+        self.kappa = float(kappa)
         self.a = robot.base_anchors
         self.b = robot.platform_anchors
         self.g_load = robot.load_point
@@ -53,6 +61,10 @@ class NavigationManifold:
         self.length_ref = float(np.mean(np.linalg.norm(self.b, axis=1))) or 0.1
         self.tension_ref = float(np.mean(self.range_f))
         self.a_skew = skew(self.a)  # (6, 3, 3)
+        self.L3T = np.linalg.cholesky(self.E3).T  # E3 = L3 L3^T
+        self.de_dc = np.zeros((3, 6, 6))  # d e(c) / dc_m
+        for m in range(3):
+            self.de_dc[m, 3:, :3] = -skew(np.eye(3)[m])
 
     # ----- scaling -------------------------------------------------------------------
     def variable_scale(self):
@@ -79,7 +91,6 @@ class NavigationManifold:
         r[18:24] = self.length_ref ** 2
         r[24:27] = self.tension_ref
         r[27:30] = self.tension_ref * self.length_ref
-        r[36:66] = 1.0 / self.tension_ref
         return r
 
     # ----- pieces ----------------------------------------------------------------------
@@ -87,33 +98,16 @@ class NavigationManifold:
         p, tau = X[I_P:I_TAU], X[I_TAU:I_D]
         d = X[I_D:I_L].reshape(6, 3)
         l, f0 = X[I_L:I_F], X[I_F:I_V]
-        V = X[I_V:I_G].reshape(6, 6)  # row i = v_i
-        return p, tau, d, l, f0, V, X[I_G:I_S], X[I_S:I_T], X[I_T:N_VARS]
+        G = X[I_V:I_G].reshape(6, 6)  # tension envelope map: f = f0 + G z, |z| <= 1
+        return p, tau, d, l, f0, G, X[I_G:I_S], X[I_S:I_T], X[I_T:N_VARS]
 
-    def _wrench_and_ellipsoid(self, c):
-        """w0(c), E(c) in the base frame and the force part F of the load wrench."""
-        F = self.w_local[:3]
+    def _wrench_and_factor(self, c):
+        """w0(c) in the base frame and P(c) = L3^T e(c), so that E_base = P^T P."""
         w0 = self.w_local.copy()
         if not self.load_frame:
-            return w0, self.E3, F
-        w0[3:] += np.cross(c, F)
-        e = np.eye(6)
-        e[3:, :3] = -skew(c)
-        return w0, e.T @ self.E3 @ e, F
-
-    def _ellipsoid_derivatives(self, c):
-        """dE/dc_m, shape (3, 6, 6); zeros for a base-frame ellipsoid."""
-        if not self.load_frame:
-            return np.zeros((3, 6, 6))
-        e = np.eye(6)
-        e[3:, :3] = -skew(c)
-        out = np.empty((3, 6, 6))
-        for m in range(3):
-            G = np.zeros((6, 6))
-            G[3:, :3] = -skew(np.eye(3)[m])
-            A = G.T @ self.E3 @ e
-            out[m] = A + A.T
-        return out
+            return w0, self.L3T
+        w0[3:] += np.cross(c, self.w_local[:3])
+        return w0, self.L3T @ wrench_transform(c)
 
     def margins(self, l, f0, vdiag):
         r = self.robot
@@ -128,28 +122,25 @@ class NavigationManifold:
 
     def residual_and_jacobian(self, X, jacobian=True):
         """F(X) (84,) and F_X(X) (84, 90) in physical units."""
-        p, tau, d, l, f0, V, g, s, t = self._unpack(X)
+        p, tau, d, l, f0, G, g, s, t = self._unpack(X)
         R = rotation_tt(tau)
         c = p + R @ self.g_load
-        w0, E, Fload = self._wrench_and_ellipsoid(c)
-        cols = np.concatenate([d, np.einsum("kij,kj->ki", self.a_skew, d)], axis=1)  # (6, 6): row i = J col i * l_i
+        w0, P = self._wrench_and_factor(c)
+        cols = np.concatenate([d, np.einsum("kij,kj->ki", self.a_skew, d)], axis=1)  # row i = l_i J col i
         J = (cols / l[:, None]).T
-        Y = V @ J.T  # row i = y_i = J v_i
-        Z = Y @ E  # row i = z_i = E y_i (E symmetric)
-        BV = Z @ J  # row i = (B v_i)^T
-        vdiag = np.diag(V)
+        JG = J @ G
+        M = P @ J
+        vdiag = np.linalg.norm(G, axis=1)
         mu_l, mu_lo, mu_hi = self.margins(l, f0, vdiag)
-        off = ~np.eye(6, dtype=bool)
 
         Fv = np.empty(N_EQS)
         Fv[0:18] = (d - (p + self.b @ R.T - self.a)).ravel()
         Fv[18:24] = l ** 2 - np.einsum("ij,ij->i", d, d)
         Fv[24:30] = J @ f0 - w0
-        Fv[30:36] = np.einsum("ij,ij->i", V, BV) - 1.0
-        Fv[36:66] = BV[off]
-        Fv[66:72] = mu_l - np.exp(g / KAPPA)
-        Fv[72:78] = mu_lo - np.exp(s / KAPPA)
-        Fv[78:84] = mu_hi - np.exp(t / KAPPA)
+        Fv[30:66] = (P @ JG - np.eye(6)).ravel()
+        Fv[66:72] = mu_l - np.exp(g / self.kappa)
+        Fv[72:78] = mu_lo - np.exp(s / self.kappa)
+        Fv[78:84] = mu_hi - np.exp(t / self.kappa)
         if not jacobian:
             return Fv, None
 
@@ -177,46 +168,36 @@ class NavigationManifold:
             Jx[24:30, I_D + 3 * i:I_D + 3 * i + 3] = f0[i] * dcol_dd[i]
             Jx[24:30, I_L + i] = f0[i] * dcol_dl[i]
         if self.load_frame:
-            Fx = skew(Fload)  # d(-w0)/dc = [0; [F]x]
+            Fx = skew(self.w_local[:3])  # d(-w0)/dc = [0; [F]x]
             Jx[27:30, I_P:I_TAU] = Fx
             Jx[27:30, I_TAU:I_D] = Fx @ dc_dtau
-        # (5) and (6): derivatives through J (per column j), v_i and c
-        dE = self._ellipsoid_derivatives(c)
-        dEy = np.einsum("mab,ib->ima", dE, Y)  # (i, m, 6): dE/dc_m y_i
-        JtE = J.T @ E
-        B = JtE @ J
+        # envelope: P J G - I, rows (k, j) row-major
+        blk = Jx[30:66]
+        idx_k = np.repeat(rows, 6)  # k of each row
+        idx_j = np.tile(rows, 6)  # j of each row
+        for a in range(6):
+            blk[np.arange(36), I_V + 6 * a + idx_j] = M[idx_k, a]
         for i in range(6):
-            vi, yi, zi = V[i], Y[i], Z[i]
-            # d(v^T B v)/dJcol_j = 2 v_j z ; d(Bv)/dJcol_j = e_j z^T + v_j J^T E
-            q5 = 2.0 * vi[:, None] * zi[None, :]  # (j, 6)
-            Jx[30 + i, I_V + 6 * i:I_V + 6 * i + 6] = 2.0 * BV[i]
-            ks = [k for k in range(6) if k != i]
-            r6 = 36 + 5 * i
-            Jx[r6:r6 + 5, I_V + 6 * i:I_V + 6 * i + 6] = B[ks]
-            for j in range(6):
-                D = vi[j] * JtE
-                D[j] += zi
-                Jx[30 + i, I_D + 3 * j:I_D + 3 * j + 3] = q5[j] @ dcol_dd[j]
-                Jx[30 + i, I_L + j] = q5[j] @ dcol_dl[j]
-                Jx[r6:r6 + 5, I_D + 3 * j:I_D + 3 * j + 3] = D[ks] @ dcol_dd[j]
-                Jx[r6:r6 + 5, I_L + j] = D[ks] @ dcol_dl[j]
-            if self.load_frame:
-                d5_dc = np.einsum("a,ma->m", yi, dEy[i])  # (3,)
-                d6_dc = (J.T @ dEy[i].T)[ks]  # (5, 3)
-                Jx[30 + i, I_P:I_TAU] = d5_dc
-                Jx[30 + i, I_TAU:I_D] = d5_dc @ dc_dtau
-                Jx[r6:r6 + 5, I_P:I_TAU] = d6_dc
-                Jx[r6:r6 + 5, I_TAU:I_D] = d6_dc @ dc_dtau
+            # d(P J G)_kj / dJcol_i = P_k: G_ij
+            dcol = np.einsum("ka,j->kja", P, G[i]).reshape(36, 6)
+            blk[:, I_D + 3 * i:I_D + 3 * i + 3] = dcol @ dcol_dd[i]
+            blk[:, I_L + i] = dcol @ dcol_dl[i]
+        if self.load_frame:
+            dc = np.einsum("kb,mbc,cj->kjm", self.L3T, self.de_dc, JG).reshape(36, 3)
+            blk[:, I_P:I_TAU] = dc
+            blk[:, I_TAU:I_D] = dc @ dc_dtau
         # (10)-(12)
         rr = self.robot
+        dv = G / vdiag[:, None]  # d|G_i| / dG_i
         Jx[66 + rows, I_L + rows] = (rr.length_max + rr.length_min - 2.0 * l) / self.half_range_l ** 2
-        Jx[66 + rows, I_G + rows] = -np.exp(g / KAPPA) / KAPPA
+        Jx[66 + rows, I_G + rows] = -np.exp(g / self.kappa) / self.kappa
         Jx[72 + rows, I_F + rows] = 1.0 / self.range_f
-        Jx[72 + rows, I_V + 7 * rows] = -1.0 / self.range_f
-        Jx[72 + rows, I_S + rows] = -np.exp(s / KAPPA) / KAPPA
         Jx[78 + rows, I_F + rows] = -1.0 / self.range_f
-        Jx[78 + rows, I_V + 7 * rows] = -1.0 / self.range_f
-        Jx[78 + rows, I_T + rows] = -np.exp(t / KAPPA) / KAPPA
+        for i in range(6):
+            Jx[72 + i, I_V + 6 * i:I_V + 6 * i + 6] = -dv[i] / self.range_f[i]
+            Jx[78 + i, I_V + 6 * i:I_V + 6 * i + 6] = -dv[i] / self.range_f[i]
+        Jx[72 + rows, I_S + rows] = -np.exp(s / self.kappa) / self.kappa
+        Jx[78 + rows, I_T + rows] = -np.exp(t / self.kappa) / self.kappa
         return Fv, Jx
 
     # ----- lifting -----------------------------------------------------------------------
@@ -231,14 +212,13 @@ class NavigationManifold:
         l = np.linalg.norm(d, axis=1)
         J = np.concatenate([d, np.cross(self.a, d)], axis=1).T / l
         c = p + R @ self.g_load
-        w0, E, _ = self._wrench_and_ellipsoid(c)
+        w0, P = self._wrench_and_factor(c)
         f0 = np.linalg.solve(J, w0)
-        B_inv = np.linalg.inv(J.T @ E @ J)
-        V = (B_inv / np.sqrt(np.diag(B_inv))).T  # row i = B^-1 e_i / sqrt(e_i^T B^-1 e_i)
-        mu_l, mu_lo, mu_hi = self.margins(l, f0, np.diag(V))
-        return np.concatenate([p, tau, d.ravel(), l, f0, V.ravel(),
-                               KAPPA * np.log(mu_l), KAPPA * np.log(mu_lo), KAPPA * np.log(mu_hi)])
+        G = np.linalg.inv(P @ J)
+        mu_l, mu_lo, mu_hi = self.margins(l, f0, np.linalg.norm(G, axis=1))
+        return np.concatenate([p, tau, d.ravel(), l, f0, G.ravel(),
+                               self.kappa * np.log(mu_l), self.kappa * np.log(mu_lo), self.kappa * np.log(mu_hi)])
 
     def min_margin(self, X):
         """Smallest normalised margin encoded by the slacks of X (> 0 on M)."""
-        return float(np.exp(np.min(X[I_G:N_VARS]) / KAPPA))
+        return float(np.exp(np.min(X[I_G:N_VARS]) / self.kappa))
