@@ -1,0 +1,129 @@
+"""``cdh-planner call``: the task sequencer's view of a running node.
+
+    cdh-planner call --start "x y z qx qy qz qw" --goal "x y z qx qy qz qw" [--execute]
+                     [--node /cdh_planner] [--frame F] [--timeout S] [--ros-args ...]
+
+Calls ``~/plan`` (positions in m in the base frame, quaternion x y z w) and prints the
+outcome, the path length, duration, lowest tension margin and the run's log file; with
+``--execute`` then calls ``~/execute`` and follows ``~/cable_command`` until the motion
+ends (Ctrl-C calls ``~/stop`` first). The frame defaults to the node's ``base_frame``.
+
+Exit codes: 0 planned (and executed); 1 no plan, or execution refused; 2 bad input;
+3 the node did not answer.
+"""
+
+import argparse
+import sys
+import time
+
+EXIT_OK, EXIT_NO_PLAN, EXIT_NO_NODE = 0, 1, 3
+
+
+def add_parser(subparsers):
+    p = subparsers.add_parser(
+        "call", help="call a running node's plan service (and execute)",
+        description="Call ~/plan of a running cdh_planner node with a start and a goal pose, "
+                    "print the outcome, path length, duration, lowest tension margin and "
+                    "the log file; --execute streams the plan. Exit 1 when there is no plan.",
+        epilog="example (Robot 2's sphere task, q1 -> q2):\n"
+               "  cdh-planner call --start \"0 0 0.176 0 0 0 1\" \\\n"
+               "      --goal \"0.081092 0.049718 0.217387 0.208539 -0.340136 0 0.916962\"\n"
+               "values starting with '-': --start=\"-0.1 0 0.2 0 0 0 1\"",
+        formatter_class=argparse.RawDescriptionHelpFormatter)
+    p.add_argument("--start", required=True, metavar='"X Y Z QX QY QZ QW"',
+                   help="start pose: position (m, base frame) and quaternion (x y z w)")
+    p.add_argument("--goal", required=True, metavar='"X Y Z QX QY QZ QW"', help="goal pose")
+    p.add_argument("--execute", action="store_true",
+                   help="after a successful plan, stream it (~/execute) and wait for the end")
+    p.add_argument("--node", default="/cdh_planner", help="the planner node (default: "
+                                                          "%(default)s)")
+    p.add_argument("--frame", help="frame_id of the poses (default: the node's base_frame)")
+    p.add_argument("--timeout", type=float, default=120.0, metavar="S",
+                   help="seconds to wait for the node and for its answer (default: "
+                        "%(default)g)")
+    p.add_argument("--ros-args", dest="ros_args", nargs=argparse.REMAINDER, default=[],
+                   metavar="ARGS", help="ROS arguments for this client (e.g. remapping)")
+    p.set_defaults(func=run)
+
+
+def run(args):
+    from ..errors import InputError
+    from ..ros.client import ClientError, PlannerClient, pose_stamped
+    if not args.timeout > 0:
+        raise InputError("--timeout", args.timeout, "must be a positive number of seconds")
+    pose_stamped(args.start, "", "--start")  # refuse malformed input before joining ROS
+    pose_stamped(args.goal, "", "--goal")
+    with PlannerClient(args.node, args=["cdh-planner-call", "--ros-args", *args.ros_args]) \
+            as client:
+        try:
+            client.wait_for_node(min(args.timeout, 30.0))
+            frame = args.frame or client.get_parameters(["base_frame"])["base_frame"]
+            answer = client.plan(pose_stamped(args.start, frame, "--start"),
+                                 pose_stamped(args.goal, frame, "--goal"), args.timeout)
+            print_answer(answer)
+            if not answer.success:
+                return EXIT_NO_PLAN
+            if args.execute:
+                return execute(client, answer)
+        except ClientError as exc:
+            print(f"cdh-planner call: error: {exc}", file=sys.stderr)
+            return EXIT_NO_NODE
+    return EXIT_OK
+
+
+def print_answer(answer):
+    """Print a PlanAnswer for a person: outcome, numbers with units, the log file."""
+    from ..ros.client import path_duration, path_length
+    v = answer.values
+    if answer.success:
+        print(f"outcome: planned ({len(answer.path.poses)} waypoints, "
+              f"{v.get('charts', '?')} charts, strategy {v.get('strategy', '?')}, planning "
+              f"{answer.number('planning_time_s'):.3f} s, call {answer.seconds:.3f} s)")
+        print(f"path length: {path_length(answer.path):.4f} m")
+        print(f"duration: {path_duration(answer.path):.3f} s")
+        print(f"lowest tension margin: {answer.number('min_tension_margin_n'):.4f} N "
+              f"(normalised feasibility margin {answer.number('min_margin'):.4f})")
+    else:
+        code = v.get("error_code", "?")
+        why = v.get("error_msg") or "(no ~/plan_result received)"
+        print(f"outcome: NO PLAN (error code {code}): {why}")
+    print(f"log file: {v.get('log_file') or '(not recorded)'}")
+    if v.get("run_id"):
+        print(f"run id: {v['run_id']}")
+
+
+def execute(client, answer):
+    """Call ~/execute and follow ~/cable_command to the end; Ctrl-C stops the motion."""
+    from sensor_msgs.msg import JointState
+
+    from ..ros.client import path_duration
+    commands = []
+    client.node.create_subscription(JointState, f"{client.target}/cable_command",
+                                    commands.append, 100)
+    client.spin(0.3)  # let the subscription match before streaming starts
+    ok, message = client.execute()
+    print(f"execute: {message}")
+    if not ok:
+        return EXIT_NO_PLAN
+    duration = path_duration(answer.path)
+    t0 = time.monotonic()
+    try:
+        def ended():
+            return (commands and time.monotonic() - t0 > duration
+                    and not any(commands[-1].velocity))
+        client.spin_until(ended, duration + 2.0)
+    except KeyboardInterrupt:
+        print(f"stop: {client.stop()[1]}")
+        return EXIT_NO_PLAN
+    if commands:
+        span = _seconds(commands[-1]) - _seconds(commands[0])
+        print(f"streamed: {len(commands)} commands over {span:.3f} s "
+              f"({(len(commands) - 1) / span if span > 0 else 0:.1f} Hz); final cable lengths "
+              f"{' '.join(f'{x:.4f}' for x in commands[-1].position)} m")
+    else:
+        print("streamed: no ~/cable_command received")
+    return EXIT_OK
+
+
+def _seconds(msg):
+    return msg.header.stamp.sec + 1e-9 * msg.header.stamp.nanosec

@@ -1,0 +1,32 @@
+"""``cdh-planner node``: run the ROS 2 planner node (``cdh_planner.ros.node``).
+
+    cdh-planner node --ros-args --params-file config/robot2.yaml [-p name:=value ...]
+
+Everything after ``--ros-args`` goes to rclpy unchanged (parameters, remapping, log level).
+Stops cleanly on SIGINT / SIGTERM, closing the run's MCAP file.
+"""
+
+import argparse
+import sys
+
+
+def add_parser(subparsers):
+    p = subparsers.add_parser(
+        "node", help="run the ROS 2 planner node",
+        description="Run the ROS 2 node cdh_planner: services ~/plan (nav_msgs/GetPlan), "
+                    "~/execute and ~/stop (std_srvs/Trigger); topics ~/path, "
+                    "~/cable_trajectory, ~/tension_envelope, ~/markers, ~/plan_result, "
+                    "~/plan_progress, ~/cable_command. Parameters: the robot file and the "
+                    "names in cdh_planner/ros/params.py.",
+        epilog="example:\n  cdh-planner node --ros-args --params-file config/robot2.yaml "
+               "-p log_dir:=/tmp/runs -p planner.strategy:=gbf",
+        formatter_class=argparse.RawDescriptionHelpFormatter)
+    p.add_argument("--ros-args", dest="ros_args", nargs=argparse.REMAINDER, default=[],
+                   metavar="ARGS", help="ROS arguments for rclpy (--params-file FILE, "
+                                        "-p name:=value, -r from:=to, --log-level ...)")
+    p.set_defaults(func=run)
+
+
+def run(args):
+    from ..ros.node import main
+    return main(args.ros_args, log=lambda line: print(line, file=sys.stderr))

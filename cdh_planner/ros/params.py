@@ -1,0 +1,302 @@
+"""The node's parameters: names, types, defaults, descriptions, ranges, and the check that
+turns a set of values into a robot, a task and planner settings.
+
+The robot file is a ROS 2 parameters file (``robot:`` nested under ``ros__parameters``),
+which ROS flattens to dotted names (``robot.load.force``). ``node_config(values)`` folds
+the flat values back into the nested mapping and hands it to the same parsers the offline
+CLI uses (``model.robot.robot_from_dict``, ``model.task.task_from_dict``), so the node and
+the CLI accept and refuse exactly the same files, with the same messages (``InputError``
+naming the parameter and the value).
+
+No rclpy here: ``declare`` in ``ros/node.py`` turns ``SPECS`` into declarations. Numeric
+parameters are dynamically typed in ROS so that ``-p planner.timeout_s:=5`` (an integer) and
+YAML integer lists work; ``node_config`` checks their types and ranges itself.
+
+Parameters (SI units):
+
+==============================  =========  ================================================
+name                            default    meaning
+==============================  =========  ================================================
+base_frame                      cdh_base   frame_id requests must use and outputs carry
+robot.*                         (file)     the robot (model/robot.py; from the robot file)
+task.type                       free       free, slice or sphere
+task.fixed.x .. task.fixed.sigma  NaN      slice: fixed coordinate (m, rad); NaN = free
+task.center, task.radius        0 0 0, 0.1 sphere (paper Eq. 17), m
+task.free_torsion               false      sphere: sigma free as well
+planner.strategy                astar      astar or gbf
+planner.timeout_s               60         give up after this long (answer TIMEOUT)
+planner.radius                  0.1        chart radius (scaled units, about rad)
+planner.max_charts              100000     give up after this many charts
+planner.complete                false      grow the whole atlas component
+planner.margin_floor            0.001      least normalised feasibility margin kept
+trajectory.max_cable_speed      0.05       per-winch speed limit (m/s)
+trajectory.max_cable_accel      0.2        per-winch acceleration limit (m/s^2)
+stream_rate_hz                  50         rate of ~/cable_command while executing (Hz)
+stream_interpolation            linear     linear (never above the speed limit) or quintic
+log_dir                         ~/.ros/cdh_planner  where run MCAP files go
+log_enabled                     true       record plan calls to MCAP
+==============================  =========  ================================================
+"""
+
+import math
+import os
+from dataclasses import dataclass, field
+from typing import Optional
+
+import numpy as np
+
+from ..errors import InputError
+from ..model.robot import robot_from_dict
+from ..model.task import POSE_NAMES, task_from_dict
+from ..planner import PlannerSettings
+
+STRING, BOOL, INT, DOUBLE, DOUBLES, STRINGS = "string", "bool", "int", "double", "doubles", \
+    "strings"
+REQUIRED = object()  # default of a parameter that must come from the robot file
+
+# the groups whose change means a new Planner (the others only affect the node)
+PLANNER_PREFIXES = ("robot.", "task.", "planner.", "trajectory.")
+STRATEGIES = ("astar", "gbf")
+INTERPOLATIONS = ("linear", "quintic")
+DEFAULT_SETTINGS = PlannerSettings()
+
+
+@dataclass(frozen=True)
+class Spec:
+    """One parameter: ``kind`` (STRING, BOOL, INT, DOUBLE, DOUBLES, STRINGS), ``default``
+    (REQUIRED: no default; None for an optional array left empty), a description, and for
+    numbers a closed range ``low``..``high`` (None: unbounded) and whether ``low`` itself is
+    excluded (``open_low``)."""
+
+    name: str
+    kind: str
+    default: object
+    description: str
+    low: Optional[float] = None
+    high: Optional[float] = None
+    open_low: bool = False
+    choices: tuple = ()
+
+
+def _robot_specs():
+    r = "robot."
+    six = "6 numbers, one per cable (or a single number for all)"
+    return [
+        Spec(r + "name", STRING, "", "robot name (for messages)"),
+        Spec(r + "winch_names", STRINGS, [f"winch_{i + 1}" for i in range(6)],
+             "6 distinct joint names, one per winch (JointState / JointTrajectory names)"),
+        Spec(r + "base_anchors", DOUBLES, REQUIRED,
+             "A_1..A_6 in the base frame: 18 numbers (m), x y z per anchor"),
+        Spec(r + "platform_anchors", DOUBLES, REQUIRED,
+             "B_1..B_6 in the platform frame: 18 numbers (m), x y z per anchor"),
+        Spec(r + "length_min", DOUBLES, REQUIRED, f"least cable length (m): {six}"),
+        Spec(r + "length_max", DOUBLES, REQUIRED, f"greatest cable length (m): {six}"),
+        Spec(r + "tension_min", DOUBLES, REQUIRED, f"least cable tension (N): {six}"),
+        Spec(r + "tension_max", DOUBLES, REQUIRED, f"greatest cable tension (N): {six}"),
+        Spec(r + "load.force", DOUBLES, REQUIRED, "load force, base frame (N): 3 numbers"),
+        Spec(r + "load.point", DOUBLES, [0.0, 0.0, 0.0],
+             "where the load force acts, platform frame (m): 3 numbers"),
+        Spec(r + "load.moment", DOUBLES, [0.0, 0.0, 0.0], "load moment, base frame (N m)"),
+        Spec(r + "wrench_ellipsoid.frame", STRING, "load",
+             "frame of the wrench ellipsoid: load (F3, parallel to base at the load point) "
+             "or base", choices=("load", "base")),
+        Spec(r + "wrench_ellipsoid.matrix", DOUBLES, REQUIRED,
+             "ellipsoid shape E (SPD): 36 numbers row-major or 6 for a diagonal "
+             "(force rows 1/N^2, moment rows 1/(N m)^2)"),
+        Spec(r + "wrench_ellipsoid.offset", DOUBLES, [0.0] * 6,
+             "ellipsoid centre offset from the load wrench: 6 numbers (N, N m)"),
+        Spec(r + "contact_ellipsoid.matrix", DOUBLES, None,
+             "optional contact wrench ellipsoid (paper Eqs. 22-23): 36 or 6 numbers; empty "
+             "for none"),
+        Spec(r + "contact_ellipsoid.center", DOUBLES, [0.0] * 6,
+             "contact ellipsoid centre: 6 numbers (N, N m)"),
+    ]
+
+
+SPECS = (
+    [Spec("base_frame", STRING, "cdh_base",
+          "frame_id that plan requests must use and every output carries (REP 103, m)")]
+    + _robot_specs()
+    + [Spec("task.type", STRING, "free", "task constraint: free, slice or sphere",
+            choices=("free", "slice", "sphere"))]
+    + [Spec(f"task.fixed.{n}", DOUBLE, math.nan,
+            f"slice task: fixed value of {n} ({'m' if n in 'xyz' else 'rad'}); NaN leaves it "
+            f"free") for n in POSE_NAMES]
+    + [Spec("task.center", DOUBLES, [0.0, 0.0, 0.0],
+            "sphere task (paper Eq. 17): centre, base frame (m): 3 numbers"),
+       Spec("task.radius", DOUBLE, 0.1, "sphere task: radius (m)", low=0.0, high=100.0,
+            open_low=True),
+       Spec("task.free_torsion", BOOL, False, "sphere task: torsion sigma free as well"),
+       Spec("planner.strategy", STRING, DEFAULT_SETTINGS.strategy,
+            "search strategy: astar (A*, shortest on the chart graph) or gbf (greedy "
+            "best-first, faster)", choices=STRATEGIES),
+       Spec("planner.timeout_s", DOUBLE, DEFAULT_SETTINGS.timeout_s,
+            "give up after this many seconds (answer TIMEOUT)", low=0.0, high=86400.0,
+            open_low=True),
+       Spec("planner.radius", DOUBLE, DEFAULT_SETTINGS.radius,
+            "chart radius in the atlas' scaled units (about rad of platform motion)",
+            low=0.0, high=10.0, open_low=True),
+       Spec("planner.max_charts", INT, DEFAULT_SETTINGS.max_charts,
+            "give up after this many charts (answer NO_VALID_PATH)", low=1, high=100_000_000),
+       Spec("planner.complete", BOOL, DEFAULT_SETTINGS.complete,
+            "keep growing the atlas to the whole component after reaching the goal"),
+       Spec("planner.margin_floor", DOUBLE, DEFAULT_SETTINGS.margin_floor,
+            "least normalised feasibility margin of a planned waypoint", low=0.0, high=1.0),
+       Spec("trajectory.max_cable_speed", DOUBLE, DEFAULT_SETTINGS.max_cable_speed,
+            "per-winch cable speed limit of the trajectory (m/s)", low=0.0, high=100.0,
+            open_low=True),
+       Spec("trajectory.max_cable_accel", DOUBLE, DEFAULT_SETTINGS.max_cable_accel,
+            "per-winch cable acceleration limit of the trajectory (m/s^2)", low=0.0,
+            high=1000.0, open_low=True),
+       Spec("stream_rate_hz", DOUBLE, 50.0,
+            "rate of ~/cable_command while executing (Hz)", low=1.0, high=1000.0),
+       Spec("stream_interpolation", STRING, "linear",
+            "between waypoints while streaming: linear (straight in cable space at the mean "
+            "speed, never above the limit) or quintic (as a JointTrajectoryController "
+            "interpolates the same points)", choices=INTERPOLATIONS),
+       Spec("log_dir", STRING, "~/.ros/cdh_planner",
+            "directory of the run MCAP files (one file per node run; created when needed)"),
+       Spec("log_enabled", BOOL, True, "record plan calls, published messages and streamed "
+            "commands to MCAP in log_dir")]
+)
+SPEC = {s.name: s for s in SPECS}
+
+
+@dataclass(frozen=True)
+class NodeConfig:
+    """Everything the node needs, checked: ``robot`` (Robot), ``task``, ``settings``
+    (PlannerSettings) and the node's own settings."""
+
+    robot: object
+    task: object
+    settings: PlannerSettings
+    base_frame: str
+    stream_rate_hz: float
+    stream_interpolation: str
+    log_dir: str
+    log_enabled: bool
+    values: dict = field(default_factory=dict, compare=False, repr=False)
+
+
+def check_value(spec, value):
+    """The value of ``spec`` converted (ints to floats for doubles, sequences to lists) and
+    checked against its kind, choices and range; InputError naming the parameter."""
+    name = spec.name
+    if value is None:
+        if spec.default is REQUIRED:
+            raise InputError(name, None, "required parameter is not set: give the robot file "
+                                         "(--ros-args --params-file config/robot2.yaml)")
+        if spec.default is None:
+            return None
+        raise InputError(name, None, "must be set")
+    if spec.kind == STRING:
+        if not isinstance(value, str):
+            raise InputError(name, value, "expected a string")
+        if spec.choices and value not in spec.choices:
+            raise InputError(name, value, f"expected one of {', '.join(spec.choices)}")
+        if name == "base_frame" and not value:
+            raise InputError(name, value, "must not be empty")
+        return value
+    if spec.kind == BOOL:
+        if not isinstance(value, bool):
+            raise InputError(name, value, "expected true or false")
+        return value
+    if spec.kind == STRINGS:
+        if isinstance(value, str) or not all(isinstance(v, str) for v in value):
+            raise InputError(name, value, "expected a list of strings")
+        return list(value)
+    if spec.kind == DOUBLES:
+        if isinstance(value, (str, bytes)):
+            raise InputError(name, value, "expected a list of numbers")
+        if not hasattr(value, "__len__"):  # one number: the parsers broadcast it or refuse
+            if isinstance(value, bool) or not isinstance(value, (int, float)):
+                raise InputError(name, value, "expected a list of numbers")
+            return float(value)
+        if any(isinstance(v, (bool, str)) for v in value):
+            raise InputError(name, list(value), "expected a list of numbers")
+        try:
+            arr = [float(v) for v in value]
+        except (TypeError, ValueError):
+            raise InputError(name, list(value), "expected a list of numbers") from None
+        return arr if arr or spec.default is not None else None
+    # INT, DOUBLE
+    if isinstance(value, bool) or not isinstance(value, (int, float, np.integer, np.floating)):
+        raise InputError(name, value, "expected a number")
+    if spec.kind == INT:
+        if float(value) != int(value):
+            raise InputError(name, value, "expected an integer")
+        value = int(value)
+    else:
+        value = float(value)
+        if math.isnan(value) and math.isnan(spec.default if spec.default is not REQUIRED
+                                             else 0.0):
+            return value  # NaN means "not set" where that is the default
+        if not math.isfinite(value):
+            raise InputError(name, value, "must be a finite number")
+    if spec.low is not None and (value < spec.low or (spec.open_low and value == spec.low)):
+        raise InputError(name, value, f"must be {'>' if spec.open_low else '>='} {spec.low:g}")
+    if spec.high is not None and value > spec.high:
+        raise InputError(name, value, f"must be <= {spec.high:g}")
+    return value
+
+
+def node_config(values, source="ROS parameters"):
+    """NodeConfig of the flat parameter values ``values`` (name -> value; a missing name
+    takes its default). Raises InputError naming the first bad parameter."""
+    checked = {}
+    for spec in SPECS:
+        raw = values.get(spec.name, None if spec.default is REQUIRED else spec.default)
+        checked[spec.name] = check_value(spec, raw)
+    robot = robot_from_dict(_robot_dict(checked), source=source)
+    task = task_from_dict(_task_dict(checked), where="task")
+    settings = PlannerSettings(
+        strategy=checked["planner.strategy"], radius=checked["planner.radius"],
+        timeout_s=checked["planner.timeout_s"], max_charts=checked["planner.max_charts"],
+        complete=checked["planner.complete"], margin_floor=checked["planner.margin_floor"],
+        max_cable_speed=checked["trajectory.max_cable_speed"],
+        max_cable_accel=checked["trajectory.max_cable_accel"])
+    log_dir = checked["log_dir"]
+    if not log_dir and checked["log_enabled"]:
+        raise InputError("log_dir", log_dir, "must name a directory while log_enabled is true")
+    return NodeConfig(robot=robot, task=task, settings=settings,
+                      base_frame=checked["base_frame"],
+                      stream_rate_hz=checked["stream_rate_hz"],
+                      stream_interpolation=checked["stream_interpolation"],
+                      log_dir=os.path.expanduser(log_dir), log_enabled=checked["log_enabled"],
+                      values=checked)
+
+
+def _robot_dict(checked):
+    """The nested ``robot:`` mapping of the robot file from the flat values."""
+    out = {}
+    for name, value in checked.items():
+        if not name.startswith("robot.") or value is None:
+            continue
+        if name == "robot.name" and not value:
+            continue
+        keys = name.split(".")[1:]
+        node = out
+        for key in keys[:-1]:
+            node = node.setdefault(key, {})
+        node[keys[-1]] = value
+    contact = out.get("contact_ellipsoid", {})
+    if "matrix" not in contact:
+        out.pop("contact_ellipsoid", None)
+    return out
+
+
+def _task_dict(checked):
+    kind = checked["task.type"]
+    if kind == "sphere":
+        return {"type": kind, "center": checked["task.center"], "radius": checked["task.radius"],
+                "free_torsion": checked["task.free_torsion"]}
+    if kind == "slice":
+        fixed = {n: checked[f"task.fixed.{n}"] for n in POSE_NAMES
+                 if not math.isnan(checked[f"task.fixed.{n}"])}
+        return {"type": kind, "fixed": fixed}
+    return {"type": kind}
+
+
+def needs_new_planner(names):
+    """True if a change of the parameters ``names`` changes the robot, task or planner."""
+    return any(n.startswith(PLANNER_PREFIXES) for n in names)

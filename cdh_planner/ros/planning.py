@@ -1,0 +1,164 @@
+"""One plan call, without the graph: request -> poses -> PlanResult -> messages.
+
+The node (``ros/node.py``) only moves these values between ROS and this module:
+
+    start, goal = request_poses(request, base_frame)          # InputError: refuse
+    result = run_planner(planner, start, goal, progress)      # never raises
+    outputs = plan_outputs(result, robot, base_frame, stamp)  # messages to publish
+    status = result_status(result, robot, run_id, log_file, stamp)
+
+Refusals before planning (bad frame, invalid pose, busy) are PlanResults too (``refusal``),
+so every answer has one ``~/plan_result`` with a nav2 error code (``messages.ERROR_CODES``).
+"""
+
+import math
+import traceback
+from dataclasses import dataclass
+from typing import Optional
+
+import numpy as np
+from diagnostic_msgs.msg import DiagnosticStatus, KeyValue
+from nav_msgs.msg import Path
+
+from ..errors import InputError
+from ..planner import PlanResult
+from . import messages as M
+
+SINGULAR_SIN = 1e-9  # |sin theta| below this: phi is not determined by the orientation
+
+# keys that ``result_status`` adds to messages.plan_status's (strings; numbers by repr)
+EXTRA_KEYS = ("path_stamp", "waypoints", "path_length_m", "duration_s", "min_margin",
+              "min_tension_margin_n")
+PROGRESS_NAME = "cdh_planner: planning"
+
+
+@dataclass
+class PlanOutputs:
+    """The messages of a successful plan (all in the base frame, SI units)."""
+
+    path: object               # nav_msgs/Path
+    cable_trajectory: object   # trajectory_msgs/JointTrajectory
+    tension_envelope: object   # std_msgs/Float64MultiArray
+    markers: object            # visualization_msgs/MarkerArray
+
+
+def request_poses(request, base_frame):
+    """(start, goal) planner Poses of a nav_msgs/GetPlan request; InputError naming the field
+    (``start.header.frame_id``, ``goal.pose.position.x``, ``start.pose.orientation``).
+
+    Where a pose's tilt theta is 0 or pi its azimuth phi is not determined by the
+    orientation: it is taken from the other pose, so the planner starts (or ends) heading
+    the way it has to go (for the sphere task, alpha1 of the pole pose = alpha1 of the other).
+    """
+    start = M.pose_from_msg(request.start, base_frame, "start")
+    goal = M.pose_from_msg(request.goal, base_frame, "goal")
+    if _singular(start) and not _singular(goal):
+        start = M.pose_from_msg(request.start, base_frame, "start", phi_hint=goal.tau[0])
+    elif _singular(goal) and not _singular(start):
+        goal = M.pose_from_msg(request.goal, base_frame, "goal", phi_hint=start.tau[0])
+    return start, goal
+
+
+def _singular(pose):
+    return abs(math.sin(float(pose.tau[1]))) <= SINGULAR_SIN
+
+
+def refusal(reason, message, strategy=""):
+    """A PlanResult for a request refused before planning (``bad_frame``, ``invalid``,
+    ``busy``): no path, no charts, no time."""
+    return PlanResult(success=False, reason=reason, message=message, strategy=strategy, n=0,
+                      m=0, charts=0, time_s=0.0, cost=math.nan, path=None)
+
+
+def input_refusal(exc, strategy=""):
+    """The refusal for an InputError from ``request_poses``: a frame_id that is not the base
+    frame is ``bad_frame`` (nav2 TF_ERROR), anything else ``invalid``."""
+    reason = "bad_frame" if exc.field.endswith("frame_id") else "invalid"
+    return refusal(reason, f"invalid request: {exc}", strategy)
+
+
+def run_planner(planner, start, goal, progress=None, logger=None):
+    """``planner.plan(start, goal, progress)``, never raising: an InputError becomes
+    ``invalid``; any other exception ``internal_error`` (error code UNKNOWN) with its
+    message, the traceback going to ``logger`` (a callable taking a string) if given."""
+    strategy = getattr(getattr(planner, "settings", None), "strategy", "")
+    try:
+        result = planner.plan(start, goal, progress=progress)
+    except InputError as exc:
+        return refusal("invalid", f"invalid request: {exc}", strategy)
+    except Exception as exc:  # noqa: BLE001 - the node must keep serving
+        if logger is not None:
+            logger(traceback.format_exc())
+        return refusal("internal_error", f"internal error: {type(exc).__name__}: {exc}",
+                       strategy)
+    if result.success and (result.path is None or len(result.path) == 0):
+        return refusal("internal_error", "internal error: the planner reported success "
+                                         "without a path", strategy)
+    return result
+
+
+def plan_outputs(result, robot, base_frame, stamp):
+    """The messages of a successful PlanResult: path (stamp = ``stamp``, poses at stamp +
+    t), cable trajectory (header stamp 0: start on receipt), tension envelope, markers."""
+    path = result.path
+    return PlanOutputs(
+        path=M.path_msg(path, base_frame, stamp),
+        cable_trajectory=M.cable_trajectory_msg(path, robot.winch_names, base_frame),
+        tension_envelope=M.tension_envelope_msg(path),
+        markers=M.markers_msg(path, robot, base_frame, stamp))
+
+
+def empty_path(base_frame, stamp):
+    """The answer's path when there is no plan: no poses, header in the base frame."""
+    msg = Path()
+    msg.header.frame_id = base_frame
+    msg.header.stamp = stamp
+    return msg
+
+
+def path_summary(path, robot):
+    """Numbers a task sequencer wants about a PlannedPath: waypoints, platform path length
+    (m), duration (s), least normalised feasibility margin, least tension margin (N: the
+    least distance of any cable's tension envelope to its tension limits)."""
+    low = np.asarray(path.tension_min) - robot.tension_min
+    high = robot.tension_max - np.asarray(path.tension_max)
+    return {"waypoints": len(path), "path_length_m": path.length_m(),
+            "duration_s": float(path.t[-1]), "min_margin": float(np.min(path.margin)),
+            "min_tension_margin_n": float(np.min(np.minimum(low, high)))}
+
+
+def result_status(result, robot, run_id, log_file, stamp):
+    """diagnostic_msgs/DiagnosticStatus for ``~/plan_result``: ``messages.plan_status`` plus
+    ``path_stamp`` (the answered path's header stamp, integer ns: pairs this result with its
+    service response) and, on success, the ``path_summary`` numbers."""
+    msg = M.plan_status(result, run_id=run_id, log_file=log_file)
+    extra = {"path_stamp": str(M.time_ns(stamp))}
+    if result.success and result.path is not None:
+        extra.update({k: repr(v) if isinstance(v, float) else str(v)
+                      for k, v in path_summary(result.path, robot).items()})
+    msg.values.extend(KeyValue(key=k, value=v) for k, v in extra.items())
+    return msg
+
+
+def progress_status(info, run_id):
+    """diagnostic_msgs/DiagnosticStatus for ``~/plan_progress`` while planning: level OK,
+    message "<charts> charts, <time> s", values charts, time_s, best_h (the heuristic's least
+    remaining distance, task units), run_id."""
+    msg = DiagnosticStatus(level=DiagnosticStatus.OK, name=PROGRESS_NAME)
+    charts = int(info.get("charts", 0))
+    time_s = float(info.get("time_s", 0.0))
+    best_h = float(info.get("best_h", math.nan))
+    msg.message = f"planning: {charts} charts, {time_s:.1f} s, best h {best_h:.4g}"
+    msg.values = [KeyValue(key="charts", value=str(charts)),
+                  KeyValue(key="time_s", value=repr(time_s)),
+                  KeyValue(key="best_h", value=repr(best_h)),
+                  KeyValue(key="run_id", value=str(run_id))]
+    return msg
+
+
+def result_line(result) -> Optional[str]:
+    """One line for the node's log."""
+    if result.success:
+        return (f"plan ok: {len(result.path)} waypoints, {result.charts} charts, "
+                f"{result.time_s:.3f} s")
+    return f"no plan ({result.reason}): {result.message}"

@@ -1,0 +1,80 @@
+"""TEST DOUBLE: a stand-in for cdh_planner.planner.Planner used only by the node's plumbing
+tests (bad frames, busy, streaming). It plans a straight line in the task coordinates and
+checks it pointwise; it is NOT the planner. Tests that compare ROS answers with the offline
+planner use the real Planner.
+
+If the file named by ``FAKE_PLANNER_DELAY_FILE`` (environment) exists, every plan takes at
+least the number of seconds written in it, reporting progress every 10 ms, so that "busy"
+can be provoked deterministically.
+"""
+
+import os
+import sys
+import time
+
+import numpy as np
+
+from cdh_planner.feasibility import evaluate
+from cdh_planner.model.pose import quaternion_from_tau
+from cdh_planner.planner import PlanResult
+from cdh_planner.trajectory.path import PlannedPath
+from cdh_planner.trajectory.timing import time_path
+
+WAYPOINTS = 40
+
+
+class FakePlanner:
+    def __init__(self, robot, task, settings):
+        self.robot, self.task, self.settings = robot, task, settings
+        self.delay_file = os.environ.get("FAKE_PLANNER_DELAY_FILE", "")
+
+    def _result(self, ok, reason, message, path=None, t0=0.0):
+        return PlanResult(success=ok, reason=reason, message=message,
+                          strategy=self.settings.strategy, n=len(self.task.names), m=0,
+                          charts=WAYPOINTS if ok else 0, time_s=time.perf_counter() - t0,
+                          cost=path.length_m() if path is not None else float("nan"), path=path)
+
+    def plan(self, start, goal, progress=None):
+        t0 = time.perf_counter()
+        try:
+            delay = float(open(self.delay_file).read()) if self.delay_file else 0.0
+        except OSError:
+            delay = 0.0
+        while time.perf_counter() - t0 < delay:
+            if progress is not None:
+                progress({"charts": 1, "time_s": time.perf_counter() - t0, "best_h": 1.0})
+            time.sleep(0.01)
+        a = self.task.coords(start.p[None], start.tau[None])[0]
+        b = self.task.coords(goal.p[None], goal.tau[None])[0]
+        for label, pose in (("start", start), ("goal", goal)):
+            f = evaluate(self.robot, pose.p[None], pose.tau[None])
+            if not f.feasible[0]:
+                return self._result(False, f"{label}_infeasible",
+                                    f"{label} pose is not wrench-feasible", t0=t0)
+        y = a + np.linspace(0.0, 1.0, WAYPOINTS)[:, None] * (b - a)
+        p, tau = self.task.pose(y)
+        f = evaluate(self.robot, p, tau)
+        if not np.all(f.feasible):
+            return self._result(False, "no_path", "the straight line leaves C", t0=t0)
+        zeros = np.zeros((WAYPOINTS, 6))
+        path = PlannedPath(p=p, quaternion=quaternion_from_tau(tau), tau=tau, lengths=f.lengths,
+                           tension_min=f.tension_min, tension_nominal=f.tension_nominal,
+                           tension_max=f.tension_max, margin=f.margin, t=np.zeros(WAYPOINTS),
+                           velocities=zeros, accelerations=zeros)
+        path = time_path(path, self.settings.max_cable_speed, self.settings.max_cable_accel)
+        return self._result(True, "ok", "straight line (test double)", path, t0)
+
+
+def main():
+    """Run the real node with this test double: python -m test.ros_doubles.fake_planner
+    --ros-args ..."""
+    from cdh_planner.ros.node import main as node_main
+    args = sys.argv[1:]
+    if args[:1] == ["--ros-args"]:
+        args = args[1:]
+    return node_main(args, planner_factory=FakePlanner,
+                     log=lambda line: print(line, file=sys.stderr))
+
+
+if __name__ == "__main__":
+    sys.exit(main())

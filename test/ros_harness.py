@@ -1,0 +1,160 @@
+"""Running the node for tests: its own process, its own ROS domain, discovery on localhost.
+
+    with claimed_domain() as domain, NodeProcess(domain, tmp_path) as node, \
+            PlannerClient(domain_id=domain) as client:
+        client.wait_for_node()
+        ...
+
+``claimed_domain`` holds a localhost TCP port per domain id while the test runs, so test
+processes running at the same time (other sessions, other test modules) never share a
+domain (two nodes with the same service name in one domain answer each other's calls:
+ros-on-pip.md).
+"""
+
+import contextlib
+import math
+import os
+import random
+import signal
+import socket
+import subprocess
+import sys
+import time
+from pathlib import Path
+
+import numpy as np
+
+REPO = Path(__file__).resolve().parents[1]
+ROBOT2 = REPO / "config" / "robot2.yaml"
+FAKE_NODE = REPO / "test" / "doubles" / "fake_planner.py"
+DOMAIN_PORT_BASE = 41_000
+DOMAINS = range(1, 101)
+FRAME = "cdh_base"
+
+# Robot 2's sphere task (config/robot2.yaml, paper Eq. 17): (alpha1, alpha2) in rad
+Q1, Q2, Q3 = (0.55, math.pi / 2), (0.55, 0.75), (2.63, 0.75)
+EQUATOR = (0.55, 0.0)         # on the sphere, not wrench-feasible (margin -0.15)
+EQUATOR_Q3 = (2.63, 0.0)      # on the sphere, not wrench-feasible
+
+
+@contextlib.contextmanager
+def claimed_domain():
+    """A ROS_DOMAIN_ID no other test process holds (a bound localhost port marks it)."""
+    ids = list(DOMAINS)
+    random.shuffle(ids)
+    for d in ids:
+        sock = socket.socket(socket.AF_INET, socket.SOCK_STREAM)
+        try:
+            sock.bind(("127.0.0.1", DOMAIN_PORT_BASE + d))
+        except OSError:
+            sock.close()
+            continue
+        try:
+            yield d
+        finally:
+            sock.close()
+        return
+    raise RuntimeError("no free ROS domain id")
+
+
+def ros_env(domain):
+    env = dict(os.environ)
+    env.update(ROS_DOMAIN_ID=str(domain), ROS_AUTOMATIC_DISCOVERY_RANGE="LOCALHOST",
+               AMENT_PREFIX_PATH=env.get("AMENT_PREFIX_PATH", sys.prefix),
+               PYTHONUNBUFFERED="1")
+    env.pop("ROS_LOCALHOST_ONLY", None)
+    return env
+
+
+def cli(*args):
+    """The ``cdh-planner`` command of this interpreter's environment."""
+    exe = Path(sys.executable).with_name("cdh-planner")
+    return [str(exe), *args] if exe.exists() else [sys.executable, "-m", "cdh_planner.cli", *args]
+
+
+def run_cli(domain, *args, timeout=120):
+    """Run ``cdh-planner ARGS`` in ``domain``; CompletedProcess with text output."""
+    return subprocess.run(cli(*args), env=ros_env(domain), capture_output=True, text=True,
+                          timeout=timeout)
+
+
+class NodeProcess:
+    """``cdh-planner node`` (or, with ``fake=True``, the node around the test double
+    planner of test/doubles/fake_planner.py) in its own process."""
+
+    def __init__(self, domain, log_dir, params=(), fake=False, env=None):
+        self.log_dir = Path(log_dir)
+        self.log_dir.mkdir(parents=True, exist_ok=True)
+        ros_args = ["--ros-args", "--params-file", str(ROBOT2), "-p", f"log_dir:={self.log_dir}"]
+        for p in params:
+            ros_args += ["-p", p]
+        cmd = ([sys.executable, str(FAKE_NODE), *ros_args] if fake
+               else cli("node", *ros_args))
+        self.output = self.log_dir / f"node-{time.time_ns()}.log"
+        full_env = ros_env(domain)
+        full_env.update(env or {})
+        self._out = open(self.output, "w")
+        self.proc = subprocess.Popen(cmd, env=full_env, stdout=self._out,
+                                     stderr=subprocess.STDOUT, cwd=REPO)
+
+    def __enter__(self):
+        return self
+
+    def __exit__(self, *exc):
+        self.stop()
+
+    def stop(self, sig=signal.SIGTERM, timeout=15.0):
+        """Send ``sig`` (if still running) and wait; the exit code."""
+        if self.proc.poll() is None:
+            self.proc.send_signal(sig)
+            try:
+                self.proc.wait(timeout)
+            except subprocess.TimeoutExpired:
+                self.proc.kill()
+                self.proc.wait()
+        self._out.close()
+        return self.proc.returncode
+
+    def log(self):
+        if not self._out.closed:
+            self._out.flush()
+        return self.output.read_text()
+
+    def run_files(self):
+        return sorted(self.log_dir.glob("*.mcap"))
+
+
+def sphere_pose_msg(coords, frame=FRAME):
+    """geometry_msgs/PoseStamped of Robot 2's sphere task at (alpha1, alpha2)."""
+    from cdh_planner.commands.slice import task_in_yaml
+    from cdh_planner.model.pose import quaternion_from_tau
+    from cdh_planner.ros.client import pose_stamped
+    task = task_in_yaml(ROBOT2)
+    p, tau = task.pose(np.array([coords]))
+    return pose_stamped(list(p[0]) + list(quaternion_from_tau(tau)[0]), frame)
+
+
+def pose_text(coords):
+    """"x y z qx qy qz qw" of a sphere-task pose (for ``cdh-planner call``)."""
+    m = sphere_pose_msg(coords)
+    p, o = m.pose.position, m.pose.orientation
+    return " ".join(repr(float(v)) for v in (p.x, p.y, p.z, o.x, o.y, o.z, o.w))
+
+
+class Collector:
+    """Keep every message of a subscription with its arrival time (time.time())."""
+
+    def __init__(self, node, msg_type, topic, qos):
+        self.items = []
+        node.create_subscription(msg_type, topic, self._add, qos)
+
+    def _add(self, msg):
+        self.items.append((time.time(), msg))
+
+    @property
+    def messages(self):
+        return [m for _, m in self.items]
+
+
+def stamp_s(stamp):
+    return stamp.sec + 1e-9 * stamp.nanosec

@@ -1,0 +1,198 @@
+"""The node's parameters, request reading and streaming without a ROS graph: the robot file
+read as ROS parameters gives the same robot and task as the offline reader; bad values are
+refused naming the parameter; the stream samples the trajectory in time and holds."""
+
+import math
+from dataclasses import replace
+
+import numpy as np
+import pytest
+import yaml
+
+pytest.importorskip("nav_msgs")
+
+from nav_msgs.srv import GetPlan  # noqa: E402
+
+from cdh_planner.commands.slice import task_in_yaml  # noqa: E402
+from cdh_planner.errors import InputError  # noqa: E402
+from cdh_planner.feasibility import evaluate  # noqa: E402
+from cdh_planner.model.pose import quaternion_from_tau  # noqa: E402
+from cdh_planner.model.robot import load_robot  # noqa: E402
+from cdh_planner.model.task import SliceTask  # noqa: E402
+from cdh_planner.ros import planning  # noqa: E402
+from cdh_planner.ros.params import SPECS, node_config  # noqa: E402
+from cdh_planner.ros.streaming import Stream  # noqa: E402
+from cdh_planner.trajectory.path import PlannedPath  # noqa: E402
+from cdh_planner.trajectory.timing import time_path  # noqa: E402
+from ros_harness import Q1, Q2, REPO, ROBOT2, sphere_pose_msg  # noqa: E402
+
+
+def flat(d, prefix=""):
+    """ROS's flattening of nested parameters: {'a': {'b': 1}} -> {'a.b': 1}. PyYAML reads
+    '1.0e4' as a string (YAML 1.1), rcl's parser as a double: read it as rcl does."""
+    out = {}
+    for k, v in d.items():
+        if isinstance(v, dict):
+            out.update(flat(v, f"{prefix}{k}."))
+        else:
+            out[prefix + k] = [_number(x) for x in v] if isinstance(v, list) else _number(v)
+    return out
+
+
+def _number(v):
+    if isinstance(v, str):
+        try:
+            return float(v)
+        except ValueError:
+            return v
+    return v
+
+
+def file_params(path):
+    return flat(yaml.safe_load(path.read_text())["cdh_planner"]["ros__parameters"])
+
+
+ROBOT2_PARAMS = file_params(ROBOT2)
+
+
+@pytest.mark.parametrize("name", ["robot1.yaml", "robot2.yaml"])
+def test_robot_file_as_parameters_is_the_offline_robot(name):
+    path = REPO / "config" / name
+    config = node_config(file_params(path))
+    offline = load_robot(path)
+    for field in ("winch_names", "base_anchors", "platform_anchors", "length_min", "length_max",
+                  "tension_min", "tension_max", "force", "load_point", "moment",
+                  "ellipsoid_offset", "ellipsoid_matrix", "ellipsoid_frame", "name"):
+        np.testing.assert_array_equal(getattr(config.robot, field), getattr(offline, field))
+
+
+def test_robot2_task_and_defaults():
+    config = node_config(ROBOT2_PARAMS)
+    assert config.task == task_in_yaml(ROBOT2)
+    assert config.base_frame == "cdh_base"
+    assert config.settings.strategy == "astar" and config.stream_rate_hz == 50.0
+
+
+def test_every_parameter_has_a_description_and_architecture_names_exist():
+    names = {s.name for s in SPECS}
+    for required in ("base_frame", "task.type", "task.center", "task.radius", "task.free_torsion",
+                     "planner.strategy", "planner.timeout_s", "stream_rate_hz", "log_dir",
+                     *(f"task.fixed.{n}" for n in ("x", "y", "z", "phi", "theta", "sigma"))):
+        assert required in names
+    assert all(s.description for s in SPECS)
+
+
+def test_slice_from_fixed_coordinates_nan_is_free():
+    values = dict(ROBOT2_PARAMS, **{"task.type": "slice", "task.fixed.x": 0.0,
+                                    "task.fixed.y": 0, "task.fixed.z": 0.35,
+                                    "task.fixed.sigma": 0.5})
+    task = node_config(values).task
+    assert task == SliceTask(fixed={"x": 0.0, "y": 0.0, "z": 0.35, "sigma": 0.5})
+    assert task.names == ("phi", "theta")
+
+
+def test_integers_are_accepted_for_numbers():
+    config = node_config(dict(ROBOT2_PARAMS, **{"planner.timeout_s": 5, "task.center": [0, 0, 1]}))
+    assert config.settings.timeout_s == 5.0 and config.task.center == (0.0, 0.0, 1.0)
+
+
+@pytest.mark.parametrize("name,value,message", [
+    ("robot.base_anchors", None, "robot.base_anchors = None: required parameter is not set"),
+    ("robot.length_min", [0.2] * 5, "robot.length_min"),
+    ("robot.winch_names", ["a"] * 6, "robot.winch_names"),
+    ("robot.wrench_ellipsoid.frame", "world", "robot.wrench_ellipsoid.frame = 'world'"),
+    ("task.type", "cube", "task.type = 'cube': expected one of free, slice, sphere"),
+    ("task.radius", 0.0, "task.radius = 0.0: must be > 0"),
+    ("task.center", [0.0, 1.0], "task.center"),
+    ("task.fixed.x", math.inf, "task.fixed.x = inf: must be a finite number"),
+    ("planner.strategy", "bfs", "planner.strategy = 'bfs'"),
+    ("planner.max_charts", 2.5, "planner.max_charts = 2.5: expected an integer"),
+    ("planner.timeout_s", "long", "planner.timeout_s = 'long': expected a number"),
+    ("stream_rate_hz", 0.5, "stream_rate_hz = 0.5: must be >= 1"),
+    ("trajectory.max_cable_speed", -1.0, "trajectory.max_cable_speed"),
+    ("base_frame", "", "base_frame = '': must not be empty"),
+    ("log_enabled", "yes", "log_enabled = 'yes': expected true or false"),
+])
+def test_bad_values_name_parameter_and_value(name, value, message):
+    with pytest.raises(InputError) as err:
+        node_config(dict(ROBOT2_PARAMS, **{name: value}))
+    assert message in str(err.value)
+
+
+# --------------------------------------------------------------------------- requests
+
+def test_request_poses_take_the_azimuth_of_the_other_pose_at_the_pole():
+    config = node_config(ROBOT2_PARAMS)
+    request = GetPlan.Request(start=sphere_pose_msg(Q1), goal=sphere_pose_msg(Q2))
+    start, goal = planning.request_poses(request, "cdh_base")
+    np.testing.assert_allclose(config.task.coords(start.p[None], start.tau[None]),
+                               [[0.55, math.pi / 2]], atol=1e-9)
+    np.testing.assert_allclose(config.task.coords(goal.p[None], goal.tau[None]), [Q2],
+                               atol=1e-9)
+
+
+def test_refusal_reasons_and_codes():
+    request = GetPlan.Request(start=sphere_pose_msg(Q1, frame="map"), goal=sphere_pose_msg(Q2))
+    with pytest.raises(InputError) as err:
+        planning.request_poses(request, "cdh_base")
+    result = planning.input_refusal(err.value)
+    assert result.reason == "bad_frame" and not result.success
+    robot = load_robot(ROBOT2)
+    status = planning.result_status(result, robot, "r#1", "", sphere_pose_msg(Q1).header.stamp)
+    values = {kv.key: kv.value for kv in status.values}
+    assert values["error_code"] == "202" and "map" in values["error_msg"]
+    assert values["path_stamp"] == "0"
+
+
+class Exploding:
+    settings = type("S", (), {"strategy": "astar"})
+
+    def plan(self, start, goal, progress=None):
+        raise ZeroDivisionError("boom")
+
+
+def test_planner_exception_becomes_an_answer():
+    lines = []
+    result = planning.run_planner(Exploding(), None, None, logger=lines.append)
+    assert not result.success and result.reason == "internal_error"
+    assert "ZeroDivisionError: boom" in result.message and "Traceback" in lines[0]
+
+
+# --------------------------------------------------------------------------- streaming
+
+def _path():
+    robot = load_robot(ROBOT2)
+    task = task_in_yaml(ROBOT2)
+    y = np.array(Q1) + np.linspace(0, 1, 20)[:, None] * (np.array(Q2) - np.array(Q1))
+    p, tau = task.pose(y)
+    f = evaluate(robot, p, tau)
+    z = np.zeros((20, 6))
+    path = PlannedPath(p=p, quaternion=quaternion_from_tau(tau), tau=tau, lengths=f.lengths,
+                       tension_min=f.tension_min, tension_nominal=f.tension_nominal,
+                       tension_max=f.tension_max, margin=f.margin, t=np.zeros(20),
+                       velocities=z, accelerations=z)
+    return robot, time_path(path, 0.05, 0.2)
+
+
+def test_stream_samples_in_time_finishes_and_holds():
+    robot, path = _path()
+    stamp = sphere_pose_msg(Q1).header.stamp
+    stream = Stream(path, robot.winch_names, "linear", start=100.0)
+    first, done = stream.command(100.0, stamp)
+    assert not done
+    np.testing.assert_array_equal(first.position, path.lengths[0])
+    mid, done = stream.command(100.0 + path.t[5], stamp)
+    np.testing.assert_allclose(mid.position, path.lengths[5], atol=1e-12)
+    held = stream.hold(stamp)
+    np.testing.assert_array_equal(held.position, mid.position)
+    assert np.all(np.asarray(held.velocity) == 0)
+    last, done = stream.command(100.0 + path.t[-1] + 1.0, stamp)
+    assert done and np.all(np.asarray(last.velocity) == 0)
+    np.testing.assert_array_equal(last.position, path.lengths[-1])
+    assert list(last.name) == list(robot.winch_names)
+
+
+def test_stream_refuses_wrong_joint_names():
+    robot, path = _path()
+    with pytest.raises(InputError):
+        Stream(replace(path), ["a", "b"])

@@ -1,0 +1,219 @@
+"""The node's plumbing over real DDS, node in its own process and ROS domain: refusals
+(bad input, busy, execute without a plan / while executing), parameter validation,
+progress, streaming rate and stop latency.
+
+The node here runs around a TEST DOUBLE planner (test/doubles/fake_planner.py: a straight
+line in the task coordinates) so that these tests do not depend on planning times; a plan
+that is slow on purpose provokes "busy". What the real planner answers over ROS is tested
+in test_ros_node.py.
+"""
+
+import math
+import time
+
+import numpy as np
+import pytest
+
+pytest.importorskip("rclpy")
+
+from diagnostic_msgs.msg import DiagnosticStatus  # noqa: E402
+from nav_msgs.srv import GetPlan  # noqa: E402
+from rclpy.qos import DurabilityPolicy, QoSProfile, ReliabilityPolicy  # noqa: E402
+from sensor_msgs.msg import JointState  # noqa: E402
+from trajectory_msgs.msg import JointTrajectory  # noqa: E402
+
+from cdh_planner.model.robot import load_robot  # noqa: E402
+from cdh_planner.ros.client import PlannerClient  # noqa: E402
+from ros_harness import (Q1, Q2, ROBOT2, Collector, NodeProcess,  # noqa: E402
+                         claimed_domain, sphere_pose_msg, stamp_s)
+
+ROBOT = load_robot(ROBOT2)
+RATE_HZ = 50.0
+LATCHED = QoSProfile(depth=1, durability=DurabilityPolicy.TRANSIENT_LOCAL,
+                     reliability=ReliabilityPolicy.RELIABLE)
+
+
+@pytest.fixture(scope="module")
+def ros(tmp_path_factory):
+    tmp = tmp_path_factory.mktemp("plumbing")
+    delay_file = tmp / "delay"
+    with claimed_domain() as domain:
+        node = NodeProcess(domain, tmp / "runs", fake=True,
+                           params=[f"stream_rate_hz:={RATE_HZ}"],
+                           env={"FAKE_PLANNER_DELAY_FILE": str(delay_file)})
+        try:
+            with PlannerClient(domain_id=domain) as client:
+                client.wait_for_node(20.0)
+                client.delay_file = delay_file
+                client.process = node
+                client.commands = Collector(client.node, JointState, "/cdh_planner/cable_command",
+                                            100)
+                client.progress = Collector(client.node, DiagnosticStatus,
+                                            "/cdh_planner/plan_progress", 100)
+                client.trajectory = Collector(client.node, JointTrajectory,
+                                              "/cdh_planner/cable_trajectory", LATCHED)
+                client.spin(0.3)
+                yield client
+        finally:
+            rc = node.stop()
+            assert rc == 0, node.log()
+
+
+def plan(client, start=Q1, goal=Q2):
+    return client.plan(sphere_pose_msg(start), sphere_pose_msg(goal), timeout_s=30)
+
+
+# --------------------------------------------------------------------------- refusals
+
+def test_execute_without_plan_is_refused(ros):
+    ok, message = ros.execute()
+    assert not ok and "no plan" in message
+    ok, message = ros.stop()
+    assert ok and "not executing" in message
+
+
+def _bad(msg_fn):
+    start = sphere_pose_msg(Q1)
+    msg_fn(start)
+    return start
+
+
+BAD_REQUESTS = [
+    ("nan x", lambda m: setattr(m.pose.position, "x", math.nan), "start.pose.position.x"),
+    ("inf z", lambda m: setattr(m.pose.position, "z", math.inf), "start.pose.position.z"),
+    ("zero quaternion", lambda m: setattr(m.pose.orientation, "w", 0.0),
+     "zero quaternion"),
+    ("quaternion not normalised", lambda m: setattr(m.pose.orientation, "w", 2.0),
+     "not normalised"),
+    ("wrong frame", lambda m: setattr(m.header, "frame_id", "world"),
+     "start.header.frame_id = 'world': must be the base frame 'cdh_base'"),
+    ("empty frame", lambda m: setattr(m.header, "frame_id", ""), "start.header.frame_id"),
+]
+
+
+@pytest.mark.parametrize("label,mutate,expected", BAD_REQUESTS, ids=[b[0] for b in BAD_REQUESTS])
+def test_bad_request_answered_with_reason_then_next_served(ros, label, mutate, expected):
+    answer = ros.plan(_bad(mutate), sphere_pose_msg(Q2), timeout_s=10)
+    assert not answer.success and answer.path.header.frame_id == "cdh_base"
+    assert expected in answer.values["error_msg"], answer.values
+    code = "202" if "frame" in label else "200"       # nav2 TF_ERROR / UNKNOWN
+    assert answer.values["error_code"] == code
+    assert answer.status.level == DiagnosticStatus.ERROR
+    assert plan(ros).success                           # the node still serves
+
+
+def test_busy_is_refused_at_once_and_progress_is_published(ros):
+    ros.delay_file.write_text("1.5")
+    try:
+        n_progress = len(ros.progress.items)
+        first = ros.plan_client.call_async(GetPlan.Request(start=sphere_pose_msg(Q1),
+                                                           goal=sphere_pose_msg(Q2)))
+        ros.spin(0.4)
+        t0 = time.monotonic()
+        second = plan(ros)
+        refused_in = time.monotonic() - t0
+        assert not second.success
+        assert second.values["error_msg"].startswith("busy"), second.values
+        assert refused_in < 0.5, refused_in
+        assert not first.done()
+        assert ros.spin_until(first.done, 10.0)
+        assert len(first.result().plan.poses) > 0
+    finally:
+        ros.delay_file.unlink()
+    progress = [m for m in ros.progress.messages[n_progress:]]
+    assert len(progress) >= 5       # at most 10 Hz over 1.5 s of planning
+    values = {kv.key: kv.value for kv in progress[-1].values}
+    assert set(values) == {"charts", "time_s", "best_h", "run_id"}
+    assert float(values["time_s"]) > 0.5
+    assert plan(ros).success
+
+
+# --------------------------------------------------------------------------- parameters
+
+@pytest.mark.parametrize("name,value,reason", [
+    ("planner.strategy", "dijkstra", "planner.strategy = 'dijkstra': expected one of astar, gbf"),
+    ("task.radius", -0.1, "task.radius"),
+    ("stream_rate_hz", 5000.0, "stream_rate_hz"),
+    ("robot.length_min", [0.2] * 5, "robot.length_min"),
+    ("robot.tension_max", [0.05] * 6, "robot.tension_min[0] = 0.1: must be below"),
+    ("task.type", "cube", "task.type"),
+    ("planner.timeout_s", 0.0, "planner.timeout_s"),
+])
+def test_bad_parameter_is_refused_with_reason(ros, name, value, reason):
+    [(ok, why)] = ros.set_parameters({name: value})
+    assert not ok and reason in why, why
+    assert plan(ros).success
+
+
+def test_parameter_change_rebuilds_planner(ros):
+    results = ros.set_parameters({"planner.strategy": "gbf", "planner.timeout_s": 5})
+    assert all(ok for ok, _ in results), results
+    try:
+        assert ros.get_parameters(["planner.strategy"]) == {"planner.strategy": "gbf"}
+        answer = plan(ros)
+        assert answer.success and answer.values["strategy"] == "gbf"
+    finally:
+        ros.set_parameters({"planner.strategy": "astar"})
+
+
+# --------------------------------------------------------------------------- streaming
+
+def test_streaming_rate_and_stop_within_one_period(ros):
+    answer = plan(ros)
+    assert answer.success
+    duration = float(answer.values["duration_s"])
+    assert duration > 1.6
+    n0 = len(ros.commands.items)
+    ok, message = ros.execute()
+    assert ok, message
+    ok, message = ros.execute()
+    assert not ok and "already executing" in message
+    ros.spin(1.3)
+    t_stop = time.time()
+    ok, message = ros.stop()
+    assert ok and "stopped" in message
+    ros.spin(0.4)
+    got = ros.commands.messages[n0:]
+    stamps = np.array([stamp_s(m.header.stamp) for m in got])
+    # rate: commands stamped within the first second of streaming
+    in_first_second = np.sum(stamps < stamps[0] + 1.0)
+    assert abs(in_first_second - RATE_HZ) <= 0.1 * RATE_HZ, in_first_second
+    period = np.diff(stamps[:-1])
+    assert abs(np.mean(period) - 1 / RATE_HZ) < 0.1 / RATE_HZ
+    # stop: the last command holds the one before (velocity 0) and follows the request
+    # within one period; nothing after it
+    hold, before = got[-1], got[-2]
+    assert np.all(np.asarray(hold.velocity) == 0.0)
+    np.testing.assert_array_equal(hold.position, before.position)
+    assert stamps[-1] - t_stop <= 1.0 / RATE_HZ, stamps[-1] - t_stop
+    assert any(np.asarray(before.velocity) != 0.0)
+    # types, names, units: cable lengths within the robot's limits, tensions within limits
+    for m in got:
+        assert list(m.name) == list(ROBOT.winch_names)
+        assert np.all((np.asarray(m.position) >= ROBOT.length_min)
+                      & (np.asarray(m.position) <= ROBOT.length_max))
+        assert np.all((np.asarray(m.effort) >= ROBOT.tension_min)
+                      & (np.asarray(m.effort) <= ROBOT.tension_max))
+        assert np.all(np.abs(m.velocity) <= 0.05 * (1 + 1e-9))   # trajectory.max_cable_speed
+    ok, message = ros.stop()
+    assert ok and "not executing" in message
+
+
+def test_streaming_ends_on_the_last_waypoint(ros):
+    answer = plan(ros)
+    assert answer.success
+    assert ros.spin_until(lambda: ros.trajectory.items
+                          and len(ros.trajectory.messages[-1].points) == len(answer.path.poses),
+                          5.0)
+    last_point = ros.trajectory.messages[-1].points[-1]
+    n0 = len(ros.commands.items)
+    assert ros.execute()[0]
+    duration = float(answer.values["duration_s"])
+    ros.spin(duration + 0.5)
+    got = ros.commands.messages[n0:]
+    assert abs(len(got) - (duration * RATE_HZ + 2)) <= 0.1 * duration * RATE_HZ
+    np.testing.assert_allclose(got[-1].position, last_point.positions, atol=1e-12)
+    assert np.all(np.asarray(got[-1].velocity) == 0.0)
+    assert ros.execute()[0]          # the same plan can be executed again
+    ros.spin(0.2)
+    assert ros.stop()[0]
