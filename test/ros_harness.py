@@ -5,18 +5,14 @@
         client.wait_for_node()
         ...
 
-``claimed_domain`` holds a localhost TCP port per domain id while the test runs, so test
-processes running at the same time (other sessions, other test modules) never share a
-domain (two nodes with the same service name in one domain answer each other's calls:
-ros-on-pip.md).
+``claimed_domain`` (cdh_planner.ros.domains) holds a localhost TCP port per domain id while
+the test runs, so test processes running at the same time (other sessions, other test
+modules, the demo) never share a domain (two nodes with the same service name in one domain
+answer each other's calls: ros-on-pip.md).
 """
 
-import contextlib
 import math
-import os
-import random
 import signal
-import socket
 import subprocess
 import sys
 import time
@@ -24,11 +20,11 @@ from pathlib import Path
 
 import numpy as np
 
+from cdh_planner.ros.domains import claimed_domain, isolated_env  # noqa: F401 (re-exported)
+
 REPO = Path(__file__).resolve().parents[1]
 ROBOT2 = REPO / "config" / "robot2.yaml"
 FAKE_NODE = REPO / "test" / "doubles" / "fake_planner.py"
-DOMAIN_PORT_BASE = 41_000
-DOMAINS = range(1, 101)
 FRAME = "cdh_base"
 
 # Robot 2's sphere task (config/robot2.yaml, paper Eq. 17): (alpha1, alpha2) in rad
@@ -37,33 +33,8 @@ EQUATOR = (0.55, 0.0)         # on the sphere, not wrench-feasible (margin -0.15
 EQUATOR_Q3 = (2.63, 0.0)      # on the sphere, not wrench-feasible
 
 
-@contextlib.contextmanager
-def claimed_domain():
-    """A ROS_DOMAIN_ID no other test process holds (a bound localhost port marks it)."""
-    ids = list(DOMAINS)
-    random.shuffle(ids)
-    for d in ids:
-        sock = socket.socket(socket.AF_INET, socket.SOCK_STREAM)
-        try:
-            sock.bind(("127.0.0.1", DOMAIN_PORT_BASE + d))
-        except OSError:
-            sock.close()
-            continue
-        try:
-            yield d
-        finally:
-            sock.close()
-        return
-    raise RuntimeError("no free ROS domain id")
-
-
 def ros_env(domain):
-    env = dict(os.environ)
-    env.update(ROS_DOMAIN_ID=str(domain), ROS_AUTOMATIC_DISCOVERY_RANGE="LOCALHOST",
-               AMENT_PREFIX_PATH=env.get("AMENT_PREFIX_PATH", sys.prefix),
-               PYTHONUNBUFFERED="1")
-    env.pop("ROS_LOCALHOST_ONLY", None)
-    return env
+    return isolated_env(domain)
 
 
 def cli(*args):
@@ -158,3 +129,30 @@ class Collector:
 
 def stamp_s(stamp):
     return stamp.sec + 1e-9 * stamp.nanosec
+
+
+def flat_parameters(d, prefix=""):
+    """ROS's flattening of nested parameters: {'a': {'b': 1}} -> {'a.b': 1}. PyYAML reads
+    '1.0e4' as a string (YAML 1.1), rcl's parser as a double: read it as rcl does."""
+    out = {}
+    for k, v in d.items():
+        if isinstance(v, dict):
+            out.update(flat_parameters(v, f"{prefix}{k}."))
+        else:
+            out[prefix + k] = [_number(x) for x in v] if isinstance(v, list) else _number(v)
+    return out
+
+
+def _number(v):
+    if isinstance(v, str):
+        try:
+            return float(v)
+        except ValueError:
+            return v
+    return v
+
+
+def file_parameters(path):
+    """The flat ROS parameters of a parameters file's ``cdh_planner`` node."""
+    import yaml
+    return flat_parameters(yaml.safe_load(Path(path).read_text())["cdh_planner"]["ros__parameters"])

@@ -7,7 +7,6 @@ from dataclasses import replace
 
 import numpy as np
 import pytest
-import yaml
 
 pytest.importorskip("nav_msgs")
 
@@ -24,41 +23,16 @@ from cdh_planner.ros.params import SPECS, node_config  # noqa: E402
 from cdh_planner.ros.streaming import Stream  # noqa: E402
 from cdh_planner.trajectory.path import PlannedPath  # noqa: E402
 from cdh_planner.trajectory.timing import time_path  # noqa: E402
-from ros_harness import Q1, Q2, REPO, ROBOT2, sphere_pose_msg  # noqa: E402
+from ros_harness import Q1, Q2, REPO, ROBOT2, file_parameters, sphere_pose_msg  # noqa: E402
 
 
-def flat(d, prefix=""):
-    """ROS's flattening of nested parameters: {'a': {'b': 1}} -> {'a.b': 1}. PyYAML reads
-    '1.0e4' as a string (YAML 1.1), rcl's parser as a double: read it as rcl does."""
-    out = {}
-    for k, v in d.items():
-        if isinstance(v, dict):
-            out.update(flat(v, f"{prefix}{k}."))
-        else:
-            out[prefix + k] = [_number(x) for x in v] if isinstance(v, list) else _number(v)
-    return out
-
-
-def _number(v):
-    if isinstance(v, str):
-        try:
-            return float(v)
-        except ValueError:
-            return v
-    return v
-
-
-def file_params(path):
-    return flat(yaml.safe_load(path.read_text())["cdh_planner"]["ros__parameters"])
-
-
-ROBOT2_PARAMS = file_params(ROBOT2)
+ROBOT2_PARAMS = file_parameters(ROBOT2)
 
 
 @pytest.mark.parametrize("name", ["robot1.yaml", "robot2.yaml"])
 def test_robot_file_as_parameters_is_the_offline_robot(name):
     path = REPO / "config" / name
-    config = node_config(file_params(path))
+    config = node_config(file_parameters(path))
     offline = load_robot(path)
     for field in ("winch_names", "base_anchors", "platform_anchors", "length_min", "length_max",
                   "tension_min", "tension_max", "force", "load_point", "moment",

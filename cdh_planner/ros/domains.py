@@ -1,0 +1,48 @@
+"""A ROS domain of one's own for tests and demos (no rclpy here).
+
+Two processes offering the same service name in one ROS_DOMAIN_ID answer each other's calls
+(ros-on-pip.md). ``claimed_domain()`` picks a domain id that no other cooperating process
+(tests, demos) holds: holding one means holding a bound localhost TCP port, released when
+the block ends or the process dies. Discovery should also stay on the machine:
+``ROS_AUTOMATIC_DISCOVERY_RANGE=LOCALHOST`` (``isolated_env``).
+"""
+
+import contextlib
+import os
+import random
+import socket
+
+PORT_BASE = 41_000
+DOMAINS = range(1, 101)   # 0 is everybody's default; ids up to 101 keep DDS ports < 33000
+
+
+@contextlib.contextmanager
+def claimed_domain():
+    """Yield a ROS domain id no other ``claimed_domain`` holds; RuntimeError if none."""
+    ids = list(DOMAINS)
+    random.shuffle(ids)
+    for d in ids:
+        sock = socket.socket(socket.AF_INET, socket.SOCK_STREAM)
+        try:
+            sock.bind(("127.0.0.1", PORT_BASE + d))
+        except OSError:
+            sock.close()
+            continue
+        try:
+            yield d
+        finally:
+            sock.close()
+        return
+    raise RuntimeError(f"no free ROS domain id in {DOMAINS.start}..{DOMAINS.stop - 1}")
+
+
+def isolated_env(domain, base=None):
+    """A copy of ``base`` (default os.environ) for a process in ``domain``, discovery on
+    localhost only, message definitions found in this interpreter's prefix."""
+    import sys
+    env = dict(os.environ if base is None else base)
+    env.update(ROS_DOMAIN_ID=str(domain), ROS_AUTOMATIC_DISCOVERY_RANGE="LOCALHOST",
+               AMENT_PREFIX_PATH=env.get("AMENT_PREFIX_PATH") or sys.prefix,
+               PYTHONUNBUFFERED="1")
+    env.pop("ROS_LOCALHOST_ONLY", None)
+    return env
