@@ -8,8 +8,8 @@ outcome, the path length, duration, lowest tension margin and the run's log file
 ``--execute`` then calls ``~/execute`` and follows ``~/cable_command`` until the motion
 ends (Ctrl-C calls ``~/stop`` first). The frame defaults to the node's ``base_frame``.
 
-Exit codes: 0 planned (and executed); 1 no plan, or execution refused; 2 bad input;
-3 the node did not answer.
+Exit codes: 0 planned (and executed to the last waypoint); 1 no plan, or execution refused
+or cut short; 2 bad input; 3 the node did not answer.
 """
 
 import argparse
@@ -93,35 +93,46 @@ def print_answer(answer):
 
 
 def execute(client, answer):
-    """Call ~/execute and follow ~/cable_command to the end; Ctrl-C stops the motion."""
+    """Call ~/execute and follow ~/cable_command until it reaches the trajectory's last
+    point; Ctrl-C stops the motion. 0 when it got there, 1 otherwise."""
+    import numpy as np
     from sensor_msgs.msg import JointState
+    from trajectory_msgs.msg import JointTrajectory
 
     from ..ros.client import path_duration
-    commands = []
+    from ..ros.node import LATCHED
+    commands, trajectories = [], []
     client.node.create_subscription(JointState, f"{client.target}/cable_command",
                                     commands.append, 100)
-    client.spin(0.3)  # let the subscription match before streaming starts
+    client.node.create_subscription(JointTrajectory, f"{client.target}/cable_trajectory",
+                                    trajectories.append, LATCHED)
+    n = len(answer.path.poses)
+    client.spin_until(lambda: trajectories and len(trajectories[-1].points) == n, 2.0)
+    goal = np.asarray(trajectories[-1].points[-1].positions) if trajectories else None
     ok, message = client.execute()
     print(f"execute: {message}")
     if not ok:
         return EXIT_NO_PLAN
-    duration = path_duration(answer.path)
-    t0 = time.monotonic()
+
+    def arrived():
+        return (commands and not any(commands[-1].velocity) and goal is not None
+                and np.allclose(commands[-1].position, goal, rtol=0, atol=1e-9))
+
     try:
-        def ended():
-            return (commands and time.monotonic() - t0 > duration
-                    and not any(commands[-1].velocity))
-        client.spin_until(ended, duration + 2.0)
+        client.spin_until(arrived, path_duration(answer.path) + 3.0)
     except KeyboardInterrupt:
         print(f"stop: {client.stop()[1]}")
         return EXIT_NO_PLAN
-    if commands:
-        span = _seconds(commands[-1]) - _seconds(commands[0])
-        print(f"streamed: {len(commands)} commands over {span:.3f} s "
-              f"({(len(commands) - 1) / span if span > 0 else 0:.1f} Hz); final cable lengths "
-              f"{' '.join(f'{x:.4f}' for x in commands[-1].position)} m")
-    else:
+    if not commands:
         print("streamed: no ~/cable_command received")
+        return EXIT_NO_PLAN
+    span = _seconds(commands[-1]) - _seconds(commands[0])
+    print(f"streamed: {len(commands)} commands over {span:.3f} s "
+          f"({(len(commands) - 1) / span if span > 0 else 0:.1f} Hz); final cable lengths "
+          f"{' '.join(f'{x:.4f}' for x in commands[-1].position)} m")
+    if not arrived():
+        print("execution did not reach the last waypoint (stopped, or the node went away)")
+        return EXIT_NO_PLAN
     return EXIT_OK
 
 
