@@ -161,8 +161,13 @@ class Atlas:
         while step >= self.min_radius * (1 - 1e-9):
             x_new = self.psi(i, step * u)
             basis = None if x_new is None else self._acceptable_basis(ch, step * u, x_new, step)
-            if basis is not None and self.in_domain(x_new):
-                j = self.add_chart(x_new, radius=min(self.radius, max(step, self.min_radius)), basis=basis)
+            if basis is not None and not self.in_domain(x_new):
+                # the domain boundary (or the margin floor) is crossed: this chart ends there
+                ch.frontier = True
+                ch.polytope.clip(u, max(self._inside_fraction(ch.x, x_new) * step, 0.05 * ch.radius))
+                return None
+            if basis is not None:
+                j = self.add_chart(x_new, radius=min(self.radius, 2.0 * step), basis=basis)
                 if ch.polytope.vertices.shape[0] and np.any(np.all(np.isclose(ch.polytope.vertices, v), axis=1)):
                     ch.polytope.clip(u, ch.radius)
                 return j
@@ -170,6 +175,18 @@ class Atlas:
         ch.frontier = True
         ch.polytope.clip(u, ch.radius)
         return None
+
+    def _inside_fraction(self, x0, x1):
+        """Fraction of the chord x0 -> x1 (x0 inside the domain) before it leaves the domain."""
+        d = self.diff(x0, x1)
+        free = ~self.periodic
+        t = 1.0
+        with np.errstate(divide="ignore", invalid="ignore"):
+            for bound, sign in ((self.c.lower, -1.0), (self.c.upper, 1.0)):
+                over = free & (sign * (x1 - bound) > 0)
+                if over.any():
+                    t = min(t, float(np.min((bound[over] - x0[over]) / d[over])))
+        return max(t, 0.0)
 
     def _acceptable_basis(self, ch, s, x_new, step):
         """The tangent basis at x_new if the manifold is flat enough between, else None."""
