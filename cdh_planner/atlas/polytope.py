@@ -27,15 +27,18 @@ class Polytope:
     def clip(self, a, beta):
         """Intersect with {s : a . s <= beta}; returns True if any vertex was removed."""
         side = self.vertices @ a - beta
-        outside = side > EPS * max(1.0, abs(beta))
+        tol = EPS * max(1.0, abs(beta))
+        outside = side > tol
         if not outside.any():
             return False
         facet = 1 << self.n_facets
         self.n_facets += 1
+        on_plane = np.abs(side) <= tol
         inside = np.flatnonzero(~outside)
-        new_v, new_m = [], []
         out_idx = np.flatnonzero(outside)
-        for i in inside.tolist():
+        new_v, new_m = [], []
+        # cut edges: an inside vertex strictly inside and an outside one sharing n - 1 facets
+        for i in np.flatnonzero(~outside & ~on_plane).tolist():
             mi = self.masks[i]
             for j in out_idx.tolist():
                 shared = mi & self.masks[j]
@@ -43,11 +46,9 @@ class Polytope:
                     t = -side[i] / (side[j] - side[i])
                     new_v.append(self.vertices[i] + t * (self.vertices[j] - self.vertices[i]))
                     new_m.append(shared | facet)
-        # vertices on the plane (side ~ 0) also lie on the new facet
-        keep_m = [self.masks[i] | (facet if abs(side[i]) <= EPS * max(1.0, abs(beta)) else 0) for i in inside.tolist()]
-        verts = [self.vertices[inside]] + ([np.array(new_v)] if new_v else [])
-        self.vertices = np.concatenate(verts, axis=0) if verts else np.empty((0, self.n))
-        self.masks = keep_m + new_m
+        keep_m = [self.masks[i] | (facet if on_plane[i] else 0) for i in inside.tolist()]
+        verts = np.concatenate([self.vertices[inside]] + ([np.array(new_v)] if new_v else []), axis=0)
+        self.vertices, self.masks = _merge_duplicates(verts, keep_m + new_m)
         return True
 
     def outside_vertices(self, r):
@@ -55,3 +56,17 @@ class Polytope:
         norms = np.linalg.norm(self.vertices, axis=1)
         idx = np.flatnonzero(norms > r * (1.0 + 1e-6))
         return idx[np.argsort(-norms[idx])]
+
+
+def _merge_duplicates(vertices, masks, decimals=10):
+    """Vertices that coincide (degenerate cuts) become one, on the union of their facets."""
+    if vertices.shape[0] < 2:
+        return vertices, masks
+    _, first, inverse = np.unique(np.round(vertices, decimals), axis=0, return_index=True,
+                                  return_inverse=True)
+    if first.size == vertices.shape[0]:
+        return vertices, masks
+    merged = [0] * first.size
+    for k, g in enumerate(inverse.ravel().tolist()):
+        merged[g] |= masks[k]
+    return vertices[first], merged
