@@ -2,7 +2,7 @@
 
 Henderson's multiple-hypercube atlas starts each chart's domain as the cube of side 2r and
 clips it by half-spaces {s : a . s <= beta}. Vertices carry the set of facets they lie on
-(a bit mask), so clipping finds the cut edges as pairs of vertices, one on each side, that
+(an incidence matrix), so clipping finds the cut edges as pairs of vertices, one on each side, that
 share n - 1 facets (exact for simple polytopes; degenerate extra vertices stay inside).
 """
 
@@ -14,15 +14,18 @@ EPS = 1e-10
 
 
 class Polytope:
-    """Cube [-r, r]^n clipped by half-spaces; ``vertices`` is (V, n)."""
+    """Cube [-r, r]^n clipped by half-spaces; ``vertices`` (V, n), ``incidence`` (V, F)
+    bool: which facets each vertex lies on (facets no vertex lies on are dropped)."""
 
     def __init__(self, n, r):
         self.n = n
         signs = np.array(list(itertools.product((1.0, -1.0), repeat=n)))
         self.vertices = r * signs
         # facet 2k: s_k <= r, facet 2k + 1: -s_k <= r
-        self.masks = [sum(1 << (2 * k + int(sgn < 0)) for k, sgn in enumerate(row)) for row in signs]
-        self.n_facets = 2 * n
+        self.incidence = np.zeros((signs.shape[0], 2 * n), dtype=bool)
+        for k in range(n):
+            self.incidence[:, 2 * k] = signs[:, k] > 0
+            self.incidence[:, 2 * k + 1] = signs[:, k] < 0
 
     def clip(self, a, beta):
         """Intersect with {s : a . s <= beta}; returns True if any vertex was removed."""
@@ -31,25 +34,29 @@ class Polytope:
         outside = side > tol
         if not outside.any():
             return False
-        facet = 1 << self.n_facets
-        self.n_facets += 1
         on_plane = np.abs(side) <= tol
-        inside = np.flatnonzero(~outside)
-        out_idx = np.flatnonzero(outside)
-        new_v, new_m = [], []
-        # cut edges: an inside vertex strictly inside and an outside one sharing n - 1 facets
-        for i in np.flatnonzero(~outside & ~on_plane).tolist():
-            mi = self.masks[i]
-            for j in out_idx.tolist():
-                shared = mi & self.masks[j]
-                if shared.bit_count() >= self.n - 1:
-                    t = -side[i] / (side[j] - side[i])
-                    new_v.append(self.vertices[i] + t * (self.vertices[j] - self.vertices[i]))
-                    new_m.append(shared | facet)
-        keep_m = [self.masks[i] | (facet if on_plane[i] else 0) for i in inside.tolist()]
-        verts = np.concatenate([self.vertices[inside]] + ([np.array(new_v)] if new_v else []), axis=0)
-        self.vertices, self.masks = _merge_duplicates(verts, keep_m + new_m)
+        strict = ~outside & ~on_plane
+        # cut edges: a vertex strictly inside and one outside that share n - 1 facets
+        inc = self.incidence.astype(np.int32)
+        shared = inc[strict] @ inc[outside].T
+        ii, jj = np.nonzero(shared >= self.n - 1)
+        vi, vo = np.flatnonzero(strict)[ii], np.flatnonzero(outside)[jj]
+        t = (-side[vi] / (side[vo] - side[vi]))[:, None]
+        new_v = self.vertices[vi] + t * (self.vertices[vo] - self.vertices[vi])
+        new_inc = self.incidence[vi] & self.incidence[vo]
+        keep = ~outside
+        verts = np.concatenate([self.vertices[keep], new_v], axis=0)
+        inc = np.concatenate([self.incidence[keep], new_inc], axis=0)
+        facet = np.concatenate([on_plane[keep], np.ones(new_v.shape[0], dtype=bool)])
+        inc = np.concatenate([inc, facet[:, None]], axis=1)
+        verts, inc = _merge_duplicates(verts, inc)
+        self.vertices, self.incidence = verts, inc[:, inc.any(axis=0)]
         return True
+
+    def close(self):
+        """Give up on the rest of this polytope: no vertices, so the chart counts as closed."""
+        self.vertices = self.vertices[:0]
+        self.incidence = self.incidence[:0]
 
     def outside_vertices(self, r):
         """Indices of vertices outside the ball of radius r, farthest first."""
@@ -58,15 +65,14 @@ class Polytope:
         return idx[np.argsort(-norms[idx])]
 
 
-def _merge_duplicates(vertices, masks, decimals=10):
+def _merge_duplicates(vertices, incidence, decimals=10):
     """Vertices that coincide (degenerate cuts) become one, on the union of their facets."""
     if vertices.shape[0] < 2:
-        return vertices, masks
+        return vertices, incidence
     _, first, inverse = np.unique(np.round(vertices, decimals), axis=0, return_index=True,
                                   return_inverse=True)
     if first.size == vertices.shape[0]:
-        return vertices, masks
-    merged = [0] * first.size
-    for k, g in enumerate(inverse.ravel().tolist()):
-        merged[g] |= masks[k]
+        return vertices, incidence
+    merged = np.zeros((first.size, incidence.shape[1]), dtype=bool)
+    np.logical_or.at(merged, inverse.ravel(), incidence)
     return vertices[first], merged

@@ -144,7 +144,7 @@ class AtlasSearch:
             j = self.atlas.expand(i)
             if j is not None and until_better and self.h(j) < self.h(i):
                 return None
-        ch.polytope.vertices = ch.polytope.vertices[:0]  # give up on this chart: closed
+        ch.polytope.close()  # give up on this chart
         ch.frontier = True
         return None
 
@@ -160,7 +160,6 @@ class AtlasSearch:
             if i in closed:
                 continue
             self._best_h = min(self._best_h, self.h(i))
-            n_before = len(self.atlas.charts)
             reason = self._grow(i, goal, until_better=True)
             if reason:
                 return SearchOutcome(reason, expanded=len(closed))
@@ -169,8 +168,7 @@ class AtlasSearch:
                 closed.add(i)
             else:
                 heapq.heappush(heap, (self.h(i), next(self._count), i))
-            new = set(range(n_before, len(self.atlas.charts)))
-            for j in sorted(ch.neighbours | (new & ch.neighbours)):
+            for j in sorted(ch.neighbours):
                 if j in parent or not self._edge_ok(i, j):
                     continue
                 parent[j] = i
