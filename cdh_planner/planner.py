@@ -54,6 +54,7 @@ class PlannerSettings:
     (m/s, m/s^2)."""
 
     strategy: str = "astar"
+    cost: str = "auto"  # one of COSTS; auto: the paper's choice for the task
     radius: float = 0.1
     timeout_s: float = 60.0
     max_charts: int = 100_000
@@ -80,6 +81,7 @@ class PlanResult:
 
 ProgressCallback = Callable[[dict], None]  # called with {"charts": int, "time_s": float, "best_h": float}
 
+COSTS = ("auto", "so3", "great_circle", "se3")
 TASK_TOL = 1e-6  # m / rad: how far a start or goal may be off the task's constraint
 EDGE_RETRIES = 20  # chart-graph edges found not to carry a path before giving up
 SMOOTHING_ROUNDS = 12
@@ -98,7 +100,7 @@ class Planner:
         s = self.settings
         self.constraint = TaskConstraint(robot, task, margin_floor=s.margin_floor)
         self.atlas = Atlas(self.constraint, radius=s.radius)
-        self.pose_cost = task_cost(robot, task)
+        self.pose_cost = task_cost(robot, task, self.settings.cost)
         pose = self.constraint.pose
         self.cost = lambda xa, xb: self.pose_cost(*pose(xa), *pose(xb))
 
@@ -282,17 +284,23 @@ def _wrapped(d, periodic):
 
 
 # ----- task metrics ------------------------------------------------------------------------
-def task_cost(robot, task):
-    """cost(p_a, tau_a, p_b, tau_b) between two poses (m, rad): the paper's SO(3) geodesic
-    (rad) for orientation slices, the great-circle distance (m) for the sphere task (plus
-    r_s times the torsion change when sigma is free), and for free flight or slices that
-    move the position |dp| + L |angle| (m, L = mean platform anchor radius)."""
+def task_cost(robot, task, kind="auto"):
+    """cost(p_a, tau_a, p_b, tau_b) between two poses (m, rad) of ``kind`` (COSTS):
+    ``so3`` the SO(3) geodesic (rad, the paper's for orientation slices), ``great_circle``
+    the distance on the sphere task (m, plus r_s times the torsion change when sigma is
+    free), ``se3`` |dp| + L |angle| (m, L = mean platform anchor radius) for free flight.
+    ``auto``: so3 for slices that fix the position, great_circle on the sphere, else se3."""
+    if kind == "auto":
+        kind = ("great_circle" if isinstance(task, SphereTask) else
+                "so3" if isinstance(task, SliceTask) and {"x", "y", "z"} <= set(task.fixed) else "se3")
     L = float(np.mean(np.linalg.norm(robot.platform_anchors, axis=1)))
 
     def angle(ta, tb):
         return float(rotation_angle_between(rotation_tt(ta), rotation_tt(tb)))
 
-    if isinstance(task, SphereTask):
+    if kind == "great_circle":
+        if not isinstance(task, SphereTask):
+            raise InputError("cost", kind, f"the great-circle cost needs the sphere task, not '{task.type}'")
         c = np.asarray(task.center)
 
         def sphere(pa, ta, pb, tb):
@@ -302,8 +310,12 @@ def task_cost(robot, task):
                 arc += task.radius * abs(float((tb[2] - ta[2] + np.pi) % (2 * np.pi) - np.pi))
             return arc
         return sphere
-    if isinstance(task, SliceTask) and {"x", "y", "z"} <= set(task.fixed):
+    if kind == "so3":
+        if not (isinstance(task, SliceTask) and {"x", "y", "z"} <= set(task.fixed)):
+            raise InputError("cost", kind, "the SO(3) cost needs a slice that fixes x, y and z")
         return lambda pa, ta, pb, tb: angle(ta, tb)
+    if kind != "se3":
+        raise InputError("cost", kind, f"expected one of {', '.join(COSTS)}")
     return lambda pa, ta, pb, tb: float(np.linalg.norm(pb - pa)) + L * angle(ta, tb)
 
 

@@ -1,0 +1,126 @@
+"""``cdh-planner plan``: plan a wrench-feasible path for a problem file, without ROS.
+
+    cdh-planner plan PROBLEM.yaml [--strategy astar|gbf] [--radius R] [--timeout S]
+                     [--max-charts N] [--complete] [--json OUT] [--plot OUT.png]
+
+Prints the outcome (reason, charts, seconds, cost, waypoints, duration, least margin) with a
+progress bar while the atlas grows. Exit 0 with a path, 1 without one (no path at this
+resolution, timeout, chart limit, infeasible start or goal), 2 for bad input.
+
+``--json OUT`` writes the contract of architecture.md: success, reason, message, strategy,
+n, m, charts, time_s, cost, and path: [{p, quaternion, tau, lengths, tension_min,
+tension_nominal, tension_max, t}] (m, rad, N, s).
+"""
+
+import json
+import math
+from dataclasses import replace
+from pathlib import Path
+
+import numpy as np
+from tqdm import tqdm
+
+from ..errors import InputError
+from ..io.problem import load_problem
+from ..planner import Planner
+from ..search.search import STRATEGIES
+
+EXIT_OK, EXIT_NO_PLAN = 0, 1
+
+
+def add_parser(subparsers):
+    p = subparsers.add_parser(
+        "plan", help="plan a wrench-feasible path for a problem file (no ROS needed)",
+        description="Grow an atlas of the navigation manifold from the start and search it "
+                    "(A* or Greedy Best-First) until the goal is reached, the start's component "
+                    "is exhausted (no path at this resolution), or a limit. Exit 0 with a path, "
+                    "1 without, 2 for bad input.",
+        epilog="example: cdh-planner plan config/problems/robot2_q2_q3.yaml --json out.json "
+               "--plot out.png")
+    p.add_argument("problem", help="problem file (YAML: robot, task, start, goal; see config/problems)")
+    p.add_argument("--strategy", choices=STRATEGIES, help="search strategy (default: the file's, else astar)")
+    p.add_argument("--radius", type=float, metavar="R", help="chart radius (scaled units, ~rad; default 0.1)")
+    p.add_argument("--timeout", type=float, metavar="S", help="time limit in seconds (default 60)")
+    p.add_argument("--max-charts", type=int, metavar="N", help="chart limit (default 100000)")
+    p.add_argument("--complete", action="store_true",
+                   help="after reaching the goal, keep growing the atlas over the whole component")
+    p.add_argument("--json", metavar="OUT", help="write the result as JSON")
+    p.add_argument("--plot", metavar="OUT.png",
+                   help="draw the atlas and path over the C-space slice (2-D tasks) and the "
+                        "tension envelope along the path (OUT_tensions.png)")
+    p.add_argument("--quiet", action="store_true", help="no progress bar")
+    p.set_defaults(func=run)
+
+
+def run(args):
+    problem = load_problem(args.problem)
+    settings = problem.settings
+    overrides = {"strategy": args.strategy, "radius": args.radius, "timeout_s": args.timeout,
+                 "max_charts": args.max_charts, "complete": args.complete or None}
+    for option, (key, value) in zip(("--strategy", "--radius", "--timeout", "--max-charts", "--complete"),
+                                    overrides.items()):
+        if value is None:
+            continue
+        if key in ("radius", "timeout_s") and not (math.isfinite(value) and value > 0):
+            raise InputError(option, value, "must be a positive finite number")
+        if key == "max_charts" and value < 2:
+            raise InputError(option, value, "must be at least 2")
+        settings = replace(settings, **{key: value})
+    for path in (args.json, args.plot):
+        if path and not Path(path).resolve().parent.is_dir():
+            raise InputError("--json" if path == args.json else "--plot", path, "directory does not exist")
+    planner = Planner(problem.robot, problem.task, settings)
+    result = plan_with_progress(planner, problem.start, problem.goal, quiet=args.quiet)
+    print_result(result, problem)
+    if args.json:
+        Path(args.json).write_text(json.dumps(result_dict(result), indent=1))
+        print(f"JSON: {args.json}")
+    if args.plot:
+        from ..io.plan_plots import plot_plan
+        for out in plot_plan(planner, problem, result, args.plot):
+            print(f"picture: {out}")
+    return EXIT_OK if result.success else EXIT_NO_PLAN
+
+
+def plan_with_progress(planner, start, goal, quiet=False):
+    """planner.plan with a tqdm bar counting charts (on stderr)."""
+    with tqdm(total=None, unit="chart", desc="atlas", disable=quiet, leave=False) as bar:
+        def progress(info):
+            bar.n = info["charts"]
+            bar.set_postfix(best_h=f"{info['best_h']:.3g}", refresh=False)
+            bar.refresh()
+        return planner.plan(start, goal, progress=progress)
+
+
+def print_result(result, problem):
+    head = "path found" if result.success else f"no path ({result.reason})"
+    print(f"{head}: {result.message}")
+    print(f"  strategy {result.strategy}, n = {result.n}, m = {result.m}, "
+          f"{result.charts} charts, {result.time_s:.3f} s")
+    if result.success:
+        path = result.path
+        print(f"  cost {result.cost:.4f}, {len(path)} waypoints, platform path "
+              f"{path.length_m():.4f} m, duration {path.t[-1]:.2f} s, least margin "
+              f"{float(np.min(path.margin)):.4f}")
+
+
+def result_dict(result):
+    """The JSON contract (architecture.md); non-finite numbers become null."""
+    out = {"success": result.success, "reason": result.reason, "message": result.message,
+           "strategy": result.strategy, "n": result.n, "m": result.m, "charts": result.charts,
+           "time_s": result.time_s, "cost": _num(result.cost), "path": []}
+    path = result.path
+    if path is not None:
+        for k in range(len(path)):
+            out["path"].append({
+                "p": path.p[k].tolist(), "quaternion": path.quaternion[k].tolist(),
+                "tau": path.tau[k].tolist(), "lengths": path.lengths[k].tolist(),
+                "tension_min": path.tension_min[k].tolist(),
+                "tension_nominal": path.tension_nominal[k].tolist(),
+                "tension_max": path.tension_max[k].tolist(), "margin": float(path.margin[k]),
+                "t": float(path.t[k])})
+    return out
+
+
+def _num(x):
+    return float(x) if x is not None and math.isfinite(x) else None
