@@ -1,0 +1,200 @@
+"""The planner end to end: paths of the paper's 2-D queries, no-path answers, periodic
+angles, theta = 0 starts, multi-query, and the plan command's bad input."""
+import json
+import time
+from pathlib import Path
+
+import numpy as np
+import pytest
+
+from cdh_planner.cli import main
+from cdh_planner.feasibility import evaluate
+from cdh_planner.io.problem import load_problem
+from cdh_planner.model.pose import quaternion_from_tau
+from cdh_planner.planner import Planner, PlannerSettings, Pose
+from cdh_planner.trajectory.verify import check_motion, check_task_motion
+
+ROOT = Path(__file__).resolve().parents[1]
+PROBLEMS = ROOT / "config" / "problems"
+SIGMA1 = 0.593411945678072
+ROBOT1_SLICE = ("task: {type: slice, fixed: {x: 0.0, y: 0.0, z: 0.35, sigma: %r}}\n" % SIGMA1)
+
+
+def robot1_problem(tmp_path, name, start, goal):
+    text = (f"robot: {ROOT / 'config' / 'robot1.yaml'}\n" + ROBOT1_SLICE +
+            f"start: {{position: [0.0, 0.0, 0.35], tau: [{start[0]}, {start[1]}, {SIGMA1}]}}\n"
+            f"goal: {{position: [0.0, 0.0, 0.35], tau: [{goal[0]}, {goal[1]}, {SIGMA1}]}}\n")
+    path = tmp_path / f"{name}.yaml"
+    path.write_text(text)
+    return path
+
+
+def plan(problem, **settings):
+    pr = load_problem(problem) if not hasattr(problem, "robot") else problem
+    s = pr.settings
+    for k, v in settings.items():
+        setattr(s, k, v)
+    planner = Planner(pr.robot, pr.task, s)
+    return planner, pr, planner.plan(pr.start, pr.goal)
+
+
+def assert_dense_feasible(robot, path, start, goal):
+    """Every waypoint and the motion between them (position linear, slerp) is feasible,
+    the path joins start to goal, times increase, lengths are the poses' lengths."""
+    assert np.all(evaluate(robot, path.p, path.tau).feasible)
+    assert np.all(path.margin > 0)
+    segments = check_motion(robot, path.p, path.quaternion)
+    assert all(s.feasible and s.unresolved == 0 for s in segments)
+    np.testing.assert_allclose(path.p[0], start.p, atol=1e-9)
+    np.testing.assert_allclose(path.p[-1], goal.p, atol=1e-9)
+    for k, pose in ((0, start), (-1, goal)):
+        q = quaternion_from_tau(pose.tau)
+        assert abs(abs(float(q @ path.quaternion[k])) - 1.0) < 1e-9
+    assert np.all(np.diff(path.t) > 0)
+    np.testing.assert_allclose(path.lengths, evaluate(robot, path.p, path.tau).lengths)
+
+
+@pytest.mark.parametrize("name,strategy", [("robot2_q1_q2", "astar"), ("robot2_q2_q3", "gbf"),
+                                           ("robot1_qs2_qg", "gbf")])
+def test_table1_2d_queries_give_dense_feasible_paths(name, strategy):
+    planner, pr, res = plan(PROBLEMS / f"{name}.yaml", strategy=strategy)
+    assert res.success, res.message
+    assert res.reason == "ok" and res.n == 2 and res.charts > 1
+    assert_dense_feasible(pr.robot, res.path, pr.start, pr.goal)
+    # every waypoint lies on the task (sphere / slice) and the cost is the task metric
+    assert float(np.max(pr.task.residual(res.path.p, res.path.tau))) < 1e-6
+    assert res.cost >= planner.pose_cost(pr.start.p, pr.start.tau, pr.goal.p, pr.goal.tau) - 1e-9
+
+
+def test_q2_q3_path_exists_where_the_straight_line_fails():
+    planner, pr, res = plan(PROBLEMS / "robot2_q2_q3.yaml", strategy="astar")
+    assert res.success
+    ends = pr.task.coords(np.array([pr.start.p, pr.goal.p]), np.array([pr.start.tau, pr.goal.tau]))
+    assert not check_task_motion(pr.robot, pr.task, ends)[0].feasible
+
+
+def test_different_components_answer_no_path(tmp_path):
+    """The island of C around (phi, theta) = (-1.3, 2.0) is not connected to q_g."""
+    problem = robot1_problem(tmp_path, "island", (-1.3, 2.0), (1.7, 1.7))
+    _, pr, res = plan(problem, strategy="gbf")
+    assert not res.success and res.reason == "no_path"
+    assert "exhausted" in res.message and res.path is None and res.charts > 10
+    ends = pr.task.coords(np.array([pr.start.p, pr.goal.p]), np.array([pr.start.tau, pr.goal.tau]))
+    assert not check_task_motion(pr.robot, pr.task, ends)[0].feasible
+
+
+def test_path_across_phi_pi(tmp_path):
+    problem = robot1_problem(tmp_path, "wrap", (2.8, 0.4), (-2.8, 0.4))
+    _, pr, res = plan(problem)
+    assert res.success
+    assert_dense_feasible(pr.robot, res.path, pr.start, pr.goal)
+    phi = res.path.tau[:, 0]
+    assert np.all(np.abs(phi) > 2.0)  # went across +-pi, not the long way through 0
+    assert res.cost < 0.5
+
+
+def test_start_on_theta_zero(tmp_path):
+    problem = robot1_problem(tmp_path, "pole", (-2.3, 0.0), (-1.0, 0.3))
+    _, pr, res = plan(problem)
+    assert res.success, res.message
+    assert res.path.tau[0, 1] == pytest.approx(0.0, abs=1e-12)
+    assert_dense_feasible(pr.robot, res.path, pr.start, pr.goal)
+
+
+def test_second_query_reuses_the_atlas():
+    pr = load_problem(PROBLEMS / "robot2_q1_q2.yaml")
+    planner = Planner(pr.robot, pr.task, pr.settings)
+    first = planner.plan(pr.start, pr.goal)
+    n_charts = len(planner.atlas.charts)
+    t = time.perf_counter()
+    again = planner.plan(pr.goal, pr.start)  # reversed, inside the same atlas
+    elapsed = time.perf_counter() - t
+    assert first.success and again.success
+    assert len(planner.atlas.charts) <= 1.1 * n_charts  # little growth: open charts on the way
+    assert elapsed < first.time_s
+    assert again.cost == pytest.approx(first.cost, rel=0.05)
+
+
+def test_infeasible_start_and_goal_are_refused():
+    pr = load_problem(PROBLEMS / "robot2_q1_q2.yaml")
+    planner = Planner(pr.robot, pr.task, pr.settings)
+    bad = Pose(*[a[0] for a in pr.task.pose(np.array([[1.0, 0.0]]))])  # on the equator: not feasible
+    assert not evaluate(pr.robot, bad.p[None], bad.tau[None]).feasible[0]
+    res = planner.plan(bad, pr.goal)
+    assert (res.success, res.reason) == (False, "start_infeasible") and "violated" in res.message
+    res = planner.plan(pr.start, bad)
+    assert (res.success, res.reason) == (False, "goal_infeasible")
+    off = Pose(pr.start.p + np.array([0.01, 0.0, 0.0]), pr.start.tau)
+    res = planner.plan(off, pr.goal)
+    assert res.reason == "invalid" and "off the sphere task" in res.message
+
+
+def test_timeout_and_chart_limit_are_reported():
+    _, _, res = plan(PROBLEMS / "robot1_qs_qg.yaml", max_charts=20)
+    assert (res.success, res.reason) == (False, "chart_limit")
+    _, _, res = plan(PROBLEMS / "robot1_qs_qg.yaml", timeout_s=0.05)
+    assert (res.success, res.reason) == (False, "timeout")
+
+
+# ----- the command line ----------------------------------------------------------------
+def test_plan_command_writes_the_json_contract(tmp_path, capsys):
+    out = tmp_path / "r.json"
+    code = main(["plan", str(PROBLEMS / "robot2_q1_q2.yaml"), "--quiet", "--json", str(out)])
+    assert code == 0
+    doc = json.loads(out.read_text())
+    for key in ("success", "reason", "strategy", "n", "m", "charts", "time_s", "cost", "path"):
+        assert key in doc
+    assert doc["success"] and doc["n"] == 2 and doc["m"] == 92
+    w = doc["path"][0]
+    for key in ("p", "quaternion", "tau", "lengths", "tension_min", "tension_nominal",
+                "tension_max", "t"):
+        assert key in w
+    assert len(w["lengths"]) == 6 and len(w["quaternion"]) == 4
+    assert "path found" in capsys.readouterr().out
+
+
+def test_plan_command_no_path_exits_1(tmp_path, capsys):
+    problem = robot1_problem(tmp_path, "island", (-1.3, 2.0), (1.7, 1.7))
+    assert main(["plan", str(problem), "--quiet", "--strategy", "gbf"]) == 1
+    assert "no path (no_path)" in capsys.readouterr().out
+
+
+BAD = {
+    "unknown task type": ("task: {type: torus}", "task.type"),
+    "missing goal": ("goal: null", "goal"),
+    "radius zero": ("planner: {radius: 0}", "planner.radius"),
+    "start off the sphere": ("start: {position: [0.0, 0.0, 0.2], tau: [0.0, 0.0, 0.0]}", None),
+    "NaN in start": ("start: {position: [.nan, 0.0, 0.2], tau: [0.0, 0.0, 0.0]}", "start.position[0]"),
+    "lambda on a slice": (None, "start.lambda"),
+    "unknown key": ("speed: 3", "speed"),
+    "bad strategy": ("strategy: dijkstra", "strategy"),
+}
+
+
+@pytest.mark.parametrize("case", BAD)
+def test_bad_problems_give_a_clear_error(case, tmp_path, capsys):
+    line, field = BAD[case]
+    text = (PROBLEMS / "robot2_q1_q2.yaml").read_text().replace("../robot2.yaml", str(ROOT / "config" / "robot2.yaml"))
+    if case == "lambda on a slice":
+        text = robot1_problem(tmp_path, "x", (-2.3, 1.6), (1.7, 1.7)).read_text() + "\n"
+        text = text.replace("start: {position: [0.0, 0.0, 0.35], tau: [-2.3, 1.6, %r]}" % SIGMA1,
+                            "start: {lambda: [0.1, 0.2]}")
+    else:
+        key = line.split(":")[0]
+        lines = [ln for ln in text.splitlines() if not ln.startswith(key + ":")]
+        text = "\n".join(lines + ([line] if line != "goal: null" else [])) + "\n"
+    path = tmp_path / "bad.yaml"
+    path.write_text(text)
+    code = main(["plan", str(path), "--quiet"])
+    err = capsys.readouterr()
+    assert code != 0
+    assert "Traceback" not in err.err + err.out
+    if field is not None:
+        assert code == 2 and field in err.err
+    else:
+        assert code == 1 and "off the sphere task" in err.out
+
+
+def test_radius_option_is_validated(capsys):
+    assert main(["plan", str(PROBLEMS / "robot2_q1_q2.yaml"), "--radius", "-1"]) == 2
+    assert "--radius" in capsys.readouterr().err
