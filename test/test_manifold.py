@@ -152,3 +152,12 @@ def test_polytope_clipping_matches_qhull(n):
             assert np.min(np.linalg.norm(got - v, axis=1)) < 1e-6
         H = np.array(halfspaces)
         assert np.all(P.vertices @ H[:, :-1].T + H[:, -1] <= 1e-9)
+
+
+def test_scalar_rotation_derivatives_match_the_vectorised_ones():
+    from cdh_planner.manifold.navigation import rotation_and_derivatives
+    from cdh_planner.model.pose import rotation_tt, rotation_tt_derivatives
+    for tau in np.random.default_rng(5).uniform(-3, 3, (10, 3)):
+        R, dR = rotation_and_derivatives(tau)
+        np.testing.assert_allclose(R, rotation_tt(tau), atol=1e-14)
+        np.testing.assert_allclose(dR, rotation_tt_derivatives(tau), atol=1e-14)

@@ -11,6 +11,7 @@ import itertools
 import numpy as np
 
 EPS = 1e-10
+_HASH = np.random.default_rng(0).uniform(1.0, 2.0, 16)
 
 
 class Polytope:
@@ -69,8 +70,11 @@ def _merge_duplicates(vertices, incidence, decimals=10):
     """Vertices that coincide (degenerate cuts) become one, on the union of their facets."""
     if vertices.shape[0] < 2:
         return vertices, incidence
-    _, first, inverse = np.unique(np.round(vertices, decimals), axis=0, return_index=True,
-                                  return_inverse=True)
+    rounded = np.round(vertices, decimals)
+    key = rounded @ _HASH[:vertices.shape[1]]  # 1-D keys: equal rows give equal keys
+    if np.unique(key).size == key.size:
+        return vertices, incidence
+    _, first, inverse = np.unique(rounded, axis=0, return_index=True, return_inverse=True)
     if first.size == vertices.shape[0]:
         return vertices, incidence
     merged = np.zeros((first.size, incidence.shape[1]), dtype=bool)

@@ -32,10 +32,12 @@ The atlas sees scaled variables x = X / scale, so one chart radius is meaningful
 over the platform radius, tensions over the tension range, angles in radians, slacks as is.
 """
 
+import math
+
 import numpy as np
 
 from ..feasibility import evaluate, skew, wrench_transform
-from ..model.pose import rotation_tt, rotation_tt_derivatives
+from ..model.pose import rotation_tt
 
 N_POSE = 6
 I_P, I_TAU, I_D, I_L, I_F, I_V, I_G, I_S, I_T = 0, 3, 6, 24, 30, 36, 72, 78, 84
@@ -65,6 +67,26 @@ class NavigationManifold:
         self.de_dc = np.zeros((3, 6, 6))  # d e(c) / dc_m
         for m in range(3):
             self.de_dc[m, 3:, :3] = -skew(np.eye(3)[m])
+        self._index_tables()
+
+    def _index_tables(self):
+        """Constant entries and scatter indices of F_X, computed once."""
+        self._rows6 = np.arange(6)
+        self._template = np.zeros((N_EQS, N_VARS))
+        for i in range(6):
+            r0 = 3 * i
+            self._template[r0:r0 + 3, I_P:I_TAU] = -np.eye(3)
+            self._template[r0:r0 + 3, I_D + r0:I_D + r0 + 3] = np.eye(3)
+        self._r2 = 18 + np.repeat(self._rows6, 3)
+        self._c2 = I_D + np.arange(18)
+        self._col_dd = np.concatenate([np.broadcast_to(np.eye(3), (6, 3, 3)), self.a_skew], axis=1)
+        idx_k, idx_j = np.repeat(self._rows6, 6), np.tile(self._rows6, 6)
+        self._r_env = np.arange(36)[:, None]
+        self._c_env = I_V + 6 * self._rows6[None, :] + idx_j[:, None]
+        self._k_env = idx_k
+        self._r_v = np.repeat(self._rows6, 6)
+        self._c_v = np.arange(36)
+        self._force_skew = skew(self.w_local[:3])
 
     # ----- scaling -------------------------------------------------------------------
     def variable_scale(self):
@@ -106,8 +128,10 @@ class NavigationManifold:
         w0 = self.w_local.copy()
         if not self.load_frame:
             return w0, self.L3T
-        w0[3:] += np.cross(c, self.w_local[:3])
-        return w0, self.L3T @ wrench_transform(c)
+        w0[3:] += _cross(c, self.w_local[:3])
+        e = np.eye(6)
+        e[3:, :3] = -_skew3(c)
+        return w0, self.L3T @ e
 
     def margins(self, l, f0, vdiag):
         r = self.robot
@@ -123,7 +147,7 @@ class NavigationManifold:
     def residual_and_jacobian(self, X, jacobian=True):
         """F(X) (84,) and F_X(X) (84, 90) in physical units."""
         p, tau, d, l, f0, G, g, s, t = self._unpack(X)
-        R = rotation_tt(tau)
+        R, dR = rotation_and_derivatives(tau)
         c = p + R @ self.g_load
         w0, P = self._wrench_and_factor(c)
         cols = np.concatenate([d, np.einsum("kij,kj->ki", self.a_skew, d)], axis=1)  # row i = l_i J col i
@@ -144,58 +168,46 @@ class NavigationManifold:
         if not jacobian:
             return Fv, None
 
-        Jx = np.zeros((N_EQS, N_VARS))
-        dR = rotation_tt_derivatives(tau)  # (3, 3, 3): dR[:, :, k]
+        Jx = self._template.copy()  # the constant entries (identities of Eq. 1)
         db = np.einsum("ijk,nj->nik", dR, self.b)  # (6 cables, 3, 3 angles)
         dc_dtau = np.einsum("ijk,j->ik", dR, self.g_load)  # (3, 3)
-        rows = np.arange(6)
+        rows = self._rows6
         # (1)
-        for i in range(6):
-            r0 = 3 * i
-            Jx[r0:r0 + 3, I_P:I_TAU] = -np.eye(3)
-            Jx[r0:r0 + 3, I_TAU:I_D] = -db[i]
-            Jx[r0:r0 + 3, I_D + r0:I_D + r0 + 3] = np.eye(3)
+        Jx[0:18, I_TAU:I_D] = -db.reshape(18, 3)
         # (2)
         Jx[18 + rows, I_L + rows] = 2.0 * l
-        for i in range(6):
-            Jx[18 + i, I_D + 3 * i:I_D + 3 * i + 3] = -2.0 * d[i]
+        Jx[self._r2, self._c2] = -2.0 * d.ravel()
         # dJcol_i / dd_i = [I; [a_i]x] / l_i and dJcol_i / dl_i = -Jcol_i / l_i
-        dcol_dd = np.concatenate([np.broadcast_to(np.eye(3), (6, 3, 3)), self.a_skew], axis=1) / l[:, None, None]
+        dcol_dd = self._col_dd / l[:, None, None]  # (6, 6, 3)
         dcol_dl = -J.T / l[:, None]  # (6, 6): row i = d Jcol_i / d l_i
         # (4) J f0 - w0
         Jx[24:30, I_F:I_V] = J
-        for i in range(6):
-            Jx[24:30, I_D + 3 * i:I_D + 3 * i + 3] = f0[i] * dcol_dd[i]
-            Jx[24:30, I_L + i] = f0[i] * dcol_dl[i]
+        Jx[24:30, I_D:I_L] = (f0[:, None, None] * dcol_dd).transpose(1, 0, 2).reshape(6, 18)
+        Jx[24:30, I_L:I_F] = (f0[:, None] * dcol_dl).T
         if self.load_frame:
-            Fx = skew(self.w_local[:3])  # d(-w0)/dc = [0; [F]x]
+            Fx = self._force_skew  # d(-w0)/dc = [0; [F]x]
             Jx[27:30, I_P:I_TAU] = Fx
             Jx[27:30, I_TAU:I_D] = Fx @ dc_dtau
         # envelope: P J G - I, rows (k, j) row-major
         blk = Jx[30:66]
-        idx_k = np.repeat(rows, 6)  # k of each row
-        idx_j = np.tile(rows, 6)  # j of each row
-        for a in range(6):
-            blk[np.arange(36), I_V + 6 * a + idx_j] = M[idx_k, a]
-        for i in range(6):
-            # d(P J G)_kj / dJcol_i = P_k: G_ij
-            dcol = np.einsum("ka,j->kja", P, G[i]).reshape(36, 6)
-            blk[:, I_D + 3 * i:I_D + 3 * i + 3] = dcol @ dcol_dd[i]
-            blk[:, I_L + i] = dcol @ dcol_dl[i]
+        blk[self._r_env, self._c_env] = M[self._k_env]
+        # d(P J G)_kj / dJcol_i = P_k: G_ij
+        D = np.einsum("ka,ij->ikja", P, G).reshape(6, 36, 6)
+        blk[:, I_D:I_L] = np.einsum("ira,iac->ric", D, dcol_dd).reshape(36, 18)
+        blk[:, I_L:I_F] = np.einsum("ira,ia->ri", D, dcol_dl)
         if self.load_frame:
             dc = np.einsum("kb,mbc,cj->kjm", self.L3T, self.de_dc, JG).reshape(36, 3)
             blk[:, I_P:I_TAU] = dc
             blk[:, I_TAU:I_D] = dc @ dc_dtau
         # (10)-(12)
         rr = self.robot
-        dv = G / vdiag[:, None]  # d|G_i| / dG_i
+        dv = (G / vdiag[:, None] / self.range_f[:, None]).ravel()  # d|G_i| / dG_i over the range
         Jx[66 + rows, I_L + rows] = (rr.length_max + rr.length_min - 2.0 * l) / self.half_range_l ** 2
         Jx[66 + rows, I_G + rows] = -np.exp(g / self.kappa) / self.kappa
         Jx[72 + rows, I_F + rows] = 1.0 / self.range_f
         Jx[78 + rows, I_F + rows] = -1.0 / self.range_f
-        for i in range(6):
-            Jx[72 + i, I_V + 6 * i:I_V + 6 * i + 6] = -dv[i] / self.range_f[i]
-            Jx[78 + i, I_V + 6 * i:I_V + 6 * i + 6] = -dv[i] / self.range_f[i]
+        Jx[72 + self._r_v, I_V + self._c_v] = -dv
+        Jx[78 + self._r_v, I_V + self._c_v] = -dv
         Jx[72 + rows, I_S + rows] = -np.exp(s / self.kappa) / self.kappa
         Jx[78 + rows, I_T + rows] = -np.exp(t / self.kappa) / self.kappa
         return Fv, Jx
@@ -222,3 +234,33 @@ class NavigationManifold:
     def min_margin(self, X):
         """Smallest normalised margin encoded by the slacks of X (> 0 on M)."""
         return float(np.exp(np.min(X[I_G:N_VARS]) / self.kappa))
+
+
+def _cross(a, b):
+    return np.array([a[1] * b[2] - a[2] * b[1], a[2] * b[0] - a[0] * b[2], a[0] * b[1] - a[1] * b[0]])
+
+
+def _skew3(v):
+    return np.array([[0.0, -v[2], v[1]], [v[2], 0.0, -v[0]], [-v[1], v[0], 0.0]])
+
+
+def rotation_and_derivatives(tau):
+    """R = Rz(phi) Ry(theta) Rz(sigma - phi) of one pose and dR / d(phi, theta, sigma)
+    stacked as (3, 3, 3) (last index = angle); scalar code, the Newton loop's hot path."""
+    phi, theta, sigma = float(tau[0]), float(tau[1]), float(tau[2])
+    cf, sf = math.cos(phi), math.sin(phi)
+    ct, st = math.cos(theta), math.sin(theta)
+    cp, sp = math.cos(sigma - phi), math.sin(sigma - phi)
+    Rzf = np.array([[cf, -sf, 0.0], [sf, cf, 0.0], [0.0, 0.0, 1.0]])
+    dRzf = np.array([[-sf, -cf, 0.0], [cf, -sf, 0.0], [0.0, 0.0, 0.0]])
+    Ry = np.array([[ct, 0.0, st], [0.0, 1.0, 0.0], [-st, 0.0, ct]])
+    dRy = np.array([[-st, 0.0, ct], [0.0, 0.0, 0.0], [-ct, 0.0, -st]])
+    Rzp = np.array([[cp, -sp, 0.0], [sp, cp, 0.0], [0.0, 0.0, 1.0]])
+    dRzp = np.array([[-sp, -cp, 0.0], [cp, -sp, 0.0], [0.0, 0.0, 0.0]])
+    A = Rzf @ Ry
+    d_sigma = A @ dRzp
+    dR = np.empty((3, 3, 3))
+    dR[:, :, 0] = dRzf @ Ry @ Rzp - d_sigma
+    dR[:, :, 1] = Rzf @ dRy @ Rzp
+    dR[:, :, 2] = d_sigma
+    return A @ Rzp, dR
