@@ -198,3 +198,23 @@ def test_bad_problems_give_a_clear_error(case, tmp_path, capsys):
 def test_radius_option_is_validated(capsys):
     assert main(["plan", str(PROBLEMS / "robot2_q1_q2.yaml"), "--radius", "-1"]) == 2
     assert "--radius" in capsys.readouterr().err
+
+
+def test_implicit_task_constraint(tmp_path):
+    """Eq. 15: the Robot 1 slice written as C(p, tau) = 0 plans like the slice."""
+    from cdh_planner.model.pose import wrap_angle
+    from cdh_planner.model.task import ImplicitTask
+
+    def slice_equations(p, tau):
+        C = np.array([p[0], p[1], p[2] - 0.35, wrap_angle(tau[2] - SIGMA1)])
+        dC = np.zeros((4, 6))
+        dC[0, 0] = dC[1, 1] = dC[2, 2] = dC[3, 5] = 1.0
+        return C, dC
+
+    pr = load_problem(robot1_problem(tmp_path, "implicit", (1.7, 0.0), (1.7, 1.7)))
+    task = ImplicitTask(slice_equations, 4)
+    planner = Planner(pr.robot, task, PlannerSettings(strategy="gbf"))
+    res = planner.plan(pr.start, pr.goal)
+    assert res.success and res.n == 2
+    assert float(np.max(task.residual(res.path.p, res.path.tau))) < 1e-6
+    assert_dense_feasible(pr.robot, res.path, pr.start, pr.goal)

@@ -5,13 +5,14 @@ x = X / scale, X = [the 90 navigation variables | task variables]. Task equation
 - sphere (paper Eq. 17): task variables (alpha1, alpha2);
   p = c + r [cos a2 cos a1, cos a2 sin a1, -sin a2], phi = a1 - pi, theta = pi/2 - a2,
   sigma = 0 unless the torsion is free;
+- implicit (paper Eq. 15): the task's own C(p, tau) = 0 and its Jacobian;
 - free: none (n = 6).
 """
 
 import numpy as np
 
 from ..model.pose import wrap_angle
-from ..model.task import POSE_NAMES, SliceTask, SphereTask
+from ..model.task import POSE_NAMES, ImplicitTask, SliceTask, SphereTask
 from .navigation import I_G, I_P, I_TAU, N_EQS, N_VARS, NavigationManifold
 
 PHI, THETA, SIGMA = 3, 4, 5
@@ -47,6 +48,8 @@ class TaskConstraint:
             return len(self.task.fixed)
         if isinstance(self.task, SphereTask):
             return 5 if self.task.free_torsion else 6
+        if isinstance(self.task, ImplicitTask):
+            return int(self.task.count)
         return 0
 
     def residual_and_jacobian(self, x):
@@ -75,6 +78,10 @@ class TaskConstraint:
                 else:
                     Ft[r] = (X[j] - value) / (L if j < 3 else 1.0)
                 Jt[r, j] = 1.0 / (L if j < 3 else 1.0)
+        elif isinstance(self.task, ImplicitTask):
+            C, dC = self.task.equations(X[I_P:I_TAU], X[I_TAU:I_TAU + 3])
+            Ft[:] = C
+            Jt[:, I_P:I_TAU + 3] = dC
         elif isinstance(self.task, SphereTask):
             a1, a2 = X[N_VARS], X[N_VARS + 1]
             c1, s1, c2, s2 = np.cos(a1), np.sin(a1), np.cos(a2), np.sin(a2)

@@ -111,6 +111,33 @@ class SphereTask:
         return np.maximum(np.abs(dist - self.radius), ang)
 
 
+@dataclass(frozen=True)
+class ImplicitTask:
+    """Paper Eq. 15: poses with C(p, tau) = 0, for library use (a callable is not a file
+    value). ``equations(p (3,), tau (3,)) -> (C (k,), dC/d(p, tau) (k, 6))`` with full row
+    rank on the poses used; ``count`` = k. Task coordinates are the whole pose, as in free
+    flight."""
+
+    equations: object
+    count: int
+    type: str = "implicit"
+
+    @property
+    def names(self):
+        return POSE_NAMES
+
+    def pose(self, y):
+        return FreeTask().pose(y)
+
+    def coords(self, p, tau):
+        return FreeTask().coords(p, tau)
+
+    def residual(self, p, tau):
+        """max |C| of each pose (the equations' own units)."""
+        p, tau = np.atleast_2d(p), np.atleast_2d(tau)
+        return np.array([np.max(np.abs(self.equations(a, b)[0])) for a, b in zip(p, tau)])
+
+
 def task_from_dict(d, where="task"):
     """Build a task from the problem file / parameter form {type, fixed | center, radius, ...}."""
     if d is None:
