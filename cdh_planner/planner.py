@@ -103,6 +103,8 @@ class Planner:
         self.pose_cost = task_cost(robot, task, self.settings.cost)
         pose = self.constraint.pose
         self.cost = lambda xa, xb: self.pose_cost(*pose(xa), *pose(xb))
+        self._edge_costs = {}  # (i, j), i < j -> task cost between the chart centres
+        self._edges = {}  # (i, j), i < j -> points on M from chart i to chart j (multi-query)
 
     # ----- the query -------------------------------------------------------------------
     def plan(self, start: Pose, goal: Pose, progress: Optional[ProgressCallback] = None):
@@ -126,7 +128,7 @@ class Planner:
         blocked = set()
         for _ in range(EDGE_RETRIES):
             search = AtlasSearch(self.atlas, self.cost, s.strategy, s.max_charts, deadline,
-                                 progress, frozenset(blocked))
+                                 progress, frozenset(blocked), self._edge_costs)
             out = search.run(i_start, i_goal)
             if out.reason != "reached":
                 return answer(False, *_failure(out.reason, len(self.atlas.charts), s),
@@ -140,8 +142,8 @@ class Planner:
                                             "path; try a smaller radius")
         if s.complete:
             self.grow_complete(deadline)
-        y = self._densify(self._smooth(self._task_coords(xs)))
-        path = self._planned_path(y)
+        y, verified = self._densify(self._smooth(self._task_coords(xs)))
+        path = self._planned_path(y, verified)
         if path is None:
             return answer(False, "no_path", "the path could not be made dense-feasible "
                                             "(a bug: please report the problem file)")
@@ -192,22 +194,30 @@ class Planner:
 
     # ----- chart path -> points on M ---------------------------------------------------
     def _chart_path_points(self, charts):
-        """Points on M through the chart centres; or the first edge (i, j) that does not carry a path (Newton failed, the points left
-        the domain or jumped)."""
-        at = self.atlas
-        xs = [at.charts[charts[0]].x]
+        """Points on M through the chart centres; or the first edge (i, j) that does not
+        carry a path (Newton failed, the points left the domain or jumped)."""
+        xs = [self.atlas.charts[charts[0]].x]
         for a, b in zip(charts, charts[1:]):
-            gap = np.linalg.norm(at.diff(at.charts[a].x, at.charts[b].x))
-            n = max(3, int(math.ceil(gap / (POINT_SPACING * at.radius))) + 1)
-            pts = at.segment(a, b, n)
-            ok = pts is not None and all(at.in_domain(x) for x in pts)
-            if ok:
-                steps = [np.linalg.norm(at.diff(u, v)) for u, v in zip(pts, pts[1:])]
-                ok = max(steps) <= 3.0 * gap / (n - 1) + 1e-12
-            if not ok:
+            pts = self._edge_points(min(a, b), max(a, b))
+            if pts is None:
                 return None, (min(a, b), max(a, b))
-            xs.extend(pts[1:])
+            xs.extend(pts[1:] if a < b else pts[::-1][1:])
         return xs, None
+
+    def _edge_points(self, a, b):
+        """Points on M from chart a's centre to chart b's (cached: charts never move)."""
+        if (a, b) in self._edges:
+            return self._edges[(a, b)]
+        at = self.atlas
+        gap = np.linalg.norm(at.diff(at.charts[a].x, at.charts[b].x))
+        n = max(3, int(math.ceil(gap / (POINT_SPACING * at.radius))) + 1)
+        pts = at.segment(a, b, n)
+        ok = pts is not None and all(at.in_domain(x) for x in pts)
+        if ok:
+            steps = [np.linalg.norm(at.diff(u, v)) for u, v in zip(pts, pts[1:])]
+            ok = max(steps) <= 3.0 * gap / (n - 1) + 1e-12
+        self._edges[(a, b)] = pts if ok else None
+        return self._edges[(a, b)]
 
     # ----- smoothing and densification in task coordinates ------------------------------
     # M is the graph of the (closed-form) lift over the feasible poses of the task, so a
@@ -245,6 +255,8 @@ class Planner:
             p, tau = self.task.pose(y)
             segs = check_motion(self.robot, p, quaternion_from_tau(tau))
             bad = np.array([k for k, seg in enumerate(segs) if not seg.feasible], dtype=int)
+            if bad.size == 0 and all(seg.unresolved == 0 for seg in segs):
+                return y, True
             if bad.size == 0:
                 break
             mid = _wrapped(y[bad] + 0.5 * _wrapped(y[bad + 1] - y[bad], per), per)
@@ -252,21 +264,22 @@ class Planner:
             if not ok.any():
                 break
             y = np.insert(y, bad[ok] + 1, mid[ok], axis=0)
-        return y
+        return y, False
 
     def _pose_arrays(self, xs):
         poses = [self.constraint.pose(x) for x in xs]
         return np.array([a for a, _ in poses]), np.array([b for _, b in poses])
 
-    def _planned_path(self, y):
+    def _planned_path(self, y, verified=False):
         """The PlannedPath through task coordinates y (N, k), or None if the final dense
-        check fails."""
+        check fails (``verified``: y is exactly what ``_densify`` just checked densely)."""
         p, tau = self.task.pose(y)
         q = quaternion_from_tau(tau)
         f = evaluate(self.robot, p, tau)
         if not np.all(f.feasible):
             return None
-        if not all(seg.feasible and seg.unresolved == 0 for seg in check_motion(self.robot, p, q)):
+        if not verified and not all(seg.feasible and seg.unresolved == 0
+                                    for seg in check_motion(self.robot, p, q)):
             return None
         n = len(y)
         zeros = np.zeros((n, 6))

@@ -44,7 +44,7 @@ class AtlasSearch:
 
     def __init__(self, atlas, cost: Callable, strategy="astar", max_charts=100_000,
                  deadline: Optional[float] = None, progress: Optional[Callable] = None,
-                 blocked=frozenset()):
+                 blocked=frozenset(), edge_costs=None):
         if strategy not in STRATEGIES:
             raise ValueError(f"unknown strategy {strategy!r} (expected {STRATEGIES})")
         self.atlas = atlas
@@ -54,6 +54,7 @@ class AtlasSearch:
         self.deadline = deadline
         self.progress = progress
         self.blocked = blocked  # edges (i, j), i < j, known not to carry a path
+        self.edge_costs = {} if edge_costs is None else edge_costs  # (i, j), i < j -> cost
         self._t0 = time.perf_counter()
         self._last_progress = 0.0
         self._h = {}
@@ -64,6 +65,13 @@ class AtlasSearch:
         if i not in self._h:
             self._h[i] = self.cost(self.atlas.charts[i].x, self._x_goal)
         return self._h[i]
+
+    def edge_cost(self, i, j):
+        key = (i, j) if i < j else (j, i)
+        c = self.edge_costs.get(key)
+        if c is None:
+            c = self.edge_costs[key] = self.cost(self.atlas.charts[i].x, self.atlas.charts[j].x)
+        return c
 
     def _edge_ok(self, i, j):
         return (min(i, j), max(i, j)) not in self.blocked
@@ -87,8 +95,7 @@ class AtlasSearch:
         return out[::-1]
 
     def _path_cost(self, charts):
-        return sum(self.cost(self.atlas.charts[a].x, self.atlas.charts[b].x)
-                   for a, b in zip(charts, charts[1:]))
+        return sum(self.edge_cost(a, b) for a, b in zip(charts, charts[1:]))
 
     # ----- the searches ----------------------------------------------------------------
     def run(self, start, goal):
@@ -118,11 +125,10 @@ class AtlasSearch:
             reason = self._grow(i, goal)
             if reason:
                 return SearchOutcome(reason, expanded=len(done))
-            xi = self.atlas.charts[i].x
             for j in self.atlas.charts[i].neighbours:
                 if j in done or not self._edge_ok(i, j):
                     continue
-                gj = g[i] + self.cost(xi, self.atlas.charts[j].x)
+                gj = g[i] + self.edge_cost(i, j)
                 if gj < g.get(j, float("inf")):
                     g[j] = gj
                     parent[j] = i
