@@ -38,10 +38,17 @@ class Polytope:
         on_plane = np.abs(side) <= tol
         strict = ~outside & ~on_plane
         # cut edges: a vertex strictly inside and one outside that share n - 1 facets
-        inc = self.incidence.astype(np.int32)
-        shared = inc[strict] @ inc[outside].T
-        ii, jj = np.nonzero(shared >= self.n - 1)
-        vi, vo = np.flatnonzero(strict)[ii], np.flatnonzero(outside)[jj]
+        # only facets of outside vertices matter, and only inside vertices on n - 1 of them
+        out_idx = np.flatnonzero(outside)
+        cols = self.incidence[out_idx].any(axis=0)
+        inc_out = self.incidence[np.ix_(out_idx, cols)]
+        cand = np.flatnonzero(strict)
+        inc_in = self.incidence[np.ix_(cand, cols)]
+        near = inc_in.sum(axis=1) >= self.n - 1
+        cand, inc_in = cand[near], inc_in[near]
+        shared = inc_in.astype(np.float32) @ inc_out.T.astype(np.float32)  # BLAS
+        ii, jj = np.nonzero(shared >= self.n - 1.5)
+        vi, vo = cand[ii], out_idx[jj]
         t = (-side[vi] / (side[vo] - side[vi]))[:, None]
         new_v = self.vertices[vi] + t * (self.vertices[vo] - self.vertices[vi])
         new_inc = self.incidence[vi] & self.incidence[vo]
