@@ -55,11 +55,12 @@ def assert_dense_feasible(robot, path, start, goal):
 
 
 @pytest.mark.parametrize("name,strategy", [("robot2_q1_q2", "astar"), ("robot2_q2_q3", "gbf"),
-                                           ("robot1_qs2_qg", "gbf")])
+                                           ("robot1_qs2_qg", "gbf"),
+                                           ("robot2_q2_q3_sigma_free", "gbf")])
 def test_table1_2d_queries_give_dense_feasible_paths(name, strategy):
     planner, pr, res = plan(PROBLEMS / f"{name}.yaml", strategy=strategy)
     assert res.success, res.message
-    assert res.reason == "ok" and res.n == 2 and res.charts > 1
+    assert res.reason == "ok" and res.n == len(pr.task.names) and res.charts > 1
     assert_dense_feasible(pr.robot, res.path, pr.start, pr.goal)
     # every waypoint lies on the task (sphere / slice) and the cost is the task metric
     assert float(np.max(pr.task.residual(res.path.p, res.path.tau))) < 1e-6
@@ -218,3 +219,13 @@ def test_implicit_task_constraint(tmp_path):
     assert res.success and res.n == 2
     assert float(np.max(task.residual(res.path.p, res.path.tau))) < 1e-6
     assert_dense_feasible(pr.robot, res.path, pr.start, pr.goal)
+
+
+def test_complete_atlas_closes_every_chart(tmp_path):
+    """--complete: after the goal, the start's component (the island) is covered."""
+    problem = robot1_problem(tmp_path, "island2", (-1.3, 2.0), (-1.2, 1.9))
+    planner, pr, res = plan(problem, strategy="gbf", complete=True)
+    assert res.success
+    assert all(ch.closed for ch in planner.atlas.charts)
+    _, _, exhausted = plan(robot1_problem(tmp_path, "island", (-1.3, 2.0), (1.7, 1.7)), strategy="gbf")
+    assert abs(len(planner.atlas.charts) - exhausted.charts) < 0.2 * exhausted.charts
