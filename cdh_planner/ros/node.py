@@ -62,6 +62,7 @@ NODE_NAME = "cdh_planner"
 LATCHED = QoSProfile(depth=1, durability=DurabilityPolicy.TRANSIENT_LOCAL,
                      reliability=ReliabilityPolicy.RELIABLE)
 PROGRESS_PERIOD_S = 0.1
+SHUTDOWN_JOIN_S = 5.0
 STATIC_TYPES = {STRING: Parameter.Type.STRING, BOOL: Parameter.Type.BOOL,
                 STRINGS: Parameter.Type.STRING_ARRAY}
 
@@ -401,18 +402,25 @@ def main(ros_args=(), planner_factory=default_planner_factory, log=print):
         finally:
             stop.set()
 
-    threading.Thread(target=spin, name="executor", daemon=True).start()
+    spinner = threading.Thread(target=spin, name="executor", daemon=True)
+    spinner.start()
     while not stop.wait(1.0):
         pass
     node.get_logger().info("shutting down")
     node.begin_shutdown()                 # a running plan ends at its next progress report
     executor.shutdown(timeout_sec=2.0)
+    # Wait for the executor thread to leave spin(): a thread still inside rclpy's wait when
+    # the interpreter exits aborts the process ("terminate called without an active
+    # exception", exit 134 instead of 0).
+    spinner.join(timeout=SHUTDOWN_JOIN_S)
     node.close()                          # hold the winches, close the run file
     abandoned = node.planning
+    stuck = spinner.is_alive()
     node.destroy_node()
     rclpy.try_shutdown(context=context)
-    if abandoned:  # its thread cannot be joined: leave without waiting for it
-        log("cdh-planner node: a plan was still running at shutdown; abandoned")
+    if abandoned or stuck:  # a thread that cannot be joined: leave without waiting for it
+        log("cdh-planner node: " + ("a plan was still running at shutdown; abandoned"
+                                    if abandoned else "the executor did not stop; left"))
         sys.stdout.flush()
         sys.stderr.flush()
         os._exit(0)
