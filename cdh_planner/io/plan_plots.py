@@ -1,0 +1,321 @@
+"""Pictures of a planning query (``cdh-planner plan --plot OUT.png``).
+
+``plot_plan(planner, problem, result, out)`` writes
+
+- ``out``: for tasks with two free coordinates, the atlas and the path over the C-space
+  slice of the task (like the paper's Figs. 10 and 13). The background is the slice of
+  ``io.plots`` (green feasible, orange a length out of range, blue a tension out of range,
+  red det J = 0). Every chart is drawn as its Henderson polygon mapped to task coordinates
+  (its polytope's vertices s -> x = centre + basis s -> pose -> task coordinates; the
+  tangent-space polygon, not projected on M, which is what the atlas covers to first
+  order): closed charts light shaded with thin outlines (the explored part of the slice),
+  open charts in gold, frontier charts (touching the variable domain's boundary, or where
+  Newton could not reach) in purple; chart centres as small dots. The path is a black line
+  with a white halo, broken where it wraps across +-pi, and start and goal are the white
+  markers of the slice pictures. For tasks with 3 or 6 free coordinates (free torsion,
+  free flight) this picture is skipped: a slice through a 3-D atlas would show a thin,
+  misleading cut of it.
+- ``<out stem>_tensions.png``: the tension envelope along the path, for any task, when
+  there is a path: per cable, the band [tension_min, tension_max] (every wrench of the
+  ellipsoid K is balanced with tensions inside it), the nominal tension f0 and the
+  cable's tension limits, against time (s) of the time-parameterised path (waypoint index
+  if the path carries no timing).
+
+Periodic task coordinates (phi, sigma, alpha1) are drawn in [-pi, pi): a polygon is
+unwrapped around its chart centre and drawn a second time shifted by 2 pi when it
+straddles the edge. Prints nothing; matplotlib with the Agg backend.
+"""
+
+import itertools
+from pathlib import Path
+
+import numpy as np
+
+from . import plots
+from .plots import DEFAULT_RANGES, DPI, Marker, SliceView, compute_slice, plt
+from ..model.task import PERIODIC
+
+TWO_PI = 2.0 * np.pi
+CLOSED_FACE, CLOSED_EDGE = "white", "#303030"
+OPEN_COLOR = "#ffd21f"  # gold
+FRONTIER_COLOR = "#b03cff"  # purple
+CENTRE_COLOR = "#202020"
+PATH_COLOR = "black"
+ATLAS_SIZE = (1000, 800)
+TENSION_SIZE = (1200, 800)
+ZOOM_SHARE = 0.4
+CLASS_LABELS = ("wrench-feasible (C)", "a cable length out of range", "a tension out of range")
+
+
+# ----- small geometric helpers (tested on their own) -----------------------------------
+def wrap(values, periodic):
+    """Periodic columns of ``values`` (N, k) wrapped to [-pi, pi); others unchanged."""
+    out = np.array(values, dtype=float, copy=True)
+    per = np.asarray(periodic, dtype=bool)
+    out[..., per] = (out[..., per] + np.pi) % TWO_PI - np.pi
+    return out
+
+
+def unwrap_about(points, centre, periodic):
+    """``points`` (V, k) moved by multiples of 2 pi on periodic columns so that each lies
+    within pi of ``centre`` (k,): a polygon around its chart centre, drawn in one piece."""
+    points = np.asarray(points, dtype=float)
+    centre = np.asarray(centre, dtype=float)
+    return centre + wrap(points - centre, periodic)
+
+
+def order_by_angle(points, centre=None):
+    """``points`` (V, 2) in counter-clockwise order of their angle around ``centre``
+    (default: their mean): the polygon of a convex set's vertices."""
+    points = np.asarray(points, dtype=float)
+    c = points.mean(axis=0) if centre is None else np.asarray(centre, dtype=float)
+    d = points - c
+    return points[np.argsort(np.arctan2(d[:, 1], d[:, 0]), kind="stable")]
+
+
+def wrap_copies(polygon, periodic, lo=-np.pi, hi=np.pi):
+    """The polygon (V, k) and its copies shifted by -+2 pi on each periodic column where it
+    crosses ``lo`` or ``hi``: what to draw so that a picture over [lo, hi) shows it whole."""
+    polygon = np.asarray(polygon, dtype=float)
+    shifts = []
+    for j, per in enumerate(periodic):
+        options = [0.0]
+        if per and polygon[:, j].min() < lo:
+            options.append(TWO_PI)
+        if per and polygon[:, j].max() > hi:
+            options.append(-TWO_PI)
+        shifts.append(options)
+    return [polygon + np.array(s) for s in itertools.product(*shifts)]
+
+
+def split_at_wraps(y, periodic):
+    """A path (N, k) in wrapped coordinates as pieces to draw as lines: a new piece starts
+    where a periodic coordinate jumps across +-pi, and each piece is extended by the
+    wrapped step across the edge (so the line reaches the edge on both sides)."""
+    y = np.asarray(y, dtype=float)
+    if len(y) < 2:
+        return [y.copy()]
+    step = np.diff(y, axis=0)
+    wrapped_step = wrap(step, periodic)
+    jumps = np.flatnonzero(np.any(np.abs(step - wrapped_step) > 1e-9, axis=1))
+    pieces, begin, head = [], 0, None
+    for k in jumps:
+        piece = y[begin:k + 1]
+        if head is not None:
+            piece = np.vstack([head, piece])
+        pieces.append(np.vstack([piece, y[k] + wrapped_step[k]]))
+        head = y[k + 1] - wrapped_step[k]
+        begin = k + 1
+    last = y[begin:]
+    pieces.append(last if head is None else np.vstack([head, last]))
+    return pieces
+
+
+# ----- the atlas in task coordinates ----------------------------------------------------
+def chart_polygons(planner):
+    """Per chart: (kind, centre (k,), polygon (V, k) or None) in task coordinates, kind one
+    of "closed", "open", "frontier"; polygons unwrapped around their centres and ordered
+    by angle in the chart's tangent space (exact for its convex polytope)."""
+    task, pose = planner.task, planner.constraint.pose
+    periodic = [name in PERIODIC for name in task.names]
+    out = []
+    for chart in planner.atlas.charts:
+        centre = wrap(task.coords(*pose(chart.x))[0], periodic)
+        kind = "frontier" if chart.frontier else ("closed" if chart.closed else "open")
+        s = chart.polytope.vertices
+        if s.shape[0] < 3 or s.shape[1] != 2:
+            out.append((kind, centre, None))
+            continue
+        s = order_by_angle(s, np.zeros(2))
+        poses = [pose(chart.x + chart.basis @ v) for v in s]
+        y = task.coords(np.array([p for p, _ in poses]), np.array([t for _, t in poses]))
+        out.append((kind, centre, unwrap_about(y, centre, periodic)))
+    return out
+
+
+def plot_plan(planner, problem, result, out, resolution=400):
+    """Write the pictures of a query (module docstring); returns the PNG paths written."""
+    out = Path(out)
+    written = []
+    task = planner.task
+    if len(task.names) == 2:
+        plot_atlas(planner, problem, result, out, resolution=resolution)
+        written.append(str(out))
+    if result.path is not None:
+        tensions = out.with_name(out.stem + "_tensions.png")
+        plot_tensions(problem, result, tensions)
+        written.append(str(tensions))
+    return written
+
+
+def plot_atlas(planner, problem, result, out, resolution=400, size=ATLAS_SIZE):
+    """The atlas, path, start and goal over the slice of a 2-D task (module docstring)."""
+    task = planner.task
+    names = tuple(task.names)
+    periodic = [name in PERIODIC for name in names]
+    polygons = chart_polygons(planner)
+    ends = wrap(task.coords(np.array([problem.start.p, problem.goal.p]),
+                            np.array([problem.start.tau, problem.goal.tau])), periodic)
+    path = None
+    if result.path is not None:
+        path = wrap(task.coords(result.path.p, result.path.tau), periodic)
+    data = [ends] + [c[None] for _, c, _ in polygons] + [p for _, _, p in polygons if p is not None]
+    if path is not None:
+        data.append(path)
+    data = np.vstack(data)
+    ranges = zoom(tuple(axis_range(name, data[:, j]) for j, name in enumerate(names)), data)
+    view = SliceView(task=task, axes=names, ranges=ranges)
+    grid = compute_slice(problem.robot, view, resolution)
+
+    fig = plt.figure(figsize=(size[0] / DPI, size[1] / DPI), dpi=DPI, layout="constrained")
+    try:
+        ax = fig.add_subplot()
+        plots._draw_classes(ax, grid)
+        has_singular = plots._draw_singular(ax, grid)
+        _draw_atlas(ax, polygons, periodic, ranges)
+        if path is not None:
+            for piece in split_at_wraps(path, periodic):
+                ax.plot(piece[:, 0], piece[:, 1], color="white", lw=4.5, solid_capstyle="round")
+                ax.plot(piece[:, 0], piece[:, 1], color=PATH_COLOR, lw=2.2, solid_capstyle="round")
+        for label, (a, b) in zip(("start", "goal"), ends):
+            plots._draw_marker(ax, Marker(label, a, b), view)
+        plots._label_axes(ax, view)
+        ax.set_xlim(*ranges[0])
+        ax.set_ylim(*ranges[1])
+        ax.set_title(_title(planner, problem, result))
+        fig.legend(handles=_legend_handles(polygons, has_singular, path is not None),
+                   loc="outside lower center", ncol=3, fontsize="small")
+        fig.savefig(out, dpi=DPI, format="png")
+    finally:
+        plt.close(fig)
+
+
+def axis_range(name, values):
+    """Picture range of a task coordinate: [-pi, pi) for periodic ones; for theta and
+    alpha2 the default range, or its half holding all ``values`` (the sphere task's lower
+    hemisphere, as in the paper's Fig. 13); positions: the values with a 10 % border."""
+    values = np.asarray(values, dtype=float)
+    values = values[np.isfinite(values)]
+    if name in DEFAULT_RANGES:
+        lo, hi = DEFAULT_RANGES[name]
+        if name in PERIODIC or values.size == 0:
+            return lo, hi
+        mid = 0.5 * (lo + hi)
+        if values.min() >= mid - 1e-9:
+            return mid, hi
+        if values.max() <= mid + 1e-9:
+            return lo, mid
+        return lo, hi
+    lo, hi = (values.min(), values.max()) if values.size else (-1.0, 1.0)
+    pad = max(0.1 * (hi - lo), 1e-3)
+    return lo - pad, hi + pad
+
+
+def zoom(ranges, data, share=ZOOM_SHARE):
+    """``ranges`` narrowed to the ``data`` (N, 2) with a border when the data cover less
+    than ``share`` of both ranges (a small atlas, like the sphere task's, would be a thin
+    strip otherwise); the border is a quarter of the data's extent, at least 0.15 (rad or m)
+    but never beyond the original ranges."""
+    data = np.asarray(data, dtype=float)
+    data = data[np.all(np.isfinite(data), axis=1)]
+    if data.size == 0:
+        return ranges
+    lo, hi = data.min(axis=0), data.max(axis=0)
+    if not all(h - l < share * (r1 - r0) for l, h, (r0, r1) in zip(lo, hi, ranges)):
+        return ranges
+    pad = np.maximum(0.25 * (hi - lo), 0.15)
+    return tuple((max(r0, l - p), min(r1, h + p)) for l, h, p, (r0, r1) in zip(lo, hi, pad, ranges))
+
+
+def _draw_atlas(ax, polygons, periodic, ranges):
+    from matplotlib.collections import PolyCollection
+
+    style = {"closed": (CLOSED_FACE, 0.35, CLOSED_EDGE, 0.4),
+             "open": (OPEN_COLOR, 0.45, "#8a6d00", 0.6),
+             "frontier": (FRONTIER_COLOR, 0.55, "#5a1080", 0.6)}
+    for kind in ("closed", "open", "frontier"):
+        verts = []
+        for k, _, poly in polygons:
+            if k == kind and poly is not None:
+                verts.extend(wrap_copies(poly, periodic, lo=-np.pi, hi=np.pi))
+        if verts:
+            face, alpha, edge, lw = style[kind]
+            ax.add_collection(PolyCollection(verts, facecolors=face, edgecolors=edge,
+                                             linewidths=lw, alpha=alpha, zorder=2))
+            ax.add_collection(PolyCollection(verts, facecolors="none", edgecolors=edge,
+                                             linewidths=lw, zorder=2.1))
+    centres = np.array([c for _, c, _ in polygons])
+    if centres.size:
+        ax.plot(centres[:, 0], centres[:, 1], ls="none", marker="o", markersize=1.6,
+                color=CENTRE_COLOR, zorder=2.2)
+
+
+def _legend_handles(polygons, has_singular, has_path):
+    from matplotlib.lines import Line2D
+    from matplotlib.patches import Patch
+
+    handles = [Patch(color=c, label=l) for c, l in zip(plots.CLASS_COLORS, CLASS_LABELS)]
+    if has_singular:
+        handles.append(Line2D([], [], color=plots.SINGULAR_COLOR, lw=1.5, label=r"$\det J = 0$"))
+    counts = {k: sum(1 for kind, _, _ in polygons if kind == k) for k in ("closed", "open", "frontier")}
+    handles.append(Patch(facecolor="#e8e8e8", edgecolor=CLOSED_EDGE, lw=0.6,
+                         label=f"closed charts ({counts['closed']}): explored"))
+    handles.append(Patch(facecolor=OPEN_COLOR, edgecolor="#8a6d00", lw=0.6,
+                         label=f"open charts ({counts['open']})"))
+    handles.append(Patch(facecolor=FRONTIER_COLOR, alpha=0.6, edgecolor="#5a1080", lw=0.6,
+                         label=f"frontier charts ({counts['frontier']})"))
+    if has_path:
+        handles.append(Line2D([], [], color=PATH_COLOR, lw=2.2, label="planned path"))
+    return handles
+
+
+def _title(planner, problem, result):
+    head = problem.description or problem.robot.name
+    strategy = {"astar": "A*", "gbf": "Greedy Best-First"}.get(result.strategy, result.strategy)
+    outcome = "path found" if result.success else f"no path ({result.reason})"
+    tail = f"{strategy}: {outcome}, {result.charts} charts, {result.time_s:.2f} s"
+    if result.path is not None:
+        tail += f", {len(result.path)} waypoints"
+    return f"{head}\n{tail}"
+
+
+# ----- the tension envelope ---------------------------------------------------------------
+def plot_tensions(problem, result, out, size=TENSION_SIZE):
+    """Per cable: tension band [min, max], nominal and limits along the path."""
+    path, robot = result.path, problem.robot
+    t = np.asarray(path.t, dtype=float)
+    timed = t.size > 1 and np.all(np.isfinite(t)) and t[-1] > 0
+    x = t if timed else np.arange(len(path), dtype=float)
+    fig = plt.figure(figsize=(size[0] / DPI, size[1] / DPI), dpi=DPI, layout="constrained")
+    try:
+        axes = fig.subplots(2, 3, sharex=True)
+        for i, ax in enumerate(axes.ravel()):
+            lo, hi = robot.tension_min[i], robot.tension_max[i]
+            ax.fill_between(x, path.tension_min[:, i], path.tension_max[:, i], color="#3778bf",
+                            alpha=0.3, lw=0, label="envelope [min, max]")
+            ax.plot(x, path.tension_min[:, i], color="#3778bf", lw=0.8)
+            ax.plot(x, path.tension_max[:, i], color="#3778bf", lw=0.8)
+            ax.plot(x, path.tension_nominal[:, i], color="black", lw=1.5, label="nominal $f_0$")
+            ax.axhline(lo, color="#e41a1c", ls="--", lw=1.2, label="tension limits")
+            ax.axhline(hi, color="#e41a1c", ls="--", lw=1.2)
+            span = hi - lo
+            top = max(hi, float(np.max(path.tension_max[:, i])))
+            bottom = min(lo, float(np.min(path.tension_min[:, i])))
+            ax.set_ylim(bottom - 0.06 * span, top + 0.06 * span)
+            ax.set_xlim(x[0], x[-1])
+            name = robot.winch_names[i] if i < len(robot.winch_names) else f"cable {i + 1}"
+            least = float(min(np.min(path.tension_min[:, i]) - lo, hi - np.max(path.tension_max[:, i])))
+            ax.set_title(f"cable {i + 1} ({name}): least slack {least:.3g} N", fontsize="medium")
+            if i % 3 == 0:
+                ax.set_ylabel("tension (N)")
+            if i >= 3:
+                ax.set_xlabel("time (s)" if timed else "waypoint")
+            ax.grid(alpha=0.3)
+        handles, labels = axes[0, 0].get_legend_handles_labels()
+        fig.legend(handles, labels, loc="outside lower center", ncol=3, fontsize="small")
+        head = problem.description or robot.name
+        fig.suptitle(f"{head}\ntension envelope along the planned path ({len(path)} waypoints"
+                     + (f", {t[-1]:.2f} s)" if timed else ")"))
+        fig.savefig(out, dpi=DPI, format="png")
+    finally:
+        plt.close(fig)
