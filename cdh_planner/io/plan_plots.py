@@ -303,9 +303,12 @@ def plot_tensions(problem, result, out, size=TENSION_SIZE):
             bottom = min(lo, float(np.min(path.tension_min[:, i])))
             ax.set_ylim(bottom - 0.06 * span, top + 0.06 * span)
             ax.set_xlim(x[0], x[-1])
-            name = robot.winch_names[i] if i < len(robot.winch_names) else f"cable {i + 1}"
+            name = robot.winch_names[i] if i < len(robot.winch_names) else ""
+            label = f"cable {i + 1}" + (f" ({name})" if name and name != f"winch_{i + 1}" else "")
             least = float(min(np.min(path.tension_min[:, i]) - lo, hi - np.max(path.tension_max[:, i])))
-            ax.set_title(f"cable {i + 1} ({name}): least slack {least:.3g} N", fontsize="medium")
+            width = float(np.max(path.tension_max[:, i] - path.tension_min[:, i]))
+            ax.set_title(f"{label}: band width \u2264 {width:.3g} N, "
+                         f"slack \u2265 {least:.3g} N", fontsize="small")
             if i % 3 == 0:
                 ax.set_ylabel("tension (N)")
             if i >= 3:
@@ -315,7 +318,8 @@ def plot_tensions(problem, result, out, size=TENSION_SIZE):
         fig.legend(handles, labels, loc="outside lower center", ncol=3, fontsize="small")
         head = problem.description or robot.name
         fig.suptitle(f"{head}\ntension envelope along the planned path ({len(path)} waypoints"
-                     + (f", {t[-1]:.2f} s)" if timed else ")"))
+                     + (f", {t[-1]:.2f} s)" if timed else ")")
+                     + "; slack: least distance from the band to a limit")
         fig.savefig(out, dpi=DPI, format="png")
     finally:
         plt.close(fig)
