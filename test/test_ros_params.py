@@ -86,11 +86,51 @@ def test_integers_are_accepted_for_numbers():
     ("trajectory.max_cable_speed", -1.0, "trajectory.max_cable_speed"),
     ("base_frame", "", "base_frame = '': must not be empty"),
     ("log_enabled", "yes", "log_enabled = 'yes': expected true or false"),
+    ("planner.cost", "euclid", "planner.cost = 'euclid': expected one of auto, so3"),
+    ("planner.cost", "so3", "planner.cost = 'so3': the SO(3) cost needs a slice"),
+    ("planner.margin_floor", 0.0, "planner.margin_floor = 0.0: must be > 0"),
+    ("planner.margin_floor", 1.0, "planner.margin_floor = 1.0: must be < 1"),
+    ("planner.max_charts", 1, "planner.max_charts = 1: must be >= 2"),
 ])
 def test_bad_values_name_parameter_and_value(name, value, message):
     with pytest.raises(InputError) as err:
         node_config(dict(ROBOT2_PARAMS, **{name: value}))
     assert message in str(err.value)
+
+
+def test_parameters_map_onto_the_planner_settings():
+    """Every planner.* / trajectory.* parameter reaches its PlannerSettings field, and the
+    settings the node builds are accepted by the Planner itself."""
+    from cdh_planner.planner import Planner, PlannerSettings
+    values = {"planner.strategy": "gbf", "planner.cost": "great_circle",
+              "planner.radius": 0.15, "planner.timeout_s": 7, "planner.max_charts": 500,
+              "planner.complete": True, "planner.margin_floor": 0.01,
+              "trajectory.max_cable_speed": 0.02, "trajectory.max_cable_accel": 0.1}
+    config = node_config(dict(ROBOT2_PARAMS, **values))
+    assert config.settings == PlannerSettings(
+        strategy="gbf", cost="great_circle", radius=0.15, timeout_s=7.0, max_charts=500,
+        complete=True, margin_floor=0.01, max_cable_speed=0.02, max_cable_accel=0.1)
+    Planner(config.robot, config.task, config.settings)   # no InputError
+    assert node_config(ROBOT2_PARAMS).settings == PlannerSettings()   # same defaults
+
+
+def test_settings_errors_name_the_node_parameter():
+    from cdh_planner.ros.params import parameter_error
+    err = parameter_error(InputError("max_cable_speed", 0.0, "must be positive"))
+    assert str(err) == "trajectory.max_cable_speed = 0.0: must be positive"
+    assert str(parameter_error(InputError("radius", -1.0, "x"))).startswith("planner.radius")
+
+
+def test_a_parameter_set_to_its_value_keeps_the_planner():
+    from cdh_planner.ros.params import needs_new_planner
+    old = node_config(ROBOT2_PARAMS).values
+    same = node_config(dict(ROBOT2_PARAMS, **{"planner.timeout_s": 60})).values
+    assert not needs_new_planner(["planner.timeout_s"], old, same)
+    assert not needs_new_planner(["task.fixed.x"], old, old)            # NaN == NaN here
+    assert not needs_new_planner(["stream_rate_hz", "log_dir"])
+    changed = node_config(dict(ROBOT2_PARAMS, **{"planner.timeout_s": 5.0})).values
+    assert needs_new_planner(["planner.timeout_s"], old, changed)
+    assert needs_new_planner(["robot.length_min"])                      # no values: assume so
 
 
 # --------------------------------------------------------------------------- requests

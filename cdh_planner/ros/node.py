@@ -54,7 +54,7 @@ from ..errors import InputError
 from ..io.mcap_log import REQUEST_RECEIVED, RESPONSE_SENT
 from . import planning
 from .params import BOOL, DOUBLE, DOUBLES, INT, REQUIRED, SPECS, STRING, STRINGS, \
-    PLANNER_PREFIXES, needs_new_planner, node_config
+    PLANNER_PREFIXES, needs_new_planner, node_config, parameter_error
 from .recording import RunLog
 from .streaming import Stream
 
@@ -83,8 +83,7 @@ class PlannerNode(Node):
         self._factory = planner_factory
         self._values = self._declare()
         self.config = node_config(self._values)          # InputError: the node cannot start
-        self._planner = planner_factory(self.config.robot, self.config.task,
-                                        self.config.settings)
+        self._planner = self._new_planner(self.config)
         self._config_lock = threading.Lock()
         self.add_on_set_parameters_callback(self._on_set_parameters)
         self.runlog = RunLog(self.config.log_dir, self.config.log_enabled,
@@ -154,8 +153,8 @@ class PlannerNode(Node):
         try:
             config = node_config(values)
             planner = self._planner
-            if needs_new_planner([p.name for p in params]):
-                planner = self._factory(config.robot, config.task, config.settings)
+            if needs_new_planner([p.name for p in params], self.config.values, config.values):
+                planner = self._new_planner(config)
         except InputError as exc:
             return SetParametersResult(successful=False, reason=str(exc))
         with self._config_lock:
@@ -163,6 +162,13 @@ class PlannerNode(Node):
         self.runlog.configure(config.log_dir, config.log_enabled)
         self.get_logger().info(f"parameters set: {', '.join(p.name for p in params)}")
         return SetParametersResult(successful=True)
+
+    def _new_planner(self, config):
+        """A Planner for ``config`` (a fresh atlas); InputError naming the parameter."""
+        try:
+            return self._factory(config.robot, config.task, config.settings)
+        except InputError as exc:
+            raise parameter_error(exc) from None
 
     # ------------------------------------------------------------------ plan
 

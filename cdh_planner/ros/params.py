@@ -24,6 +24,7 @@ task.fixed.x .. task.fixed.sigma  NaN      slice: fixed coordinate (m, rad); NaN
 task.center, task.radius        0 0 0, 0.1 sphere (paper Eq. 17), m
 task.free_torsion               false      sphere: sigma free as well
 planner.strategy                astar      astar or gbf
+planner.cost                    auto       auto, so3, great_circle or se3
 planner.timeout_s               60         give up after this long (answer TIMEOUT)
 planner.radius                  0.1        chart radius (scaled units, about rad)
 planner.max_charts              100000     give up after this many charts
@@ -48,7 +49,7 @@ import numpy as np
 from ..errors import InputError
 from ..model.robot import robot_from_dict
 from ..model.task import POSE_NAMES, task_from_dict
-from ..planner import PlannerSettings
+from ..planner import COSTS, PlannerSettings, task_cost
 
 STRING, BOOL, INT, DOUBLE, DOUBLES, STRINGS = "string", "bool", "int", "double", "doubles", \
     "strings"
@@ -66,7 +67,7 @@ class Spec:
     """One parameter: ``kind`` (STRING, BOOL, INT, DOUBLE, DOUBLES, STRINGS), ``default``
     (REQUIRED: no default; None for an optional array left empty), a description, and for
     numbers a closed range ``low``..``high`` (None: unbounded) and whether ``low`` itself is
-    excluded (``open_low``)."""
+    excluded (``open_low``), ``high`` (``open_high``)."""
 
     name: str
     kind: str
@@ -75,6 +76,7 @@ class Spec:
     low: Optional[float] = None
     high: Optional[float] = None
     open_low: bool = False
+    open_high: bool = False
     choices: tuple = ()
 
 
@@ -130,6 +132,9 @@ SPECS = (
        Spec("planner.strategy", STRING, DEFAULT_SETTINGS.strategy,
             "search strategy: astar (A*, shortest on the chart graph) or gbf (greedy "
             "best-first, faster)", choices=STRATEGIES),
+       Spec("planner.cost", STRING, DEFAULT_SETTINGS.cost,
+            "path cost: auto (the paper's for the task), so3 (rad; slices fixing x, y, z), "
+            "great_circle (m; sphere task) or se3 (m)", choices=COSTS),
        Spec("planner.timeout_s", DOUBLE, DEFAULT_SETTINGS.timeout_s,
             "give up after this many seconds (answer TIMEOUT)", low=0.0, high=86400.0,
             open_low=True),
@@ -137,11 +142,12 @@ SPECS = (
             "chart radius in the atlas' scaled units (about rad of platform motion)",
             low=0.0, high=10.0, open_low=True),
        Spec("planner.max_charts", INT, DEFAULT_SETTINGS.max_charts,
-            "give up after this many charts (answer NO_VALID_PATH)", low=1, high=100_000_000),
+            "give up after this many charts (answer NO_VALID_PATH)", low=2, high=100_000_000),
        Spec("planner.complete", BOOL, DEFAULT_SETTINGS.complete,
             "keep growing the atlas to the whole component after reaching the goal"),
        Spec("planner.margin_floor", DOUBLE, DEFAULT_SETTINGS.margin_floor,
-            "least normalised feasibility margin of a planned waypoint", low=0.0, high=1.0),
+            "least normalised feasibility margin of a planned waypoint", low=0.0, high=1.0,
+            open_low=True, open_high=True),
        Spec("trajectory.max_cable_speed", DOUBLE, DEFAULT_SETTINGS.max_cable_speed,
             "per-winch cable speed limit of the trajectory (m/s)", low=0.0, high=100.0,
             open_low=True),
@@ -235,8 +241,8 @@ def check_value(spec, value):
             raise InputError(name, value, "must be a finite number")
     if spec.low is not None and (value < spec.low or (spec.open_low and value == spec.low)):
         raise InputError(name, value, f"must be {'>' if spec.open_low else '>='} {spec.low:g}")
-    if spec.high is not None and value > spec.high:
-        raise InputError(name, value, f"must be <= {spec.high:g}")
+    if spec.high is not None and (value > spec.high or (spec.open_high and value == spec.high)):
+        raise InputError(name, value, f"must be {'<' if spec.open_high else '<='} {spec.high:g}")
     return value
 
 
@@ -250,11 +256,16 @@ def node_config(values, source="ROS parameters"):
     robot = robot_from_dict(_robot_dict(checked), source=source)
     task = task_from_dict(_task_dict(checked), where="task")
     settings = PlannerSettings(
-        strategy=checked["planner.strategy"], radius=checked["planner.radius"],
+        strategy=checked["planner.strategy"], cost=checked["planner.cost"],
+        radius=checked["planner.radius"],
         timeout_s=checked["planner.timeout_s"], max_charts=checked["planner.max_charts"],
         complete=checked["planner.complete"], margin_floor=checked["planner.margin_floor"],
         max_cable_speed=checked["trajectory.max_cable_speed"],
         max_cable_accel=checked["trajectory.max_cable_accel"])
+    try:
+        task_cost(robot, task, settings.cost)   # e.g. great_circle needs the sphere task
+    except InputError as exc:
+        raise InputError("planner.cost", settings.cost, exc.reason) from None
     log_dir = checked["log_dir"]
     if not log_dir and checked["log_enabled"]:
         raise InputError("log_dir", log_dir, "must name a directory while log_enabled is true")
@@ -297,6 +308,38 @@ def _task_dict(checked):
     return {"type": kind}
 
 
-def needs_new_planner(names):
-    """True if a change of the parameters ``names`` changes the robot, task or planner."""
-    return any(n.startswith(PLANNER_PREFIXES) for n in names)
+def needs_new_planner(names, old=None, new=None):
+    """True if a change of the parameters ``names`` changes the robot, task or planner.
+    With the values before and after (``old``, ``new``: name -> value), a parameter set to
+    the value it already has changes nothing (the planner keeps its atlas)."""
+    return any(n.startswith(PLANNER_PREFIXES)
+               and (old is None or new is None or not _same(old.get(n), new.get(n)))
+               for n in names)
+
+
+def _same(a, b):
+    if isinstance(a, (list, tuple)) or isinstance(b, (list, tuple)):
+        if not (isinstance(a, (list, tuple)) and isinstance(b, (list, tuple))):
+            return False
+        return len(a) == len(b) and all(_same(x, y) for x, y in zip(a, b))
+    if isinstance(a, float) and isinstance(b, float) and math.isnan(a) and math.isnan(b):
+        return True
+    return type(a) is type(b) and a == b or (
+        isinstance(a, (int, float)) and isinstance(b, (int, float))
+        and not isinstance(a, bool) and not isinstance(b, bool) and float(a) == float(b))
+
+
+# PlannerSettings field -> the node parameter that sets it (to name it in errors)
+SETTING_PARAMETERS = {
+    "strategy": "planner.strategy", "cost": "planner.cost", "radius": "planner.radius",
+    "timeout_s": "planner.timeout_s", "max_charts": "planner.max_charts",
+    "complete": "planner.complete", "margin_floor": "planner.margin_floor",
+    "max_cable_speed": "trajectory.max_cable_speed",
+    "max_cable_accel": "trajectory.max_cable_accel"}
+
+
+def parameter_error(exc):
+    """An InputError of the planner's settings check, naming the node parameter instead of
+    the PlannerSettings field (``margin_floor`` -> ``planner.margin_floor``)."""
+    name = SETTING_PARAMETERS.get(exc.field)
+    return exc if name is None else InputError(name, exc.value, exc.reason)
