@@ -1,7 +1,10 @@
-"""``cdh-planner demo`` end to end: the paper's verdicts, the pictures, the exit codes."""
+"""``cdh-planner demo`` end to end: the paper's verdicts, the pictures, the exit codes, and
+the ROS story (node, q_1 -> q_2 -> q_3 planned over ROS and streamed, recorded, replayed,
+shut down, pictures) over real DDS in a domain of its own."""
 import contextlib
 import io
 import math
+import re
 import struct
 from pathlib import Path
 
@@ -57,7 +60,7 @@ def line_with(text, robot, *parts):
 
 def test_demo_exits_0_and_prints_the_papers_verdicts(full_run):
     rc, text, _ = full_run
-    assert rc == 0
+    assert rc == 0, text[-2500:]
     for robot, label in [("robot1", "q_s"), ("robot1", "q_g"), ("robot2", "q_1"), ("robot2", "q_2"),
                          ("robot2", "q_3")]:
         row = line_with(text, robot, f"  {label}  ").split()
@@ -76,16 +79,61 @@ def test_demo_exits_0_and_prints_the_papers_verdicts(full_run):
 
 def test_demo_writes_the_two_slice_pictures(full_run):
     rc, text, out = full_run
-    assert rc == 0
+    assert rc == 0, text[-2500:]
     for name in ("robot1_slice.png", "robot2_sphere.png"):
         path = out / name
         assert path.stat().st_size > 20_000  # a real picture, not an empty canvas
         assert png_size(path) == (1000, 800)
         assert f"wrote {path}" in text
-    assert f"files in {out.resolve()}/: robot1_slice.png, robot2_sphere.png" in text
+    assert re.search(rf"files in {re.escape(str(out.resolve()))}/: robot1_slice.png, "
+                     r"robot2_sphere.png, cdh_planner_\d{8}-\d{6}_\d+\.mcap, "
+                     r"robot2_plans.png, robot2_execution.png\n", text)
     # The drawn segments are the ones verified: same first unsafe points.
     assert "segment q_s -> q_g leaves C at 3.2 %" in text
     assert "segment q_2 -> q_3 leaves C at 4.3 %" in text
+
+
+def test_demo_ros_story(full_run):
+    """The node plans q_1 -> q_2 -> q_3 over ROS, each motion is dense-safe and streamed to
+    its last waypoint at the stream rate; the recording replays (commands identical, requests
+    answered the same by a fresh node); both nodes stop with exit 0; the run file is a
+    complete MCAP; the summary table and the two pictures."""
+    rc, text, out = full_run
+    assert rc == 0, text[-3000:]
+    assert "DIFFERS" not in text and "FAILED" not in text and "skipped" not in text
+    ros = text[text.index("== 5. The ROS 2 node"):]
+    assert re.search(r"node /cdh_planner ready in [\d.]+ s: base_frame cdh_base, task.type "
+                     r"sphere, planner.strategy astar", ros)
+    for leg in ("q_1 -> q_2", "q_2 -> q_3"):
+        part = ros[ros.index(f"call ~/plan: {leg}"):]
+        planned = re.search(r"planned in ([\d.]+) s \((\d+) charts, astar\): (\d+) waypoints, "
+                            r"path ([\d.]+) m, duration ([\d.]+) s, lowest tension margin "
+                            r"([\d.]+) N", part)
+        assert planned, part[:400]
+        assert float(planned.group(1)) < 30 and float(planned.group(6)) > 0
+        assert "checked densely: safe, worst margin +" in part.splitlines()[2]
+        streamed = re.search(r"streamed (\d+) cable commands over ([\d.]+) s \(([\d.]+) Hz\); "
+                             r"last = the final waypoint's cable lengths within 0.0e\+00 m", part)
+        assert streamed, part[:800]
+        assert 45.0 <= float(streamed.group(3)) <= 55.0                 # stream_rate_hz 50
+        assert abs(float(streamed.group(2)) - float(planned.group(5))) < 0.1
+    assert re.search(r"received (\d+) republished commands \(recorded \1 over [\d.]+ s\): "
+                     r"identical to the ones streamed live", ros)
+    assert "request 1: MATCHES" in ros and "request 2: MATCHES" in ros
+    assert "2 of 2 answers match the recording" in ros
+    assert "fresh node stopped by SIGINT, exit code 0" in ros
+    assert re.search(r"node stopped by SIGINT in [\d.]+ s, exit code 0", ros)
+    assert "complete MCAP (rosbags reads it)" in ros
+    assert re.search(r"/cdh_planner/plan/_service_event: 4\n", ros)     # 2 requests, 2 answers
+    [run_file] = (out / "runs").glob("*.mcap")
+    assert str(run_file) in ros
+    rows = [line.split() for line in ros.splitlines() if line.startswith("q_")]
+    assert [r[:3] for r in rows] == [["q_1", "->", "q_2"], ["q_2", "->", "q_3"]]
+    assert all(r[-2] == "safe" for r in rows)
+    for name, size in (("robot2_plans.png", (1000, 600)), ("robot2_execution.png", (1000, 700))):
+        assert (out / name).stat().st_size > 20_000 and png_size(out / name) == size
+        assert f"wrote {out / name}" in ros
+    assert "node.log" in ros and (out / "node.log").is_file()
 
 
 def test_pose_verdicts_agree_with_the_closed_form_and_the_limits(checked):

@@ -1,5 +1,6 @@
 """``cdh-planner demo``: the paper's robots, poses and straight motions, checked, and
-C-space pictures.
+C-space pictures; then the ROS story: the node plans Robot 2's sphere task q_1 -> q_2 -> q_3,
+streams it, records it, and the recording is replayed.
 
     cdh-planner demo [--out DIR] [--config-dir DIR]
 
@@ -19,7 +20,12 @@ part by appending a ``Step`` (planning, the ROS node, replay).
    orientation slerp) and as a straight line in the slice's (phi, theta); q_1 -> q_2 and
    q_2 -> q_3 as straight lines in the sphere task's (alpha1, alpha2);
 4. ``pictures``: the two C-space slices (like the paper's Figs. 9 and 13) as PNGs in the
-   output directory, drawn by the same code as ``cdh-planner slice``.
+   output directory, drawn by the same code as ``cdh-planner slice``;
+5. - 10. the ROS story (``demo_ros``): start ``cdh-planner node`` (Robot 2, sphere task) in
+   a ROS domain of its own, recording to ``<out>/runs``; plan q_1 -> q_2 and q_2 -> q_3 over
+   ROS, check the planned motion densely and execute it (streamed cable commands); replay
+   the recording (commands republished; requests re-sent to a fresh node); SIGINT, read the
+   run file back; pictures of the plans and the execution, and a summary table.
 
 Every verdict with an expected value (the paper's results as restated and checked
 numerically in the design notes, math.md section 6) is compared with it. Exit code 0 when
@@ -304,17 +310,29 @@ STEPS = [
     Step("pictures", "C-space pictures", draw_pictures),
 ]
 
+# The ROS story (node, q_1 -> q_2 -> q_3 over ROS, streaming, recording, replay, shutdown,
+# pictures). demo_ros imports rclpy only inside its steps.
+from . import demo_ros  # noqa: E402  (its steps() needs Step, defined above)
+
+STEPS += demo_ros.steps()
+
 
 # --- command -----------------------------------------------------------------------------
 
 def add_parser(subparsers):
     """Register ``demo`` on the top-level subparsers."""
     p = subparsers.add_parser(
-        "demo", help="check the paper's robots, poses and straight motions; draw C-space pictures",
+        "demo", help="the whole story: the paper's robots, poses and motions checked, then "
+                     "the ROS node planning, streaming, recording and replaying Robot 2's "
+                     "sphere task",
         description="Load the paper's Robot 1 and Robot 2, check the paper's poses (closed-form "
                     "wrench feasibility) and the straight motions between them (dense "
                     "verification), compare each verdict with the paper's results, and write the "
-                    "C-space pictures. Exit 0 when every verdict agrees, 1 if one differs.",
+                    "C-space pictures. Then start the ROS 2 node (its own ROS domain, discovery "
+                    "on localhost), plan Robot 2's sphere task q1 -> q2 -> q3 over ROS, execute "
+                    "it (streamed cable commands), record the run to MCAP, replay it, stop the "
+                    "node and draw the plans and the execution. Exit 0 when every verdict "
+                    "agrees, 1 if one differs.",
         epilog="example:\n  cdh-planner demo --out /tmp/demo", formatter_class=argparse.RawDescriptionHelpFormatter)
     p.add_argument("--out", default=DEFAULT_OUT, metavar="DIR",
                    help=f"directory for the pictures, created if missing (default: {DEFAULT_OUT}/ "

@@ -5,8 +5,11 @@
 6. ``q1-q2``, 7. ``q2-q3``: a task sequencer's calls: plan over ROS (the paper's Robot 2
    sphere task), check the motion between the planned waypoints densely, execute it,
    following the streamed cable commands to the last waypoint;
-8. ``replay``: re-send the recorded requests to the node and compare the answers; republish
-   the recorded cable commands (``cdh-planner replay``) and compare them with the originals;
+8. ``replay``: republish the recorded cable commands (``cdh-planner replay``) and compare
+   them with the originals; re-send the recorded requests to a fresh node (same parameters,
+   its own domain) and compare the answers. Not to the node that recorded them: the planner
+   keeps its atlas between requests, so a node that has already planned may find other
+   (equally valid) paths;
 9. ``shutdown``: SIGINT, then read the run file back (rosbags, independent of ROS);
 10. ``ros-pictures``: the planned paths on the sphere task's C-space, and the cable lengths
    and tension envelopes over time.
@@ -75,23 +78,34 @@ def node_command(args):
     return _cli(*args)
 
 
+def _spawn_node(demo, stack, args, log_name):
+    """Start ``cdh-planner node ARGS`` in a domain of its own (held by ``stack``, which also
+    stops the process); (domain, process, log path)."""
+    from ..ros.domains import claimed_domain, isolated_env
+    domain = stack.enter_context(claimed_domain())
+    node_log = demo.out_dir / log_name
+    out = stack.enter_context(open(node_log, "w"))
+    process = subprocess.Popen(node_command(args), env=isolated_env(domain), stdout=out,
+                               stderr=subprocess.STDOUT)
+    stack.callback(_stop_process, process)
+    return domain, process, node_log
+
+
 def start_node(demo):
     """Start the node on Robot 2 and wait for its services."""
-    from ..ros.client import PlannerClient
-    from ..ros.domains import claimed_domain, isolated_env
+    try:
+        from ..ros.client import PlannerClient
+    except ImportError as exc:
+        raise NodeFailed(f"rclpy is not installed here ({exc}): make venv installs the ROS 2 "
+                         f"wheels") from None
     stack = contextlib.ExitStack()
     atexit.register(stack.close)
-    domain = stack.enter_context(claimed_domain())
     run_dir = demo.out_dir / "runs"
     run_dir.mkdir(parents=True, exist_ok=True)
     robot_file = demo.config_dir / "robot2.yaml"
     args = ["node", "--ros-args", "--params-file", str(robot_file), "-p", f"log_dir:={run_dir}"]
-    node_log = demo.out_dir / "node.log"
-    out = stack.enter_context(open(node_log, "w"))
     t0 = time.perf_counter()
-    process = subprocess.Popen(node_command(args), env=isolated_env(domain), stdout=out,
-                               stderr=subprocess.STDOUT)
-    stack.callback(_stop_process, process)
+    domain, process, node_log = _spawn_node(demo, stack, args, "node.log")
     client = PlannerClient(domain_id=domain, name="cdh_planner_demo")
     stack.callback(client.close)
     demo.ros = NodeStory(stack=stack, domain=domain, process=process, client=client,
@@ -104,7 +118,6 @@ def start_node(demo):
             and time.monotonic() < end:
         client.spin(0.1)
     if process.poll() is not None:
-        out.flush()
         tail = node_log.read_text().strip().splitlines()[-3:]
         raise NodeFailed(f"the node exited with {process.returncode}: " + " | ".join(tail))
     client.wait_for_node(max(1.0, end - time.monotonic()))
@@ -239,7 +252,7 @@ def leg_q2_q3(demo):
 
 
 def replay(demo):
-    """Re-send the recorded requests; republish the recorded cable commands."""
+    """Republish the recorded cable commands; re-send the recorded requests to a fresh node."""
     from ..ros.domains import isolated_env
     from ..ros.replay import read_records
     story = demo.ros
@@ -252,16 +265,12 @@ def replay(demo):
         demo.differs.append("the node recorded nothing (log_file empty)")
         return
     print(f"run file: {story.run_file}")
+    # a fresh node for the recorded requests, starting while the commands are republished
+    robot_file = demo.config_dir / "robot2.yaml"
+    fresh_args = ["node", "--ros-args", "--params-file", str(robot_file), "-p",
+                  "log_enabled:=false"]
+    fresh_domain, fresh, _ = _spawn_node(demo, story.stack, fresh_args, "node_fresh.log")
     env = isolated_env(story.domain)
-    args = ["replay", story.run_file, "--requests", "--tolerance", f"{TOLERANCE:g}"]
-    print(f"$ cdh-planner {' '.join(args)}")
-    r = subprocess.run(_cli(*args), env=env, capture_output=True, text=True, timeout=300)
-    for line in r.stdout.splitlines():
-        if line.startswith("request") or "answers match" in line:
-            print(f"  {line.strip()}")
-    if r.returncode != 0:
-        demo.differs.append(f"replay --requests: exit {r.returncode}: "
-                            f"{(r.stderr or r.stdout).strip().splitlines()[-1:]}")
     # republish the recorded commands at REPLAY_RATE and compare with the originals
     recorded = [rec for rec in read_records(story.run_file)
                 if rec.topic == "/cdh_planner/cable_command"]
@@ -291,6 +300,26 @@ def replay(demo):
           f"live")
     if proc.returncode != 0 or not same:
         demo.differs.append("replay of the recorded cable commands differs from the original")
+    # the recorded requests, re-sent to the fresh node
+    print(f"$ cdh-planner {' '.join(fresh_args)}")
+    print(f"  (a fresh node, ROS_DOMAIN_ID={fresh_domain}: the planner keeps its atlas between "
+          f"requests, so the recording replays to the same answers on a node in the state it "
+          f"started from)")
+    args = ["replay", story.run_file, "--requests", "--tolerance", f"{TOLERANCE:g}",
+            "--timeout", f"{NODE_TIMEOUT_S:g}"]
+    print(f"$ cdh-planner {' '.join(args)}")
+    r = subprocess.run(_cli(*args), env=isolated_env(fresh_domain), capture_output=True,
+                       text=True, timeout=300)
+    for line in r.stdout.splitlines():
+        if line.startswith("request") or "answers match" in line:
+            print(f"  {line.strip()}")
+    if r.returncode != 0:
+        demo.differs.append(f"replay --requests: exit {r.returncode}: "
+                            f"{(r.stderr or r.stdout).strip().splitlines()[-1:]}")
+    rc = _stop_process(fresh)
+    print(f"fresh node stopped by SIGINT, exit code {rc}")
+    if rc != 0:
+        demo.differs.append(f"the fresh node exited with {rc} after SIGINT")
 
 
 def shutdown(demo):

@@ -7,6 +7,9 @@ Without ``--requests``: republish the recorded topics with their original timing
 ``--rate``), e.g. the streamed ``/cdh_planner/cable_command`` to test a winch controller.
 With ``--requests``: re-send the recorded plan requests to a running node and report, for
 each, whether the new answer matches the recorded one (pose by pose, within the tolerance).
+The planner keeps its atlas between requests, so the answers are the recorded ones on a node
+in the state the recording started from: a freshly started node with the same parameters. A
+node that has already planned may answer with other (equally valid) paths.
 
 Exit codes: 0 done (every answer matches); 1 an answer differs; 2 bad input; 3 the node
 did not answer.
@@ -40,7 +43,9 @@ def add_parser(subparsers):
                    help="wait up to S seconds for a subscriber on every replayed topic before "
                         "the first message (default: %(default)g)")
     p.add_argument("--requests", action="store_true",
-                   help="re-send the recorded plan requests to a running node and compare")
+                   help="re-send the recorded plan requests to a running node and compare "
+                        "(to reproduce the recorded answers: a freshly started node with the "
+                        "recording's parameters; the planner keeps its atlas between requests)")
     p.add_argument("--node", help="node for --requests (default: the recorded one)")
     p.add_argument("--tolerance", type=float, default=1e-6, metavar="M",
                    help="--requests: largest pose difference that still matches, in m for "
