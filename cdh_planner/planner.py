@@ -197,6 +197,8 @@ class Planner:
         """Points on M through the chart centres; or the first edge (i, j) that does not
         carry a path (Newton failed, the points left the domain or jumped)."""
         xs = [self.atlas.charts[charts[0]].x]
+        if len(charts) == 1:  # start == goal: a path that stays
+            return [xs[0], xs[0].copy()], None
         for a, b in zip(charts, charts[1:]):
             pts = self._edge_points(min(a, b), max(a, b))
             if pts is None:
@@ -240,6 +242,8 @@ class Planner:
         that would not be feasible stays where it was."""
         per = self._periodic_mask()
         y = y.copy()
+        if len(y) < 3:
+            return y
         for _ in range(SMOOTHING_ROUNDS):
             lap = 0.5 * (_wrapped(y[:-2] - y[1:-1], per) + _wrapped(y[2:] - y[1:-1], per))
             trial = _wrapped(y[1:-1] + 0.5 * lap, per)

@@ -229,3 +229,11 @@ def test_complete_atlas_closes_every_chart(tmp_path):
     assert all(ch.closed for ch in planner.atlas.charts)
     _, _, exhausted = plan(robot1_problem(tmp_path, "island", (-1.3, 2.0), (1.7, 1.7)), strategy="gbf")
     assert abs(len(planner.atlas.charts) - exhausted.charts) < 0.2 * exhausted.charts
+
+
+def test_start_equal_to_goal_gives_a_path_that_stays(tmp_path):
+    problem = robot1_problem(tmp_path, "same", (-2.3, 1.6), (-2.3, 1.6))
+    _, pr, res = plan(problem)
+    assert res.success and len(res.path) == 2 and res.cost == 0.0
+    assert np.all(np.diff(res.path.t) > 0)
+    np.testing.assert_allclose(res.path.p[0], res.path.p[1])
