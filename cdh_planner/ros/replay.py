@@ -27,6 +27,9 @@ from ..io.mcap_log import REQUEST_RECEIVED, RESPONSE_SENT, SERVICE_EVENT_SUFFIX
 from ..io.mcap_log import _scan as scan_run  # raw records of a (possibly killed) run file
 
 
+MATCH_SETTLE_S = 0.3   # s after the publisher sees its subscribers, before the first message
+
+
 @dataclass(frozen=True)
 class Record:
     topic: str
@@ -120,6 +123,10 @@ def replay_topics(node, records, rate=1.0, delay_s=1.0, clock=time.monotonic,
     end = clock() + delay_s
     while clock() < end and not all(p.get_subscription_count() for p in publishers.values()):
         sleep(0.02)
+    if any(p.get_subscription_count() for p in publishers.values()):
+        # discovery is not symmetric: the subscriber may not know this publisher yet when
+        # the publisher sees it, and would drop the first (volatile) messages
+        sleep(MATCH_SETTLE_S)
     t_first = records[0].log_time_ns
     start = clock()
     late = 0.0
