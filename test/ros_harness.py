@@ -53,10 +53,11 @@ class NodeProcess:
     """``cdh-planner node`` (or, with ``fake=True``, the node around the test double
     planner of test/doubles/fake_planner.py) in its own process."""
 
-    def __init__(self, domain, log_dir, params=(), fake=False, env=None):
+    def __init__(self, domain, log_dir, params=(), fake=False, env=None, params_file=None):
         self.log_dir = Path(log_dir)
         self.log_dir.mkdir(parents=True, exist_ok=True)
-        ros_args = ["--ros-args", "--params-file", str(ROBOT2), "-p", f"log_dir:={self.log_dir}"]
+        ros_args = ["--ros-args", "--params-file", str(params_file or ROBOT2),
+                    "-p", f"log_dir:={self.log_dir}"]
         for p in params:
             ros_args += ["-p", p]
         cmd = ([sys.executable, str(FAKE_NODE), *ros_args] if fake

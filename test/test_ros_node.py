@@ -259,3 +259,32 @@ def test_an_idle_node_stops_cleanly(tmp_path):
             rc = node.stop(signal.SIGINT)
         assert rc == 0, node.log()
         assert "terminate called" not in node.log()
+
+
+def test_no_path_between_components_over_ros(tmp_path):
+    """Robot 1's (phi, theta) slice (paper Sec. 5.1) as node parameters: from the island of
+    C around (-1.3, 2.0) the goal q_g is unreachable (NO_VALID_PATH, "no path"); the node
+    then serves a reachable goal."""
+    from cdh_planner.model.pose import quaternion_from_tau
+    from cdh_planner.ros.client import pose_stamped
+
+    sigma = 17 * math.pi / 90
+    fixed = {"x": 0.0, "y": 0.0, "z": 0.35, "sigma": sigma}
+    params = ["task.type:=slice"] + [f"task.fixed.{k}:={v!r}" for k, v in fixed.items()]
+
+    def pose(phi, theta):
+        q = quaternion_from_tau(np.array([phi, theta, sigma]))
+        return pose_stamped([0.0, 0.0, 0.35] + list(q), "cdh_base")
+
+    with claimed_domain() as domain:
+        node = NodeProcess(domain, tmp_path, params=params, params_file=ROBOT2.parent / "robot1.yaml")
+        try:
+            with PlannerClient(domain_id=domain) as client:
+                client.wait_for_node(30.0)
+                answer = client.plan(pose(-1.3, 2.0), pose(1.7, 1.7), timeout_s=120)
+                assert not answer.success and len(answer.path.poses) == 0
+                assert answer.values["error_code"] == str(M.NO_VALID_PATH), answer.values
+                assert "no path" in answer.values["error_msg"].lower(), answer.values
+                assert client.plan(pose(-1.3, 2.0), pose(-1.2, 1.9), timeout_s=120).success
+        finally:
+            assert node.stop() == 0, node.log()
