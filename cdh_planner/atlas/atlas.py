@@ -167,6 +167,8 @@ class Atlas:
                 ch.polytope.clip(u, max(self._inside_fraction(ch.x, x_new) * step, 0.05 * ch.radius))
                 return None
             if basis is not None:
+                if step < ch.radius * (1 - 1e-9):
+                    self.shrink(i, step)
                 j = self.add_chart(x_new, radius=min(self.radius, 2.0 * step), basis=basis)
                 if ch.polytope.vertices.shape[0] and np.any(np.all(np.isclose(ch.polytope.vertices, v), axis=1)):
                     ch.polytope.clip(u, ch.radius)
@@ -175,6 +177,17 @@ class Atlas:
         ch.frontier = True
         ch.polytope.clip(u, ch.radius)
         return None
+
+    def shrink(self, i, radius):
+        """The manifold curves too much for chart i's radius: make its ball (and box) the
+        radius at which a new chart could be made, so that small neighbours can close it."""
+        ch = self.charts[i]
+        ch.radius = radius
+        for k in range(ch.basis.shape[1]):
+            e = np.zeros(ch.basis.shape[1])
+            e[k] = 1.0
+            ch.polytope.clip(e, radius)
+            ch.polytope.clip(-e, radius)
 
     def _inside_fraction(self, x0, x1):
         """Fraction of the chord x0 -> x1 (x0 inside the domain) before it leaves the domain."""
