@@ -26,7 +26,7 @@ TWO_PI = 2.0 * np.pi
 class Chart:
     """A chart: centre ``x`` (on M), tangent ``basis`` (n_vars, dim), ``radius``, polytope."""
 
-    __slots__ = ("x", "basis", "radius", "polytope", "neighbours", "frontier", "index")
+    __slots__ = ("x", "basis", "radius", "polytope", "neighbours", "frontier", "index", "_closed")
 
     def __init__(self, index, x, basis, radius):
         self.index = index
@@ -36,10 +36,15 @@ class Chart:
         self.polytope = Polytope(basis.shape[1], radius)
         self.neighbours = set()
         self.frontier = False  # touches the domain boundary or a place Newton cannot reach
+        self._closed = False
 
     @property
     def closed(self):
-        return self.polytope.outside_vertices(self.radius).size == 0
+        """No polytope vertex outside the ball. Monotone: clipping only removes, and only
+        open charts grow (and shrink), so once closed a chart stays closed."""
+        if not self._closed:
+            self._closed = self.polytope.outside_vertices(self.radius).size == 0
+        return self._closed
 
 
 class Atlas:
@@ -127,7 +132,10 @@ class Atlas:
         ch = Chart(i, x, self.tangent_basis(x) if basis is None else basis, radius)
         self.charts.append(ch)
         key = self.c.key(x)
-        for j in self._index.query(key, radius + self.radius):
+        near = self._index.query(key, radius + self.radius)
+        # nearest first: their planes cut most, so later clips mostly find nothing to cut
+        near.sort(key=lambda j: float(np.linalg.norm(self.diff(x, self.charts[j].x))))
+        for j in near:
             self._link(i, j)
         self._index.add(key)
         return i
@@ -140,6 +148,8 @@ class Atlas:
         ci.neighbours.add(j)
         cj.neighbours.add(i)
         for a, b, dab in ((ci, cj, d), (cj, ci, -d)):
+            if a.closed:  # clipping a closed chart cannot change anything the search uses
+                continue
             s = a.basis.T @ dab
             ds = np.linalg.norm(s)
             if ds < 1e-12:
