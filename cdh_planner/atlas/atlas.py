@@ -12,7 +12,10 @@ A chart i is a point x_i on M, an orthonormal basis Phi_i of its tangent space, 
 r_i and a polytope P_i in tangent coordinates s. phi_i(s) = x_i + Phi_i s; psi_i(s) is its
 Newton projection onto M. New charts are made at the ball's boundary towards a polytope
 vertex outside the ball; the step halves where the manifold curves (distance to the tangent
-space or tangent-space angle too large, or Newton not converging).
+space or tangent-space angle too large, or Newton not converging), and the chart then takes
+that smaller radius so that its smaller neighbours can close it; radii grow back (a new
+chart gets twice the step that made it, up to r). A chart that reaches the variable domain's
+boundary is a frontier chart, its polytope cut where the boundary is crossed.
 """
 
 import numpy as np
