@@ -56,7 +56,8 @@ def assert_dense_feasible(robot, path, start, goal):
 
 @pytest.mark.parametrize("name,strategy", [("robot2_q1_q2", "astar"), ("robot2_q2_q3", "gbf"),
                                            ("robot1_qs2_qg", "gbf"),
-                                           ("robot2_q2_q3_sigma_free", "gbf")])
+                                           ("robot2_q2_q3_sigma_free", "gbf"),
+                                           ("robot2_q2_q3_free_flight", "gbf")])
 def test_table1_2d_queries_give_dense_feasible_paths(name, strategy):
     planner, pr, res = plan(PROBLEMS / f"{name}.yaml", strategy=strategy)
     assert res.success, res.message

@@ -34,6 +34,10 @@ class FreeTask:
     def coords(self, p, tau):
         return np.concatenate([np.atleast_2d(p), np.atleast_2d(tau)], axis=1)
 
+    def residual(self, p, tau):
+        """Every pose is on the free task: zeros (N,)."""
+        return np.zeros(np.atleast_2d(p).shape[0])
+
 
 @dataclass(frozen=True)
 class SliceTask:
