@@ -20,7 +20,7 @@ from .atlas.atlas import Atlas
 from .errors import InputError
 from .feasibility import evaluate
 from .manifold.constraint import TaskConstraint
-from .model.pose import quaternion_from_tau, rotation_angle_between, rotation_tt
+from .model.pose import quaternion_from_tau, rotation_angle_between, rotation_tt, wrap_angle
 from .model.task import PERIODIC, SliceTask, SphereTask
 from .search.search import STRATEGIES, AtlasSearch
 from .trajectory.path import PlannedPath
@@ -160,9 +160,10 @@ class Planner:
         while i < len(self.atlas.charts) and len(self.atlas.charts) < self.settings.max_charts:
             if deadline is not None and time.perf_counter() > deadline:
                 return False
-            ch = self.atlas.charts[i]
-            if ch.closed or self.atlas.expand(i) is None and ch.closed:
+            if self.atlas.charts[i].closed:
                 i += 1
+            else:
+                self.atlas.expand(i)
         return i >= len(self.atlas.charts)
 
     # ----- start and goal ----------------------------------------------------------------
@@ -295,8 +296,9 @@ class Planner:
 
 
 def _wrapped(d, periodic):
+    """Rows of task coordinates with the periodic columns wrapped to [-pi, pi)."""
     d = d.copy()
-    d[:, periodic] = (d[:, periodic] + np.pi) % (2 * np.pi) - np.pi
+    d[:, periodic] = wrap_angle(d[:, periodic])
     return d
 
 
@@ -324,7 +326,7 @@ def task_cost(robot, task, kind="auto"):
             na, nb = pa - c, pb - c
             arc = task.radius * math.atan2(np.linalg.norm(np.cross(na, nb)), float(na @ nb))
             if task.free_torsion:
-                arc += task.radius * abs(float((tb[2] - ta[2] + np.pi) % (2 * np.pi) - np.pi))
+                arc += task.radius * abs(float(wrap_angle(tb[2] - ta[2])))
             return arc
         return sphere
     if kind == "so3":

@@ -30,15 +30,13 @@ from dataclasses import dataclass
 from pathlib import Path
 from typing import Optional
 
-import yaml
-
 from ..errors import InputError
 from ..feasibility import evaluate
 from ..io.plots import DEFAULT_RANGES, FEASIBLE, Marker, SegmentOverlay, SliceGrid, SliceView, \
     compute_slice, plot_slice
 from ..io.poses import parse_angle, parse_length
 from ..model.pose import rotation_tt
-from ..model.robot import load_robot, ros_parameters
+from ..model.robot import load_robot, read_yaml, ros_parameters
 from ..model.task import POSE_NAMES, FreeTask, SliceTask, SphereTask, task_from_dict
 from ..trajectory.verify import DEFAULT_STEP_M, DEFAULT_STEP_RAD, SegmentCheck, check_task_motion
 
@@ -201,13 +199,7 @@ def _load_task_file(path):
 
 def task_in_yaml(path):
     """The task of a problem file (top-level ``task:``) or of a ROS parameters file."""
-    path = Path(path)
-    if not path.is_file():
-        raise InputError("--task-file", str(path), "file not found")
-    try:
-        doc = yaml.safe_load(path.read_text())
-    except yaml.YAMLError as exc:
-        raise InputError("--task-file", str(path), f"not valid YAML: {exc}") from None
+    doc = read_yaml(path, "--task-file")
     if isinstance(doc, dict) and "task" in doc:
         return task_from_dict(doc["task"])
     if isinstance(doc, dict) and any(isinstance(v, dict) and "ros__parameters" in v for v in doc.values()):

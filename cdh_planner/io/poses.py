@@ -66,7 +66,7 @@ def poses_from_obj(doc, where="poses"):
             raise InputError(where, None, "required key is missing")
         doc = doc["poses"]
     if not isinstance(doc, list):
-        raise InputError(where, _short(doc), "expected a list of poses")
+        raise InputError(where, short_repr(doc), "expected a list of poses")
     if not doc:
         raise InputError(where, doc, "empty pose list: give at least one pose")
     parsed = [pose_from_dict(d, f"{where}[{i}]") for i, d in enumerate(doc)]
@@ -79,7 +79,7 @@ def poses_from_obj(doc, where="poses"):
 def pose_from_dict(d, where):
     """One pose: (position (3,) m, quaternion (4,) with w >= 0, tau (3,) rad)."""
     if not isinstance(d, dict):
-        raise InputError(where, _short(d), "expected a mapping with 'position' and 'quaternion' or 'tau'")
+        raise InputError(where, short_repr(d), "expected a mapping with 'position' and 'quaternion' or 'tau'")
     unknown = sorted(set(d) - set(POSE_KEYS))
     if unknown:
         raise InputError(f"{where}.{unknown[0]}", d[unknown[0]],
@@ -88,7 +88,7 @@ def pose_from_dict(d, where):
         raise InputError(f"{where}.position", None, "required key is missing")
     has_q, has_tau = "quaternion" in d, "tau" in d
     if has_q == has_tau:
-        raise InputError(where, _short(d), "give exactly one of 'quaternion' or 'tau'")
+        raise InputError(where, short_repr(d), "give exactly one of 'quaternion' or 'tau'")
     p = number_list(f"{where}.position", d["position"], 3)
     if has_q:
         q = check_quaternion(number_list(f"{where}.quaternion", d["quaternion"], 4),
@@ -104,9 +104,9 @@ def pose_from_dict(d, where):
 def number_list(where, value, n):
     """A list of exactly ``n`` finite numbers (JSON NaN/Infinity and booleans rejected)."""
     if not isinstance(value, (list, tuple)):
-        raise InputError(where, _short(value), f"expected a list of {n} numbers")
+        raise InputError(where, short_repr(value), f"expected a list of {n} numbers")
     if len(value) != n:
-        raise InputError(where, _short(value), f"expected {n} numbers, got {len(value)}")
+        raise InputError(where, short_repr(value), f"expected {n} numbers, got {len(value)}")
     for i, x in enumerate(value):
         if isinstance(x, bool) or not isinstance(x, (int, float)):
             raise InputError(f"{where}[{i}]", x, "expected a number")
@@ -190,7 +190,7 @@ def _plain_number(s):
     return float(s)
 
 
-def _short(value, limit=80):
+def short_repr(value, limit=80):
     """A value for an error message, abbreviated when it is long."""
     text = repr(value)
     return value if len(text) <= limit else text[: limit - 3] + "..."

@@ -15,14 +15,13 @@ from dataclasses import dataclass, fields, replace
 from pathlib import Path
 
 import numpy as np
-import yaml
 
 from ..errors import InputError
-from ..model.robot import load_robot
+from ..model.robot import load_robot, read_yaml
 from ..model.task import SphereTask, task_from_dict
 from ..planner import COSTS, PlannerSettings, Pose
 from ..search.search import STRATEGIES
-from .poses import number_list, pose_from_dict
+from .poses import number_list, pose_from_dict, short_repr
 
 TOP_KEYS = ("robot", "task", "cost", "strategy", "planner", "start", "goal", "description")
 SETTING_KEYS = ("radius", "timeout_s", "max_charts", "margin_floor", "complete",
@@ -43,18 +42,13 @@ class Problem:
 def load_problem(path):
     """Read and validate a problem file."""
     path = Path(path)
-    if not path.is_file():
-        raise InputError("problem", str(path), "file not found")
-    try:
-        doc = yaml.safe_load(path.read_text())
-    except yaml.YAMLError as exc:
-        raise InputError("problem", str(path), f"not valid YAML: {exc}") from None
+    doc = read_yaml(path, "problem")
     return problem_from_dict(doc, base_dir=path.parent, source=str(path))
 
 
 def problem_from_dict(doc, base_dir=".", source=""):
     if not isinstance(doc, dict):
-        raise InputError("problem", _short(doc), "expected a mapping with robot, task, start, goal")
+        raise InputError("problem", short_repr(doc), "expected a mapping with robot, task, start, goal")
     unknown = sorted(set(doc) - set(TOP_KEYS))
     if unknown:
         raise InputError(unknown[0], doc[unknown[0]], f"unknown key (allowed: {', '.join(TOP_KEYS)})")
@@ -81,7 +75,7 @@ def problem_from_dict(doc, base_dir=".", source=""):
 
 def settings_from_dict(d, where):
     if not isinstance(d, dict):
-        raise InputError(where, _short(d), "expected a mapping of planner settings")
+        raise InputError(where, short_repr(d), "expected a mapping of planner settings")
     unknown = sorted(set(d) - set(SETTING_KEYS))
     if unknown:
         raise InputError(f"{where}.{unknown[0]}", d[unknown[0]],
@@ -123,7 +117,3 @@ def _choice(key, value, allowed):
         raise InputError(key, value, f"expected one of {', '.join(allowed)}")
     return value
 
-
-def _short(value, limit=80):
-    text = repr(value)
-    return text if len(text) <= limit else text[:limit] + "..."

@@ -61,15 +61,21 @@ def combine_contact_ellipsoid(E_w, E_c):
     return 0.5 * E_w @ np.linalg.solve(E_w + E_c, E_c)
 
 
-def load_robot(path):
-    """Read a robot from a ROS 2 parameters YAML file; raise InputError on bad content."""
+def read_yaml(path, field):
+    """The parsed YAML file at ``path``; InputError naming ``field`` if it is missing or
+    not YAML."""
     path = Path(path)
     if not path.is_file():
-        raise InputError("robot", str(path), "file not found")
+        raise InputError(field, str(path), "file not found")
     try:
-        doc = yaml.safe_load(path.read_text())
+        return yaml.safe_load(path.read_text())
     except yaml.YAMLError as exc:
-        raise InputError("robot", str(path), f"not valid YAML: {exc}") from None
+        raise InputError(field, str(path), f"not valid YAML: {exc}") from None
+
+
+def load_robot(path):
+    """Read a robot from a ROS 2 parameters YAML file; raise InputError on bad content."""
+    doc = read_yaml(path, "robot")
     params = ros_parameters(doc, str(path))
     if "robot" not in params:
         raise InputError("robot", str(path), "no 'robot:' section under ros__parameters")
