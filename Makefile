@@ -35,7 +35,9 @@ demo: venv
 test: venv
 	$(PY) -m pytest
 
+# Benchmark-only dependencies (OMPL for benchmarks/vs_ompl.py): only `make bench` installs them.
 bench: venv
+	$(PY) -m pip install -r benchmarks/requirements.txt
 	@set -e; shopt -s nullglob; files=(benchmarks/*.py); \
 	if [ $${#files[@]} -eq 0 ]; then echo "no benchmarks/*.py"; fi; \
 	for f in "$${files[@]}"; do echo "== $$f"; $(PY) "$$f"; done

@@ -4,7 +4,9 @@
     result = planner.plan(start, goal, progress=callback)   # start/goal: Pose
 
 ``plan`` never raises for a well-formed request that cannot be planned: the answer is a
-PlanResult with ``success`` False and a ``reason`` (one of REASONS) and ``message``.
+PlanResult with ``success`` False and a ``reason`` (a ``Status``) and ``message``.
+Before any atlas is built the direct motion from start to goal is tried (a dense
+closed-form check): a safe one is the answer, in milliseconds.
 Malformed input (NaN, wrong shapes) raises InputError naming the field. The atlas built
 by one query is kept and reused by the next (multi-query) as long as robot and task stay.
 """
@@ -16,26 +18,22 @@ from typing import Callable, Optional
 
 import numpy as np
 
+from threadpoolctl import threadpool_limits
+
 from .atlas.atlas import Atlas
 from .errors import InputError
 from .feasibility import evaluate
 from .manifold.constraint import TaskConstraint
-from .model.pose import quaternion_from_tau, rotation_angle_between, rotation_tt, wrap_angle
-from .model.task import PERIODIC, SliceTask, SphereTask
-from .search.search import STRATEGIES, AtlasSearch
+from .model.pose import (quaternion_from_tau, rotation_angle_between, rotation_tt,
+                         tau_from_rotation, wrap_angle)
+from .model.task import PERIODIC, FreeTask, SliceTask, SphereTask
+from .search.search import MB, STRATEGIES, Stop, run
+from .status import Status
 from .trajectory.path import PlannedPath
 from .trajectory.timing import time_path
-from .trajectory.verify import check_motion
+from .trajectory.verify import SlerpPath, TaskLinePath, check_motion, check_path
 
-REASONS = (
-    "ok",                # success
-    "start_infeasible",  # start pose not wrench-feasible (or off the task)
-    "goal_infeasible",   # goal pose not wrench-feasible (or off the task)
-    "no_path",           # the atlas component of the start is exhausted: no path at this resolution
-    "timeout",           # settings.timeout_s elapsed
-    "chart_limit",       # settings.max_charts reached
-    "invalid",           # request inconsistent with the task (e.g. off the sphere)
-)
+REASONS = tuple(Status)  # kept for callers that list the reasons
 
 
 @dataclass(frozen=True)
@@ -49,15 +47,17 @@ class Pose:
 @dataclass
 class PlannerSettings:
     """``radius``: chart radius in the atlas' scaled units (about radians of platform
-    motion); ``timeout_s`` s; ``max_charts``; ``complete``: keep growing the atlas to the
-    whole component after reaching the goal; winch limits for the time parameterisation
-    (m/s, m/s^2)."""
+    motion), 0 for the default of the task's dimension (``default_radius``); ``timeout_s``
+    s; ``max_charts``; ``max_memory_mb``: the atlas' memory (MiB); ``complete``: keep
+    growing the atlas to the whole component after reaching the goal; winch limits for the
+    time parameterisation (m/s, m/s^2)."""
 
-    strategy: str = "astar"
+    strategy: str = "auto"  # one of STRATEGIES; auto: astar up to 3-D, gbf above
     cost: str = "auto"  # one of COSTS; auto: the paper's choice for the task
-    radius: float = 0.1
+    radius: float = 0.0
     timeout_s: float = 60.0
     max_charts: int = 100_000
+    max_memory_mb: float = 1024.0
     complete: bool = False
     margin_floor: float = 1e-3
     max_cable_speed: float = 0.05
@@ -67,7 +67,7 @@ class PlannerSettings:
 @dataclass
 class PlanResult:
     success: bool
-    reason: str
+    reason: Status
     message: str
     strategy: str
     n: int  # manifold dimension
@@ -83,10 +83,24 @@ ProgressCallback = Callable[[dict], None]  # called with {"charts": int, "time_s
 
 COSTS = ("auto", "so3", "great_circle", "se3")
 TASK_TOL = 1e-6  # m / rad: how far a start or goal may be off the task's constraint
-EDGE_RETRIES = 20  # chart-graph edges found not to carry a path before giving up
 SMOOTHING_ROUNDS = 12
 DENSIFY_ROUNDS = 10
-POINT_SPACING = 0.25  # path points per edge: one per this fraction of the chart radius
+CHORD_SAMPLES = 9  # poses probed between two link points before the dense check
+COARSE_SAMPLES = 17  # a direct motion is first checked at these few points (a cheap "no")
+DIRECT_STEP_M, DIRECT_STEP_RAD = 5e-3, np.deg2rad(1.0)  # waypoint spacing on a direct motion
+
+
+def default_strategy(dim):
+    """A* (shortest on the chart graph) up to 3-D; Greedy Best-First above, where A* must
+    close charts of dozens of neighbours each (6-D free flight: measured in the README)."""
+    return "astar" if dim <= 3 else "gbf"
+
+
+def default_radius(dim):
+    """Chart radius (scaled units) for a manifold of dimension ``dim``: 0.1 up to 3-D
+    (the paper's resolution), 0.5 above (6-D free flight: 5x fewer charts per unit of
+    motion in each direction, measured in the README's performance section)."""
+    return 0.1 if dim <= 3 else 0.5
 
 
 class Planner:
@@ -99,23 +113,30 @@ class Planner:
         _check_settings(self.settings)
         s = self.settings
         self.constraint = TaskConstraint(robot, task, margin_floor=s.margin_floor)
-        self.atlas = Atlas(self.constraint, radius=s.radius)
+        self.radius = s.radius or default_radius(self.constraint.dim)
+        self.strategy = default_strategy(self.constraint.dim) if s.strategy == "auto" else s.strategy
+        self.atlas = Atlas(self.constraint, radius=self.radius)
         self.pose_cost = task_cost(robot, task, self.settings.cost)
         pose = self.constraint.pose
         self.cost = lambda xa, xb: self.pose_cost(*pose(xa), *pose(xb))
         self._edge_costs = {}  # (i, j), i < j -> task cost between the chart centres
-        self._edges = {}  # (i, j), i < j -> points on M from chart i to chart j (multi-query)
 
     # ----- the query -------------------------------------------------------------------
-    def plan(self, start: Pose, goal: Pose, progress: Optional[ProgressCallback] = None):
+    def plan(self, start: Pose, goal: Pose, progress: Optional[ProgressCallback] = None,
+             cancel=None):
+        """A PlanResult from ``start`` to ``goal``. ``cancel``: an object with ``is_set()``
+        (threading.Event) that stops the search (answer ``canceled``)."""
+        with threadpool_limits(limits=1, user_api="blas"):  # many small solves: threads only hurt
+            return self._plan(start, goal, progress, cancel)
+
+    def _plan(self, start, goal, progress, cancel):
         t0 = time.perf_counter()
         s = self.settings
         c = self.constraint
 
-        def answer(ok, reason, message, charts=None, cost=math.nan, path=None, **stats):
-            return PlanResult(ok, reason, message, s.strategy, c.dim, c.n_vars,
-                              len(self.atlas.charts) if charts is None else charts,
-                              time.perf_counter() - t0, cost, path, stats)
+        def answer(ok, reason, message, cost=math.nan, path=None, **stats):
+            return PlanResult(ok, reason, message, self.strategy, c.dim, c.n_vars,
+                              len(self.atlas.charts), time.perf_counter() - t0, cost, path, stats)
 
         points = {}
         for label, pose in (("start", start), ("goal", goal)):
@@ -123,35 +144,33 @@ class Planner:
             if x is None:
                 return answer(False, why[0], why[1])
             points[label] = x
-        i_start, i_goal = self._chart_at(points["start"]), self._chart_at(points["goal"])
-        deadline = t0 + s.timeout_s
-        blocked = set()
-        for _ in range(EDGE_RETRIES):
-            search = AtlasSearch(self.atlas, self.cost, s.strategy, s.max_charts, deadline,
-                                 progress, frozenset(blocked), self._edge_costs)
-            out = search.run(i_start, i_goal)
-            if out.reason != "reached":
-                return answer(False, *_failure(out.reason, len(self.atlas.charts), s),
-                              expanded=out.expanded)
-            xs, bad = self._chart_path_points(out.charts)
-            if bad is None:
-                break
-            blocked.add(bad)
+        ys = self._task_coords([points["start"], points["goal"]])
+        stop = Stop(t0 + s.timeout_s, s.max_charts, int(s.max_memory_mb * MB), cancel)
+        if self._direct_ok(ys[0], ys[1]):
+            y, charts, direct = self._direct_points(ys[0], ys[1]), 0, True
         else:
-            return answer(False, "no_path", f"{EDGE_RETRIES} chart links failed to carry a "
-                                            "path; try a smaller radius")
+            out = run(self.atlas, points["start"], points["goal"], self.cost, stop, self.strategy,
+                      self._direct_x, progress, self._edge_costs, self._link_ok)
+            if out.status != Status.OK:
+                return answer(False, *_failure(out.status, len(self.atlas.charts), s, self.radius),
+                              expanded=out.expanded)
+            y, charts, direct = self._route_coords(out), len(out.charts), False
         if s.complete:
-            self.grow_complete(deadline)
-        y, verified = self._densify(self._smooth(self._task_coords(xs)))
-        path = self._planned_path(y, verified)
+            self.atlas.chart_at(points["start"])
+            self.grow_complete(stop.deadline)
+        for y in (self._smooth(y), y):  # smoothing can cut a corner through a thin gap of C
+            y, verified = self._densify(y)
+            path = self._planned_path(y, verified)
+            if path is not None:
+                break
         if path is None:
-            return answer(False, "no_path", "the path could not be made dense-feasible "
-                                            "(a bug: please report the problem file)")
+            return answer(False, Status.NO_PATH, "the path could not be made dense-feasible "
+                                                 "(a bug: please report the problem file)")
         cost = float(sum(self.pose_cost(path.p[k], path.tau[k], path.p[k + 1], path.tau[k + 1])
                          for k in range(len(path) - 1)))
-        return answer(True, "ok", f"path of {len(path)} waypoints over "
-                                  f"{len(out.charts)} charts", cost=cost, path=path,
-                      expanded=out.expanded, chart_path=len(out.charts))
+        how = "the direct motion" if direct else f"{charts} charts"
+        return answer(True, Status.OK, f"path of {len(path)} waypoints over {how}", cost=cost,
+                      path=path, chart_path=charts, direct=direct)
 
     def grow_complete(self, deadline=None):
         """Grow every open chart until the atlas covers the start's component (or the
@@ -165,6 +184,68 @@ class Planner:
             else:
                 self.atlas.expand(i)
         return i >= len(self.atlas.charts)
+
+    # ----- direct motions -----------------------------------------------------------------
+    def _direct_motion(self, ya, yb):
+        """The direct motion between task coordinates: position linear and orientation slerp
+        in free flight (what a controller executes), a straight line in a task's coordinates
+        otherwise (slerp would leave the task)."""
+        ends = np.array([ya, yb])
+        if isinstance(self.task, FreeTask):
+            p, tau = self.task.pose(ends)
+            return SlerpPath(p, quaternion_from_tau(tau))
+        per = self._periodic_mask()
+        ends[1, per] = ends[0, per] + wrap_angle(ends[1, per] - ends[0, per])
+        return TaskLinePath(self.task, ends)
+
+    def _direct_ok(self, ya, yb):
+        """Is the direct motion ya -> yb dense-feasible with margin above the floor? A few
+        points first (most unsafe motions fail there), then the dense check."""
+        motion = self._direct_motion(ya, yb)
+        for n in (COARSE_SAMPLES, 8 * COARSE_SAMPLES):
+            s = np.linspace(0.0, 1.0, n)
+            p, R = motion(np.zeros(n, dtype=int), s)
+            if evaluate(self.robot, p, R=R).margin.min() < self.settings.margin_floor:
+                return False
+        seg = check_path(self.robot, motion)[0]
+        return seg.feasible and seg.unresolved == 0 and seg.worst.margin >= self.settings.margin_floor
+
+    def _probe(self, ya, yb, n):
+        """Are n evenly spaced poses of the direct motion ya -> yb all feasible?"""
+        motion = self._direct_motion(ya, yb)
+        p, R = motion(np.zeros(n, dtype=int), np.linspace(0.0, 1.0, n))
+        return bool(np.all(evaluate(self.robot, p, R=R).margin > 0))
+
+    def _direct_x(self, xa, xb):
+        ya, yb = self._task_coords([xa, xb])
+        return self._direct_ok(ya, yb)
+
+    def _direct_points(self, ya, yb):
+        """Task coordinates along the direct motion ya -> yb, DIRECT_STEP_M / _RAD apart."""
+        motion = self._direct_motion(ya, yb)
+        dp, da = motion.speeds()
+        n = int(max(2, math.ceil(max(dp[0] / DIRECT_STEP_M, da[0] / DIRECT_STEP_RAD)) + 1))
+        p, R = motion(np.zeros(n, dtype=int), np.linspace(0.0, 1.0, n))
+        y = self.task.coords(p, tau_from_rotation(R, phi_hint=float(ya[3]) if len(ya) == 6 else 0.0))
+        y[0], y[-1] = ya, yb
+        return y
+
+    def _link_ok(self, xs):
+        """Do the points joining two charts make a dense-feasible motion once densified?
+        (Large charts can link two sheets of M across a thin gap of C.) A few poses between
+        each pair first: a gap usually shows there."""
+        y = self._task_coords(xs)
+        if not all(self._probe(a, b, CHORD_SAMPLES) for a, b in zip(y, y[1:])):
+            return False
+        return self._densify(y)[1]
+
+    def _route_coords(self, out):
+        """Task coordinates of the search's points, direct motions sampled on the way."""
+        y = self._task_coords(out.points)
+        parts = [y[:1]]
+        for k in range(len(y) - 1):
+            parts.append(self._direct_points(y[k], y[k + 1])[1:] if k in out.direct else y[k + 1:k + 2])
+        return np.concatenate(parts)
 
     # ----- start and goal ----------------------------------------------------------------
     def _lift(self, label, pose):
@@ -186,41 +267,6 @@ class Planner:
                           f"boundary of C than the planner's margin floor "
                           f"({self.settings.margin_floor:g}): {_describe(p, tau)}")
         return x, None
-
-    def _chart_at(self, x):
-        for j in self.atlas.closest(x):
-            if np.linalg.norm(self.atlas.diff(self.atlas.charts[j].x, x)) < 1e-9:
-                return j
-        return self.atlas.add_chart(x)
-
-    # ----- chart path -> points on M ---------------------------------------------------
-    def _chart_path_points(self, charts):
-        """Points on M through the chart centres; or the first edge (i, j) that does not
-        carry a path (Newton failed, the points left the domain or jumped)."""
-        xs = [self.atlas.charts[charts[0]].x]
-        if len(charts) == 1:  # start == goal: a path that stays
-            return [xs[0], xs[0].copy()], None
-        for a, b in zip(charts, charts[1:]):
-            pts = self._edge_points(min(a, b), max(a, b))
-            if pts is None:
-                return None, (min(a, b), max(a, b))
-            xs.extend(pts[1:] if a < b else pts[::-1][1:])
-        return xs, None
-
-    def _edge_points(self, a, b):
-        """Points on M from chart a's centre to chart b's (cached: charts never move)."""
-        if (a, b) in self._edges:
-            return self._edges[(a, b)]
-        at = self.atlas
-        gap = np.linalg.norm(at.diff(at.charts[a].x, at.charts[b].x))
-        n = max(3, int(math.ceil(gap / (POINT_SPACING * at.radius))) + 1)
-        pts = at.segment(a, b, n)
-        ok = pts is not None and all(at.in_domain(x) for x in pts)
-        if ok:
-            steps = [np.linalg.norm(at.diff(u, v)) for u, v in zip(pts, pts[1:])]
-            ok = max(steps) <= 3.0 * gap / (n - 1) + 1e-12
-        self._edges[(a, b)] = pts if ok else None
-        return self._edges[(a, b)]
 
     # ----- smoothing and densification in task coordinates ------------------------------
     # M is the graph of the (closed-form) lift over the feasible poses of the task, so a
@@ -340,12 +386,14 @@ def task_cost(robot, task, kind="auto"):
 
 # ----- small helpers -------------------------------------------------------------------------
 def _check_settings(s):
-    if s.strategy not in STRATEGIES:
-        raise InputError("strategy", s.strategy, f"expected one of {', '.join(STRATEGIES)}")
-    for name in ("radius", "timeout_s", "margin_floor", "max_cable_speed", "max_cable_accel"):
+    if s.strategy not in ("auto",) + STRATEGIES:
+        raise InputError("strategy", s.strategy, f"expected one of auto, {', '.join(STRATEGIES)}")
+    for name in ("timeout_s", "margin_floor", "max_cable_speed", "max_cable_accel", "max_memory_mb"):
         v = getattr(s, name)
         if not (isinstance(v, (int, float)) and math.isfinite(v) and v > 0):
             raise InputError(name, v, "must be a positive finite number")
+    if not (isinstance(s.radius, (int, float)) and math.isfinite(s.radius) and s.radius >= 0):
+        raise InputError("radius", s.radius, "must be a positive finite number (0: by the task's dimension)")
     if s.margin_floor >= 1:
         raise InputError("margin_floor", s.margin_floor, "must be below 1 (a normalised margin)")
     if not (isinstance(s.max_charts, int) and s.max_charts >= 2):
@@ -369,10 +417,15 @@ def _describe(p, tau):
             f"tau = [{', '.join(f'{v:.4f}' for v in tau)}] rad")
 
 
-def _failure(reason, charts, s):
-    if reason == "exhausted":
-        return "no_path", (f"no path at resolution r = {s.radius:g}: the start's connected "
-                           f"component is exhausted after {charts} charts")
-    if reason == "timeout":
-        return "timeout", f"no path found within {s.timeout_s:g} s ({charts} charts)"
-    return "chart_limit", f"no path found within the chart limit ({s.max_charts} charts)"
+def _failure(status, charts, s, radius):
+    """(status, message) of a search that ended without a path."""
+    messages = {
+        Status.NO_PATH: f"no path at resolution r = {radius:g}: a connected component of an end "
+                        f"is exhausted after {charts} charts",
+        Status.TIMEOUT: f"no path found within {s.timeout_s:g} s ({charts} charts)",
+        Status.CHART_LIMIT: f"no path found within the chart limit ({s.max_charts} charts)",
+        Status.RESOURCE_LIMIT: f"no path found within the memory limit ({s.max_memory_mb:g} MiB, "
+                               f"{charts} charts)",
+        Status.CANCELED: f"canceled after {charts} charts",
+    }
+    return status, messages[status]

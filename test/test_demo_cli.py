@@ -103,7 +103,7 @@ def test_demo_ros_story(full_run):
     assert "DIFFERS" not in text and "FAILED" not in text and "skipped" not in text
     ros = text[text.index("== 5. The ROS 2 node"):]
     assert re.search(r"node /cdh_planner ready in [\d.]+ s: base_frame cdh_base, task.type "
-                     r"sphere, planner.strategy astar", ros)
+                     r"sphere, planner.strategy auto", ros)
     for leg in ("q_1 -> q_2", "q_2 -> q_3"):
         part = ros[ros.index(f"call ~/plan: {leg}"):]
         planned = re.search(r"planned in ([\d.]+) s \((\d+) charts, astar\): (\d+) waypoints, "

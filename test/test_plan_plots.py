@@ -97,7 +97,7 @@ def test_axis_range_and_zoom():
 @pytest.fixture(scope="module")
 def query():
     problem = load_problem(ROOT / "config/problems/robot1_qs2_qg.yaml")
-    planner = Planner(problem.robot, problem.task, replace(problem.settings, strategy="gbf"))
+    planner = Planner(problem.robot, problem.task, replace(problem.settings, strategy="astar"))
     result = planner.plan(problem.start, problem.goal)
     assert result.success
     return planner, problem, result

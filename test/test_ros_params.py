@@ -44,7 +44,7 @@ def test_robot2_task_and_defaults():
     config = node_config(ROBOT2_PARAMS)
     assert config.task == task_in_yaml(ROBOT2)
     assert config.base_frame == "cdh_base"
-    assert config.settings.strategy == "astar" and config.stream_rate_hz == 50.0
+    assert config.settings.strategy == "auto" and config.stream_rate_hz == 50.0
 
 
 def test_every_parameter_has_a_description_and_architecture_names_exist():

@@ -131,7 +131,7 @@ def test_busy_is_refused_at_once_and_progress_is_published(ros):
 # --------------------------------------------------------------------------- parameters
 
 @pytest.mark.parametrize("name,value,reason", [
-    ("planner.strategy", "dijkstra", "planner.strategy = 'dijkstra': expected one of astar, gbf"),
+    ("planner.strategy", "dijkstra", "planner.strategy = 'dijkstra': expected one of auto, astar, gbf"),
     ("task.radius", -0.1, "task.radius"),
     ("stream_rate_hz", 5000.0, "stream_rate_hz"),
     ("robot.length_min", [0.2] * 5, "robot.length_min"),

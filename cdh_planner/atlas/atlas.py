@@ -9,53 +9,63 @@ Knows nothing of robots. The constraint gives (duck-typed, like OMPL's Constrain
                                      spatial index (|key(x) - key(y)| <= |x - y|)
 
 A chart i is a point x_i on M, an orthonormal basis Phi_i of its tangent space, a radius
-r_i and a polytope P_i in tangent coordinates s. phi_i(s) = x_i + Phi_i s; psi_i(s) is its
+r_i and a domain P_i in tangent coordinates s (``domain.py``: an exact polytope for n <= 3,
+half-spaces and sampled frontier directions above, so that no chart grows without bound). phi_i(s) = x_i + Phi_i s; psi_i(s) is its
 Newton projection onto M. New charts are made at the ball's boundary towards a polytope
 vertex outside the ball; the step halves where the manifold curves (distance to the tangent
 space or tangent-space angle too large, or Newton not converging), and the chart then takes
 that smaller radius so that its smaller neighbours can close it; radii grow back (a new
 chart gets twice the step that made it, up to r). A chart that reaches the variable domain's
-boundary is a frontier chart, its polytope cut where the boundary is crossed.
+boundary is a frontier chart, its domain cut where the boundary is crossed.
+
+For a search that samples (RRT-like) the atlas also gives ``sample`` (a point of M in a
+chart's domain), ``owner`` (the chart whose domain holds a point) and ``traverse`` (a
+discrete geodesic between two points of M). ``nbytes`` counts the memory the atlas holds
+(chart centres, bases, domains, cached edge points): the search bounds it.
 """
+
+import math
 
 import numpy as np
 from scipy.spatial import cKDTree
 
-from .polytope import Polytope
+from .domain import make_domain
 
 TWO_PI = 2.0 * np.pi
 
 
 class Chart:
-    """A chart: centre ``x`` (on M), tangent ``basis`` (n_vars, dim), ``radius``, polytope."""
+    """A chart: centre ``x`` (on M), tangent ``basis`` (n_vars, dim), ``domain``."""
 
-    __slots__ = ("x", "basis", "radius", "polytope", "neighbours", "frontier", "index", "_closed")
+    __slots__ = ("x", "basis", "domain", "neighbours", "frontier", "index")
 
-    def __init__(self, index, x, basis, radius):
+    def __init__(self, index, x, basis, domain):
         self.index = index
         self.x = x
         self.basis = basis
-        self.radius = radius
-        self.polytope = Polytope(basis.shape[1], radius)
+        self.domain = domain
         self.neighbours = set()
         self.frontier = False  # touches the domain boundary or a place Newton cannot reach
-        self._closed = False
+
+    @property
+    def radius(self):
+        return self.domain.radius
 
     @property
     def closed(self):
-        """No polytope vertex outside the ball. Monotone: clipping only removes, and only
-        open charts grow (and shrink), so once closed a chart stays closed."""
-        if not self._closed:
-            self._closed = self.polytope.outside_vertices(self.radius).size == 0
-        return self._closed
+        """No frontier left. Monotone: clipping only removes, and only open charts grow
+        (and shrink), so once closed a chart stays closed."""
+        return self.domain.closed
 
 
 class Atlas:
     """A growing atlas. ``radius`` is the chart radius r in the constraint's scaled units."""
 
     def __init__(self, constraint, radius=0.1, epsilon=0.25, max_angle=0.5, min_radius_ratio=1 / 16,
-                 newton_tol=1e-9, newton_iters=12):
+                 newton_tol=1e-9, newton_iters=12, exact_max_dim=3, directions=384):
         self.c = constraint
+        self.exact_max_dim = exact_max_dim
+        self.directions = directions
         self.radius = float(radius)
         self.epsilon = epsilon
         self.cos_max_angle = np.cos(max_angle)
@@ -65,6 +75,8 @@ class Atlas:
         self.charts = []
         self.periodic = np.asarray(constraint.periodic, dtype=bool)
         self._index = _KeyIndex()
+        self._edges = {}  # (i, j), i < j -> points on M from chart i to chart j, or None
+        self.nbytes = 0
 
     # ----- geometry --------------------------------------------------------------------
     def diff(self, x, y):
@@ -112,7 +124,7 @@ class Atlas:
                 if not np.all(np.isfinite(step)):
                     return None
                 x = x - step
-        F, _ = self.c.residual_and_jacobian(x)
+            F, _ = self.c.residual_and_jacobian(x)  # diverged iterates overflow: quietly
         ok = np.all(np.isfinite(F)) and np.max(np.abs(F)) < 1e3 * self.newton_tol
         return x if ok else None
 
@@ -132,8 +144,10 @@ class Atlas:
         x = self.wrap(np.asarray(x, dtype=float))
         radius = self.radius if radius is None else radius
         i = len(self.charts)
-        ch = Chart(i, x, self.tangent_basis(x) if basis is None else basis, radius)
+        basis = self.tangent_basis(x) if basis is None else basis
+        ch = Chart(i, x, basis, make_domain(basis.shape[1], radius, self.exact_max_dim, self.directions))
         self.charts.append(ch)
+        self.nbytes += x.nbytes + basis.nbytes + ch.domain.nbytes + 64 * 8
         key = self.c.key(x)
         near = self._index.query(key, radius + self.radius)
         # nearest first: their planes cut most, so later clips mostly find nothing to cut
@@ -159,17 +173,22 @@ class Atlas:
                 continue
             beta = (ds * ds + a.radius ** 2 - b.radius ** 2) / (2.0 * ds)
             # keep a core around the centre: a chart never loses its own centre
-            a.polytope.clip(s / ds, max(beta, 0.05 * a.radius))
+            self._clip(a, s / ds, max(beta, 0.05 * a.radius))
 
-    def expand(self, i):
-        """One growth step from chart i. Returns the new chart's index, or None if no chart
+    def _clip(self, ch, a, beta):
+        before = ch.domain.nbytes
+        ch.domain.clip(a, beta)
+        self.nbytes += ch.domain.nbytes - before
+
+    def expand(self, i, toward=None):
+        """One growth step from chart i, on the frontier direction best aligned with the
+        point ``toward`` (if given). Returns the new chart's index, or None if no chart
         was made (the chart is closed, or the chosen direction was closed off)."""
         ch = self.charts[i]
-        out = ch.polytope.outside_vertices(ch.radius)
-        if out.size == 0:
+        t = None if toward is None else ch.basis.T @ self.diff(ch.x, toward)
+        u = ch.domain.frontier(t)
+        if u is None:
             return None
-        v = ch.polytope.vertices[out[0]]
-        u = v / np.linalg.norm(v)
         step = ch.radius
         while step >= self.min_radius * (1 - 1e-9):
             x_new = self.psi(i, step * u)
@@ -177,30 +196,32 @@ class Atlas:
             if basis is not None and not self.in_domain(x_new):
                 # the domain boundary (or the margin floor) is crossed: this chart ends there
                 ch.frontier = True
-                ch.polytope.clip(u, max(self._inside_fraction(ch.x, x_new) * step, 0.05 * ch.radius))
+                self._clip(ch, u, max(self._inside_fraction(ch.x, x_new) * step, 0.05 * ch.radius))
                 return None
             if basis is not None:
                 if step < ch.radius * (1 - 1e-9):
                     self.shrink(i, step)
                 j = self.add_chart(x_new, radius=min(self.radius, 2.0 * step), basis=basis)
-                if ch.polytope.vertices.shape[0] and np.any(np.all(np.isclose(ch.polytope.vertices, v), axis=1)):
-                    ch.polytope.clip(u, ch.radius)
+                ch.domain.drop(u)
                 return j
             step *= 0.5
         ch.frontier = True
-        ch.polytope.clip(u, ch.radius)
+        self._clip(ch, u, ch.radius)
+        ch.domain.drop(u)
         return None
 
     def shrink(self, i, radius):
-        """The manifold curves too much for chart i's radius: make its ball (and box) the
-        radius at which a new chart could be made, so that small neighbours can close it."""
+        """The manifold curves too much for chart i's radius: make its ball the radius at
+        which a new chart could be made, so that small neighbours can close it."""
         ch = self.charts[i]
-        ch.radius = radius
-        for k in range(ch.basis.shape[1]):
-            e = np.zeros(ch.basis.shape[1])
-            e[k] = 1.0
-            ch.polytope.clip(e, radius)
-            ch.polytope.clip(-e, radius)
+        before = ch.domain.nbytes
+        ch.domain.set_radius(radius)
+        self.nbytes += ch.domain.nbytes - before
+        for j in list(ch.neighbours):  # balls that no longer overlap are no longer linked
+            other = self.charts[j]
+            if np.linalg.norm(self.diff(ch.x, other.x)) >= radius + other.radius:
+                ch.neighbours.discard(j)
+                other.neighbours.discard(i)
 
     def _inside_fraction(self, x0, x1):
         """Fraction of the chord x0 -> x1 (x0 inside the domain) before it leaves the domain."""
@@ -240,6 +261,92 @@ class Atlas:
                 return None
             pts.append(x)
         return pts
+
+    def edge_points(self, a, b, spacing=0.25):
+        """Points on M from chart a's centre to chart b's, about ``spacing`` chart radii
+        apart (cached: charts never move); None if the link does not carry a path (Newton
+        failed, a point left the domain, or the points jumped)."""
+        key = (min(a, b), max(a, b))
+        if key not in self._edges:
+            self._edges[key] = self._edge_points(*key, spacing)
+            if self._edges[key] is not None:
+                self.nbytes += sum(x.nbytes for x in self._edges[key])
+        pts = self._edges[key]
+        return None if pts is None else (pts if a < b else pts[::-1])
+
+    def _edge_points(self, a, b, spacing):
+        gap = np.linalg.norm(self.diff(self.charts[a].x, self.charts[b].x))
+        n = max(3, int(math.ceil(gap / (spacing * self.radius))) + 1)
+        pts = self.segment(a, b, n)
+        if pts is None or not all(self.in_domain(x) for x in pts):
+            return None
+        steps = [np.linalg.norm(self.diff(u, v)) for u, v in zip(pts, pts[1:])]
+        return pts if max(steps) <= 3.0 * gap / (n - 1) + 1e-12 else None
+
+    def unlink(self, i, j):
+        """Charts i and j are no longer neighbours (their link was found not to carry a path)."""
+        self.charts[i].neighbours.discard(j)
+        self.charts[j].neighbours.discard(i)
+        self._edges.pop((min(i, j), max(i, j)), None)
+
+    def chart_at(self, x):
+        """The chart centred at x (a point on M), made if there is none."""
+        for j in self.closest(x):
+            if np.linalg.norm(self.diff(self.charts[j].x, x)) < 1e-9:
+                return j
+        return self.add_chart(x)
+
+    # ----- what a sampling search needs ---------------------------------------------------
+    def owner(self, x):
+        """The chart whose domain holds x (nearest centre first), or None."""
+        near = self.closest(x, k_radius=2.0 * self.radius)
+        near.sort(key=lambda j: float(np.linalg.norm(self.diff(self.charts[j].x, x))))
+        for j in near:
+            if self.charts[j].domain.contains(self.coordinates(j, x))[0]:
+                return j
+        return None
+
+    def sample(self, i, rng, tries=32):
+        """A random point of M in chart i's domain (uniform in tangent coordinates), or
+        None if ``tries`` draws all fell outside it or Newton failed."""
+        ch = self.charts[i]
+        n = ch.basis.shape[1]
+        g = rng.standard_normal((tries, n))
+        s = g / np.linalg.norm(g, axis=1, keepdims=True) * ch.radius * rng.random((tries, 1)) ** (1.0 / n)
+        for si in s[ch.domain.contains(s)]:
+            x = self.psi(i, si)
+            if x is not None and self.in_domain(x):
+                return x
+        return None
+
+    def traverse(self, x_a, x_b, step=None, max_steps=1000):
+        """A discrete geodesic from x_a towards x_b (OMPL's discreteGeodesic): steps of at
+        most ``step`` (default r / 4) in the tangent space at the current point, each
+        projected onto M. Returns (points, reached): the walk stops where Newton fails, the
+        domain is left or the distance to x_b stops decreasing."""
+        step = 0.25 * self.radius if step is None else step
+        pts = [np.asarray(x_a, dtype=float)]
+        dist = np.linalg.norm(self.diff(pts[0], x_b))
+        for _ in range(max_steps):
+            if dist <= step:
+                return pts + [np.asarray(x_b, dtype=float)], True
+            x = pts[-1]
+            basis = self.tangent_basis(x)
+            s = basis.T @ self.diff(x, x_b)
+            norm = np.linalg.norm(s)
+            if norm < 1e-12:
+                break
+            s *= min(step, dist) / norm
+            x_new = self.newton(x, basis, s, x + basis @ s)
+            if x_new is None or not self.in_domain(x_new):
+                break
+            x_new = self.wrap(x_new)
+            d_new = np.linalg.norm(self.diff(x_new, x_b))
+            if d_new >= dist:
+                break
+            pts.append(x_new)
+            dist = d_new
+        return pts, False
 
 
 class _KeyIndex:

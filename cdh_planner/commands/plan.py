@@ -1,11 +1,11 @@
 """``cdh-planner plan``: plan a wrench-feasible path for a problem file, without ROS.
 
-    cdh-planner plan PROBLEM.yaml [--strategy astar|gbf] [--radius R] [--timeout S]
-                     [--max-charts N] [--complete] [--json OUT] [--plot OUT.png]
+    cdh-planner plan PROBLEM.yaml [--strategy auto|astar|gbf] [--radius R] [--timeout S]
+                     [--max-charts N] [--max-memory MB] [--complete] [--json OUT] [--plot OUT.png]
 
 Prints the outcome (reason, charts, seconds, cost, waypoints, duration, least margin) with a
 progress bar while the atlas grows. Exit 0 with a path, 1 without one (no path at this
-resolution, timeout, chart limit, infeasible start or goal), 2 for bad input.
+resolution, timeout, chart or memory limit, infeasible start or goal), 2 for bad input.
 
 ``--json OUT`` writes the contract of architecture.md: success, reason, message, strategy,
 n, m, charts, time_s, cost, and path: [{p, quaternion, tau, lengths, tension_min,
@@ -38,10 +38,13 @@ def add_parser(subparsers):
         epilog="example: cdh-planner plan config/problems/robot2_q2_q3.yaml --json out.json "
                "--plot out.png")
     p.add_argument("problem", help="problem file (YAML: robot, task, start, goal; see config/problems)")
-    p.add_argument("--strategy", choices=STRATEGIES, help="search strategy (default: the file's, else astar)")
-    p.add_argument("--radius", type=float, metavar="R", help="chart radius (scaled units, ~rad; default 0.1)")
+    p.add_argument("--strategy", choices=("auto",) + STRATEGIES,
+                   help="search strategy (default: the file's, else auto: astar up to 3-D, gbf above)")
+    p.add_argument("--radius", type=float, metavar="R",
+                   help="chart radius (scaled units, ~rad; default by the task's dimension: 0.1 up to 3-D, 0.5 in 6-D)")
     p.add_argument("--timeout", type=float, metavar="S", help="time limit in seconds (default 60)")
     p.add_argument("--max-charts", type=int, metavar="N", help="chart limit (default 100000)")
+    p.add_argument("--max-memory", type=float, metavar="MB", help="memory limit of the atlas (MiB, default 1024)")
     p.add_argument("--complete", action="store_true",
                    help="after reaching the goal, keep growing the atlas over the whole component")
     p.add_argument("--json", metavar="OUT", help="write the result as JSON")
@@ -56,12 +59,13 @@ def run(args):
     problem = load_problem(args.problem)
     settings = problem.settings
     overrides = {"strategy": args.strategy, "radius": args.radius, "timeout_s": args.timeout,
-                 "max_charts": args.max_charts, "complete": args.complete or None}
-    for option, (key, value) in zip(("--strategy", "--radius", "--timeout", "--max-charts", "--complete"),
-                                    overrides.items()):
+                 "max_charts": args.max_charts, "max_memory_mb": args.max_memory,
+                 "complete": args.complete or None}
+    for option, (key, value) in zip(("--strategy", "--radius", "--timeout", "--max-charts",
+                                     "--max-memory", "--complete"), overrides.items()):
         if value is None:
             continue
-        if key in ("radius", "timeout_s") and not (math.isfinite(value) and value > 0):
+        if key in ("radius", "timeout_s", "max_memory_mb") and not (math.isfinite(value) and value > 0):
             raise InputError(option, value, "must be a positive finite number")
         if key == "max_charts" and value < 2:
             raise InputError(option, value, "must be at least 2")

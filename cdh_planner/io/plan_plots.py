@@ -122,8 +122,9 @@ def chart_polygons(planner):
     for chart in planner.atlas.charts:
         centre = wrap(task.coords(*pose(chart.x))[0], periodic)
         kind = "frontier" if chart.frontier else ("closed" if chart.closed else "open")
-        s = chart.polytope.vertices
-        if s.shape[0] < 3 or s.shape[1] != 2:
+        polytope = getattr(chart.domain, "polytope", None)  # exact domains (n <= 3) only
+        s = None if polytope is None else polytope.vertices
+        if s is None or s.shape[0] < 3 or s.shape[1] != 2:
             out.append((kind, centre, None))
             continue
         s = order_by_angle(s, np.zeros(2))

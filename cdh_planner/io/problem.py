@@ -3,8 +3,8 @@
     robot: ../robot1.yaml            # relative to this file, or absolute
     task: {type: slice, fixed: {x: 0.0, y: 0.0, z: 0.35, sigma: 0.5934}}
     cost: so3                        # optional: so3 | great_circle | se3 (default by task)
-    strategy: astar                  # optional: astar | gbf
-    planner: {radius: 0.1, timeout_s: 60, max_charts: 100000, margin_floor: 0.001}
+    strategy: astar                  # optional: auto | astar | gbf
+    planner: {radius: 0.1, timeout_s: 60, max_charts: 100000, max_memory_mb: 1024, margin_floor: 0.001}
     start: {position: [x, y, z], tau: [phi, theta, sigma]}   # or quaternion: [x, y, z, w]
     goal:  {lambda: [alpha1, alpha2]}                         # sphere task only
 
@@ -24,7 +24,7 @@ from ..search.search import STRATEGIES
 from .poses import number_list, pose_from_dict, short_repr
 
 TOP_KEYS = ("robot", "task", "cost", "strategy", "planner", "start", "goal", "description")
-SETTING_KEYS = ("radius", "timeout_s", "max_charts", "margin_floor", "complete",
+SETTING_KEYS = ("radius", "timeout_s", "max_charts", "max_memory_mb", "margin_floor", "complete",
                 "max_cable_speed", "max_cable_accel")
 
 
@@ -65,7 +65,7 @@ def problem_from_dict(doc, base_dir=".", source=""):
     task = task_from_dict(doc["task"])
     settings = settings_from_dict(doc.get("planner") or {}, "planner")
     if "strategy" in doc:
-        settings = replace(settings, strategy=_choice("strategy", doc["strategy"], STRATEGIES))
+        settings = replace(settings, strategy=_choice("strategy", doc["strategy"], ("auto",) + STRATEGIES))
     if "cost" in doc:
         settings = replace(settings, cost=_choice("cost", doc["cost"], COSTS))
     start = pose_in_task(doc["start"], task, "start")

@@ -327,6 +327,8 @@ ERROR_CODES = {
     "no_path": NO_VALID_PATH,             # atlas component exhausted
     "timeout": TIMEOUT,
     "chart_limit": NO_VALID_PATH,         # no path found within max_charts
+    "resource_limit": NO_VALID_PATH,      # no path found within max_memory_mb
+    "canceled": UNKNOWN,                  # the caller cancelled the plan
     "invalid": UNKNOWN,                   # request inconsistent with the task / malformed
     # refusals by the node, before planning:
     "bad_frame": TF_ERROR,                # frame_id is not the base frame

@@ -23,11 +23,13 @@ task.type                       free       free, slice or sphere
 task.fixed.x .. task.fixed.sigma  NaN      slice: fixed coordinate (m, rad); NaN = free
 task.center, task.radius        0 0 0, 0.1 sphere (paper Eq. 17), m
 task.free_torsion               false      sphere: sigma free as well
-planner.strategy                astar      astar or gbf
+planner.strategy                auto       auto (astar up to 3-D, gbf above), astar or gbf
 planner.cost                    auto       auto, so3, great_circle or se3
 planner.timeout_s               60         give up after this long (answer TIMEOUT)
-planner.radius                  0.1        chart radius (scaled units, about rad)
+planner.radius                  0          chart radius (scaled units, about rad); 0: by
+                                           the task's dimension (0.1 to 3-D, 0.5 in 6-D)
 planner.max_charts              100000     give up after this many charts
+planner.max_memory_mb           1024       give up when the atlas holds this much (MiB)
 planner.complete                false      grow the whole atlas component
 planner.margin_floor            0.001      least normalised feasibility margin kept
 trajectory.max_cable_speed      0.05       per-winch speed limit (m/s)
@@ -50,6 +52,7 @@ from ..errors import InputError
 from ..model.robot import robot_from_dict
 from ..model.task import POSE_NAMES, task_from_dict
 from ..planner import COSTS, PlannerSettings, task_cost
+from ..search.search import STRATEGIES
 
 STRING, BOOL, INT, DOUBLE, DOUBLES, STRINGS = "string", "bool", "int", "double", "doubles", \
     "strings"
@@ -57,7 +60,6 @@ REQUIRED = object()  # default of a parameter that must come from the robot file
 
 # the groups whose change means a new Planner (the others only affect the node)
 PLANNER_PREFIXES = ("robot.", "task.", "planner.", "trajectory.")
-STRATEGIES = ("astar", "gbf")
 INTERPOLATIONS = ("linear", "quintic")
 DEFAULT_SETTINGS = PlannerSettings()
 
@@ -130,8 +132,9 @@ SPECS = (
             open_low=True),
        Spec("task.free_torsion", BOOL, False, "sphere task: torsion sigma free as well"),
        Spec("planner.strategy", STRING, DEFAULT_SETTINGS.strategy,
-            "search strategy: astar (A*, shortest on the chart graph) or gbf (greedy "
-            "best-first, faster)", choices=STRATEGIES),
+            "search strategy, from both ends: auto (astar up to 3-D, gbf above), astar (A*, "
+            "shortest on the chart graph) or gbf (greedy best-first, faster)",
+            choices=("auto",) + STRATEGIES),
        Spec("planner.cost", STRING, DEFAULT_SETTINGS.cost,
             "path cost: auto (the paper's for the task), so3 (rad; slices fixing x, y, z), "
             "great_circle (m; sphere task) or se3 (m)", choices=COSTS),
@@ -139,10 +142,13 @@ SPECS = (
             "give up after this many seconds (answer TIMEOUT)", low=0.0, high=86400.0,
             open_low=True),
        Spec("planner.radius", DOUBLE, DEFAULT_SETTINGS.radius,
-            "chart radius in the atlas' scaled units (about rad of platform motion)",
-            low=0.0, high=10.0, open_low=True),
+            "chart radius in the atlas' scaled units (about rad of platform motion); 0: by "
+            "the task's dimension (0.1 up to 3-D, 0.5 for free flight)", low=0.0, high=10.0),
        Spec("planner.max_charts", INT, DEFAULT_SETTINGS.max_charts,
             "give up after this many charts (answer NO_VALID_PATH)", low=2, high=100_000_000),
+       Spec("planner.max_memory_mb", DOUBLE, DEFAULT_SETTINGS.max_memory_mb,
+            "give up when the atlas holds this much memory (MiB; answer NO_VALID_PATH, "
+            "resource_limit)", low=1.0, high=1_000_000.0),
        Spec("planner.complete", BOOL, DEFAULT_SETTINGS.complete,
             "keep growing the atlas to the whole component after reaching the goal"),
        Spec("planner.margin_floor", DOUBLE, DEFAULT_SETTINGS.margin_floor,
@@ -259,6 +265,7 @@ def node_config(values, source="ROS parameters"):
         strategy=checked["planner.strategy"], cost=checked["planner.cost"],
         radius=checked["planner.radius"],
         timeout_s=checked["planner.timeout_s"], max_charts=checked["planner.max_charts"],
+        max_memory_mb=checked["planner.max_memory_mb"],
         complete=checked["planner.complete"], margin_floor=checked["planner.margin_floor"],
         max_cable_speed=checked["trajectory.max_cable_speed"],
         max_cable_accel=checked["trajectory.max_cable_accel"])
@@ -333,6 +340,7 @@ def _same(a, b):
 SETTING_PARAMETERS = {
     "strategy": "planner.strategy", "cost": "planner.cost", "radius": "planner.radius",
     "timeout_s": "planner.timeout_s", "max_charts": "planner.max_charts",
+    "max_memory_mb": "planner.max_memory_mb",
     "complete": "planner.complete", "margin_floor": "planner.margin_floor",
     "max_cable_speed": "trajectory.max_cable_speed",
     "max_cable_accel": "trajectory.max_cable_accel"}

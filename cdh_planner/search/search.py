@@ -1,70 +1,175 @@
-"""Search over an atlas while it is built (paper Sec. 4.3): A* and Greedy Best-First.
+"""Search over an atlas while it is built (paper Sec. 4.3), from both ends.
 
-Knows nothing of robots: it sees an ``Atlas`` and a ``cost(x_a, x_b)`` between two points
-of the manifold (the task metric; also the heuristic h(x) = cost(x, x_goal)).
+    outcome = run(atlas, x_start, x_goal, cost, Stop(deadline=...), strategy="gbf",
+                  direct=direct_motion_ok)
+    outcome.status          # Status.OK, NO_PATH, TIMEOUT, CHART_LIMIT, RESOURCE_LIMIT, CANCELED
+    outcome.points          # points on M from x_start to x_goal (when OK)
 
-The search runs on the graph of charts (an edge joins charts whose balls overlap). Popping
-a chart that is still open first grows it (new charts on its polytope's outside vertices),
-so the same loop answers a first query, which builds the atlas, and later queries, which
-mostly walk charts that already exist (multi-query).
+Knows nothing of robots: it sees an ``Atlas``, a ``cost(x_a, x_b)`` between two points of
+the manifold (the task metric, also the heuristic) and, optionally, ``direct(x_a, x_b)``:
+whether the caller's direct motion between two points of M is safe (a dense closed-form
+check, much cheaper than charts).
 
-- A*: pop least g + h; a popped chart is grown until closed, then its neighbours relaxed.
-  Optimal on the chart graph at the time each chart is popped.
-- Greedy Best-First: pop least h; grow the chart one child at a time until a child beats
-  its parent's h (then both go back on the queue), so the atlas grows towards the goal.
+Two searches run on the one atlas, from a chart at the start and one at the goal, each
+with the other end as its heuristic target. A chart reached by both joins them; so does a
+direct motion from a chart of one side to the other side's root (or, for GBF, to the other
+side's chart closest to this side's root). Popping a chart that is still open first grows
+it, so the same loop answers a first query, which builds the atlas, and later queries,
+which mostly walk charts that already exist (multi-query).
 
-The answer is reached when the goal's chart is popped (A*) or discovered (GBF); "exhausted"
-when no chart is left to pop: the start's component holds no path at this resolution.
+- A*: each side pops least g + h and grows the chart until closed. Direct motions to the
+  other root are edges of cost h, so the answer is the least-cost route of the chart graph
+  (Pohl's stopping rule: the best meeting cost mu <= the larger of the two least f).
+- Greedy Best-First: each side pops least h and grows the chart one child at a time,
+  towards its target, until a child beats its parent; the first meeting is the answer.
+
+"No path" (``Status.NO_PATH``): one side has no chart left to pop, so the component of
+its end (at this resolution, see ``atlas.domain``) holds no path to the other end.
 """
 
 import heapq
 import itertools
+import math
 import time
 from dataclasses import dataclass, field
 from typing import Callable, Optional
 
+from ..status import Status
+
 STRATEGIES = ("astar", "gbf")
 PROGRESS_PERIOD_S = 0.2
-MAX_EXPANSIONS_PER_CHART = 500  # growth steps of one chart (safety: each step clips its polytope)
+MAX_EXPANSIONS_PER_CHART = 500  # growth steps of one chart (safety: each step clips its domain)
+MB = 1 << 20
+
+
+@dataclass
+class Stop:
+    """When a search must stop: ``deadline`` (time.perf_counter() seconds), ``max_charts``,
+    ``max_bytes`` (the atlas' own memory, ``Atlas.nbytes``), and ``cancel`` (anything with
+    ``is_set()``, e.g. a threading.Event that a node sets)."""
+
+    deadline: Optional[float] = None
+    max_charts: int = 100_000
+    max_bytes: int = 1024 * MB
+    cancel: object = None
+
+    def status(self, atlas):
+        """The limit reached now, or None."""
+        if self.cancel is not None and self.cancel.is_set():
+            return Status.CANCELED
+        if self.deadline is not None and time.perf_counter() > self.deadline:
+            return Status.TIMEOUT
+        if len(atlas.charts) >= self.max_charts:
+            return Status.CHART_LIMIT
+        if atlas.nbytes >= self.max_bytes:
+            return Status.RESOURCE_LIMIT
+        return None
 
 
 @dataclass
 class SearchOutcome:
-    """``reason``: ``reached`` | ``exhausted`` | ``timeout`` | ``chart_limit``;
-    ``charts``: chart indices start -> goal (empty unless reached); ``cost`` in task units."""
+    """``status``; when OK, ``points`` on M from start to goal, ``direct`` the indices k
+    where points[k] -> points[k + 1] is a direct motion (checked by ``direct``, not a chart
+    link), ``charts`` the chart route and ``cost`` its cost in task units."""
 
-    reason: str
+    status: Status
+    points: list = field(default_factory=list)
+    direct: frozenset = frozenset()
     charts: list = field(default_factory=list)
-    cost: float = float("nan")
+    cost: float = math.nan
     expanded: int = 0
 
 
-class AtlasSearch:
-    """One query on ``atlas`` from chart ``start`` to chart ``goal`` (both already in it)."""
+def run(atlas, x_start, x_goal, cost: Callable, stop: Stop, strategy="astar",
+        direct: Optional[Callable] = None, progress: Optional[Callable] = None,
+        edge_costs: Optional[dict] = None, link_ok: Optional[Callable] = None) -> SearchOutcome:
+    """One query from x_start to x_goal (points on M) on ``atlas``; module docstring.
+    ``progress`` is called with {"charts", "time_s", "best_h"} every PROGRESS_PERIOD_S;
+    ``edge_costs`` caches chart-link costs across queries; ``link_ok(points)`` is the
+    caller's check of the points that join two charts (a link that fails it is cut and
+    the search is run again)."""
+    if strategy not in STRATEGIES:
+        raise ValueError(f"unknown strategy {strategy!r} (expected {STRATEGIES})")
+    i_start, i_goal = atlas.chart_at(x_start), atlas.chart_at(x_goal)
+    direct_cache = {}
+    while True:  # lazy links: a route's links are checked once found; a bad one is cut
+        search = _Bidirectional(atlas, cost, stop, strategy, direct, progress,
+                                {} if edge_costs is None else edge_costs, direct_cache)
+        status, route, hops = search.run(i_start, i_goal)
+        if status != Status.OK:
+            return SearchOutcome(status, expanded=search.expanded)
+        points, direct_idx, bad = _route_points(atlas, route, hops, link_ok, search._direct_ok)
+        if bad is None:
+            return SearchOutcome(Status.OK, points, frozenset(direct_idx), route,
+                                 search.route_cost(route, hops), search.expanded)
+        atlas.unlink(*bad)
 
-    def __init__(self, atlas, cost: Callable, strategy="astar", max_charts=100_000,
-                 deadline: Optional[float] = None, progress: Optional[Callable] = None,
-                 blocked=frozenset(), edge_costs=None):
-        if strategy not in STRATEGIES:
-            raise ValueError(f"unknown strategy {strategy!r} (expected {STRATEGIES})")
+
+def _route_points(atlas, route, hops, link_ok=None, direct_ok=None):
+    """Points on M along a chart route; direct hops add only their far end, and so do links
+    whose points fail but whose direct motion is safe. Returns (points, direct indices,
+    None) or (None, None, the first link that failed)."""
+    points = [atlas.charts[route[0]].x]
+    direct_idx = []
+    if len(route) == 1:  # start == goal: a path that stays
+        return [points[0], points[0].copy()], [], None
+    for a, b in zip(route, route[1:]):
+        if (a, b) in hops:
+            direct_idx.append(len(points) - 1)
+            points.append(atlas.charts[b].x)
+            continue
+        pts = atlas.edge_points(a, b)
+        if pts is None or (link_ok is not None and not link_ok(pts)):
+            if direct_ok is None or not direct_ok(a, b):
+                return None, None, (min(a, b), max(a, b))
+            direct_idx.append(len(points) - 1)
+            points.append(atlas.charts[b].x)
+            continue
+        points.extend(pts[1:])
+    return points, direct_idx, None
+
+
+class _Side:
+    """One direction of the search: ``root`` chart, ``target`` point (the other end)."""
+
+    def __init__(self, root, target):
+        self.root = root
+        self.target = target
+        self.g = {root: 0.0}
+        self.parent = {root: None}
+        self.heap = []
+        self.done = set()
+        self.best = root  # the chart with the least h so far
+
+    def path(self, i):
+        out = [i]
+        while self.parent[out[-1]] is not None:
+            out.append(self.parent[out[-1]])
+        return out[::-1]  # root -> i
+
+
+class _Bidirectional:
+    def __init__(self, atlas, cost, stop, strategy, direct, progress, edge_costs, direct_cache):
         self.atlas = atlas
         self.cost = cost
+        self.stop = stop
         self.strategy = strategy
-        self.max_charts = max_charts
-        self.deadline = deadline
+        self.direct = direct
         self.progress = progress
-        self.blocked = blocked  # edges (i, j), i < j, known not to carry a path
-        self.edge_costs = {} if edge_costs is None else edge_costs  # (i, j), i < j -> cost
+        self.edge_costs = edge_costs
+        self.direct_cache = direct_cache
+        self.expanded = 0
         self._t0 = time.perf_counter()
         self._last_progress = 0.0
         self._h = {}
         self._count = itertools.count()
 
     # ----- helpers ---------------------------------------------------------------------
-    def h(self, i):
-        if i not in self._h:
-            self._h[i] = self.cost(self.atlas.charts[i].x, self._x_goal)
-        return self._h[i]
+    def h(self, side, i):
+        key = (side.root, i)
+        if key not in self._h:
+            self._h[key] = self.cost(self.atlas.charts[i].x, side.target)
+        return self._h[key]
 
     def edge_cost(self, i, j):
         key = (i, j) if i < j else (j, i)
@@ -73,113 +178,152 @@ class AtlasSearch:
             c = self.edge_costs[key] = self.cost(self.atlas.charts[i].x, self.atlas.charts[j].x)
         return c
 
-    def _edge_ok(self, i, j):
-        return (min(i, j), max(i, j)) not in self.blocked
+    def route_cost(self, route, hops):
+        return sum(self.cost(self.atlas.charts[a].x, self.atlas.charts[b].x) if (a, b) in hops
+                   else self.edge_cost(a, b) for a, b in zip(route, route[1:]))
 
-    def _stop_reason(self):
+    def _direct_ok(self, i, j):
+        if self.direct is None or i == j:
+            return False
+        key = (min(i, j), max(i, j))
+        if key not in self.direct_cache:
+            self.direct_cache[key] = bool(self.direct(self.atlas.charts[i].x, self.atlas.charts[j].x))
+        return self.direct_cache[key]
+
+    def _limit(self):
         now = time.perf_counter()
         if self.progress is not None and now - self._last_progress >= PROGRESS_PERIOD_S:
             self._last_progress = now
-            self.progress({"charts": len(self.atlas.charts), "time_s": now - self._t0,
-                           "best_h": self._best_h})
-        if self.deadline is not None and now > self.deadline:
-            return "timeout"
-        if len(self.atlas.charts) >= self.max_charts:
-            return "chart_limit"
-        return None
+            best = min(self.h(s, s.best) for s in self.sides)
+            self.progress({"charts": len(self.atlas.charts), "time_s": now - self._t0, "best_h": best})
+        return self.stop.status(self.atlas)
 
-    def _path(self, parent, goal):
-        out = [goal]
-        while parent[out[-1]] is not None:
-            out.append(parent[out[-1]])
-        return out[::-1]
-
-    def _path_cost(self, charts):
-        return sum(self.edge_cost(a, b) for a, b in zip(charts, charts[1:]))
-
-    # ----- the searches ----------------------------------------------------------------
-    def run(self, start, goal):
-        self._x_goal = self.atlas.charts[goal].x
-        self._best_h = self.h(start)
-        if start == goal:
-            return SearchOutcome("reached", [start], 0.0)
-        return self._astar(start, goal) if self.strategy == "astar" else self._gbf(start, goal)
-
-    def _astar(self, start, goal):
-        g = {start: 0.0}
-        parent = {start: None}
-        heap = [(self.h(start), next(self._count), start)]
-        done = set()
-        while heap:
-            reason = self._stop_reason()
-            if reason:
-                return SearchOutcome(reason, expanded=len(done))
-            _, _, i = heapq.heappop(heap)
-            if i in done:
-                continue
-            if i == goal:
-                charts = self._path(parent, goal)
-                return SearchOutcome("reached", charts, g[goal], len(done))
-            done.add(i)
-            self._best_h = min(self._best_h, self.h(i))
-            reason = self._grow(i, goal)
-            if reason:
-                return SearchOutcome(reason, expanded=len(done))
-            for j in self.atlas.charts[i].neighbours:
-                if j in done or not self._edge_ok(i, j):
-                    continue
-                gj = g[i] + self.edge_cost(i, j)
-                if gj < g.get(j, float("inf")):
-                    g[j] = gj
-                    parent[j] = i
-                    heapq.heappush(heap, (gj + self.h(j), next(self._count), j))
-        return SearchOutcome("exhausted", expanded=len(done))
-
-    def _grow(self, i, goal, until_better=False):
-        """Grow chart i (never the goal's) until closed, or with ``until_better`` until a
-        new chart has smaller h than i. Returns a stop reason, or None."""
-        if i == goal:
-            return None
+    def _grow(self, side, i, until_better):
+        """Grow chart i until closed, or with ``until_better`` until a new chart has smaller
+        h than i. Returns (a limit status or None, the new charts)."""
         ch = self.atlas.charts[i]
+        new = []
         for _ in range(MAX_EXPANSIONS_PER_CHART):
             if ch.closed:
-                return None
-            reason = self._stop_reason()
-            if reason:
-                return reason
-            j = self.atlas.expand(i)
-            if j is not None and until_better and self.h(j) < self.h(i):
-                return None
-        ch.polytope.close()  # give up on this chart
+                return None, new
+            status = self._limit()
+            if status:
+                return status, new
+            j = self.atlas.expand(i, toward=side.target if until_better else None)
+            if j is not None:
+                new.append(j)
+                if until_better and self.h(side, j) < self.h(side, i):
+                    return None, new
+        ch.domain.close()  # give up on this chart
         ch.frontier = True
-        return None
+        return None, new
 
-    def _gbf(self, start, goal):
-        parent = {start: None}
-        heap = [(self.h(start), next(self._count), start)]
-        closed = set()
-        while heap:
-            reason = self._stop_reason()
-            if reason:
-                return SearchOutcome(reason, expanded=len(closed))
-            _, _, i = heapq.heappop(heap)
-            if i in closed:
+    def _join(self, fwd_side, i, j, hop):
+        """The route start -> goal through chart i of ``fwd_side`` and chart j of the other
+        side (i == j: a chart both reached); ``hop``: i -> j is a direct motion."""
+        other = self.sides[1] if fwd_side is self.sides[0] else self.sides[0]
+        a, b = fwd_side.path(i), other.path(j)[::-1]
+        if i == j:
+            b = b[1:]
+        route = a + b
+        hops = set()
+        if hop:
+            hops.add((i, j))
+        if fwd_side is self.sides[1]:  # the goal side found it: reverse
+            route = route[::-1]
+            hops = {(q, p) for p, q in hops}
+        return route, hops
+
+    # ----- the searches ----------------------------------------------------------------
+    def run(self, i_start, i_goal):
+        fwd = _Side(i_start, self.atlas.charts[i_goal].x)
+        bwd = _Side(i_goal, self.atlas.charts[i_start].x)
+        self.sides = (fwd, bwd)
+        if i_start == i_goal:
+            return Status.OK, [i_start], set()
+        if self._direct_ok(i_start, i_goal):
+            return Status.OK, [i_start, i_goal], {(i_start, i_goal)}
+        for s in self.sides:
+            heapq.heappush(s.heap, (self.h(s, s.root), next(self._count), s.root))
+        return self._astar() if self.strategy == "astar" else self._gbf()
+
+    def _astar(self):
+        mu, meet = math.inf, None
+        while True:
+            status = self._limit()
+            if status:
+                return status, None, None
+            fwd, bwd = self.sides
+            if not fwd.heap or not bwd.heap:  # a component is exhausted
+                break
+            if mu <= max(fwd.heap[0][0], bwd.heap[0][0]):
+                break
+            side = fwd if len(fwd.heap) <= len(bwd.heap) else bwd
+            other = bwd if side is fwd else fwd
+            _, _, i = heapq.heappop(side.heap)
+            if i in side.done:
                 continue
-            self._best_h = min(self._best_h, self.h(i))
-            reason = self._grow(i, goal, until_better=True)
-            if reason:
-                return SearchOutcome(reason, expanded=len(closed))
+            side.done.add(i)
+            self.expanded += 1
+            closer = self.h(side, i) < self.h(side, side.best)  # direct motions are tried from here
+            if closer:
+                side.best = i
+            status, _ = self._grow(side, i, until_better=False)
+            if status:
+                return status, None, None
+            gi = side.g[i]
+            if i in other.g and gi + other.g[i] < mu:
+                mu, meet = gi + other.g[i], (side, i, i, False)
+            if closer and gi + self.h(side, i) < mu and self._direct_ok(i, other.root):
+                mu, meet = gi + self.h(side, i), (side, i, other.root, True)
+            for j in self.atlas.charts[i].neighbours:
+                if j in side.done:
+                    continue
+                gj = gi + self.edge_cost(i, j)
+                if gj < side.g.get(j, math.inf):
+                    side.g[j] = gj
+                    side.parent[j] = i
+                    heapq.heappush(side.heap, (gj + self.h(side, j), next(self._count), j))
+                    if j in other.g and gj + other.g[j] < mu:
+                        mu, meet = gj + other.g[j], (side, j, j, False)
+        if meet is None:
+            return Status.NO_PATH, None, None
+        route, hops = self._join(*meet)
+        return Status.OK, route, hops
+
+    def _gbf(self):
+        turn = 0
+        while True:
+            status = self._limit()
+            if status:
+                return status, None, None
+            side, other = self.sides[turn], self.sides[1 - turn]
+            turn = 1 - turn
+            if not side.heap:  # this end's component is exhausted
+                return Status.NO_PATH, None, None
+            _, _, i = heapq.heappop(side.heap)
+            if i in side.done:
+                continue
+            if self.h(side, i) < self.h(side, side.best):
+                side.best = i
+            status, new = self._grow(side, i, until_better=True)
+            if status:
+                return status, None, None
+            for j in new:  # direct motions from the new charts to the other side
+                for k in dict.fromkeys((other.root, other.best)):
+                    if self._direct_ok(j, k):
+                        side.parent.setdefault(j, i)
+                        return (Status.OK, *self._join(side, j, k, True))
             ch = self.atlas.charts[i]
             if ch.closed:
-                closed.add(i)
+                side.done.add(i)
+                self.expanded += 1
             else:
-                heapq.heappush(heap, (self.h(i), next(self._count), i))
+                heapq.heappush(side.heap, (self.h(side, i), next(self._count), i))
             for j in sorted(ch.neighbours):
-                if j in parent or not self._edge_ok(i, j):
+                if j in side.parent:
                     continue
-                parent[j] = i
-                if j == goal:
-                    charts = self._path(parent, goal)
-                    return SearchOutcome("reached", charts, self._path_cost(charts), len(closed))
-                heapq.heappush(heap, (self.h(j), next(self._count), j))
-        return SearchOutcome("exhausted", expanded=len(closed))
+                side.parent[j] = i
+                if j in other.parent:
+                    return (Status.OK, *self._join(side, j, j, False))
+                heapq.heappush(side.heap, (self.h(side, j), next(self._count), j))

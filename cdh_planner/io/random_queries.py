@@ -1,0 +1,99 @@
+"""Seeded random free-flight queries: both ends wrench-feasible, the straight motion unsafe.
+
+    queries = random_free_queries(robot, count=10, seed=0)   # [FreeQuery, ...]
+
+The free-flight query a user makes most ("from this pose to that one") where the direct
+motion (position linear, orientation slerp) is not safe, so a planner has work to do.
+Poses are drawn by rejection: position uniform in the box under the base anchors that the
+cables can reach, orientation within ``max_tilt`` of the robot's home orientation (that of
+the pose with the largest margin among random ones: loads hang, they do not tumble), kept
+when the closed-form margin is at least ``min_margin``. Pairs are kept when the dense
+check of the straight motion fails.
+The same seed gives the same queries on every machine (numpy's PCG64).
+"""
+
+from dataclasses import dataclass
+
+import numpy as np
+from scipy.spatial.transform import Rotation
+
+from ..feasibility import evaluate
+from ..model.pose import quaternion_from_tau, tau_from_rotation
+from ..planner import Pose
+from ..trajectory.verify import SlerpPath, check_motion
+
+BATCH = 20_000  # poses drawn per rejection round
+PROBE_SAMPLES = 200  # points of a straight motion probed before the dense check
+MAX_ROUNDS = 200
+
+
+@dataclass(frozen=True)
+class FreeQuery:
+    """``start`` and ``goal`` poses (m, rad); ``margin`` of each end; where the straight
+    motion first leaves C (``unsafe_at``, fraction of the way)."""
+
+    start: Pose
+    goal: Pose
+    margins: tuple
+    unsafe_at: float
+
+
+def workspace_box(robot):
+    """(low, high) corners (m) of the box under the base anchors that the cables reach."""
+    a = robot.base_anchors
+    down = 1.0 if robot.force[2] >= 0 else -1.0  # the platform hangs along the load
+    z = sorted((float(a[:, 2].min()), float(a[:, 2].max() + down * robot.length_max.max())))
+    return np.array([a[:, 0].min(), a[:, 1].min(), z[0]]), np.array([a[:, 0].max(), a[:, 1].max(), z[1]])
+
+
+def home_orientation(robot, draws=100_000, seed=0):
+    """The orientation (Rotation) of the pose with the largest margin among random ones."""
+    rng = np.random.default_rng(seed)
+    lo, hi = workspace_box(robot)
+    p = rng.uniform(lo, hi, size=(draws, 3))
+    R = Rotation.random(draws, random_state=rng)
+    return R[int(np.argmax(evaluate(robot, p, R=R.as_matrix()).margin))]
+
+
+def feasible_poses(robot, count, rng, min_margin=0.01, max_tilt=np.pi / 3, home=None):
+    """``count`` random wrench-feasible poses within ``max_tilt`` (rad) of the ``home``
+    orientation (default: ``home_orientation``): positions (count, 3) m, tau (count, 3) rad."""
+    lo, hi = workspace_box(robot)
+    home = home_orientation(robot) if home is None else home
+    ps, taus = [], []
+    for _ in range(MAX_ROUNDS):
+        p = rng.uniform(lo, hi, size=(BATCH, 3))
+        axis = rng.standard_normal((BATCH, 3))
+        axis /= np.linalg.norm(axis, axis=1, keepdims=True)
+        angle = max_tilt * rng.random((BATCH, 1)) ** (1 / 3)  # uniform in the ball of rotation vectors
+        R = (home * Rotation.from_rotvec(axis * angle)).as_matrix()
+        f = evaluate(robot, p, R=R)
+        ok = np.flatnonzero(f.margin >= min_margin)
+        ps.extend(p[ok])
+        taus.extend(tau_from_rotation(R[ok]))
+        if len(ps) >= count:
+            return np.array(ps[:count]), np.array(taus[:count])
+    raise RuntimeError(f"fewer than {count} feasible poses in {MAX_ROUNDS * BATCH} draws")
+
+
+def random_free_queries(robot, count, seed=0, min_margin=0.01, max_tilt=np.pi / 3):
+    """``count`` FreeQuery, reproducible from ``seed``."""
+    rng = np.random.default_rng(seed)
+    home = home_orientation(robot)
+    out = []
+    for _ in range(MAX_ROUNDS):
+        p, tau = feasible_poses(robot, 2 * count, rng, min_margin, max_tilt, home)
+        margins = evaluate(robot, p, tau).margin
+        for a in range(0, len(p) - 1, 2):
+            b = a + 1
+            motion = SlerpPath(p[[a, b]], quaternion_from_tau(tau[[a, b]]))
+            s = np.linspace(0.0, 1.0, PROBE_SAMPLES)
+            pp, RR = motion(np.zeros(s.size, dtype=int), s)
+            if evaluate(robot, pp, R=RR).feasible.all():
+                continue  # most likely safe: not a query that needs a planner
+            seg = check_motion(robot, p[[a, b]], quaternion_from_tau(tau[[a, b]]))[0]
+            out.append(FreeQuery(Pose(p[a], tau[a]), Pose(p[b], tau[b]),
+                                 (float(margins[a]), float(margins[b])), float(seg.first_unsafe.s)))
+            if len(out) == count:
+                return out
+    raise RuntimeError(f"fewer than {count} queries with an unsafe straight motion")
