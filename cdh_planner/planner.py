@@ -186,35 +186,35 @@ class Planner:
         return i >= len(self.atlas.charts)
 
     # ----- direct motions -----------------------------------------------------------------
-    def _direct_motion(self, ya, yb):
-        """The direct motion between task coordinates: position linear and orientation slerp
-        in free flight (what a controller executes), a straight line in a task's coordinates
-        otherwise (slerp would leave the task)."""
-        ends = np.array([ya, yb])
+    def _direct_motion(self, y):
+        """The direct motion through task coordinates y (N, k): position linear and
+        orientation slerp in free flight (what a controller executes), straight lines in a
+        task's coordinates otherwise (slerp would leave the task)."""
+        y = np.array(y, dtype=float)
         if isinstance(self.task, FreeTask):
-            p, tau = self.task.pose(ends)
+            p, tau = self.task.pose(y)
             return SlerpPath(p, quaternion_from_tau(tau))
         per = self._periodic_mask()
-        ends[1, per] = ends[0, per] + wrap_angle(ends[1, per] - ends[0, per])
-        return TaskLinePath(self.task, ends)
+        y[1:, per] = y[0, per] + np.cumsum(wrap_angle(np.diff(y[:, per], axis=0)), axis=0)  # short arcs
+        return TaskLinePath(self.task, y)
+
+    def _probe(self, y, n):
+        """Are n evenly spaced poses of every direct motion between the rows of y feasible
+        with margin above the floor? (one vectorised closed-form call)"""
+        motion = self._direct_motion(y)
+        seg = np.repeat(np.arange(motion.n_segments), n)
+        s = np.tile(np.linspace(0.0, 1.0, n), motion.n_segments)
+        p, R = motion(seg, s)
+        return bool(np.all(evaluate(self.robot, p, R=R).margin >= self.settings.margin_floor))
 
     def _direct_ok(self, ya, yb):
         """Is the direct motion ya -> yb dense-feasible with margin above the floor? A few
         points first (most unsafe motions fail there), then the dense check."""
-        motion = self._direct_motion(ya, yb)
-        for n in (COARSE_SAMPLES, 8 * COARSE_SAMPLES):
-            s = np.linspace(0.0, 1.0, n)
-            p, R = motion(np.zeros(n, dtype=int), s)
-            if evaluate(self.robot, p, R=R).margin.min() < self.settings.margin_floor:
-                return False
-        seg = check_path(self.robot, motion)[0]
+        y = np.array([ya, yb])
+        if not (self._probe(y, COARSE_SAMPLES) and self._probe(y, 8 * COARSE_SAMPLES)):
+            return False
+        seg = check_path(self.robot, self._direct_motion(y))[0]
         return seg.feasible and seg.unresolved == 0 and seg.worst.margin >= self.settings.margin_floor
-
-    def _probe(self, ya, yb, n):
-        """Are n evenly spaced poses of the direct motion ya -> yb all feasible?"""
-        motion = self._direct_motion(ya, yb)
-        p, R = motion(np.zeros(n, dtype=int), np.linspace(0.0, 1.0, n))
-        return bool(np.all(evaluate(self.robot, p, R=R).margin > 0))
 
     def _direct_x(self, xa, xb):
         ya, yb = self._task_coords([xa, xb])
@@ -222,7 +222,7 @@ class Planner:
 
     def _direct_points(self, ya, yb):
         """Task coordinates along the direct motion ya -> yb, DIRECT_STEP_M / _RAD apart."""
-        motion = self._direct_motion(ya, yb)
+        motion = self._direct_motion([ya, yb])
         dp, da = motion.speeds()
         n = int(max(2, math.ceil(max(dp[0] / DIRECT_STEP_M, da[0] / DIRECT_STEP_RAD)) + 1))
         p, R = motion(np.zeros(n, dtype=int), np.linspace(0.0, 1.0, n))
@@ -231,13 +231,10 @@ class Planner:
         return y
 
     def _link_ok(self, xs):
-        """Do the points joining two charts make a dense-feasible motion once densified?
-        (Large charts can link two sheets of M across a thin gap of C.) A few poses between
-        each pair first: a gap usually shows there."""
-        y = self._task_coords(xs)
-        if not all(self._probe(a, b, CHORD_SAMPLES) for a, b in zip(y, y[1:])):
-            return False
-        return self._densify(y)[1]
+        """Are the points joining two charts one motion of C? Large charts can link two
+        sheets of M across a thin gap of C; a few poses between each pair show the gap
+        (the dense check of the whole path comes later)."""
+        return self._probe(self._task_coords(xs), CHORD_SAMPLES)
 
     def _route_coords(self, out):
         """Task coordinates of the search's points, direct motions sampled on the way."""
