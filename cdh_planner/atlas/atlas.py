@@ -9,8 +9,8 @@ Knows nothing of robots. The constraint gives (duck-typed, like OMPL's Constrain
                                      spatial index (|key(x) - key(y)| <= |x - y|)
 
 A chart i is a point x_i on M, an orthonormal basis Phi_i of its tangent space, a radius
-r_i and a domain P_i in tangent coordinates s (``domain.py``: an exact polytope for n <= 3,
-half-spaces and sampled frontier directions above, so that no chart grows without bound). phi_i(s) = x_i + Phi_i s; psi_i(s) is its
+r_i and a domain P_i in tangent coordinates s (``domain.py``: half-spaces and sampled
+frontier directions, so that no chart grows without bound; exact polytopes on request). phi_i(s) = x_i + Phi_i s; psi_i(s) is its
 Newton projection onto M. New charts are made at the ball's boundary towards a polytope
 vertex outside the ball; the step halves where the manifold curves (distance to the tangent
 space or tangent-space angle too large, or Newton not converging), and the chart then takes
@@ -62,7 +62,7 @@ class Atlas:
     """A growing atlas. ``radius`` is the chart radius r in the constraint's scaled units."""
 
     def __init__(self, constraint, radius=0.1, epsilon=0.25, max_angle=0.5, min_radius_ratio=1 / 16,
-                 newton_tol=1e-9, newton_iters=12, exact_max_dim=3, directions=384):
+                 newton_tol=1e-9, newton_iters=12, exact_max_dim=0, directions=384):
         self.c = constraint
         self.exact_max_dim = exact_max_dim
         self.directions = directions

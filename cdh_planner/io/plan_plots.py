@@ -5,8 +5,8 @@
 - ``out``: for tasks with two free coordinates, the atlas and the path over the C-space
   slice of the task (like the paper's Figs. 10 and 13). The background is the slice of
   ``io.plots`` (green feasible, orange a length out of range, blue a tension out of range,
-  red det J = 0). Every chart is drawn as its Henderson polygon mapped to task coordinates
-  (its polytope's vertices s -> x = centre + basis s -> pose -> task coordinates; the
+  red det J = 0). Every chart is drawn as its domain mapped to task coordinates (its ball
+  cut by its neighbours' half-spaces, s -> x = centre + basis s -> pose -> task coordinates; the
   tangent-space polygon, not projected on M, which is what the atlas covers to first
   order): closed charts light shaded with thin outlines (the explored part of the slice),
   open charts in gold, frontier charts (touching the variable domain's boundary, or where
@@ -31,6 +31,7 @@ from pathlib import Path
 
 import numpy as np
 
+from ..atlas.domain import outline_2d
 from . import plots
 from .plots import DEFAULT_RANGES, DPI, Marker, SliceView, compute_slice, plt
 from ..model.task import PERIODIC
@@ -122,12 +123,10 @@ def chart_polygons(planner):
     for chart in planner.atlas.charts:
         centre = wrap(task.coords(*pose(chart.x))[0], periodic)
         kind = "frontier" if chart.frontier else ("closed" if chart.closed else "open")
-        polytope = getattr(chart.domain, "polytope", None)  # exact domains (n <= 3) only
-        s = None if polytope is None else polytope.vertices
-        if s is None or s.shape[0] < 3 or s.shape[1] != 2:
+        if chart.basis.shape[1] != 2:
             out.append((kind, centre, None))
             continue
-        s = order_by_angle(s, np.zeros(2))
+        s = outline_2d(chart.domain)
         poses = [pose(chart.x + chart.basis @ v) for v in s]
         y = task.coords(np.array([p for p, _ in poses]), np.array([t for _, t in poses]))
         out.append((kind, centre, unwrap_about(y, centre, periodic)))
