@@ -68,6 +68,18 @@ class NavigationManifold:
         for m in range(3):
             self.de_dc[m, 3:, :3] = -skew(np.eye(3)[m])
         self._index_tables()
+        self._kernel = self._kernel_params = None  # see _load_kernel
+
+    def _load_kernel(self):
+        """The compiled F, F_X (kernels.py), imported on the first evaluation, not with this
+        module: importing numba and loading the cached machine code cost about 0.4 s, which
+        processes that never evaluate F (problem checks, direct motions) need not pay."""
+        from .kernels import navigation_residual_and_jacobian, pack_parameters
+        r = self.robot
+        self._kernel_params = pack_parameters(
+            self.a, self.b, self.g_load, self.w_local, self.L3T, r.length_min, r.length_max,
+            r.tension_min, r.tension_max, self.kappa, self.load_frame)
+        self._kernel = navigation_residual_and_jacobian
 
     def _index_tables(self):
         """Constant entries and scatter indices of F_X, computed once."""
@@ -145,7 +157,21 @@ class NavigationManifold:
         return self.residual_and_jacobian(X, jacobian=False)[0]
 
     def residual_and_jacobian(self, X, jacobian=True):
-        """F(X) (84,) and F_X(X) (84, 90) in physical units."""
+        """F(X) (84,) and F_X(X) (84, 90) in physical units (F_X None if not ``jacobian``).
+
+        The compiled kernel (kernels.py, numba); ``residual_and_jacobian_reference`` is the
+        same computation in numpy, kept as the reference the kernel is tested against.
+        """
+        X = np.ascontiguousarray(X, dtype=np.float64)
+        if X.shape != (N_VARS,):  # the kernel does not bounds-check
+            raise ValueError(f"expected X of shape ({N_VARS},), got {X.shape}")
+        if self._kernel is None:
+            self._load_kernel()
+        F, Jx = self._kernel(X, self._kernel_params, bool(jacobian))
+        return F, (Jx if jacobian else None)
+
+    def residual_and_jacobian_reference(self, X, jacobian=True):
+        """F(X) (84,) and F_X(X) (84, 90) in physical units: numpy reference of the kernel."""
         p, tau, d, l, f0, G, g, s, t = self._unpack(X)
         R, dR = rotation_and_derivatives(tau)
         c = p + R @ self.g_load

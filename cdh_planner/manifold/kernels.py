@@ -1,0 +1,333 @@
+"""Compiled kernel of the navigation manifold: F (84,) and F_X (84, 90) in scalar loops.
+
+``navigation_residual_and_jacobian(X, params, jacobian)`` computes exactly what
+``NavigationManifold.residual_and_jacobian_reference`` computes (same equations, same
+variable and equation order, see navigation.py); the Python version stays as the
+reference and test/test_manifold_kernel.py checks the two agree to 1e-12.
+
+The robot's constants travel in one flat float64 vector (``pack_parameters``) so that a
+call unboxes two arrays only: numba's per-argument dispatch cost is a visible part of a
+kernel this small. Compiled with ``cache=True``: the first call in a process loads the
+machine code from __pycache__ (or compiles it once, a few seconds, and writes it there).
+"""
+
+import math
+
+import numpy as np
+from numba import njit
+
+from .navigation import I_D, I_F, I_G, I_L, I_P, I_S, I_T, I_TAU, I_V, N_EQS, N_VARS
+
+# Layout of the packed parameter vector.
+K_A = 0          # base anchors a_i (6 x 3, row-major)
+K_B = 18         # platform anchors b_i (6 x 3)
+K_GLOAD = 36     # load point in the platform frame (3)
+K_W = 39         # w0 in the ellipsoid frame (6)
+K_L3T = 45       # L3^T, E3 = L3 L3^T (6 x 6, row-major)
+K_LMIN = 81      # length_min (6)
+K_LMAX = 87      # length_max (6)
+K_FMIN = 93      # tension_min (6)
+K_FMAX = 99      # tension_max (6)
+K_KAPPA = 105    # slack scale kappa
+K_LOAD = 106     # 1.0 if the ellipsoid is in the load frame F3, else 0.0
+N_PARAMS = 107
+
+
+def pack_parameters(a, b, g_load, w_local, L3T, length_min, length_max, tension_min, tension_max,
+                    kappa, load_frame):
+    """The flat parameter vector of one robot (see the K_* offsets)."""
+    prm = np.empty(N_PARAMS)
+    prm[K_A:K_B] = np.asarray(a, dtype=float).ravel()
+    prm[K_B:K_GLOAD] = np.asarray(b, dtype=float).ravel()
+    prm[K_GLOAD:K_W] = g_load
+    prm[K_W:K_L3T] = w_local
+    prm[K_L3T:K_LMIN] = np.asarray(L3T, dtype=float).ravel()
+    prm[K_LMIN:K_LMAX] = length_min
+    prm[K_LMAX:K_FMIN] = length_max
+    prm[K_FMIN:K_FMAX] = tension_min
+    prm[K_FMAX:K_KAPPA] = tension_max
+    prm[K_KAPPA] = kappa
+    prm[K_LOAD] = 1.0 if load_frame else 0.0
+    return prm
+
+
+@njit(cache=True)
+def _mat3(out, a00, a01, a02, a10, a11, a12, a20, a21, a22):
+    out[0, 0], out[0, 1], out[0, 2] = a00, a01, a02
+    out[1, 0], out[1, 1], out[1, 2] = a10, a11, a12
+    out[2, 0], out[2, 1], out[2, 2] = a20, a21, a22
+
+
+@njit(cache=True)
+def _skew(v0, v1, v2, out):
+    """out = [v]x."""
+    _mat3(out, 0.0, -v2, v1, v2, 0.0, -v0, -v1, v0, 0.0)
+
+
+@njit(cache=True)
+def _rotation_and_derivatives(phi, theta, sigma, R, dR):
+    """R = Rz(phi) Ry(theta) Rz(sigma - phi) and dR[:, :, k] = dR / d(phi, theta, sigma)_k."""
+    cf, sf = math.cos(phi), math.sin(phi)
+    ct, st = math.cos(theta), math.sin(theta)
+    cp, sp = math.cos(sigma - phi), math.sin(sigma - phi)
+    T = np.empty((6, 3, 3))  # Rz(phi), dRz(phi), Ry, dRy, Rz(psi), dRz(psi)
+    _mat3(T[0], cf, -sf, 0.0, sf, cf, 0.0, 0.0, 0.0, 1.0)
+    _mat3(T[1], -sf, -cf, 0.0, cf, -sf, 0.0, 0.0, 0.0, 0.0)
+    _mat3(T[2], ct, 0.0, st, 0.0, 1.0, 0.0, -st, 0.0, ct)
+    _mat3(T[3], -st, 0.0, ct, 0.0, 0.0, 0.0, -ct, 0.0, -st)
+    _mat3(T[4], cp, -sp, 0.0, sp, cp, 0.0, 0.0, 0.0, 1.0)
+    _mat3(T[5], -sp, -cp, 0.0, cp, -sp, 0.0, 0.0, 0.0, 0.0)
+    A = np.empty((3, 3, 3))  # Rz Ry, dRz Ry, Rz dRy (then times Rz(psi) or dRz(psi))
+    for i in range(3):
+        for j in range(3):
+            s0 = 0.0
+            s1 = 0.0
+            s2 = 0.0
+            for k in range(3):
+                s0 += T[0, i, k] * T[2, k, j]
+                s1 += T[1, i, k] * T[2, k, j]
+                s2 += T[0, i, k] * T[3, k, j]
+            A[0, i, j] = s0
+            A[1, i, j] = s1
+            A[2, i, j] = s2
+    for i in range(3):
+        for j in range(3):
+            r = 0.0
+            d_sigma = 0.0
+            d_phi = 0.0
+            d_theta = 0.0
+            for k in range(3):
+                r += A[0, i, k] * T[4, k, j]
+                d_sigma += A[0, i, k] * T[5, k, j]
+                d_phi += A[1, i, k] * T[4, k, j]
+                d_theta += A[2, i, k] * T[4, k, j]
+            R[i, j] = r
+            dR[i, j, 0] = d_phi - d_sigma
+            dR[i, j, 1] = d_theta
+            dR[i, j, 2] = d_sigma
+
+
+@njit(cache=True)
+def navigation_residual_and_jacobian(X, prm, jacobian):
+    """F(X) (84,) and, if ``jacobian``, F_X(X) (84, 90) (else an empty (0, 0) array)."""
+    kappa = prm[K_KAPPA]
+    load_frame = prm[K_LOAD] != 0.0
+
+    R = np.empty((3, 3))
+    dR = np.empty((3, 3, 3))
+    _rotation_and_derivatives(X[I_TAU], X[I_TAU + 1], X[I_TAU + 2], R, dR)
+
+    # load point c = p + R g, nominal wrench w0 and the ellipsoid factor P (E = P^T P)
+    c = np.empty(3)
+    for i in range(3):
+        s = 0.0
+        for j in range(3):
+            s += R[i, j] * prm[K_GLOAD + j]
+        c[i] = X[I_P + i] + s
+    w0 = np.empty(6)
+    for i in range(6):
+        w0[i] = prm[K_W + i]
+    P = np.empty((6, 6))
+    for k in range(6):
+        for j in range(6):
+            P[k, j] = prm[K_L3T + 6 * k + j]
+    if load_frame:
+        f0x, f1x, f2x = prm[K_W], prm[K_W + 1], prm[K_W + 2]
+        w0[3] += c[1] * f2x - c[2] * f1x
+        w0[4] += c[2] * f0x - c[0] * f2x
+        w0[5] += c[0] * f1x - c[1] * f0x
+        # P = L3^T e(c), e = [[I, 0], [-[c]x, I]]: only P[:, :3] changes
+        S = np.empty((3, 3))
+        _skew(c[0], c[1], c[2], S)
+        for k in range(6):
+            for j in range(3):
+                s = prm[K_L3T + 6 * k + j]
+                for u in range(3):
+                    s -= prm[K_L3T + 6 * k + 3 + u] * S[u, j]
+                P[k, j] = s
+
+    # J (6 x 6): column i = [d_i; a_i x d_i] / l_i
+    J = np.empty((6, 6))
+    for i in range(6):
+        li = X[I_L + i]
+        d0, d1, d2 = X[I_D + 3 * i], X[I_D + 3 * i + 1], X[I_D + 3 * i + 2]
+        a0, a1, a2 = prm[K_A + 3 * i], prm[K_A + 3 * i + 1], prm[K_A + 3 * i + 2]
+        J[0, i] = d0 / li
+        J[1, i] = d1 / li
+        J[2, i] = d2 / li
+        J[3, i] = (a1 * d2 - a2 * d1) / li
+        J[4, i] = (a2 * d0 - a0 * d2) / li
+        J[5, i] = (a0 * d1 - a1 * d0) / li
+    JG = np.empty((6, 6))
+    M = np.empty((6, 6))
+    for k in range(6):
+        for j in range(6):
+            s = 0.0
+            m = 0.0
+            for i in range(6):
+                s += J[k, i] * X[I_V + 6 * i + j]
+                m += P[k, i] * J[i, j]
+            JG[k, j] = s
+            M[k, j] = m
+    vdiag = np.empty(6)
+    for i in range(6):
+        s = 0.0
+        for j in range(6):
+            s += X[I_V + 6 * i + j] * X[I_V + 6 * i + j]
+        vdiag[i] = math.sqrt(s)
+
+    F = np.empty(N_EQS)
+    # (1) d_i - (p + R b_i - a_i)
+    for i in range(6):
+        for k in range(3):
+            rb = 0.0
+            for j in range(3):
+                rb += prm[K_B + 3 * i + j] * R[k, j]
+            F[3 * i + k] = X[I_D + 3 * i + k] - (X[I_P + k] + rb - prm[K_A + 3 * i + k])
+    # (2) l_i^2 - d_i . d_i
+    for i in range(6):
+        dd = 0.0
+        for k in range(3):
+            dd += X[I_D + 3 * i + k] * X[I_D + 3 * i + k]
+        F[18 + i] = X[I_L + i] ** 2 - dd
+    # (4) J f0 - w0
+    for r in range(6):
+        s = 0.0
+        for i in range(6):
+            s += J[r, i] * X[I_F + i]
+        F[24 + r] = s - w0[r]
+    # (5-6) P J G - I
+    for k in range(6):
+        for j in range(6):
+            s = 0.0
+            for i in range(6):
+                s += P[k, i] * JG[i, j]
+            F[30 + 6 * k + j] = s - (1.0 if k == j else 0.0)
+    # (10)-(12) margins
+    for i in range(6):
+        li, fi = X[I_L + i], X[I_F + i]
+        lmin, lmax = prm[K_LMIN + i], prm[K_LMAX + i]
+        fmin, fmax = prm[K_FMIN + i], prm[K_FMAX + i]
+        hl = (lmax - lmin) / 2.0
+        rf = fmax - fmin
+        mu_l = (li - lmin) * (lmax - li) / hl ** 2
+        mu_lo = (fi - vdiag[i] - fmin) / rf
+        mu_hi = (fmax - fi - vdiag[i]) / rf
+        F[66 + i] = mu_l - math.exp(X[I_G + i] / kappa)
+        F[72 + i] = mu_lo - math.exp(X[I_S + i] / kappa)
+        F[78 + i] = mu_hi - math.exp(X[I_T + i] / kappa)
+    if not jacobian:
+        return F, np.empty((0, 0))
+
+    Jx = np.zeros((N_EQS, N_VARS))
+    # (1): d/dp = -I, d/dd_i = I, d/dtau = -dR b_i
+    for i in range(6):
+        for k in range(3):
+            Jx[3 * i + k, I_P + k] = -1.0
+            Jx[3 * i + k, I_D + 3 * i + k] = 1.0
+            for m in range(3):
+                s = 0.0
+                for j in range(3):
+                    s += dR[k, j, m] * prm[K_B + 3 * i + j]
+                Jx[3 * i + k, I_TAU + m] = -s
+    # dc / dtau (3 x 3)
+    dc_dtau = np.empty((3, 3))
+    for k in range(3):
+        for m in range(3):
+            s = 0.0
+            for j in range(3):
+                s += dR[k, j, m] * prm[K_GLOAD + j]
+            dc_dtau[k, m] = s
+    # (2)
+    for i in range(6):
+        Jx[18 + i, I_L + i] = 2.0 * X[I_L + i]
+        for k in range(3):
+            Jx[18 + i, I_D + 3 * i + k] = -2.0 * X[I_D + 3 * i + k]
+    # dJcol_i / dd_i = [I; [a_i]x] / l_i (6 x 3) and dJcol_i / dl_i = -Jcol_i / l_i (6,)
+    dcol_dd = np.empty((6, 6, 3))
+    dcol_dl = np.empty((6, 6))
+    Sa = np.empty((3, 3))
+    for i in range(6):
+        li = X[I_L + i]
+        _skew(prm[K_A + 3 * i], prm[K_A + 3 * i + 1], prm[K_A + 3 * i + 2], Sa)
+        for r in range(3):
+            for k in range(3):
+                dcol_dd[i, r, k] = (1.0 if r == k else 0.0) / li
+                dcol_dd[i, 3 + r, k] = Sa[r, k] / li
+        for r in range(6):
+            dcol_dl[i, r] = -J[r, i] / li
+    # (4) J f0 - w0
+    for r in range(6):
+        for i in range(6):
+            fi = X[I_F + i]
+            Jx[24 + r, I_F + i] = J[r, i]
+            for k in range(3):
+                Jx[24 + r, I_D + 3 * i + k] = fi * dcol_dd[i, r, k]
+            Jx[24 + r, I_L + i] = fi * dcol_dl[i, r]
+    if load_frame:
+        # d(-w0)/dc = [0; [F]x]
+        Sf = np.empty((3, 3))
+        _skew(prm[K_W], prm[K_W + 1], prm[K_W + 2], Sf)
+        for u in range(3):
+            for w in range(3):
+                Jx[27 + u, I_P + w] = Sf[u, w]
+            for m in range(3):
+                s = 0.0
+                for w in range(3):
+                    s += Sf[u, w] * dc_dtau[w, m]
+                Jx[27 + u, I_TAU + m] = s
+    # (5-6) P J G - I, rows 30 + 6 k + j
+    PD = np.empty(3)  # sum_a P[k, a] dcol_dd[i, a, :]
+    for k in range(6):
+        for i in range(6):
+            for q in range(3):
+                s = 0.0
+                for a in range(6):
+                    s += P[k, a] * dcol_dd[i, a, q]
+                PD[q] = s
+            pl = 0.0
+            for a in range(6):
+                pl += P[k, a] * dcol_dl[i, a]
+            for j in range(6):
+                row = 30 + 6 * k + j
+                gij = X[I_V + 6 * i + j]
+                Jx[row, I_V + 6 * i + j] = M[k, i]  # d(P J G)_kj / dG_ij = (P J)_ki
+                for q in range(3):
+                    Jx[row, I_D + 3 * i + q] = gij * PD[q]
+                Jx[row, I_L + i] = gij * pl
+    if load_frame:
+        # d(P J G)_kj / dc_m = (L3^T de(c)/dc_m J G)_kj, de/dc_m = [[0, 0], [-[e_m]x, 0]]:
+        # with q = row k of L3^T[:, 3:] and v = JG[:3, j] that is -q . (e_m x v) = (q x v)_m
+        dc = np.empty(3)
+        for k in range(6):
+            q0, q1, q2 = prm[K_L3T + 6 * k + 3], prm[K_L3T + 6 * k + 4], prm[K_L3T + 6 * k + 5]
+            for j in range(6):
+                row = 30 + 6 * k + j
+                v0, v1, v2 = JG[0, j], JG[1, j], JG[2, j]
+                dc[0] = q1 * v2 - q2 * v1
+                dc[1] = q2 * v0 - q0 * v2
+                dc[2] = q0 * v1 - q1 * v0
+                for m in range(3):
+                    Jx[row, I_P + m] = dc[m]
+                for m in range(3):
+                    s = 0.0
+                    for w in range(3):
+                        s += dc[w] * dc_dtau[w, m]
+                    Jx[row, I_TAU + m] = s
+    # (10)-(12)
+    for i in range(6):
+        li = X[I_L + i]
+        lmin, lmax = prm[K_LMIN + i], prm[K_LMAX + i]
+        hl = (lmax - lmin) / 2.0
+        rf = prm[K_FMAX + i] - prm[K_FMIN + i]
+        Jx[66 + i, I_L + i] = (lmax + lmin - 2.0 * li) / hl ** 2
+        Jx[66 + i, I_G + i] = -math.exp(X[I_G + i] / kappa) / kappa
+        Jx[72 + i, I_F + i] = 1.0 / rf
+        Jx[78 + i, I_F + i] = -1.0 / rf
+        for j in range(6):
+            dv = X[I_V + 6 * i + j] / vdiag[i] / rf  # d|G_i| / dG_ij over the range
+            Jx[72 + i, I_V + 6 * i + j] = -dv
+            Jx[78 + i, I_V + 6 * i + j] = -dv
+        Jx[72 + i, I_S + i] = -math.exp(X[I_S + i] / kappa) / kappa
+        Jx[78 + i, I_T + i] = -math.exp(X[I_T + i] / kappa) / kappa
+    return F, Jx
