@@ -98,7 +98,7 @@ def run(atlas, x_start, x_goal, cost: Callable, stop: Stop, strategy="astar",
         status, route, hops = search.run(i_start, i_goal)
         if status != Status.OK:
             return SearchOutcome(status, expanded=search.expanded)
-        points, direct_idx, bad = _route_points(atlas, route, hops, link_ok, search._direct_ok)
+        points, direct_idx, bad = _route_points(atlas, route, hops, link_ok, search.direct_ok)
         if bad is None:
             return SearchOutcome(Status.OK, points, frozenset(direct_idx), route,
                                  search.route_cost(route, hops), search.expanded)
@@ -182,7 +182,7 @@ class _Bidirectional:
         return sum(self.cost(self.atlas.charts[a].x, self.atlas.charts[b].x) if (a, b) in hops
                    else self.edge_cost(a, b) for a, b in zip(route, route[1:]))
 
-    def _direct_ok(self, i, j):
+    def direct_ok(self, i, j):
         if self.direct is None or i == j:
             return False
         key = (min(i, j), max(i, j))
@@ -241,7 +241,7 @@ class _Bidirectional:
         self.sides = (fwd, bwd)
         if i_start == i_goal:
             return Status.OK, [i_start], set()
-        if self._direct_ok(i_start, i_goal):
+        if self.direct_ok(i_start, i_goal):
             return Status.OK, [i_start, i_goal], {(i_start, i_goal)}
         for s in self.sides:
             heapq.heappush(s.heap, (self.h(s, s.root), next(self._count), s.root))
@@ -274,7 +274,7 @@ class _Bidirectional:
             gi = side.g[i]
             if i in other.g and gi + other.g[i] < mu:
                 mu, meet = gi + other.g[i], (side, i, i, False)
-            if closer and gi + self.h(side, i) < mu and self._direct_ok(i, other.root):
+            if closer and gi + self.h(side, i) < mu and self.direct_ok(i, other.root):
                 mu, meet = gi + self.h(side, i), (side, i, other.root, True)
             for j in self.atlas.charts[i].neighbours:
                 if j in side.done:
@@ -311,7 +311,7 @@ class _Bidirectional:
                 return status, None, None
             for j in new:  # direct motions from the new charts to the other side
                 for k in dict.fromkeys((other.root, other.best)):
-                    if self._direct_ok(j, k):
+                    if self.direct_ok(j, k):
                         side.parent.setdefault(j, i)
                         return (Status.OK, *self._join(side, j, k, True))
             ch = self.atlas.charts[i]
