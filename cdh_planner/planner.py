@@ -33,7 +33,6 @@ from .trajectory.path import PlannedPath
 from .trajectory.timing import time_path
 from .trajectory.verify import SlerpPath, TaskLinePath, check_motion, check_path
 
-REASONS = tuple(Status)  # kept for callers that list the reasons
 
 
 @dataclass(frozen=True)

@@ -18,7 +18,8 @@ from cdh_planner.errors import InputError  # noqa: E402
 from cdh_planner.feasibility import evaluate  # noqa: E402
 from cdh_planner.model.pose import quaternion_from_tau, rotation_from_quaternion, rotation_tt  # noqa: E402
 from cdh_planner.model.robot import load_robot  # noqa: E402
-from cdh_planner.planner import REASONS, PlanResult, Pose  # noqa: E402
+from cdh_planner.planner import PlanResult, Pose  # noqa: E402
+from cdh_planner.status import Status  # noqa: E402
 from cdh_planner.ros import messages as M  # noqa: E402
 from cdh_planner.trajectory.path import PlannedPath  # noqa: E402
 from cdh_planner.trajectory.timing import time_path  # noqa: E402
@@ -233,7 +234,7 @@ def test_plan_status_success_and_code_table():
     assert values["error_code"] == "0" and values["error_msg"] == ""
     assert float(values["cost"]) == 0.4321
     # every planner reason has a code; the constants are nav2 ComputePathToPose's (Jazzy)
-    assert set(REASONS) <= set(M.ERROR_CODES)
+    assert set(Status) <= set(M.ERROR_CODES)
     assert (M.NONE, M.UNKNOWN, M.TF_ERROR, M.START_OCCUPIED, M.GOAL_OCCUPIED, M.TIMEOUT,
             M.NO_VALID_PATH) == (0, 200, 202, 205, 206, 207, 208)
     assert M.error_code("bad_frame") == 202 and M.error_code("something else") == 200

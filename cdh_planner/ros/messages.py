@@ -31,6 +31,7 @@ from ..errors import InputError
 from ..model.pose import check_quaternion, quaternion_from_tau, rotation_from_quaternion, \
     tau_from_quaternion
 from ..planner import Pose
+from ..status import Status
 
 N_CABLES = 6
 NS_PER_S = 1_000_000_000
@@ -321,15 +322,15 @@ START_OUTSIDE_MAP, GOAL_OUTSIDE_MAP, START_OCCUPIED, GOAL_OCCUPIED = 203, 204, 2
 TIMEOUT, NO_VALID_PATH = 207, 208
 
 ERROR_CODES = {
-    "ok": NONE,
-    "start_infeasible": START_OCCUPIED,   # start not wrench-feasible (or off the task)
-    "goal_infeasible": GOAL_OCCUPIED,     # goal not wrench-feasible (or off the task)
-    "no_path": NO_VALID_PATH,             # atlas component exhausted
-    "timeout": TIMEOUT,
-    "chart_limit": NO_VALID_PATH,         # no path found within max_charts
-    "resource_limit": NO_VALID_PATH,      # no path found within max_memory_mb
-    "canceled": UNKNOWN,                  # the caller cancelled the plan
-    "invalid": UNKNOWN,                   # request inconsistent with the task / malformed
+    Status.OK: NONE,
+    Status.START_INFEASIBLE: START_OCCUPIED,  # start not wrench-feasible (or off the task)
+    Status.GOAL_INFEASIBLE: GOAL_OCCUPIED,    # goal not wrench-feasible (or off the task)
+    Status.NO_PATH: NO_VALID_PATH,            # a component exhausted
+    Status.TIMEOUT: TIMEOUT,
+    Status.CHART_LIMIT: NO_VALID_PATH,        # no path found within max_charts
+    Status.RESOURCE_LIMIT: NO_VALID_PATH,     # no path found within max_memory_mb
+    Status.CANCELED: UNKNOWN,                 # the caller cancelled the plan
+    Status.INVALID: UNKNOWN,                  # request inconsistent with the task / malformed
     # refusals by the node, before planning:
     "bad_frame": TF_ERROR,                # frame_id is not the base frame
     "busy": UNKNOWN,                      # a plan is already running
@@ -341,7 +342,7 @@ STATUS_KEYS = ("error_code", "error_msg", "planning_time_s", "charts", "cost", "
 
 
 def error_code(reason):
-    """nav2 ComputePathToPose error code of a planner reason (planner.REASONS) or of a node
+    """nav2 ComputePathToPose error code of a planner reason (a Status) or of a node
     refusal (``bad_frame``, ``busy``); UNKNOWN for anything else."""
     return ERROR_CODES.get(reason, UNKNOWN)
 
