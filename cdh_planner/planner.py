@@ -27,7 +27,8 @@ from .manifold.constraint import TaskConstraint
 from .model.pose import (quaternion_from_tau, rotation_angle_between, rotation_tt,
                          tau_from_rotation, wrap_angle)
 from .model.task import PERIODIC, FreeTask, SliceTask, SphereTask
-from .search.search import MB, STRATEGIES, Stop, run
+from .search.search import MB, Stop, run
+from .settings import COSTS, PlannerSettings  # noqa: F401  (PlannerSettings: part of this API)
 from .status import Status
 from .trajectory.path import PlannedPath
 from .trajectory.timing import time_path
@@ -41,26 +42,6 @@ class Pose:
 
     p: np.ndarray
     tau: np.ndarray
-
-
-@dataclass
-class PlannerSettings:
-    """``radius``: chart radius in the atlas' scaled units (about radians of platform
-    motion), 0 for the default of the task's dimension (``default_radius``); ``timeout_s``
-    s; ``max_charts``; ``max_memory_mb``: the atlas' memory (MiB); ``complete``: keep
-    growing the atlas to the whole component after reaching the goal; winch limits for the
-    time parameterisation (m/s, m/s^2)."""
-
-    strategy: str = "auto"  # one of STRATEGIES; auto: astar up to 3-D, gbf above
-    cost: str = "auto"  # one of COSTS; auto: the paper's choice for the task
-    radius: float = 0.0
-    timeout_s: float = 60.0
-    max_charts: int = 100_000
-    max_memory_mb: float = 1024.0
-    complete: bool = False
-    margin_floor: float = 1e-3
-    max_cable_speed: float = 0.05
-    max_cable_accel: float = 0.2
 
 
 @dataclass
@@ -80,7 +61,6 @@ class PlanResult:
 
 ProgressCallback = Callable[[dict], None]  # called with {"charts": int, "time_s": float, "best_h": float}
 
-COSTS = ("auto", "so3", "great_circle", "se3")
 TASK_TOL = 1e-6  # m / rad: how far a start or goal may be off the task's constraint
 SMOOTHING_ROUNDS = 12
 DENSIFY_ROUNDS = 10
@@ -108,8 +88,7 @@ class Planner:
     def __init__(self, robot, task, settings: Optional[PlannerSettings] = None):
         self.robot = robot
         self.task = task
-        self.settings = settings or PlannerSettings()
-        _check_settings(self.settings)
+        self.settings = (settings or PlannerSettings()).check()
         s = self.settings
         self.constraint = TaskConstraint(robot, task, margin_floor=s.margin_floor)
         self.radius = s.radius or default_radius(self.constraint.dim)
@@ -381,21 +360,6 @@ def task_cost(robot, task, kind="auto"):
 
 
 # ----- small helpers -------------------------------------------------------------------------
-def _check_settings(s):
-    if s.strategy not in ("auto",) + STRATEGIES:
-        raise InputError("strategy", s.strategy, f"expected one of auto, {', '.join(STRATEGIES)}")
-    for name in ("timeout_s", "margin_floor", "max_cable_speed", "max_cable_accel", "max_memory_mb"):
-        v = getattr(s, name)
-        if not (isinstance(v, (int, float)) and math.isfinite(v) and v > 0):
-            raise InputError(name, v, "must be a positive finite number")
-    if not (isinstance(s.radius, (int, float)) and math.isfinite(s.radius) and s.radius >= 0):
-        raise InputError("radius", s.radius, "must be a positive finite number (0: by the task's dimension)")
-    if s.margin_floor >= 1:
-        raise InputError("margin_floor", s.margin_floor, "must be below 1 (a normalised margin)")
-    if not (isinstance(s.max_charts, int) and s.max_charts >= 2):
-        raise InputError("max_charts", s.max_charts, "must be an integer >= 2")
-
-
 def _finite_vector(name, v, n):
     try:
         a = np.asarray(v, dtype=float).reshape(-1)

@@ -165,7 +165,9 @@ def test_plan_command_no_path_exits_1(tmp_path, capsys):
 BAD = {
     "unknown task type": ("task: {type: torus}", "task.type"),
     "missing goal": ("goal: null", "goal"),
-    "radius zero": ("planner: {radius: 0}", "planner.radius"),
+    "negative radius": ("planner: {radius: -0.1}", "planner.radius"),  # 0: by the dimension
+    "margin floor 1": ("planner: {margin_floor: 1.0}", "planner.margin_floor"),
+    "string for a number": ("planner: {timeout_s: '5'}", "planner.timeout_s"),
     "start off the sphere": ("start: {position: [0.0, 0.0, 0.2], tau: [0.0, 0.0, 0.0]}", None),
     "NaN in start": ("start: {position: [.nan, 0.0, 0.2], tau: [0.0, 0.0, 0.0]}", "start.position[0]"),
     "lambda on a slice": (None, "start.lambda"),

@@ -38,7 +38,7 @@ import sys
 import time
 from dataclasses import dataclass, field
 from pathlib import Path
-from typing import Callable, Optional
+from typing import Optional
 
 import numpy as np
 
@@ -49,6 +49,8 @@ from ..model.pose import quaternion_from_tau
 from ..model.robot import load_robot
 from ..model.task import SliceTask
 from ..trajectory.verify import check_motion, check_task_motion
+from . import demo_ros
+from .demo_steps import Step, table
 from .slice import render_slice, task_in_yaml
 
 PACKAGE = "cdh_planner"
@@ -192,13 +194,6 @@ class Demo:
         return p[0], tau[0]
 
 
-@dataclass(frozen=True)
-class Step:
-    name: str
-    title: str
-    run: Callable[[Demo], None]
-
-
 # --- steps -------------------------------------------------------------------------------
 
 def load_robots(demo):
@@ -240,7 +235,7 @@ def check_poses(demo):
                      ", ".join(f"{n} {v:.4g}" for n, v in zip(names, spec.coords)),
                      "yes" if feasible else "NO", f"{verdict.margin:+.4f}", verdict.binding,
                      _envelope(robot, verdict), _agreement(verdict.agrees, "feasible" if spec.feasible else "infeasible")])
-    _table(["robot", "pose", "task coords (rad)", "feasible", "margin", "binding",
+    table(["robot", "pose", "task coords (rad)", "feasible", "margin", "binding",
             "tensions over K: lowest .. highest (limits)", "expected"], rows)
     print("margin: least distance to a length or tension bound, as a fraction of that bound's "
           "range (> 0 iff feasible)")
@@ -271,7 +266,7 @@ def verify_motions(demo):
         rows.append([spec.robot, f"{spec.start} -> {spec.goal}", how, str(check.samples),
                      _motion_text(check),
                      "(no claim)" if spec.safe is None else _agreement(verdict.agrees, _paper_motion(spec))])
-    _table(["robot", "motion", "interpolation", "samples", "verdict", "expected"], rows)
+    table(["robot", "motion", "interpolation", "samples", "verdict", "expected"], rows)
     print("linear + slerp: position linear, orientation slerp (what a controller executes); "
           "s: fraction of the way; samples at most 1 mm and 0.2 deg apart, refined where the "
           "margin could dip below 0")
@@ -312,8 +307,6 @@ STEPS = [
 
 # The ROS story (node, q_1 -> q_2 -> q_3 over ROS, streaming, recording, replay, shutdown,
 # pictures). demo_ros imports rclpy only inside its steps.
-from . import demo_ros  # noqa: E402  (its steps() needs Step, defined above)
-
 STEPS += demo_ros.steps()
 
 
@@ -470,10 +463,3 @@ def _limits(robot):
     return (f"lengths {_span(robot.length_min)} .. {_span(robot.length_max)} m, tensions "
             f"{_span(robot.tension_min)} .. {_span(robot.tension_max)} N, load {force:.4g} N at "
             f"[{', '.join(f'{v:g}' for v in robot.load_point)}] m (platform frame)")
-
-
-def _table(header, rows):
-    """Print rows as left-aligned columns under a header."""
-    widths = [max(len(str(r[j])) for r in [header] + rows) for j in range(len(header))]
-    for r in [header] + rows:
-        print("  ".join(str(c).ljust(w) for c, w in zip(r, widths)).rstrip())

@@ -365,9 +365,9 @@ def ros_pictures(demo):
              f"{leg.answer.number('path_length_m'):.4f}", f"{leg.answer.number('duration_s'):.2f}",
              f"{leg.answer.number('min_tension_margin_n'):.3f}",
              "safe" if leg.safe else "UNSAFE", str(len(leg.commands))] for leg in legs]
-    from .demo import _table
+    from .demo_steps import table
     print()
-    _table(["motion", "waypoints", "planning (s)", "charts", "path (m)", "duration (s)",
+    table(["motion", "waypoints", "planning (s)", "charts", "path (m)", "duration (s)",
             "least tension margin (N)", "between waypoints", "commands streamed"], rows)
 
 
@@ -501,7 +501,7 @@ def _guarded(step, needs_node=True):
 
 def steps():
     """The steps to append to demo.STEPS."""
-    from .demo import Step
+    from .demo_steps import Step
     return [
         Step("node", "The ROS 2 node (Robot 2, sphere task)", _guarded(start_node, False)),
         Step("q1-q2", "Task sequencer: plan q_1 -> q_2 over ROS, execute", _guarded(leg_q1_q2)),

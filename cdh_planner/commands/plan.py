@@ -1,7 +1,10 @@
 """``cdh-planner plan``: plan a wrench-feasible path for a problem file, without ROS.
 
     cdh-planner plan PROBLEM.yaml [--strategy auto|astar|gbf] [--radius R] [--timeout S]
-                     [--max-charts N] [--max-memory MB] [--complete] [--json OUT] [--plot OUT.png]
+                     [--max-charts N] [--max-memory MB] [--complete] ... [--json OUT] [--plot OUT.png]
+
+Every planner setting has a flag (settings.py: the schema the node's parameters and the
+problem file use too).
 
 Prints the outcome (reason, charts, seconds, cost, waypoints, duration, least margin) with a
 progress bar while the atlas grows. Exit 0 with a path, 1 without one (no path at this
@@ -23,7 +26,7 @@ from tqdm import tqdm
 from ..errors import InputError
 from ..io.problem import load_problem
 from ..planner import Planner
-from ..search.search import STRATEGIES
+from ..settings import SETTINGS, check_setting
 
 EXIT_OK, EXIT_NO_PLAN = 0, 1
 
@@ -31,22 +34,22 @@ EXIT_OK, EXIT_NO_PLAN = 0, 1
 def add_parser(subparsers):
     p = subparsers.add_parser(
         "plan", help="plan a wrench-feasible path for a problem file (no ROS needed)",
-        description="Grow an atlas of the navigation manifold from the start and search it "
-                    "(A* or Greedy Best-First) until the goal is reached, the start's component "
-                    "is exhausted (no path at this resolution), or a limit. Exit 0 with a path, "
-                    "1 without, 2 for bad input.",
+        description="Try the direct motion, then grow atlases of the navigation manifold from "
+                    "the start and the goal and search them (A* or Greedy Best-First) until they "
+                    "meet, a component is exhausted (no path at this resolution), or a limit. "
+                    "Exit 0 with a path, 1 without, 2 for bad input.",
         epilog="example: cdh-planner plan config/problems/robot2_q2_q3.yaml --json out.json "
                "--plot out.png")
     p.add_argument("problem", help="problem file (YAML: robot, task, start, goal; see config/problems)")
-    p.add_argument("--strategy", choices=("auto",) + STRATEGIES,
-                   help="search strategy (default: the file's, else auto: astar up to 3-D, gbf above)")
-    p.add_argument("--radius", type=float, metavar="R",
-                   help="chart radius (scaled units, ~rad; default by the task's dimension: 0.1 up to 3-D, 0.5 in 6-D)")
-    p.add_argument("--timeout", type=float, metavar="S", help="time limit in seconds (default 60)")
-    p.add_argument("--max-charts", type=int, metavar="N", help="chart limit (default 100000)")
-    p.add_argument("--max-memory", type=float, metavar="MB", help="memory limit of the atlas (MiB, default 1024)")
-    p.add_argument("--complete", action="store_true",
-                   help="after reaching the goal, keep growing the atlas over the whole component")
+    for name, (kind, default, s) in SETTINGS.items():  # one flag per setting, from the schema
+        unit = f", {s.unit}" if s.unit else ""
+        help_text = f"{s.description} (default: the file's, else {default}{unit})"
+        if kind is bool:
+            p.add_argument(s.flag, dest=name, action="store_const", const=True, help=help_text)
+        else:
+            p.add_argument(s.flag, dest=name, type=str if kind is str else float,
+                           choices=s.choices or None, metavar=None if s.choices else name.upper(),
+                           help=help_text)
     p.add_argument("--json", metavar="OUT", help="write the result as JSON")
     p.add_argument("--plot", metavar="OUT.png",
                    help="draw the atlas and path over the C-space slice (2-D tasks) and the "
@@ -58,18 +61,9 @@ def add_parser(subparsers):
 def run(args):
     problem = load_problem(args.problem)
     settings = problem.settings
-    overrides = {"strategy": args.strategy, "radius": args.radius, "timeout_s": args.timeout,
-                 "max_charts": args.max_charts, "max_memory_mb": args.max_memory,
-                 "complete": args.complete or None}
-    for option, (key, value) in zip(("--strategy", "--radius", "--timeout", "--max-charts",
-                                     "--max-memory", "--complete"), overrides.items()):
-        if value is None:
-            continue
-        if key in ("radius", "timeout_s", "max_memory_mb") and not (math.isfinite(value) and value > 0):
-            raise InputError(option, value, "must be a positive finite number")
-        if key == "max_charts" and value < 2:
-            raise InputError(option, value, "must be at least 2")
-        settings = replace(settings, **{key: value})
+    overrides = {name: check_setting(name, getattr(args, name), s.flag)
+                 for name, (_, _, s) in SETTINGS.items() if getattr(args, name) is not None}
+    settings = replace(settings, **overrides)
     for path in (args.json, args.plot):
         if path and not Path(path).resolve().parent.is_dir():
             raise InputError("--json" if path == args.json else "--plot", path, "directory does not exist")

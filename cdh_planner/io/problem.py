@@ -11,7 +11,7 @@
 Units: m and rad. Every error is an InputError naming the key (``start.tau[1]``).
 """
 
-from dataclasses import dataclass, fields, replace
+from dataclasses import dataclass, replace
 from pathlib import Path
 
 import numpy as np
@@ -19,13 +19,14 @@ import numpy as np
 from ..errors import InputError
 from ..model.robot import load_robot, read_yaml
 from ..model.task import SphereTask, task_from_dict
-from ..planner import COSTS, PlannerSettings, Pose
-from ..search.search import STRATEGIES
+from ..planner import Pose
+from ..settings import SETTINGS, PlannerSettings, check_setting
 from .poses import number_list, pose_from_dict, short_repr
 
-TOP_KEYS = ("robot", "task", "cost", "strategy", "planner", "start", "goal", "description")
-SETTING_KEYS = ("radius", "timeout_s", "max_charts", "max_memory_mb", "margin_floor", "complete",
-                "max_cable_speed", "max_cable_accel")
+# the settings schema decides which keys go beside ``planner:`` (strategy, cost) and which in it
+TOP_SETTINGS = tuple(k for k, (_, _, s) in SETTINGS.items() if s.top_level)
+TOP_KEYS = ("robot", "task", *TOP_SETTINGS, "planner", "start", "goal", "description")
+SETTING_KEYS = tuple(k for k in SETTINGS if k not in TOP_SETTINGS)
 
 
 @dataclass
@@ -64,35 +65,23 @@ def problem_from_dict(doc, base_dir=".", source=""):
     robot = load_robot(robot_file)
     task = task_from_dict(doc["task"])
     settings = settings_from_dict(doc.get("planner") or {}, "planner")
-    if "strategy" in doc:
-        settings = replace(settings, strategy=_choice("strategy", doc["strategy"], ("auto",) + STRATEGIES))
-    if "cost" in doc:
-        settings = replace(settings, cost=_choice("cost", doc["cost"], COSTS))
+    for key in TOP_SETTINGS:
+        if key in doc:
+            settings = replace(settings, **{key: check_setting(key, doc[key])})
     start = pose_in_task(doc["start"], task, "start")
     goal = pose_in_task(doc["goal"], task, "goal")
     return Problem(robot, task, settings, start, goal, source, str(doc.get("description", "")))
 
 
 def settings_from_dict(d, where):
+    """PlannerSettings of the ``planner:`` mapping, each value checked by the schema."""
     if not isinstance(d, dict):
         raise InputError(where, short_repr(d), "expected a mapping of planner settings")
     unknown = sorted(set(d) - set(SETTING_KEYS))
     if unknown:
         raise InputError(f"{where}.{unknown[0]}", d[unknown[0]],
                          f"unknown setting (allowed: {', '.join(SETTING_KEYS)})")
-    kinds = {f.name: f.type for f in fields(PlannerSettings)}
-    values = {}
-    for key, value in d.items():
-        if kinds[key] in (bool, "bool"):
-            if not isinstance(value, bool):
-                raise InputError(f"{where}.{key}", value, "expected true or false")
-        elif isinstance(value, bool) or not isinstance(value, (int, float)) or not np.isfinite(value) \
-                or value <= 0:
-            raise InputError(f"{where}.{key}", value, "must be a positive finite number")
-        elif kinds[key] in (int, "int") and int(value) != value:
-            raise InputError(f"{where}.{key}", value, "must be an integer")
-        values[key] = int(value) if kinds[key] in (int, "int") else value
-    return PlannerSettings(**values)
+    return PlannerSettings(**{k: check_setting(k, v, f"{where}.{k}") for k, v in d.items()})
 
 
 def pose_in_task(d, task, where):
@@ -110,10 +99,3 @@ def pose_in_task(d, task, where):
         return Pose(p[0], tau[0])
     p, _, tau = pose_from_dict(d, where)
     return Pose(p, tau)
-
-
-def _choice(key, value, allowed):
-    if value not in allowed:
-        raise InputError(key, value, f"expected one of {', '.join(allowed)}")
-    return value
-

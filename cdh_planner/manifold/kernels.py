@@ -16,7 +16,7 @@ import math
 import numpy as np
 from numba import njit
 
-from .navigation import I_D, I_F, I_G, I_L, I_P, I_S, I_T, I_TAU, I_V, N_EQS, N_VARS
+from .layout import I_D, I_F, I_G, I_L, I_P, I_S, I_T, I_TAU, I_V, N_EQS, N_VARS
 
 # Layout of the packed parameter vector.
 K_A = 0          # base anchors a_i (6 x 3, row-major)

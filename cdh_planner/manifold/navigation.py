@@ -38,11 +38,7 @@ import numpy as np
 
 from ..feasibility import evaluate, skew, wrench_transform
 from ..model.pose import rotation_tt
-
-N_POSE = 6
-I_P, I_TAU, I_D, I_L, I_F, I_V, I_G, I_S, I_T = 0, 3, 6, 24, 30, 36, 72, 78, 84
-N_VARS = 90
-N_EQS = 84
+from .layout import I_D, I_F, I_G, I_L, I_P, I_S, I_T, I_TAU, I_V, N_EQS, N_POSE, N_VARS  # noqa: F401
 KAPPA = 0.1  # default slack scale kappa (see NavigationManifold)
 
 

@@ -51,8 +51,8 @@ import numpy as np
 from ..errors import InputError
 from ..model.robot import robot_from_dict
 from ..model.task import POSE_NAMES, task_from_dict
-from ..planner import COSTS, PlannerSettings, task_cost
-from ..search.search import STRATEGIES
+from ..planner import task_cost
+from ..settings import SETTINGS, PlannerSettings
 
 STRING, BOOL, INT, DOUBLE, DOUBLES, STRINGS = "string", "bool", "int", "double", "doubles", \
     "strings"
@@ -61,7 +61,6 @@ REQUIRED = object()  # default of a parameter that must come from the robot file
 # the groups whose change means a new Planner (the others only affect the node)
 PLANNER_PREFIXES = ("robot.", "task.", "planner.", "trajectory.")
 INTERPOLATIONS = ("linear", "quintic")
-DEFAULT_SETTINGS = PlannerSettings()
 
 
 @dataclass(frozen=True)
@@ -80,6 +79,17 @@ class Spec:
     open_low: bool = False
     open_high: bool = False
     choices: tuple = ()
+
+
+_KINDS = {str: STRING, bool: BOOL, int: INT, float: DOUBLE}
+
+
+def _setting_spec(name):
+    """The node parameter of a PlannerSettings field, from its schema (settings.py)."""
+    kind, default, s = SETTINGS[name]
+    unit = f" ({s.unit})" if s.unit else ""
+    return Spec(s.parameter, _KINDS[kind], default, s.description + unit, low=s.low, high=s.high,
+                open_low=s.open_low, open_high=s.open_high, choices=s.choices)
 
 
 def _robot_specs():
@@ -130,37 +140,9 @@ SPECS = (
             "sphere task (paper Eq. 17): centre, base frame (m): 3 numbers"),
        Spec("task.radius", DOUBLE, 0.1, "sphere task: radius (m)", low=0.0, high=100.0,
             open_low=True),
-       Spec("task.free_torsion", BOOL, False, "sphere task: torsion sigma free as well"),
-       Spec("planner.strategy", STRING, DEFAULT_SETTINGS.strategy,
-            "search strategy, from both ends: auto (astar up to 3-D, gbf above), astar (A*, "
-            "shortest on the chart graph) or gbf (greedy best-first, faster)",
-            choices=("auto",) + STRATEGIES),
-       Spec("planner.cost", STRING, DEFAULT_SETTINGS.cost,
-            "path cost: auto (the paper's for the task), so3 (rad; slices fixing x, y, z), "
-            "great_circle (m; sphere task) or se3 (m)", choices=COSTS),
-       Spec("planner.timeout_s", DOUBLE, DEFAULT_SETTINGS.timeout_s,
-            "give up after this many seconds (answer TIMEOUT)", low=0.0, high=86400.0,
-            open_low=True),
-       Spec("planner.radius", DOUBLE, DEFAULT_SETTINGS.radius,
-            "chart radius in the atlas' scaled units (about rad of platform motion); 0: by "
-            "the task's dimension (0.1 up to 3-D, 0.5 for free flight)", low=0.0, high=10.0),
-       Spec("planner.max_charts", INT, DEFAULT_SETTINGS.max_charts,
-            "give up after this many charts (answer NO_VALID_PATH)", low=2, high=100_000_000),
-       Spec("planner.max_memory_mb", DOUBLE, DEFAULT_SETTINGS.max_memory_mb,
-            "give up when the atlas holds this much memory (MiB; answer NO_VALID_PATH, "
-            "resource_limit)", low=1.0, high=1_000_000.0),
-       Spec("planner.complete", BOOL, DEFAULT_SETTINGS.complete,
-            "keep growing the atlas to the whole component after reaching the goal"),
-       Spec("planner.margin_floor", DOUBLE, DEFAULT_SETTINGS.margin_floor,
-            "least normalised feasibility margin of a planned waypoint", low=0.0, high=1.0,
-            open_low=True, open_high=True),
-       Spec("trajectory.max_cable_speed", DOUBLE, DEFAULT_SETTINGS.max_cable_speed,
-            "per-winch cable speed limit of the trajectory (m/s)", low=0.0, high=100.0,
-            open_low=True),
-       Spec("trajectory.max_cable_accel", DOUBLE, DEFAULT_SETTINGS.max_cable_accel,
-            "per-winch cable acceleration limit of the trajectory (m/s^2)", low=0.0,
-            high=1000.0, open_low=True),
-       Spec("stream_rate_hz", DOUBLE, 50.0,
+       Spec("task.free_torsion", BOOL, False, "sphere task: torsion sigma free as well")]
+    + [_setting_spec(name) for name in SETTINGS]
+    + [Spec("stream_rate_hz", DOUBLE, 50.0,
             "rate of ~/cable_command while executing (Hz)", low=1.0, high=1000.0),
        Spec("stream_interpolation", STRING, "linear",
             "between waypoints while streaming: linear (straight in cable space at the mean "
@@ -235,7 +217,7 @@ def check_value(spec, value):
     if isinstance(value, bool) or not isinstance(value, (int, float, np.integer, np.floating)):
         raise InputError(name, value, "expected a number")
     if spec.kind == INT:
-        if float(value) != int(value):
+        if not math.isfinite(value) or float(value) != int(value):
             raise InputError(name, value, "expected an integer")
         value = int(value)
     else:
@@ -261,14 +243,7 @@ def node_config(values, source="ROS parameters"):
         checked[spec.name] = check_value(spec, raw)
     robot = robot_from_dict(_robot_dict(checked), source=source)
     task = task_from_dict(_task_dict(checked), where="task")
-    settings = PlannerSettings(
-        strategy=checked["planner.strategy"], cost=checked["planner.cost"],
-        radius=checked["planner.radius"],
-        timeout_s=checked["planner.timeout_s"], max_charts=checked["planner.max_charts"],
-        max_memory_mb=checked["planner.max_memory_mb"],
-        complete=checked["planner.complete"], margin_floor=checked["planner.margin_floor"],
-        max_cable_speed=checked["trajectory.max_cable_speed"],
-        max_cable_accel=checked["trajectory.max_cable_accel"])
+    settings = PlannerSettings(**{name: checked[s.parameter] for name, (_, _, s) in SETTINGS.items()})
     try:
         task_cost(robot, task, settings.cost)   # e.g. great_circle needs the sphere task
     except InputError as exc:
@@ -337,13 +312,7 @@ def _same(a, b):
 
 
 # PlannerSettings field -> the node parameter that sets it (to name it in errors)
-SETTING_PARAMETERS = {
-    "strategy": "planner.strategy", "cost": "planner.cost", "radius": "planner.radius",
-    "timeout_s": "planner.timeout_s", "max_charts": "planner.max_charts",
-    "max_memory_mb": "planner.max_memory_mb",
-    "complete": "planner.complete", "margin_floor": "planner.margin_floor",
-    "max_cable_speed": "trajectory.max_cable_speed",
-    "max_cable_accel": "trajectory.max_cable_accel"}
+SETTING_PARAMETERS = {name: s.parameter for name, (_, _, s) in SETTINGS.items()}
 
 
 def parameter_error(exc):

@@ -1,0 +1,124 @@
+"""The planner's settings: one schema that every edge is generated from.
+
+Each ``PlannerSettings`` field carries its metadata (``Setting``: node parameter name, CLI
+flag, unit, range or choices, description) and ``check_setting`` validates a value
+against it. The node's parameter descriptors (``ros/params.py``), the problem file's keys
+(``io/problem.py``) and the ``plan`` command's flags (``commands/plan.py``) are built from
+``SETTINGS``, so a new setting is one field here.
+"""
+
+import math
+from dataclasses import dataclass, field, fields
+from typing import Optional
+
+from .errors import InputError
+from .search.search import STRATEGIES
+
+COSTS = ("auto", "so3", "great_circle", "se3")
+
+
+@dataclass(frozen=True)
+class Setting:
+    """Metadata of one setting: ``parameter`` (the node's), ``flag`` (the CLI's),
+    ``unit``, ``description``, a range ``low`` .. ``high`` (``open_low`` / ``open_high``:
+    the bound itself excluded) or ``choices``; ``top_level``: a problem-file key beside
+    ``planner:`` rather than inside it."""
+
+    parameter: str
+    flag: str
+    unit: str
+    description: str
+    low: Optional[float] = None
+    high: Optional[float] = None
+    open_low: bool = False
+    open_high: bool = False
+    choices: tuple = ()
+    top_level: bool = False
+
+
+def _setting(default, **meta):
+    return field(default=default, metadata={"setting": Setting(**meta)})
+
+
+@dataclass
+class PlannerSettings:
+    """How a plan is searched and timed. Units in each field's ``Setting``."""
+
+    strategy: str = _setting(
+        "auto", parameter="planner.strategy", flag="--strategy", unit="",
+        description="search strategy, from both ends: auto (astar up to 3-D, gbf above), "
+                    "astar (A*, shortest on the chart graph) or gbf (greedy best-first, faster)",
+        choices=("auto",) + STRATEGIES, top_level=True)
+    cost: str = _setting(
+        "auto", parameter="planner.cost", flag="--cost", unit="",
+        description="path cost: auto (the paper's for the task), so3 (rad; slices fixing x, y, "
+                    "z), great_circle (m; sphere task) or se3 (m)",
+        choices=COSTS, top_level=True)
+    radius: float = _setting(
+        0.0, parameter="planner.radius", flag="--radius", unit="scaled units, about rad",
+        description="chart radius in the atlas' scaled units (about rad of platform motion); 0: "
+                    "by the task's dimension (0.1 up to 3-D, 0.5 for free flight)",
+        low=0.0, high=10.0)
+    timeout_s: float = _setting(
+        60.0, parameter="planner.timeout_s", flag="--timeout", unit="s",
+        description="give up after this many seconds (answer timeout)",
+        low=0.0, high=86400.0, open_low=True)
+    max_charts: int = _setting(
+        100_000, parameter="planner.max_charts", flag="--max-charts", unit="charts",
+        description="give up after this many charts (answer chart_limit)", low=2, high=100_000_000)
+    max_memory_mb: float = _setting(
+        1024.0, parameter="planner.max_memory_mb", flag="--max-memory", unit="MiB",
+        description="give up when the atlas holds this much memory (answer resource_limit)",
+        low=0.0, high=1_000_000.0, open_low=True)
+    complete: bool = _setting(
+        False, parameter="planner.complete", flag="--complete", unit="",
+        description="keep growing the atlas to the whole component after reaching the goal")
+    margin_floor: float = _setting(
+        1e-3, parameter="planner.margin_floor", flag="--margin-floor", unit="normalised",
+        description="least normalised feasibility margin of a planned waypoint",
+        low=0.0, high=1.0, open_low=True, open_high=True)
+    max_cable_speed: float = _setting(
+        0.05, parameter="trajectory.max_cable_speed", flag="--max-cable-speed", unit="m/s",
+        description="per-winch cable speed limit of the trajectory",
+        low=0.0, high=100.0, open_low=True)
+    max_cable_accel: float = _setting(
+        0.2, parameter="trajectory.max_cable_accel", flag="--max-cable-accel", unit="m/s^2",
+        description="per-winch cable acceleration limit of the trajectory",
+        low=0.0, high=1000.0, open_low=True)
+
+    def check(self, name_of=lambda f: f):
+        """Validate every field; the InputError names ``name_of(field)``."""
+        for f in fields(self):
+            check_setting(f.name, getattr(self, f.name), name_of(f.name))
+        return self
+
+
+SETTINGS = {f.name: (f.type, f.default, f.metadata["setting"]) for f in fields(PlannerSettings)}
+
+
+def check_setting(name, value, label=None):
+    """``value`` of setting ``name`` converted to its type (int -> float for floats) and
+    checked against its kind, choices and range; InputError naming ``label`` (or ``name``)."""
+    kind, _, s = SETTINGS[name]
+    label = label or name
+    if kind in (bool, "bool"):
+        if not isinstance(value, bool):
+            raise InputError(label, value, "expected true or false")
+        return value
+    if kind in (str, "str"):
+        if value not in s.choices:
+            raise InputError(label, value, f"expected one of {', '.join(s.choices)}")
+        return value
+    if isinstance(value, bool) or not isinstance(value, (int, float)) or not math.isfinite(value):
+        raise InputError(label, value, "must be a finite number")
+    if kind in (int, "int"):
+        if int(value) != value:
+            raise InputError(label, value, "must be an integer")
+        value = int(value)
+    else:
+        value = float(value)
+    if s.low is not None and (value < s.low or (s.open_low and value == s.low)):
+        raise InputError(label, value, f"must be {'>' if s.open_low else '>='} {s.low:g}")
+    if s.high is not None and (value > s.high or (s.open_high and value == s.high)):
+        raise InputError(label, value, f"must be {'<' if s.open_high else '<='} {s.high:g}")
+    return value

@@ -1,0 +1,72 @@
+"""The package's layers (README, Layout): each layer imports only layers below it, the
+atlas and the search know nothing of cables, and no modules import each other in a cycle."""
+
+import ast
+from pathlib import Path
+
+PACKAGE = Path(__file__).resolve().parents[1] / "cdh_planner"
+# lower number = lower layer; a module may import its own layer and those below
+LAYER = {"cdh_planner": 0, "errors": 0, "status": 0, "model": 1, "feasibility": 2,
+         "manifold": 3, "atlas": 3, "search": 4, "trajectory": 4, "settings": 5,
+         "planner": 6, "io": 7, "ros": 8, "commands": 9, "cli": 10}
+CABLE_FREE = {"atlas", "search"}  # they see F, F_x, bounds and costs only
+GENERIC = {"cdh_planner", "errors", "status", "atlas", "search"}
+
+
+def _imports():
+    """{module: set of cdh_planner modules it imports (anywhere in its body)}."""
+    out = {}
+    for f in PACKAGE.rglob("*.py"):
+        parts = f.relative_to(PACKAGE.parent).with_suffix("").parts
+        module = ".".join(parts[:-1] if parts[-1] == "__init__" else parts)
+        package = module if f.name == "__init__.py" else module.rsplit(".", 1)[0]
+        found = set()
+        for node in ast.walk(ast.parse(f.read_text())):
+            if isinstance(node, ast.ImportFrom):
+                if node.level:
+                    base = package.split(".")[:len(package.split(".")) - node.level + 1]
+                    target = ".".join(base + ([node.module] if node.module else []))
+                else:
+                    target = node.module or ""
+                names = [f"{target}.{a.name}" for a in node.names]
+                found |= {t for t in [target] + names if t.startswith("cdh_planner")}
+            elif isinstance(node, ast.Import):
+                found |= {a.name for a in node.names if a.name.startswith("cdh_planner")}
+        out[module] = found
+    modules = set(out)
+    return {m: {t for t in ts if t in modules and t != m} for m, ts in out.items()}
+
+
+def _layer(module):
+    parts = module.split(".")
+    return parts[1] if len(parts) > 1 else parts[0]
+
+
+def test_every_module_imports_only_its_layer_and_those_below():
+    bad = [(m, t) for m, ts in _imports().items() for t in ts
+           if LAYER[_layer(t)] > LAYER[_layer(m)]]
+    assert not bad, f"imports from a higher layer: {bad}"
+
+
+def test_atlas_and_search_know_nothing_of_cables():
+    bad = [(m, t) for m, ts in _imports().items() if _layer(m) in CABLE_FREE
+           for t in ts if _layer(t) not in GENERIC]
+    assert not bad, bad
+
+
+def test_no_import_cycles():
+    graph = _imports()
+    state = {}
+
+    def visit(m, stack):
+        state[m] = "open"
+        for t in graph.get(m, ()):
+            if state.get(t) == "open":
+                raise AssertionError(f"import cycle: {' -> '.join(stack + [m, t])}")
+            if t not in state:
+                visit(t, stack + [m])
+        state[m] = "done"
+
+    for m in graph:
+        if m not in state:
+            visit(m, [])
