@@ -14,7 +14,6 @@ or cut short; 2 bad input; 3 the node did not answer.
 
 import argparse
 import sys
-import time
 
 EXIT_OK, EXIT_NO_PLAN, EXIT_NO_NODE = 0, 1, 3
 

@@ -27,9 +27,8 @@ part by appending a ``Step`` (planning, the ROS node, replay).
    the recording (commands republished; requests re-sent to a fresh node); SIGINT, read the
    run file back; pictures of the plans and the execution, and a summary table.
 
-Every verdict with an expected value (the paper's results as restated and checked
-numerically in the design notes, math.md section 6) is compared with it. Exit code 0 when
-all agree, 1 when one differs (printed as DIFFERS FROM THE EXPECTED), 2 for bad input.
+Every verdict with an expected value (the paper's results of Sec. 5, checked numerically
+in SI units with moments in N mm) is compared with it. Exit code 0 when all agree, 1 when one differs (printed as DIFFERS FROM THE EXPECTED), 2 for bad input.
 """
 
 import argparse
@@ -65,7 +64,7 @@ ROBOT1_SLICE = SliceTask(fixed={"x": 0.0, "y": 0.0, "z": 0.35, "sigma": 17 * mat
 @dataclass(frozen=True)
 class PaperPose:
     """A pose of the paper, in its robot's task coordinates (rad), and whether it is
-    expected to be wrench-feasible (paper / math.md section 6)."""
+    expected to be wrench-feasible (the paper's Sec. 5)."""
 
     robot: str
     label: str
@@ -77,7 +76,7 @@ class PaperPose:
 class PaperMotion:
     """A straight motion between two paper poses. ``interpolation``: "slerp" (position
     linear, orientation slerp: what a controller executes) or "task" (a straight line in
-    the task coordinates). ``safe``: the expected verdict (paper / math.md section 6; None:
+    the task coordinates). ``safe``: the expected verdict (the paper's Sec. 5; None:
     no claim); ``leaves_before``: when unsafe, expected to leave C before this fraction."""
 
     robot: str

@@ -1,4 +1,4 @@
-"""The demo's ROS story (issue 4), as steps appended to ``demo.STEPS``:
+"""The demo's ROS story, as steps appended to ``demo.STEPS``:
 
 5. ``node``: start ``cdh-planner node`` with config/robot2.yaml in a ROS domain of its own
    (discovery on localhost), recording to ``<out>/runs``;

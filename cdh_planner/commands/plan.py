@@ -10,7 +10,7 @@ Prints the outcome (reason, charts, seconds, cost, waypoints, duration, least ma
 progress bar while the atlas grows. Exit 0 with a path, 1 without one (no path at this
 resolution, timeout, chart or memory limit, infeasible start or goal), 2 for bad input.
 
-``--json OUT`` writes the contract of architecture.md: success, reason, message, strategy,
+``--json OUT`` writes the plan JSON contract (README, the plan command): success, reason, message, strategy,
 n, m, charts, time_s, cost, and path: [{p, quaternion, tau, lengths, tension_min,
 tension_nominal, tension_max, t}] (m, rad, N, s).
 """
@@ -103,7 +103,7 @@ def print_result(result, problem):
 
 
 def result_dict(result):
-    """The JSON contract (architecture.md); non-finite numbers become null."""
+    """The plan JSON contract (README); non-finite numbers become null."""
     out = {"success": result.success, "reason": result.reason, "message": result.message,
            "strategy": result.strategy, "n": result.n, "m": result.m, "charts": result.charts,
            "time_s": result.time_s, "cost": _num(result.cost), "path": []}

@@ -191,7 +191,7 @@ class _DecoderFactory(DecoderFactory):
         return super().decoder_for(message_encoding, schema)
 
 
-def _scan(path, decode: bool):
+def scan_records(path, decode: bool):
     """(schema, channel, message, decoded or None) in file order, by linear scan.
 
     A killed writer leaves a torn last record: the scan stops there quietly (chunk CRCs are
@@ -224,7 +224,7 @@ def read_run(path) -> list[tuple[str, str, object, int]]:
     Messages are mcap_ros2's decoded objects (attributes named like the fields; nested
     messages as objects, arrays as lists; ``char`` decoded as int8 by mcap_ros2).
     """
-    out = [(c.topic, s.name, m, msg.log_time) for s, c, msg, m in _scan(path, decode=True)]
+    out = [(c.topic, s.name, m, msg.log_time) for s, c, msg, m in scan_records(path, decode=True)]
     out.sort(key=lambda item: item[3])
     return out
 
@@ -237,7 +237,7 @@ def recover_run(src, dst) -> int:
     with open(dst, "wb") as out:
         writer = Writer(out, compression=CompressionType.NONE)
         writer.start(profile="ros2", library=LIBRARY)
-        for schema, channel, message, _ in _scan(src, decode=False):
+        for schema, channel, message, _ in scan_records(src, decode=False):
             if schema is not None and schema.id not in schema_ids:
                 schema_ids[schema.id] = writer.register_schema(
                     schema.name, schema.encoding, schema.data)

@@ -22,7 +22,7 @@ import numpy as np
 
 from ..errors import InputError
 from ..model.pose import check_quaternion, quaternion_from_tau, rotation_from_quaternion, \
-    rotation_tt, tau_from_quaternion
+    tau_from_quaternion
 
 POSE_KEYS = ("position", "quaternion", "tau")
 # |phi|, |sigma| beyond this (rad) are almost surely degrees; theta must be in [0, pi].
@@ -124,21 +124,6 @@ def check_tau(tau, where):
         if abs(a) > ANGLE_LIMIT:
             raise InputError(f"{where}[{i}]", float(a), "must be within [-2 pi, 2 pi] rad (degrees given?)")
     return np.array([phi, np.clip(theta, 0.0, np.pi), sigma])
-
-
-def poses_from_arrays(positions, tau=None, quaternions=None):
-    """A PoseList from arrays (already validated by the caller): tau or quaternions."""
-    p = np.atleast_2d(np.asarray(positions, dtype=float))
-    if quaternions is None:
-        tau = np.atleast_2d(np.asarray(tau, dtype=float))
-        q = quaternion_from_tau(tau)
-        R = rotation_tt(tau)
-    else:
-        q = np.atleast_2d(np.asarray(quaternions, dtype=float))
-        q = np.where(q[:, 3:4] < 0, -q, q)
-        R = rotation_from_quaternion(q)
-        tau = tau_from_quaternion(q)
-    return PoseList(positions=p, quaternions=q, rotations=R, tau=tau)
 
 
 _UNSIGNED = r"(?:\d+\.?\d*|\.\d+)(?:[eE][+-]?\d+)?"

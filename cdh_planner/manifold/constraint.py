@@ -134,6 +134,3 @@ class TaskConstraint:
         """(p m, tau rad) of a scaled point."""
         X = x[:I_G] * self.scale[:I_G]
         return X[I_P:I_TAU].copy(), X[I_TAU:I_TAU + 3].copy()
-
-    def min_margin(self, x):
-        return self.nav.min_margin(x[:N_VARS] * self.scale[:N_VARS])

@@ -36,9 +36,9 @@ import math
 
 import numpy as np
 
-from ..feasibility import evaluate, skew, wrench_transform
+from ..feasibility import evaluate, skew
 from ..model.pose import rotation_tt
-from .layout import I_D, I_F, I_G, I_L, I_P, I_S, I_T, I_TAU, I_V, N_EQS, N_POSE, N_VARS  # noqa: F401
+from .layout import I_D, I_F, I_G, I_L, I_P, I_S, I_T, I_TAU, I_V, N_EQS, N_VARS  # noqa: F401  (re-exported)
 KAPPA = 0.1  # default slack scale kappa (see NavigationManifold)
 
 

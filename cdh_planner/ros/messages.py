@@ -30,10 +30,10 @@ from visualization_msgs.msg import Marker, MarkerArray
 from ..errors import InputError
 from ..model.pose import check_quaternion, quaternion_from_tau, rotation_from_quaternion, \
     tau_from_quaternion
+from ..model.robot import N_CABLES
 from ..planner import Pose
 from ..status import Status
 
-N_CABLES = 6
 NS_PER_S = 1_000_000_000
 
 # ----------------------------------------------------------------------------- time
@@ -181,7 +181,6 @@ def cable_trajectory_msg(path, joint_names, frame_id, stamp=None):
 
 
 ENVELOPE_DIMS = ("waypoint", "cable", "bound")
-ENVELOPE_BOUNDS = ("min", "nominal", "max")
 
 
 def tension_envelope_msg(path):

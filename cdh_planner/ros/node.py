@@ -2,7 +2,7 @@
 
     cdh-planner node --ros-args --params-file config/robot2.yaml [-p name:=value ...]
 
-Interface (names relative to the node, all remappable; see architecture.md):
+Interface (names relative to the node, all remappable; see docs/ros-node.md):
 
 - ``~/plan`` nav_msgs/srv/GetPlan: start, goal -> path (empty: no plan; reason on
   ``~/plan_result``). Planned on a thread of a MultiThreadedExecutor (reentrant group), one

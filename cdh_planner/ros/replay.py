@@ -24,7 +24,7 @@ from rclpy.serialization import deserialize_message
 
 from ..errors import InputError
 from ..io.mcap_log import REQUEST_RECEIVED, RESPONSE_SENT, SERVICE_EVENT_SUFFIX
-from ..io.mcap_log import _scan as scan_run  # raw records of a (possibly killed) run file
+from ..io.mcap_log import scan_records as scan_run  # raw records of a (possibly killed) run file
 
 
 MATCH_SETTLE_S = 0.3   # s after the publisher sees its subscribers, before the first message

@@ -76,8 +76,8 @@ from dataclasses import dataclass, replace
 import numpy as np
 
 from ..errors import InputError
+from ..model.robot import N_CABLES
 
-N_CABLES = 6
 DWELL_S = 1e-3  # s, duration of a zero-length segment (duplicated waypoint)
 ZERO_LENGTH_M = 1e-9  # m, a segment this short (Euclidean, all 6 cables) has length zero
 REL_TOL = 1e-9  # a reported value within limit * (1 + REL_TOL) is within the limit (rounding)
