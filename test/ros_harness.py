@@ -22,7 +22,7 @@ import numpy as np
 
 from cdh_planner.ros.domains import claimed_domain, isolated_env  # noqa: F401 (re-exported)
 
-REPO = Path(__file__).resolve().parents[1]
+from conftest import REPO
 ROBOT2 = REPO / "config" / "robot2.yaml"
 FAKE_NODE = REPO / "test" / "doubles" / "fake_planner.py"
 FRAME = "cdh_base"

@@ -1,6 +1,5 @@
 """The closed-form wrench feasibility (paper Sec. 2, App. A) and the paper's examples."""
 import dataclasses
-from pathlib import Path
 
 import numpy as np
 import pytest
@@ -11,7 +10,7 @@ from cdh_planner.model.robot import load_robot
 from cdh_planner.model.task import SliceTask, SphereTask
 from cdh_planner.trajectory.verify import check_task_motion
 
-CONFIG = Path(__file__).resolve().parents[1] / "config"
+from conftest import CONFIG
 ROBOT1 = load_robot(CONFIG / "robot1.yaml")
 ROBOT2 = load_robot(CONFIG / "robot2.yaml")
 RNG = np.random.default_rng(7)

@@ -2,9 +2,8 @@
 atlas and the search know nothing of cables, and no modules import each other in a cycle."""
 
 import ast
-from pathlib import Path
 
-PACKAGE = Path(__file__).resolve().parents[1] / "cdh_planner"
+from conftest import PACKAGE
 # lower number = lower layer; a module may import its own layer and those below
 LAYER = {"cdh_planner": 0, "errors": 0, "status": 0, "model": 1, "feasibility": 2,
          "manifold": 3, "atlas": 3, "search": 4, "trajectory": 4, "settings": 5,

@@ -1,5 +1,4 @@
 """The navigation manifold, its task constraints, and the atlas' charts and polytopes."""
-from pathlib import Path
 
 import numpy as np
 import pytest
@@ -13,7 +12,7 @@ from cdh_planner.manifold.navigation import I_G, I_V, N_EQS, N_VARS, NavigationM
 from cdh_planner.model.robot import load_robot
 from cdh_planner.model.task import FreeTask, SliceTask, SphereTask
 
-CONFIG = Path(__file__).resolve().parents[1] / "config"
+from conftest import CONFIG
 ROBOT1 = load_robot(CONFIG / "robot1.yaml")
 ROBOT2 = load_robot(CONFIG / "robot2.yaml")
 SIGMA1 = 17 * np.pi / 90

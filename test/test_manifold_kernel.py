@@ -7,7 +7,6 @@ cancellation (F ~ 1e-14 on the manifold, some F_X entries ~ 1e-17) have no meani
 relative error on their own; measured against the size of their equation they do.
 """
 from dataclasses import replace
-from pathlib import Path
 
 import numpy as np
 import pytest
@@ -15,7 +14,7 @@ import pytest
 from cdh_planner.io.problem import load_problem
 from cdh_planner.manifold.navigation import N_EQS, N_VARS, NavigationManifold
 
-CONFIG = Path(__file__).resolve().parents[1] / "config"
+from conftest import CONFIG
 PROBLEMS = {"robot1": "robot1_qs_qg", "robot2": "robot2_q2_q3_free_flight"}
 RTOL = 1e-12
 

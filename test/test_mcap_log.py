@@ -6,7 +6,6 @@ import os
 import signal
 import subprocess
 import sys
-from pathlib import Path
 
 import numpy as np
 import pytest
@@ -32,7 +31,7 @@ from cdh_planner.io.mcap_log import (  # noqa: E402
     MAGIC, REQUEST_RECEIVED, RESPONSE_SENT, RunRecorder, read_run, recover_run)
 from cdh_planner.io.ros_schemas import full_definition  # noqa: E402
 
-REPO = Path(__file__).resolve().parents[1]
+from conftest import REPO
 T0 = 1_700_000_000_000_000_000
 GID = bytes(range(200, 216))            # bytes > 127: ROS 'char' is unsigned
 

@@ -16,7 +16,7 @@ from cdh_planner.io.problem import load_problem
 from cdh_planner.model.task import SphereTask
 from cdh_planner.planner import Planner
 
-ROOT = Path(__file__).resolve().parents[1]
+from conftest import REPO as ROOT
 PI = np.pi
 
 

@@ -2,7 +2,6 @@
 angles, theta = 0 starts, multi-query, and the plan command's bad input."""
 import json
 import time
-from pathlib import Path
 
 import numpy as np
 import pytest
@@ -14,7 +13,7 @@ from cdh_planner.model.pose import quaternion_from_tau
 from cdh_planner.planner import Planner, PlannerSettings, Pose
 from cdh_planner.trajectory.verify import check_motion, check_task_motion
 
-ROOT = Path(__file__).resolve().parents[1]
+from conftest import REPO as ROOT
 PROBLEMS = ROOT / "config" / "problems"
 SIGMA1 = 0.593411945678072
 ROBOT1_SLICE = ("task: {type: slice, fixed: {x: 0.0, y: 0.0, z: 0.35, sigma: %r}}\n" % SIGMA1)

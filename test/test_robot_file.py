@@ -4,7 +4,6 @@ import copy
 import json
 import subprocess
 import sys
-from pathlib import Path
 
 import numpy as np
 import pytest
@@ -15,7 +14,7 @@ from cdh_planner.errors import InputError
 from cdh_planner.io.poses import load_poses
 from cdh_planner.model.robot import load_robot
 
-ROOT = Path(__file__).resolve().parents[1]
+from conftest import REPO as ROOT
 ROBOT1 = ROOT / "config" / "robot1.yaml"
 GOOD_POSES = [{"position": [0.0, 0.0, 0.35], "tau": [-2.3, 1.6, 0.5934]}]
 

@@ -2,7 +2,6 @@
 and strides by the std_msgs/MultiArrayLayout rule, frames, joint names, SI units, nav2 error
 codes, interpolation mathematics and pose round trips. No ROS graph: messages only."""
 
-from pathlib import Path
 
 import numpy as np
 import pytest
@@ -24,7 +23,7 @@ from cdh_planner.ros import messages as M  # noqa: E402
 from cdh_planner.trajectory.path import PlannedPath  # noqa: E402
 from cdh_planner.trajectory.timing import time_path  # noqa: E402
 
-REPO = Path(__file__).resolve().parents[1]
+from conftest import REPO
 ROBOT = load_robot(REPO / "config" / "robot2.yaml")
 FRAME = "cdh_base"
 START = Time(sec=1_700_000_000, nanosec=999_000_000)  # close to a second: carries are tested

@@ -4,7 +4,6 @@ first, bounded resources, and the search contract (Stop, Status, outcome on M)."
 import threading
 import tracemalloc
 from dataclasses import replace
-from pathlib import Path
 
 import numpy as np
 import pytest
@@ -24,7 +23,7 @@ from cdh_planner.trajectory.verify import check_motion
 
 from test_planner import assert_dense_feasible, robot1_problem
 
-ROOT = Path(__file__).resolve().parents[1]
+from conftest import REPO as ROOT
 PROBLEMS = ROOT / "config" / "problems"
 TABLE1 = sorted(p.stem for p in PROBLEMS.glob("*.yaml"))
 MEMORY_BOUND_MB = 64
@@ -185,3 +184,21 @@ def test_free_flight_atlas_grows_with_bounded_charts():
     assert reached and len(pts) >= 2
     for p in pts[1:-1]:
         assert np.max(np.abs(atlas.c.residual_and_jacobian(p)[0])) < 1e-6
+
+
+@pytest.mark.slow
+def test_twenty_random_free_flight_queries_are_answered_right():
+    """The benchmark's acceptance in small (`pytest -m slow`, about a minute): with the
+    defaults (GBF, radius 0.5), at least 95 % of 20 seeded queries get a dense-feasible path
+    or a proven no-path, and nothing else comes back but a clean limit."""
+    answered, total = 0, 0
+    for name in ("robot1", "robot2"):
+        robot = load_robot(ROOT / "config" / f"{name}.yaml")
+        for q in random_free_queries(robot, 10, seed=3):
+            res = Planner(robot, FreeTask(), PlannerSettings(timeout_s=10.0)).plan(q.start, q.goal)
+            total += 1
+            if res.success:
+                assert_dense_feasible(robot, res.path, q.start, q.goal)
+            assert res.success or res.reason in (Status.NO_PATH, Status.TIMEOUT)
+            answered += res.success or res.reason == Status.NO_PATH
+    assert answered >= 0.95 * total

@@ -13,7 +13,7 @@ from cdh_planner.io import plots
 from cdh_planner.model.robot import load_robot
 from cdh_planner.model.task import SliceTask, SphereTask
 
-ROOT = Path(__file__).resolve().parents[1]
+from conftest import REPO as ROOT
 ROBOT1_FILE = ROOT / "config" / "robot1.yaml"
 ROBOT2_FILE = ROOT / "config" / "robot2.yaml"
 SLICE1 = ["--fixed", "x=0", "y=0", "z=0.35", "sigma=34deg"]

@@ -18,7 +18,6 @@ analytic reference computes s from the same rounded points.
 """
 
 import dataclasses
-from pathlib import Path
 
 import numpy as np
 import pytest
@@ -30,7 +29,7 @@ from cdh_planner.trajectory.path import PlannedPath
 from cdh_planner.trajectory.timing import (DWELL_S, REL_TOL, limit_ratio, time_parameterize,
                                            time_path, trapezoid_durations)
 
-REPO = Path(__file__).resolve().parents[1]
+from conftest import REPO
 RTOL = REL_TOL
 ATOL = 1e-12
 VMAX = np.array([0.05, 0.04, 0.06, 0.05, 0.03, 0.05])   # m/s

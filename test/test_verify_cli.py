@@ -1,7 +1,6 @@
 """``cdh-planner verify`` end to end, and the dense segment check it is built on."""
 import json
 import types
-from pathlib import Path
 
 import numpy as np
 import pytest
@@ -13,7 +12,7 @@ from cdh_planner.model.pose import quaternion_from_tau, rotation_angle_between, 
 from cdh_planner.model.robot import load_robot
 from cdh_planner.trajectory import verify as tv
 
-ROOT = Path(__file__).resolve().parents[1]
+from conftest import REPO as ROOT
 ROBOT1_FILE = ROOT / "config" / "robot1.yaml"
 ROBOT2_FILE = ROOT / "config" / "robot2.yaml"
 SIGMA = 17 * np.pi / 90
