@@ -24,7 +24,7 @@ from .atlas.atlas import Atlas
 from .errors import InputError
 from .feasibility import evaluate
 from .manifold.constraint import TaskConstraint
-from .model.pose import (quaternion_from_tau, rotation_angle_between, rotation_tt,
+from .model.pose import (Pose, quaternion_from_tau, rotation_angle_between, rotation_tt,
                          tau_from_rotation, wrap_angle)
 from .model.task import PERIODIC, FreeTask, SliceTask, SphereTask
 from .search.search import MB, Stop, run
@@ -34,14 +34,6 @@ from .trajectory.path import PlannedPath
 from .trajectory.timing import time_path
 from .trajectory.verify import SlerpPath, TaskLinePath, check_motion, check_path
 
-
-
-@dataclass(frozen=True)
-class Pose:
-    """Platform pose: position ``p`` (3,) m in the base frame, ``tau`` = (phi, theta, sigma) rad."""
-
-    p: np.ndarray
-    tau: np.ndarray
 
 
 @dataclass

@@ -18,6 +18,8 @@ from cdh_planner.feasibility import evaluate  # noqa: E402
 from cdh_planner.model.pose import quaternion_from_tau, rotation_from_quaternion, rotation_tt  # noqa: E402
 from cdh_planner.model.robot import load_robot  # noqa: E402
 from cdh_planner.planner import PlanResult, Pose  # noqa: E402
+from cdh_planner.ros import markers as MK  # noqa: E402
+from cdh_planner.trajectory import sampling as S  # noqa: E402
 from cdh_planner.status import Status  # noqa: E402
 from cdh_planner.ros import messages as M  # noqa: E402
 from cdh_planner.trajectory.path import PlannedPath  # noqa: E402
@@ -158,7 +160,7 @@ def test_envelope_reader_honours_offset_and_strides():
 # ----------------------------------------------------------------------------- markers
 
 def test_markers_geometry_frames_and_colours():
-    msg = M.markers_msg(PATH, ROBOT, FRAME, START)
+    msg = MK.markers_msg(PATH, ROBOT, FRAME, START)
     markers = msg.markers
     assert markers[0].action == Marker.DELETEALL
     assert all(m.header.frame_id == FRAME for m in markers)
@@ -166,12 +168,12 @@ def test_markers_geometry_frames_and_colours():
     assert set(by) == {("path", 0), ("platform", 0), ("platform", 1), ("cables", 0), ("cables", 1)}
     for m in markers[1:]:
         assert m.action == Marker.ADD and ns(m.header.stamp) == ns(START)
-        assert m.pose.orientation.w == 1.0 and m.scale.x == M.LINE_WIDTH_M
+        assert m.pose.orientation.w == 1.0 and m.scale.x == MK.LINE_WIDTH_M
         assert (m.lifetime.sec, m.lifetime.nanosec) == (0, 0)
     line = by[("path", 0)]
     assert line.type == Marker.LINE_STRIP
     np.testing.assert_array_equal([[q.x, q.y, q.z] for q in line.points], PATH.p)
-    margins = M.cable_margins(PATH, ROBOT)
+    margins = MK.cable_margins(PATH, ROBOT)
     # the tension part of the feasibility margin: never below the overall margin
     assert np.all(margins.min(axis=1) >= PATH.margin - 1e-12)
     for ident, k in ((0, 0), (1, len(PATH) - 1)):
@@ -182,7 +184,7 @@ def test_markers_geometry_frames_and_colours():
         # the drawn cables have the path's lengths at that waypoint
         np.testing.assert_allclose(np.linalg.norm(pts[1::2] - pts[0::2], axis=1), PATH.lengths[k], rtol=1e-12)
         for i in range(6):
-            expected = M.margin_color(margins[k, i])
+            expected = MK.margin_color(margins[k, i])
             for c in cables.colors[2 * i:2 * i + 2]:
                 assert (c.r, c.g, c.b, c.a) == (expected.r, expected.g, expected.b, expected.a)
         outline = by[("platform", ident)]
@@ -196,11 +198,11 @@ def test_markers_geometry_frames_and_colours():
 
 
 def test_margin_colours():
-    red, green, mid = M.margin_color(-0.1), M.margin_color(1.0), M.margin_color(M.MARGIN_FULL / 2)
+    red, green, mid = MK.margin_color(-0.1), MK.margin_color(1.0), MK.margin_color(MK.MARGIN_FULL / 2)
     assert (red.r, red.g, red.a) == (1.0, 0.0, 1.0)
     assert green.r == 0.0 and green.g > 0.5
     assert mid.r == 1.0 and mid.g > 0.5  # yellow half way
-    assert M.margin_color(float("-inf")).r == 1.0
+    assert MK.margin_color(float("-inf")).r == 1.0
 
 
 # ----------------------------------------------------------------------------- plan result
@@ -243,16 +245,16 @@ def test_plan_status_success_and_code_table():
 
 def test_sample_at_waypoints_and_clamped_ends():
     for k in (0, 1, 17, len(PATH) - 1):
-        s = M.sample_cable_state(PATH, PATH.t[k])
+        s = S.sample_cable_state(PATH, PATH.t[k])
         np.testing.assert_allclose(s.lengths, PATH.lengths[k], rtol=1e-12)
         np.testing.assert_allclose(s.velocities, PATH.velocities[k], atol=1e-12)
         np.testing.assert_allclose(s.effort, PATH.tension_nominal[k], rtol=1e-12)
-    before, after = M.sample_cable_state(PATH, -3.0), M.sample_cable_state(PATH, PATH.t[-1] + 5)
+    before, after = S.sample_cable_state(PATH, -3.0), S.sample_cable_state(PATH, PATH.t[-1] + 5)
     np.testing.assert_array_equal(before.lengths, PATH.lengths[0])
     np.testing.assert_array_equal(after.lengths, PATH.lengths[-1])
     assert not before.velocities.any() and not after.velocities.any()
     with pytest.raises(InputError) as err:
-        M.sample_cable_state(PATH, float("nan"))
+        S.sample_cable_state(PATH, float("nan"))
     assert err.value.field == "t"
 
 
@@ -271,7 +273,7 @@ def test_quintic_sampling_reproduces_a_quintic():
                        tension_max=zeros, margin=np.ones(n), t=t, velocities=ev(lambda p: p.deriv(), t),
                        accelerations=ev(lambda p: p.deriv(2), t))
     for x in rng.uniform(0, t[-1], 50):
-        s = M.sample_cable_state(path, x)
+        s = S.sample_cable_state(path, x)
         np.testing.assert_allclose(s.lengths, ev(lambda p: p, x), atol=1e-13)
         np.testing.assert_allclose(s.velocities, ev(lambda p: p.deriv(), x), atol=1e-12)
         np.testing.assert_allclose(s.effort, x, rtol=1e-12)  # linear effort of a linear ramp
@@ -279,7 +281,7 @@ def test_quintic_sampling_reproduces_a_quintic():
 
 def test_linear_sampling_stays_on_the_segment_within_the_speed_limit():
     for x in np.linspace(0, PATH.t[-1], 333):
-        s = M.sample_cable_state(PATH, x, method="linear")
+        s = S.sample_cable_state(PATH, x, method="linear")
         k = min(int(np.searchsorted(PATH.t, x, side="right") - 1), len(PATH) - 2)
         f = (x - PATH.t[k]) / (PATH.t[k + 1] - PATH.t[k])
         np.testing.assert_allclose(s.lengths, (1 - f) * PATH.lengths[k] + f * PATH.lengths[k + 1], atol=1e-14)
@@ -289,7 +291,7 @@ def test_linear_sampling_stays_on_the_segment_within_the_speed_limit():
 def test_cable_command_message():
     x = 0.5 * PATH.t[-1]
     msg = M.cable_command_msg(PATH, ROBOT.winch_names, x, START)
-    s = M.sample_cable_state(PATH, x)
+    s = S.sample_cable_state(PATH, x)
     assert list(msg.name) == list(ROBOT.winch_names)
     assert list(msg.position) == s.lengths.tolist()
     assert list(msg.velocity) == s.velocities.tolist()

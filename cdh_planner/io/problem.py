@@ -19,7 +19,7 @@ import numpy as np
 from ..errors import InputError
 from ..model.robot import load_robot, read_yaml
 from ..model.task import SphereTask, task_from_dict
-from ..planner import Pose
+from ..model.pose import Pose
 from ..settings import SETTINGS, PlannerSettings, check_setting
 from .poses import number_list, pose_from_dict, short_repr
 

@@ -18,8 +18,7 @@ import numpy as np
 from scipy.spatial.transform import Rotation
 
 from ..feasibility import evaluate
-from ..model.pose import quaternion_from_tau, tau_from_rotation
-from ..planner import Pose
+from ..model.pose import Pose, quaternion_from_tau, tau_from_rotation
 from ..trajectory.verify import SlerpPath, check_motion
 
 BATCH = 20_000  # poses drawn per rejection round

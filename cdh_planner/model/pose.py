@@ -7,6 +7,8 @@ ROS (geometry_msgs/Quaternion) and scipy.
 Everything is vectorised over leading axes: tau has shape (..., 3), R (..., 3, 3).
 """
 
+from dataclasses import dataclass
+
 import numpy as np
 from scipy.spatial.transform import Rotation
 
@@ -141,3 +143,11 @@ def rotation_angle_between(Ra, Rb):
     """SO(3) geodesic distance: the angle (radians) of Ra^T Rb, shape (...)."""
     tr = np.einsum("...ji,...ji->...", Ra, Rb)
     return np.arccos(np.clip((tr - 1.0) / 2.0, -1.0, 1.0))
+
+
+@dataclass(frozen=True)
+class Pose:
+    """Platform pose: position ``p`` (3,) m in the base frame, ``tau`` = (phi, theta, sigma) rad."""
+
+    p: np.ndarray
+    tau: np.ndarray

@@ -23,6 +23,7 @@ from nav_msgs.msg import Path
 from ..errors import InputError
 from ..planner import PlanResult
 from . import messages as M
+from .markers import markers_msg
 
 SINGULAR_SIN = 1e-9  # |sin theta| below this: phi is not determined by the orientation
 
@@ -105,7 +106,7 @@ def plan_outputs(result, robot, base_frame, stamp):
         path=M.path_msg(path, base_frame, stamp),
         cable_trajectory=M.cable_trajectory_msg(path, robot.winch_names, base_frame),
         tension_envelope=M.tension_envelope_msg(path),
-        markers=M.markers_msg(path, robot, base_frame, stamp))
+        markers=markers_msg(path, robot, base_frame, stamp))
 
 
 def empty_path(base_frame, stamp):

@@ -6,7 +6,7 @@ timer calls ``command``, its stop service ``hold``).
     msg = stream.hold(stamp)                                   # on stop
 
 The command at wall-clock time ``now`` is the trajectory sampled at ``now - start`` s
-(``messages.sample_cable_state``: linear or quintic between waypoints). Past the end the
+(``trajectory.sampling.sample_cable_state``: linear or quintic between waypoints). Past the end the
 last waypoint is sent with zero velocity and the stream is finished. ``hold`` repeats the
 last command sent with zero velocity: the winches stay where they were last told to be.
 """

@@ -68,7 +68,7 @@ curved Robot 2 path, speed up to 1.006 x the limit and acceleration up to 1.4 x,
 under 0.5 % of the time; 1.8 x at a sharp corner; with only 2 waypoints the quintic's speed
 peaks at 1.67 x. A controller that must never exceed the limits should be given derated
 limits, or sample the straight segments at their mean velocities (never above the speed
-limit: ``ros.messages.sample_cable_state(..., method="linear")``).
+limit: ``trajectory.sampling.sample_cable_state(..., method="linear")``).
 """
 
 from dataclasses import dataclass, replace

@@ -1,0 +1,97 @@
+"""The cable state between the waypoints of a timed path, as a controller interpolates it.
+
+    sample_cable_state(path, t) -> CableSample (lengths m, velocities m/s, effort N)
+
+Numerics only (no ROS): the node's command stream and the replay use it.
+"""
+
+from dataclasses import dataclass
+
+import numpy as np
+
+from ..errors import InputError
+from ..model.robot import N_CABLES
+
+
+def check_timed_path(path):
+    """InputError unless ``path`` (PlannedPath) has per-cable arrays (N, 6) and times that
+    start >= 0 and strictly increase."""
+    n = len(path)
+    for name in ("lengths", "velocities", "accelerations", "tension_min", "tension_nominal",
+                 "tension_max"):
+        shape = np.shape(getattr(path, name))
+        if shape != (n, N_CABLES):
+            raise InputError(f"path.{name}", f"shape {shape}", f"expected ({n}, {N_CABLES})")
+    if np.shape(path.t) != (n,):
+        raise InputError("path.t", f"shape {np.shape(path.t)}", f"expected ({n},)")
+    if n and (not np.all(np.isfinite(path.t)) or path.t[0] < 0 or np.any(np.diff(path.t) <= 0)):
+        raise InputError("path.t", np.asarray(path.t).tolist()[:8],
+                         "must start >= 0 and strictly increase (time-parameterise the path)")
+
+
+@dataclass(frozen=True)
+class CableSample:
+    """Cable command at one instant: ``lengths`` (6,) m, ``velocities`` (6,) m/s,
+    ``effort`` (6,) N (nominal tensions)."""
+
+    lengths: np.ndarray
+    velocities: np.ndarray
+    effort: np.ndarray
+
+
+def sample_cable_state(path, t, method="quintic"):
+    """Cable lengths, velocities and nominal tensions at time ``t`` (s from the start).
+
+    ``method``: ``quintic`` interpolates each segment with the quintic through position,
+    velocity and acceleration at both ends, as ros2_control's JointTrajectoryController
+    does with the same points (so streaming and the controller agree; at a waypoint it
+    returns that waypoint); ``linear`` moves on the straight cable-space segment at its mean
+    velocity (L_{k+1} - L_k) / h_k, which never exceeds the speed limit. Effort is linear in
+    t. Outside [t_0, t_end] the path is clamped to its end and held (velocity 0).
+    """
+    check_timed_path(path)
+    t = float(t)
+    if not np.isfinite(t):
+        raise InputError("t", t, "must be a finite number of seconds")
+    if method not in ("quintic", "linear"):
+        raise InputError("method", method, "expected 'quintic' or 'linear'")
+    n, T = len(path), np.asarray(path.t, dtype=float)
+    if n == 1 or t <= T[0] or t >= T[-1]:
+        k = 0 if (n == 1 or t <= T[0]) else n - 1
+        inside = n > 1 and t == T[k]
+        vel = path.velocities[k] if inside else np.zeros(N_CABLES)
+        return CableSample(lengths=np.array(path.lengths[k], dtype=float),
+                           velocities=np.array(vel, dtype=float),
+                           effort=np.array(path.tension_nominal[k], dtype=float))
+    k = int(np.searchsorted(T, t, side="right") - 1)
+    h = T[k + 1] - T[k]
+    s = (t - T[k]) / h
+    effort = (1 - s) * path.tension_nominal[k] + s * path.tension_nominal[k + 1]
+    if method == "linear":
+        rate = (path.lengths[k + 1] - path.lengths[k]) / h
+        return CableSample(lengths=path.lengths[k] + rate * (t - T[k]), velocities=rate,
+                           effort=np.asarray(effort, dtype=float))
+    pos, vel = quintic_hermite(s, h, path.lengths[k], path.velocities[k], path.accelerations[k],
+                               path.lengths[k + 1], path.velocities[k + 1],
+                               path.accelerations[k + 1])
+    return CableSample(lengths=pos, velocities=vel, effort=np.asarray(effort, dtype=float))
+
+
+def quintic_hermite(s, h, p0, v0, a0, p1, v1, a1):
+    """Position and velocity at fraction ``s`` in [0, 1] of a segment of duration ``h`` (s)
+    of the quintic matching position, velocity and acceleration at both ends."""
+    s2, s3, s4, s5 = s * s, s ** 3, s ** 4, s ** 5
+    basis = np.array([1 - 10 * s3 + 15 * s4 - 6 * s5,            # p0
+                      s - 6 * s3 + 8 * s4 - 3 * s5,               # v0 h
+                      0.5 * s2 - 1.5 * s3 + 1.5 * s4 - 0.5 * s5,  # a0 h^2
+                      0.5 * s3 - s4 + 0.5 * s5,                   # a1 h^2
+                      -4 * s3 + 7 * s4 - 3 * s5,                  # v1 h
+                      10 * s3 - 15 * s4 + 6 * s5])                # p1
+    slope = np.array([-30 * s2 + 60 * s3 - 30 * s4,
+                      1 - 18 * s2 + 32 * s3 - 15 * s4,
+                      s - 4.5 * s2 + 6 * s3 - 2.5 * s4,
+                      1.5 * s2 - 4 * s3 + 2.5 * s4,
+                      -12 * s2 + 28 * s3 - 15 * s4,
+                      30 * s2 - 60 * s3 + 30 * s4])
+    terms = np.array([p0, v0 * h, a0 * h * h, a1 * h * h, v1 * h, p1], dtype=float)
+    return basis @ terms, (slope @ terms) / h
