@@ -8,7 +8,7 @@
 ``claimed_domain`` (cdh_planner.ros.domains) holds a localhost TCP port per domain id while
 the test runs, so test processes running at the same time (other sessions, other test
 modules, the demo) never share a domain (two nodes with the same service name in one domain
-answer each other's calls: ros-on-pip.md).
+answer each other's calls).
 """
 
 import math

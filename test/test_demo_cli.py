@@ -164,7 +164,7 @@ def test_pose_verdicts_agree_with_the_closed_form_and_the_limits(checked):
             "tension_max": (robot.tension_max[i] - f.tension_max[0, i]) / (robot.tension_max[i] - robot.tension_min[i]),
         }[kind]
         assert v.margin == pytest.approx(expected, rel=1e-12)
-    # math.md section 6: Robot 1's q_s, q_g have a margin of about 0.04 (millimetre units).
+    # the paper's Sec. 5.1: Robot 1's q_s, q_g have a margin of about 0.04 (millimetre units).
     assert 0.02 < checked.poses[("robot1", "q_s")].margin < 0.06
     assert 0.02 < checked.poses[("robot1", "q_g")].margin < 0.06
 
@@ -176,7 +176,7 @@ def test_motion_verdicts_and_where_they_leave_c(checked):
     assert not by_key[("robot1", "q_s", "q_g", "task")].safe
     assert by_key[("robot2", "q_1", "q_2", "task")].safe
     q2q3 = by_key[("robot2", "q_2", "q_3", "task")]
-    assert not q2q3.safe and 0.03 < q2q3.leaves_at < 0.06  # math.md: after about 4 % of the way
+    assert not q2q3.safe and 0.03 < q2q3.leaves_at < 0.06  # the paper: after about 4 % of the way
     assert all(m.agrees is not False for m in checked.motions)
     assert checked.differs == []
     # The first unsafe point is a boundary point of C along the line: feasible just before,

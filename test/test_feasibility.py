@@ -186,7 +186,7 @@ def test_margins_name_the_binding_constraint():
     np.testing.assert_array_equal(f.feasible, f.margin > 0)
 
 
-# --- The paper's examples (shared design note math.md, section 6) -------------------------
+# --- The paper's examples (Sec. 5; SI units, moments in N mm as the README says) ----------
 
 def _slice_poses(points):
     p, tau = SLICE1.pose(np.array(points))

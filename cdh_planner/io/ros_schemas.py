@@ -35,8 +35,8 @@ from pathlib import Path
 
 import numpy as np
 
-# ament_index_python finds share/ through AMENT_PREFIX_PATH; a pip venv (see
-# ros-on-pip.md) has the message files under sys.prefix but often no such variable.
+# ament_index_python finds share/ through AMENT_PREFIX_PATH; a venv with ROS 2 from PyPI
+# has the message files under sys.prefix but often no such variable.
 os.environ.setdefault("AMENT_PREFIX_PATH", sys.prefix)
 
 SEPARATOR = "=" * 80

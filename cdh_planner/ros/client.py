@@ -7,7 +7,7 @@ call``, ``replay --requests``, the demo and the tests).
         client.execute(); client.stop()
 
 Spins its own node with ``spin_once`` (not ``spin_until_future_complete``, which slows down
-call after call in rclpy 7.1: ros-on-pip.md). Its subscription to ``~/plan_result`` is
+call after call in rclpy 7.1 as installed from PyPI). Its subscription to ``~/plan_result`` is
 volatile, so only answers published after it joined arrive; an answer is paired with its
 result by the ``path_stamp`` key (= the response path's header stamp).
 """

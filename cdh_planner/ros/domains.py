@@ -1,7 +1,7 @@
 """A ROS domain of one's own for tests and demos (no rclpy here).
 
 Two processes offering the same service name in one ROS_DOMAIN_ID answer each other's calls
-(ros-on-pip.md). ``claimed_domain()`` picks a domain id that no other cooperating process
+(DDS matches them by name). ``claimed_domain()`` picks a domain id that no other cooperating process
 (tests, demos) holds: holding one means holding a bound localhost TCP port, released when
 the block ends or the process dies. Discovery should also stay on the machine:
 ``ROS_AUTOMATIC_DISCOVERY_RANGE=LOCALHOST`` (``isolated_env``).
