@@ -101,24 +101,31 @@ def check_setting(name, value, label=None):
     checked against its kind, choices and range; InputError naming ``label`` (or ``name``)."""
     kind, _, s = SETTINGS[name]
     label = label or name
-    if kind in (bool, "bool"):
+    if kind is bool:
         if not isinstance(value, bool):
             raise InputError(label, value, "expected true or false")
         return value
-    if kind in (str, "str"):
+    if kind is str:
         if value not in s.choices:
             raise InputError(label, value, f"expected one of {', '.join(s.choices)}")
         return value
     if isinstance(value, bool) or not isinstance(value, (int, float)) or not math.isfinite(value):
         raise InputError(label, value, "must be a finite number")
-    if kind in (int, "int"):
+    if kind is int:
         if int(value) != value:
             raise InputError(label, value, "must be an integer")
         value = int(value)
     else:
         value = float(value)
-    if s.low is not None and (value < s.low or (s.open_low and value == s.low)):
-        raise InputError(label, value, f"must be {'>' if s.open_low else '>='} {s.low:g}")
-    if s.high is not None and (value > s.high or (s.open_high and value == s.high)):
-        raise InputError(label, value, f"must be {'<' if s.open_high else '<='} {s.high:g}")
+    return check_range(label, value, s)
+
+
+def check_range(label, value, bounds):
+    """``value`` if it lies in ``bounds`` (anything with ``low``, ``high``, ``open_low``,
+    ``open_high``; None: unbounded), else InputError naming ``label``."""
+    b = bounds
+    if b.low is not None and (value < b.low or (b.open_low and value == b.low)):
+        raise InputError(label, value, f"must be {'>' if b.open_low else '>='} {b.low:g}")
+    if b.high is not None and (value > b.high or (b.open_high and value == b.high)):
+        raise InputError(label, value, f"must be {'<' if b.open_high else '<='} {b.high:g}")
     return value

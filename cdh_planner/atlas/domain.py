@@ -71,12 +71,24 @@ class HalfSpaces:
         return self.a.nbytes + self.beta.nbytes
 
 
-class PolytopeDomain:
-    """Exact Henderson domain: the cube [-r, r]^n clipped, kept as a vertex set."""
+class _Domain:
+    """What both representations keep: the ball's ``radius`` and the ``halfspaces``."""
 
     def __init__(self, n, radius):
         self.radius = radius
         self.halfspaces = HalfSpaces(n)
+
+    def contains(self, S):
+        """Which rows of S (m, n) lie in the ball and satisfy every half-space."""
+        S = np.atleast_2d(S)
+        return (np.linalg.norm(S, axis=1) <= self.radius * (1 + TOL)) & self.halfspaces.satisfied(S)
+
+
+class PolytopeDomain(_Domain):
+    """Exact Henderson domain: the cube [-r, r]^n clipped, kept as a vertex set."""
+
+    def __init__(self, n, radius):
+        super().__init__(n, radius)
         self.polytope = Polytope(n, radius)
         self._closed = False
 
@@ -122,21 +134,16 @@ class PolytopeDomain:
         self.polytope.close()
         self._closed = True
 
-    def contains(self, S):
-        S = np.atleast_2d(S)
-        return (np.linalg.norm(S, axis=1) <= self.radius * (1 + TOL)) & self.halfspaces.satisfied(S)
-
     @property
     def nbytes(self):
         return self.halfspaces.nbytes + self.polytope.vertices.nbytes + self.polytope.bits.nbytes
 
 
-class SampledDomain:
+class SampledDomain(_Domain):
     """Bounded domain: half-spaces plus which of K fixed unit directions are still free."""
 
     def __init__(self, n, radius, directions=384):
-        self.radius = radius
-        self.halfspaces = HalfSpaces(n)
+        super().__init__(n, radius)
         self.u = unit_directions(n, directions)
         self.alive = np.ones(directions, dtype=bool)
 
@@ -168,10 +175,6 @@ class SampledDomain:
 
     def close(self):
         self.alive[:] = False
-
-    def contains(self, S):
-        S = np.atleast_2d(S)
-        return (np.linalg.norm(S, axis=1) <= self.radius * (1 + TOL)) & self.halfspaces.satisfied(S)
 
     @property
     def nbytes(self):

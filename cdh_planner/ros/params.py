@@ -52,7 +52,7 @@ from ..errors import InputError
 from ..model.robot import robot_from_dict
 from ..model.task import POSE_NAMES, task_from_dict
 from ..planner import task_cost
-from ..settings import SETTINGS, PlannerSettings
+from ..settings import SETTINGS, PlannerSettings, check_range
 
 STRING, BOOL, INT, DOUBLE, DOUBLES, STRINGS = "string", "bool", "int", "double", "doubles", \
     "strings"
@@ -227,11 +227,7 @@ def check_value(spec, value):
             return value  # NaN means "not set" where that is the default
         if not math.isfinite(value):
             raise InputError(name, value, "must be a finite number")
-    if spec.low is not None and (value < spec.low or (spec.open_low and value == spec.low)):
-        raise InputError(name, value, f"must be {'>' if spec.open_low else '>='} {spec.low:g}")
-    if spec.high is not None and (value > spec.high or (spec.open_high and value == spec.high)):
-        raise InputError(name, value, f"must be {'<' if spec.open_high else '<='} {spec.high:g}")
-    return value
+    return check_range(name, value, spec)
 
 
 def node_config(values, source="ROS parameters"):
