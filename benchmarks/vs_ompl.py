@@ -56,6 +56,7 @@ import numpy as np
 from cdh_planner.feasibility import evaluate
 from cdh_planner.io.problem import load_problem
 from cdh_planner.io.random_queries import random_free_queries
+from cdh_planner.io.random_queries import workspace_box as random_workspace_box
 from cdh_planner.search.search import STRATEGIES
 from cdh_planner.manifold.constraint import TaskConstraint
 from cdh_planner.model.pose import quaternion_from_tau, tau_from_quaternion
@@ -163,11 +164,9 @@ def ours(strategy):
 
 # ----- OMPL RRTConnect, point-wise validity ------------------------------------------------
 def workspace_box(robot, points):
-    """Position bounds (m): base anchors in x, y; 0 .. longest cable along the load in z;
-    widened to contain ``points`` (N, 3)."""
-    lo, hi = robot.base_anchors.min(axis=0).copy(), robot.base_anchors.max(axis=0).copy()
-    down = 1.0 if robot.force[2] >= 0 else -1.0
-    lo[2], hi[2] = sorted((0.0, down * float(robot.length_max.max())))
+    """Position bounds (m): the random queries' box under the anchors, widened to contain
+    ``points`` (N, 3)."""
+    lo, hi = random_workspace_box(robot)
     return np.minimum(lo, points.min(axis=0)), np.maximum(hi, points.max(axis=0))
 
 

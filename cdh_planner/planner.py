@@ -122,7 +122,8 @@ class Planner:
             out = run(self.atlas, points["start"], points["goal"], self.cost, stop, self.strategy,
                       self._direct_x, progress, self._edge_costs, self._link_ok)
             if out.status != Status.OK:
-                return answer(False, *_failure(out.status, len(self.atlas.charts), s, self.radius),
+                return answer(False, out.status, _failure_message(out.status, len(self.atlas.charts),
+                                                                  s, self.radius),
                               expanded=out.expanded)
             y, charts, direct = self._route_coords(out), len(out.charts), False
         if s.complete:
@@ -195,8 +196,12 @@ class Planner:
         motion = self._direct_motion([ya, yb])
         dp, da = motion.speeds()
         n = int(max(2, math.ceil(max(dp[0] / DIRECT_STEP_M, da[0] / DIRECT_STEP_RAD)) + 1))
-        p, R = motion(np.zeros(n, dtype=int), np.linspace(0.0, 1.0, n))
-        y = self.task.coords(p, tau_from_rotation(R, phi_hint=float(ya[3]) if len(ya) == 6 else 0.0))
+        s = np.linspace(0.0, 1.0, n)
+        if isinstance(motion, TaskLinePath):  # a line in the task's own coordinates
+            y = motion.coords[0] + s[:, None] * (motion.coords[1] - motion.coords[0])
+        else:  # slerp: free-flight coordinates are (p, tau), phi continued from the start
+            p, R = motion(np.zeros(n, dtype=int), s)
+            y = self.task.coords(p, tau_from_rotation(R, phi_hint=float(ya[3])))
         y[0], y[-1] = ya, yb
         return y
 
@@ -369,8 +374,8 @@ def _describe(p, tau):
             f"tau = [{', '.join(f'{v:.4f}' for v in tau)}] rad")
 
 
-def _failure(status, charts, s, radius):
-    """(status, message) of a search that ended without a path."""
+def _failure_message(status, charts, s, radius):
+    """What a search that ended with ``status`` (not OK) means, for the user."""
     messages = {
         Status.NO_PATH: f"no path at resolution r = {radius:g}: a connected component of an end "
                         f"is exhausted after {charts} charts",
@@ -380,4 +385,4 @@ def _failure(status, charts, s, radius):
                                f"{charts} charts)",
         Status.CANCELED: f"canceled after {charts} charts",
     }
-    return status, messages[status]
+    return messages[status]

@@ -19,7 +19,7 @@ from scipy.spatial.transform import Rotation
 
 from ..feasibility import evaluate
 from ..model.pose import Pose, quaternion_from_tau, tau_from_rotation
-from ..trajectory.verify import SlerpPath, check_motion
+from ..trajectory.verify import SlerpPath, check_path
 
 BATCH = 20_000  # poses drawn per rejection round
 PROBE_SAMPLES = 200  # points of a straight motion probed before the dense check
@@ -90,7 +90,9 @@ def random_free_queries(robot, count, seed=0, min_margin=0.01, max_tilt=np.pi / 
             pp, RR = motion(np.zeros(s.size, dtype=int), s)
             if evaluate(robot, pp, R=RR).feasible.all():
                 continue  # most likely safe: not a query that needs a planner
-            seg = check_motion(robot, p[[a, b]], quaternion_from_tau(tau[[a, b]]))[0]
+            seg = check_path(robot, motion)[0]
+            if seg.feasible:  # the probe's infeasible pose was between the dense samples
+                continue
             out.append(FreeQuery(Pose(p[a], tau[a]), Pose(p[b], tau[b]),
                                  (float(margins[a]), float(margins[b])), float(seg.first_unsafe.s)))
             if len(out) == count:

@@ -8,7 +8,8 @@
 Knows nothing of robots: it sees an ``Atlas``, a ``cost(x_a, x_b)`` between two points of
 the manifold (the task metric, also the heuristic) and, optionally, ``direct(x_a, x_b)``:
 whether the caller's direct motion between two points of M is safe (a dense closed-form
-check, much cheaper than charts).
+check, much cheaper than charts). The direct motion from start to goal itself is the
+caller's to try first, before any chart exists (``Planner.plan`` does).
 
 Two searches run on the one atlas, from a chart at the start and one at the goal, each
 with the other end as its heuristic target. A chart reached by both joins them; so does a
@@ -241,8 +242,6 @@ class _Bidirectional:
         self.sides = (fwd, bwd)
         if i_start == i_goal:
             return Status.OK, [i_start], set()
-        if self.direct_ok(i_start, i_goal):
-            return Status.OK, [i_start, i_goal], {(i_start, i_goal)}
         for s in self.sides:
             heapq.heappush(s.heap, (self.h(s, s.root), next(self._count), s.root))
         return self._astar() if self.strategy == "astar" else self._gbf()
