@@ -32,6 +32,10 @@ from . import messages as M
 
 DEFAULT_NODE = "/cdh_planner"
 RESULT_WAIT_S = 2.0  # after the response, how long to wait for its ~/plan_result
+# After the services are seen, s of spinning before the first call: the node must also have
+# discovered this client's reply reader, or a fast answer (a direct motion, 30 ms) is dropped
+# by the middleware ("failed to send response (timeout)").
+DISCOVERY_SETTLE_S = 0.3
 
 
 @dataclass
@@ -138,6 +142,7 @@ class PlannerClient:
         # let the plan_result subscription match the node's publisher
         self.spin_until(lambda: self.node.count_publishers(f"{self.target}/plan_result") > 0,
                         max(0.0, end - time.monotonic()))
+        self.spin_until(lambda: False, DISCOVERY_SETTLE_S)
 
     def call(self, client, request, timeout_s):
         """The response of one service call, spinning meanwhile; ClientError on timeout."""
