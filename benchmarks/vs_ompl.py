@@ -61,7 +61,7 @@ from cdh_planner.search.search import STRATEGIES
 from cdh_planner.manifold.constraint import TaskConstraint
 from cdh_planner.model.pose import quaternion_from_tau, tau_from_quaternion
 from cdh_planner.model.robot import load_robot
-from cdh_planner.model.task import PERIODIC, FreeTask
+from cdh_planner.model.task import FreeTask
 from cdh_planner.planner import Planner, PlannerSettings, task_cost
 from cdh_planner.trajectory.verify import check_motion, check_task_motion
 
@@ -108,14 +108,14 @@ class Run:
 
 # ----- paths: waypoints as the planner interpolates them -----------------------------------
 def is_free(task):
-    return isinstance(task, FreeTask)
+    return task.slerp
 
 
 def unwrap(task, y):
     """Task coordinates (N, k) with periodic columns unwrapped (short arcs as lines)."""
     y = np.array(y, dtype=float)
-    for j, name in enumerate(task.names):
-        if name in PERIODIC:
+    for j, periodic in enumerate(task.periodic):
+        if periodic:
             y[:, j] = np.unwrap(y[:, j])
     return y
 
@@ -219,7 +219,7 @@ class TaskAdapter:
 
     def __init__(self, q):
         self.q = q
-        self.periodic = [name in PERIODIC for name in q.task.names]
+        self.periodic = list(q.task.periodic)
         self.space = ob.CompoundStateSpace()
         ends = np.array([q.start.p, q.goal.p])
         box = dict(zip("xyz", zip(*workspace_box(q.robot, ends))))

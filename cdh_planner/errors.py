@@ -13,3 +13,17 @@ class InputError(ValueError):
         self.value = value
         self.reason = reason
         super().__init__(f"{field} = {value!r}: {reason}")
+
+
+def check_finite(field: str, value, positive: bool = False) -> float:
+    """``value`` as a float if it is a finite number (and > 0 when ``positive``), else an
+    InputError naming ``field``. Booleans are not numbers here."""
+    try:
+        ok = not isinstance(value, (bool, str, bytes)) and abs(float(value)) < float("inf")
+    except (TypeError, ValueError):
+        ok = False
+    if not ok:
+        raise InputError(field, value, "expected a finite number")
+    if positive and float(value) <= 0:
+        raise InputError(field, value, "must be positive")
+    return float(value)

@@ -26,7 +26,6 @@ from .feasibility import evaluate
 from .manifold.constraint import TaskConstraint
 from .model.pose import (Pose, quaternion_from_tau, rotation_angle_between, rotation_tt,
                          tau_from_rotation, wrap_angle)
-from .model.task import PERIODIC, FreeTask, SliceTask, SphereTask
 from .search.search import MB, Stop, run
 from .settings import COSTS, PlannerSettings  # noqa: F401  (PlannerSettings: part of this API)
 from .status import Status
@@ -162,7 +161,7 @@ class Planner:
         orientation slerp in free flight (what a controller executes), straight lines in a
         task's coordinates otherwise (slerp would leave the task)."""
         y = np.array(y, dtype=float)
-        if isinstance(self.task, FreeTask):
+        if self.task.slerp:
             p, tau = self.task.pose(y)
             return SlerpPath(p, quaternion_from_tau(tau))
         per = self._periodic_mask()
@@ -249,7 +248,7 @@ class Planner:
         return self.task.coords(p, tau)
 
     def _periodic_mask(self):
-        return np.array([name in PERIODIC for name in self.task.names])
+        return np.array(self.task.periodic, dtype=bool)
 
     def _feasible(self, y):
         """Which task coordinate rows (N, k) are feasible with margin above the floor."""
@@ -322,38 +321,26 @@ def _wrapped(d, periodic):
 
 # ----- task metrics ------------------------------------------------------------------------
 def task_cost(robot, task, kind="auto"):
-    """cost(p_a, tau_a, p_b, tau_b) between two poses (m, rad) of ``kind`` (COSTS):
-    ``so3`` the SO(3) geodesic (rad, the paper's for orientation slices), ``great_circle``
-    the distance on the sphere task (m, plus r_s times the torsion change when sigma is
-    free), ``se3`` |dp| + L |angle| (m, L = mean platform anchor radius) for free flight.
-    ``auto``: so3 for slices that fix the position, great_circle on the sphere, else se3."""
-    if kind == "auto":
-        kind = ("great_circle" if isinstance(task, SphereTask) else
-                "so3" if isinstance(task, SliceTask) and {"x", "y", "z"} <= set(task.fixed) else "se3")
+    """cost(p_a, tau_a, p_b, tau_b) between two poses (m, rad) of ``kind`` (COSTS), one of
+    the task's ``costs``: ``so3`` the SO(3) geodesic (rad, the paper's for orientation
+    slices), ``se3`` |dp| + L |angle| (m, L = mean platform anchor radius), or the task's
+    own (the sphere's ``great_circle``). ``auto``: the task's ``default_cost``."""
+    kind = task.default_cost if kind == "auto" else kind
+    if kind not in COSTS:
+        raise InputError("cost", kind, f"expected one of {', '.join(COSTS)}")
+    if kind not in task.costs:
+        raise InputError("cost", kind, f"not a cost of the {task.describe()} (its costs: "
+                                       f"{', '.join(task.costs)})")
     L = float(np.mean(np.linalg.norm(robot.platform_anchors, axis=1)))
 
     def angle(ta, tb):
         return float(rotation_angle_between(rotation_tt(ta), rotation_tt(tb)))
 
-    if kind == "great_circle":
-        if not isinstance(task, SphereTask):
-            raise InputError("cost", kind, f"the great-circle cost needs the sphere task, not '{task.type}'")
-        c = np.asarray(task.center)
-
-        def sphere(pa, ta, pb, tb):
-            na, nb = pa - c, pb - c
-            arc = task.radius * math.atan2(np.linalg.norm(np.cross(na, nb)), float(na @ nb))
-            if task.free_torsion:
-                arc += task.radius * abs(float(wrap_angle(tb[2] - ta[2])))
-            return arc
-        return sphere
     if kind == "so3":
-        if not (isinstance(task, SliceTask) and {"x", "y", "z"} <= set(task.fixed)):
-            raise InputError("cost", kind, "the SO(3) cost needs a slice that fixes x, y and z")
         return lambda pa, ta, pb, tb: angle(ta, tb)
-    if kind != "se3":
-        raise InputError("cost", kind, f"expected one of {', '.join(COSTS)}")
-    return lambda pa, ta, pb, tb: float(np.linalg.norm(pb - pa)) + L * angle(ta, tb)
+    if kind == "se3":
+        return lambda pa, ta, pb, tb: float(np.linalg.norm(pb - pa)) + L * angle(ta, tb)
+    return task.own_cost(kind)
 
 
 # ----- small helpers -------------------------------------------------------------------------

@@ -182,7 +182,7 @@ def test_bad_problems_give_a_clear_error(case, tmp_path, capsys):
     if case == "lambda on a slice":
         text = robot1_problem(tmp_path, "x", (-2.3, 1.6), (1.7, 1.7)).read_text() + "\n"
         text = text.replace("start: {position: [0.0, 0.0, 0.35], tau: [-2.3, 1.6, %r]}" % SIGMA1,
-                            "start: {lambda: [0.1, 0.2]}")
+                            "start: {lambda: [0.1, 0.2, 0.3]}")  # the slice has 2 coordinates
     else:
         key = line.split(":")[0]
         lines = [ln for ln in text.splitlines() if not ln.startswith(key + ":")]

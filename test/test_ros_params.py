@@ -17,9 +17,9 @@ from cdh_planner.errors import InputError  # noqa: E402
 from cdh_planner.feasibility import evaluate  # noqa: E402
 from cdh_planner.model.pose import quaternion_from_tau  # noqa: E402
 from cdh_planner.model.robot import load_robot  # noqa: E402
-from cdh_planner.model.task import SliceTask  # noqa: E402
+from cdh_planner.model.task import PivotTask, SliceTask  # noqa: E402
 from cdh_planner.ros import planning  # noqa: E402
-from cdh_planner.ros.params import SPECS, node_config  # noqa: E402
+from cdh_planner.ros.params import SPEC, SPECS, node_config  # noqa: E402
 from cdh_planner.ros.streaming import Stream  # noqa: E402
 from cdh_planner.trajectory.path import PlannedPath  # noqa: E402
 from cdh_planner.trajectory.timing import time_path  # noqa: E402
@@ -45,6 +45,15 @@ def test_robot2_task_and_defaults():
     assert config.task == task_in_yaml(ROBOT2)
     assert config.base_frame == "cdh_base"
     assert config.settings.strategy == "auto" and config.stream_rate_hz == 50.0
+
+
+def test_pivot_task_from_parameters():
+    values = dict(ROBOT2_PARAMS, **{"task.type": "pivot", "task.tool": [0.0, 0.0, 0.1],
+                                    "task.center": [0, 0, 0.35]})
+    assert node_config(values).task == PivotTask(tool=(0.0, 0.0, 0.1), center=(0.0, 0.0, 0.35))
+    assert "platform frame" in SPEC["task.tool"].description
+    with pytest.raises(InputError, match=r"task.tool = \[0.0, 0.1\]: expected 3 numbers"):
+        node_config(dict(values, **{"task.tool": [0.0, 0.1]}))
 
 
 def test_every_parameter_has_a_description_and_architecture_names_exist():
@@ -75,7 +84,7 @@ def test_integers_are_accepted_for_numbers():
     ("robot.length_min", [0.2] * 5, "robot.length_min"),
     ("robot.winch_names", ["a"] * 6, "robot.winch_names"),
     ("robot.wrench_ellipsoid.frame", "world", "robot.wrench_ellipsoid.frame = 'world'"),
-    ("task.type", "cube", "task.type = 'cube': expected one of free, slice, sphere"),
+    ("task.type", "cube", "task.type = 'cube': expected one of free, slice, sphere, pivot"),
     ("task.radius", 0.0, "task.radius = 0.0: must be > 0"),
     ("task.center", [0.0, 1.0], "task.center"),
     ("task.fixed.x", math.inf, "task.fixed.x = inf: must be a finite number"),
@@ -87,7 +96,7 @@ def test_integers_are_accepted_for_numbers():
     ("base_frame", "", "base_frame = '': must not be empty"),
     ("log_enabled", "yes", "log_enabled = 'yes': expected true or false"),
     ("planner.cost", "euclid", "planner.cost = 'euclid': expected one of auto, so3"),
-    ("planner.cost", "so3", "planner.cost = 'so3': the SO(3) cost needs a slice"),
+    ("planner.cost", "so3", "planner.cost = 'so3': not a cost of the sphere task"),
     ("planner.margin_floor", 0.0, "planner.margin_floor = 0.0: must be > 0"),
     ("planner.margin_floor", 1.0, "planner.margin_floor = 1.0: must be < 1"),
     ("planner.max_charts", 1, "planner.max_charts = 1: must be >= 2"),

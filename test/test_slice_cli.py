@@ -75,9 +75,9 @@ def test_default_resolution_is_fast(tmp_path):
     ([*SLICE1, "--range", "phi=1:0"], "LO must be below HI"),
     ([*SLICE1, "--range", "phi=a:b"], "--range phi = 'a'"),
     ([*SLICE1, "--range", "x=0:1"], "not a picture axis"),
-    ([*SLICE1, "--fixed", "w=3"], "unknown pose coordinate"),  # repeated options accumulate
+    ([*SLICE1, "--fixed", "w=3"], "unknown coordinate"),  # repeated options accumulate
     ([*SLICE1, "--fixed", "sigma=0"], "given twice"),
-    (["--fixed", "x=0", "y=0", "z=0.35", "w=1", "--free", "phi", "theta"], "unknown pose coordinate"),
+    (["--fixed", "x=0", "y=0", "z=0.35", "w=1", "--free", "phi", "theta"], "unknown coordinate"),
     (["--fixed", "x=0", "y=0", "z=0.35", "sigma=0.5", "--free", "x", "phi"], "not a free coordinate"),
     ([*SLICE1, "--segment", "--start", "0", "1"], "needs both --start and --goal"),
     ([*SLICE1, "--start", "0"], "expected two values"),

@@ -24,7 +24,6 @@ metres (``0.35``) or ``350mm``. A value starting with '-' that is not a plain nu
 """
 
 import argparse
-import math
 import time
 from dataclasses import dataclass
 from pathlib import Path
@@ -32,12 +31,12 @@ from typing import Optional
 
 from ..errors import InputError
 from ..feasibility import evaluate
-from ..io.plots import DEFAULT_RANGES, FEASIBLE, Marker, SegmentOverlay, SliceGrid, SliceView, \
+from ..io.plots import FEASIBLE, Marker, SegmentOverlay, SliceGrid, SliceView, \
     compute_slice, plot_slice
 from ..io.poses import parse_angle, parse_length
 from ..model.pose import rotation_tt
 from ..model.robot import load_robot, read_yaml, ros_parameters
-from ..model.task import POSE_NAMES, FreeTask, SliceTask, SphereTask, task_from_dict
+from ..model.task import COORDINATES, POSE_NAMES, SliceTask, SphereTask, describe_value, task_from_dict
 from ..trajectory.verify import DEFAULT_STEP_M, DEFAULT_STEP_RAD, SegmentCheck, check_task_motion
 
 EXAMPLES = """examples:
@@ -185,7 +184,7 @@ def _task(args):
             raise InputError("--fixed", args.fixed, "at least two coordinates must stay free")
         return SliceTask(fixed=fixed), True
     task = task_in_yaml(args.robot)
-    if task is None or isinstance(task, FreeTask):
+    if task is None or len(task.names) == 6:
         raise InputError("task", args.robot, "no task: give --fixed, --sphere or --task-file")
     return task, False
 
@@ -220,7 +219,9 @@ def _parse_sphere(text):
 
 def parse_value(name, text, where):
     """A coordinate value: an angle (rad or deg) or a position (m or mm) by name."""
-    if name in ("x", "y", "z"):
+    if name not in COORDINATES:
+        raise InputError(where, text, f"unknown coordinate '{name}'")
+    if COORDINATES[name].unit == "m":
         return parse_length(text, where)
     return parse_angle(text, where)
 
@@ -254,9 +255,9 @@ def _ranges(items, axes):
         given[name] = (lo, hi)
     ranges = []
     for name in axes:
-        if name not in given and name not in DEFAULT_RANGES:
+        if name not in given and COORDINATES[name].bounds is None:
             raise InputError("--range", name, f"no default range: give --range {name}=LO:HI")
-        ranges.append(given.get(name, DEFAULT_RANGES.get(name)))
+        ranges.append(given.get(name, COORDINATES[name].bounds))
     return tuple(ranges)
 
 
@@ -314,23 +315,8 @@ def _print_segment(check, start_label, goal_label):
 
 
 def _title(robot, view):
-    held = dict(view.task.fixed) if isinstance(view.task, SliceTask) else {}
-    held.update(view.held)
-    values = ", ".join(_describe(n, v) for n, v in held.items())
-    if isinstance(view.task, SphereTask):
-        c = ", ".join(f"{v:.4g}" for v in view.task.center)
-        head = f"sphere task, centre [{c}] m, radius {view.task.radius:.4g} m"
-        return f"{robot.name}: {head}" + (f", {values}" if values else "")
-    if isinstance(view.task, SliceTask):
-        return f"{robot.name}: slice {values}"
-    return f"{robot.name}: {view.task.type} task" + (f", {values}" if values else "")
-
-
-def _describe(name, value):
-    """'x = 0 m' or 'sigma = 0.5934 rad (34 deg)' for titles."""
-    if name in ("x", "y", "z"):
-        return f"{name} = {value:.4g} m"
-    return f"{name} = {value:.4g} rad ({math.degrees(value):.4g} deg)"
+    held = ", ".join(describe_value(n, v) for n, v in view.held.items())
+    return f"{robot.name}: {view.task.describe()}" + (f", {held}" if held else "")
 
 
 def _report(robot, view, grid, elapsed, markers, out, size):

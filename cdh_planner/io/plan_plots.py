@@ -24,17 +24,21 @@
 Periodic task coordinates (phi, sigma, alpha1) are drawn in [-pi, pi): a polygon is
 unwrapped around its chart centre and drawn a second time shifted by 2 pi when it
 straddles the edge. Prints nothing; matplotlib with the Agg backend.
+
+``plot_paths`` (paths over a slice) and ``plot_execution`` (streamed cable lengths and tension
+envelopes over time) draw what a node answered and streamed, with the same pieces.
 """
 
 import itertools
+from dataclasses import dataclass
 from pathlib import Path
 
 import numpy as np
 
 from ..atlas.domain import outline_2d
 from . import plots
-from .plots import DEFAULT_RANGES, DPI, Marker, SliceView, compute_slice, plt
-from ..model.task import PERIODIC
+from .plots import DPI, Marker, SliceView, compute_slice, plt
+from ..model.task import COORDINATES
 
 TWO_PI = 2.0 * np.pi
 CLOSED_FACE, CLOSED_EDGE = "white", "#303030"
@@ -44,6 +48,10 @@ CENTRE_COLOR = "#202020"
 PATH_COLOR = "black"
 ATLAS_SIZE = (1000, 800)
 TENSION_SIZE = (1200, 800)
+PATHS_SIZE = (1000, 600)
+EXECUTION_SIZE = (1000, 700)
+PATH_COLORS = (PATH_COLOR, "#7b2cbf")
+BAND_COLOR = "#3778bf"
 ZOOM_SHARE = 0.4
 CLASS_LABELS = ("wrench-feasible (C)", "a cable length out of range", "a tension out of range")
 
@@ -118,7 +126,7 @@ def chart_polygons(planner):
     of "closed", "open", "frontier"; polygons unwrapped around their centres and ordered
     by angle in the chart's tangent space (exact for its convex polytope)."""
     task, pose = planner.task, planner.constraint.pose
-    periodic = [name in PERIODIC for name in task.names]
+    periodic = task.periodic
     out = []
     for chart in planner.atlas.charts:
         centre = wrap(task.coords(*pose(chart.x))[0], periodic)
@@ -152,7 +160,7 @@ def plot_atlas(planner, problem, result, out, resolution=400, size=ATLAS_SIZE):
     """The atlas, path, start and goal over the slice of a 2-D task (module docstring)."""
     task = planner.task
     names = tuple(task.names)
-    periodic = [name in PERIODIC for name in names]
+    periodic = task.periodic
     polygons = chart_polygons(planner)
     ends = wrap(task.coords(np.array([problem.start.p, problem.goal.p]),
                             np.array([problem.start.tau, problem.goal.tau])), periodic)
@@ -174,9 +182,7 @@ def plot_atlas(planner, problem, result, out, resolution=400, size=ATLAS_SIZE):
         has_singular = plots._draw_singular(ax, grid)
         _draw_atlas(ax, polygons, periodic, ranges)
         if path is not None:
-            for piece in split_at_wraps(path, periodic):
-                ax.plot(piece[:, 0], piece[:, 1], color="white", lw=4.5, solid_capstyle="round")
-                ax.plot(piece[:, 0], piece[:, 1], color=PATH_COLOR, lw=2.2, solid_capstyle="round")
+            _draw_path(ax, path, periodic)
         for label, (a, b) in zip(("start", "goal"), ends):
             plots._draw_marker(ax, Marker(label, a, b), view)
         plots._label_axes(ax, view)
@@ -196,9 +202,10 @@ def axis_range(name, values):
     hemisphere, as in the paper's Fig. 13); positions: the values with a 10 % border."""
     values = np.asarray(values, dtype=float)
     values = values[np.isfinite(values)]
-    if name in DEFAULT_RANGES:
-        lo, hi = DEFAULT_RANGES[name]
-        if name in PERIODIC or values.size == 0:
+    c = COORDINATES.get(name)
+    if c is not None and c.bounds is not None:
+        lo, hi = c.bounds
+        if c.periodic or values.size == 0:
             return lo, hi
         mid = 0.5 * (lo + hi)
         if values.min() >= mid - 1e-9:
@@ -254,9 +261,7 @@ def _legend_handles(polygons, has_singular, has_path):
     from matplotlib.lines import Line2D
     from matplotlib.patches import Patch
 
-    handles = [Patch(color=c, label=l) for c, l in zip(plots.CLASS_COLORS, CLASS_LABELS)]
-    if has_singular:
-        handles.append(Line2D([], [], color=plots.SINGULAR_COLOR, lw=1.5, label=r"$\det J = 0$"))
+    handles = _class_handles(has_singular)
     counts = {k: sum(1 for kind, _, _ in polygons if kind == k) for k in ("closed", "open", "frontier")}
     handles.append(Patch(facecolor="#e8e8e8", edgecolor=CLOSED_EDGE, lw=0.6,
                          label=f"closed charts ({counts['closed']}): explored"))
@@ -267,6 +272,23 @@ def _legend_handles(polygons, has_singular, has_path):
     if has_path:
         handles.append(Line2D([], [], color=PATH_COLOR, lw=2.2, label="planned path"))
     return handles
+
+
+def _class_handles(has_singular):
+    from matplotlib.lines import Line2D
+    from matplotlib.patches import Patch
+
+    handles = [Patch(color=c, label=l) for c, l in zip(plots.CLASS_COLORS, CLASS_LABELS)]
+    if has_singular:
+        handles.append(Line2D([], [], color=plots.SINGULAR_COLOR, lw=1.5, label=r"$\det J = 0$"))
+    return handles
+
+
+def _draw_path(ax, path, periodic, color=PATH_COLOR):
+    """A path (N, 2) in wrapped picture coordinates, with a white halo, broken at the wraps."""
+    for piece in split_at_wraps(path, periodic):
+        ax.plot(piece[:, 0], piece[:, 1], color="white", lw=4.5, solid_capstyle="round")
+        ax.plot(piece[:, 0], piece[:, 1], color=color, lw=2.2, solid_capstyle="round")
 
 
 def _title(planner, problem, result):
@@ -291,11 +313,8 @@ def plot_tensions(problem, result, out, size=TENSION_SIZE):
         axes = fig.subplots(2, 3, sharex=True)
         for i, ax in enumerate(axes.ravel()):
             lo, hi = robot.tension_min[i], robot.tension_max[i]
-            ax.fill_between(x, path.tension_min[:, i], path.tension_max[:, i], color="#3778bf",
-                            alpha=0.3, lw=0, label="envelope [min, max]")
-            ax.plot(x, path.tension_min[:, i], color="#3778bf", lw=0.8)
-            ax.plot(x, path.tension_max[:, i], color="#3778bf", lw=0.8)
-            ax.plot(x, path.tension_nominal[:, i], color="black", lw=1.5, label="nominal $f_0$")
+            _draw_envelope(ax, x, path.tension_min[:, i], path.tension_nominal[:, i],
+                           path.tension_max[:, i], labels=("envelope [min, max]", "nominal $f_0$"))
             ax.axhline(lo, color="#e41a1c", ls="--", lw=1.2, label="tension limits")
             ax.axhline(hi, color="#e41a1c", ls="--", lw=1.2)
             span = hi - lo
@@ -320,6 +339,100 @@ def plot_tensions(problem, result, out, size=TENSION_SIZE):
         fig.suptitle(f"{head}\ntension envelope along the planned path ({len(path)} waypoints"
                      + (f", {t[-1]:.2f} s)" if timed else ")")
                      + "; slack: least distance from the band to a limit")
+        fig.savefig(out, dpi=DPI, format="png")
+    finally:
+        plt.close(fig)
+
+
+def _draw_envelope(ax, x, low, nominal, high, color=BAND_COLOR, nominal_color="black",
+                   labels=(None, None)):
+    """A tension band [low, high] with its edges, and the nominal tension as a line."""
+    ax.fill_between(x, low, high, color=color, alpha=0.3, lw=0, label=labels[0])
+    ax.plot(x, low, color=color, lw=0.8)
+    ax.plot(x, high, color=color, lw=0.8)
+    ax.plot(x, nominal, color=nominal_color, lw=1.5, label=labels[1])
+
+
+# ----- plans and executions received from the node (the demo) ------------------------------
+def plot_paths(robot, view, paths, out, markers=(), segment=None, periodic=(False, False),
+               title="", resolution=300, size=PATHS_SIZE):
+    """Paths (label -> (N, 2) picture coordinates) over the classified slice of ``view``,
+    broken where a ``periodic`` axis wraps, with ``markers`` (plots.Marker) and the straight
+    ``segment`` (plots.SegmentOverlay)."""
+    from matplotlib.lines import Line2D
+
+    grid = compute_slice(robot, view, resolution)
+    fig = plt.figure(figsize=(size[0] / DPI, size[1] / DPI), dpi=DPI, layout="constrained")
+    try:
+        ax = fig.add_subplot()
+        plots._draw_classes(ax, grid)
+        handles = _class_handles(plots._draw_singular(ax, grid))
+        if segment is not None:
+            plots._draw_segment(ax, segment)
+            leaves = ("" if segment.first_unsafe_s is None
+                      else f", leaves C at {100 * segment.first_unsafe_s:.1f} %")
+            handles.append(Line2D([], [], color=plots.SEGMENT_COLOR, lw=1.5, ls="--",
+                                  label=f"straight segment{leaves}"))
+        for (label, y), color in zip(paths.items(), itertools.cycle(PATH_COLORS)):
+            _draw_path(ax, wrap(y, periodic), periodic, color)
+            handles.append(Line2D([], [], color=color, lw=2.2, label=label))
+        for m in markers:
+            plots._draw_marker(ax, m, view)
+        plots._label_axes(ax, view)
+        ax.set_xlim(*view.ranges[0])
+        ax.set_ylim(*view.ranges[1])
+        ax.set_title(title)
+        fig.legend(handles=handles, loc="outside lower center", ncol=3, fontsize="small")
+        fig.savefig(out, dpi=DPI, format="png")
+    finally:
+        plt.close(fig)
+
+
+@dataclass(frozen=True)
+class ExecutedMotion:
+    """A motion as executed: its waypoints' times ``t`` (N,) s, cable ``lengths`` (N, 6) m
+    and tension ``envelope`` (N, 6, 3) N (min, nominal, max); the streamed commands' times
+    ``command_t`` (M,) s (from the first) and cable lengths ``commands`` (M, 6) m."""
+
+    t: np.ndarray
+    lengths: np.ndarray
+    envelope: np.ndarray
+    command_t: np.ndarray
+    commands: np.ndarray
+
+
+def plot_execution(robot, motions, out, size=EXECUTION_SIZE):
+    """Motions (label -> ExecutedMotion) one after the other: above, per cable, the streamed
+    commands (lines) through the waypoints' lengths (dots); below, the tension envelopes
+    (bands, nominal as a line); dashed: the robot's limits."""
+    fig = plt.figure(figsize=(size[0] / DPI, size[1] / DPI), dpi=DPI, layout="constrained")
+    try:
+        top, bottom = fig.subplots(2, 1, sharex=True)
+        colors = plt.get_cmap("tab10")
+        offset = 0.0
+        for k, (label, m) in enumerate(motions.items()):
+            for i in range(m.lengths.shape[1]):
+                top.plot(offset + m.command_t, m.commands[:, i], color=colors(i), lw=1.2,
+                         label=robot.winch_names[i] if k == 0 else None)
+                top.plot(offset + m.t, m.lengths[:, i], ".", color=colors(i), ms=3)
+                _draw_envelope(bottom, offset + m.t, *m.envelope[:, i].T, color=colors(i),
+                               nominal_color=colors(i))
+            top.axvline(offset, color="grey", lw=0.8, ls=":")
+            top.annotate(label, (offset, 1), xycoords=("data", "axes fraction"),
+                         xytext=(4, -14), textcoords="offset points")
+            offset += m.t[-1] + 0.5
+        for ax, low, high in ((top, robot.length_min, robot.length_max),
+                              (bottom, robot.tension_min, robot.tension_max)):
+            ax.axhline(np.min(low), color="black", ls="--", lw=0.8)
+            ax.axhline(np.max(high), color="black", ls="--", lw=0.8)
+        top.set_ylabel("cable length (m)")
+        top.set_title("streamed cable commands (lines) through the trajectory's waypoints "
+                      "(dots); dashed: limits")
+        top.legend(ncol=6, fontsize="small", loc="lower right")
+        bottom.set_ylabel("tension (N)")
+        bottom.set_xlabel("time (s)")
+        bottom.set_title("tension envelope over the wrench ellipsoid: nominal (line), "
+                         "min..max (band); dashed: limits")
         fig.savefig(out, dpi=DPI, format="png")
     finally:
         plt.close(fig)

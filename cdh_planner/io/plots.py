@@ -31,6 +31,7 @@ from matplotlib.ticker import FuncFormatter, MultipleLocator  # noqa: E402
 
 from ..feasibility import evaluate  # noqa: E402
 from ..model.pose import rotation_tt  # noqa: E402
+from ..model.task import COORDINATES  # noqa: E402
 
 FEASIBLE, LENGTH_OUT, TENSION_OUT = 0, 1, 2
 CLASS_COLORS = ("#4daf4a", "#ff8c1a", "#3778bf")  # green, orange, blue
@@ -40,14 +41,6 @@ SINGULAR_COLOR = "#e41a1c"
 SEGMENT_COLOR = "black"
 CHUNK = 20_000  # poses per feasibility call (bounds memory)
 DPI = 100
-
-ANGLE_NAMES = {"phi", "theta", "sigma", "alpha1", "alpha2"}
-AXIS_LABELS = {"x": "$x$ (m)", "y": "$y$ (m)", "z": "$z$ (m)", "phi": r"$\phi$ (rad)",
-               "theta": r"$\theta$ (rad)", "sigma": r"$\sigma$ (rad)",
-               "alpha1": r"$\alpha_1$ (rad)", "alpha2": r"$\alpha_2$ (rad)"}
-DEFAULT_RANGES = {"phi": (-np.pi, np.pi), "theta": (0.0, np.pi), "sigma": (-np.pi, np.pi),
-                  "alpha1": (-np.pi, np.pi), "alpha2": (-np.pi / 2, np.pi / 2)}
-
 
 @dataclass(frozen=True)
 class SliceView:
@@ -214,8 +207,9 @@ def _math_label(label):
 
 def _label_axes(ax, view):
     for name, axis, (lo, hi) in zip(view.axes, (ax.xaxis, ax.yaxis), view.ranges):
-        axis.set_label_text(AXIS_LABELS.get(name, name))
-        if name in ANGLE_NAMES:
+        c = COORDINATES[name]
+        axis.set_label_text(f"{c.label or name} ({c.unit})")
+        if c.unit == "rad":
             base = _pi_tick_base(hi - lo)
             if base:
                 axis.set_major_locator(MultipleLocator(base))

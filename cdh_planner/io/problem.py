@@ -6,7 +6,7 @@
     strategy: astar                  # optional: auto | astar | gbf
     planner: {radius: 0.1, timeout_s: 60, max_charts: 100000, max_memory_mb: 1024, margin_floor: 0.001}
     start: {position: [x, y, z], tau: [phi, theta, sigma]}   # or quaternion: [x, y, z, w]
-    goal:  {lambda: [alpha1, alpha2]}                         # sphere task only
+    goal:  {lambda: [alpha1, alpha2]}                         # or the task's own coordinates
 
 Units: m and rad. Every error is an InputError naming the key (``start.tau[1]``).
 """
@@ -18,7 +18,7 @@ import numpy as np
 
 from ..errors import InputError
 from ..model.robot import load_robot, read_yaml
-from ..model.task import SphereTask, task_from_dict
+from ..model.task import COORDINATES, task_from_dict
 from ..model.pose import Pose
 from ..settings import SETTINGS, PlannerSettings, check_setting
 from .poses import number_list, pose_from_dict, short_repr
@@ -85,16 +85,18 @@ def settings_from_dict(d, where):
 
 
 def pose_in_task(d, task, where):
-    """A start / goal: a full pose, or for the sphere task ``{lambda: [a1, a2(, sigma)]}``."""
+    """A start / goal: a full pose, or ``{lambda: [...]}`` in the task's own coordinates
+    (``task.names``: the sphere's [alpha1, alpha2], the pivot's [phi, theta, sigma])."""
     if isinstance(d, dict) and "lambda" in d:
-        if not isinstance(task, SphereTask):
-            raise InputError(f"{where}.lambda", d["lambda"], "only the sphere task has lambda coordinates")
         extra = sorted(set(d) - {"lambda"})
         if extra:
             raise InputError(f"{where}.{extra[0]}", d[extra[0]], "give lambda alone")
         lam = number_list(f"{where}.lambda", d["lambda"], len(task.names))
-        if not -np.pi / 2 <= lam[1] <= np.pi / 2:
-            raise InputError(f"{where}.lambda[1]", float(lam[1]), "alpha2 must be in [-pi/2, pi/2] rad")
+        for j, name in enumerate(task.names):
+            c = COORDINATES[name]
+            if c.bounds is not None and not c.periodic and not c.bounds[0] <= lam[j] <= c.bounds[1]:
+                raise InputError(f"{where}.lambda[{j}]", float(lam[j]), f"{name} must be in "
+                                 f"[{c.bounds[0]:.4g}, {c.bounds[1]:.4g}] {c.unit}")
         p, tau = task.pose(lam[None])
         return Pose(p[0], tau[0])
     p, _, tau = pose_from_dict(d, where)

@@ -1,32 +1,137 @@
-"""Task constraints on the platform pose: which poses a motion may use.
+"""Tasks, the constraints on the platform pose that say which poses a motion may use. Each
+task is one class, a plug-in.
 
-A task maps its free coordinates y (shape (N, k)) to poses (p m, tau rad) and back:
-- ``FreeTask``: y = (x, y, z, phi, theta, sigma), free flight (k = 6).
+A task maps its free coordinates y (shape (N, k), ``names``) to poses (p m, tau rad) and
+back. It also gives the equations C(p, tau, v) = 0 that restrict the navigation manifold to
+it (paper Eq. 15), with their Jacobian. ``v`` holds the task's own variables, the first
+``n_vars`` task coordinates when they are not pose coordinates (the sphere's alphas).
+``register`` puts a class in ``TASKS`` (type -> class). That registry drives the problem
+file (``task_from_dict``), the node's parameters (``task.<field>``), ``slice`` and the
+planner's default cost. A new task is one registered class:
+
+- ``FreeTask``: y = (x, y, z, phi, theta, sigma), free flight (n = 6).
 - ``SliceTask``: some pose coordinates fixed (the paper's Robot 1 slices).
 - ``SphereTask``: the paper's Eq. 17, P on a sphere facing its centre,
   y = (alpha1, alpha2) or (alpha1, alpha2, sigma) with free torsion.
+- ``PivotTask``: a tool point t (platform frame) stays at c (base frame), p + R t = c,
+  orientation free: y = (phi, theta, sigma), n = 3.
+- ``ImplicitTask`` (library only): the caller's own C(p, tau) = 0.
 """
 
-from dataclasses import dataclass, field
+from dataclasses import MISSING, dataclass, field, fields
+from typing import ClassVar
 
 import numpy as np
 
-from ..errors import InputError
-from .pose import rotation_angle_between, rotation_tt, wrap_angle
+from ..errors import InputError, check_finite
+from .pose import rotation_angle_between, rotation_tt, rotation_tt_derivatives, wrap_angle
 
 POSE_NAMES = ("x", "y", "z", "phi", "theta", "sigma")
-PERIODIC = {"phi", "sigma", "alpha1"}
-TASK_TYPES = ("free", "slice", "sphere")
 
 
 @dataclass(frozen=True)
-class FreeTask:
-    type: str = "free"
+class Coordinate:
+    """A task coordinate: ``unit`` "m" or "rad", whether it is ``periodic`` (2 pi), its
+    ``bounds`` (lo, hi) if it has natural ones, and its picture ``label`` (TeX)."""
+
+    name: str
+    unit: str
+    periodic: bool = False
+    bounds: tuple = None
+    label: str = ""
+
+
+def _coordinates(*items):
+    return {c.name: c for c in items}
+
+
+# Every coordinate a registered task uses; a task with new ones declares them (``coordinates``).
+COORDINATES = _coordinates(
+    Coordinate("x", "m", label="$x$"), Coordinate("y", "m", label="$y$"),
+    Coordinate("z", "m", label="$z$"),
+    Coordinate("phi", "rad", True, (-np.pi, np.pi), r"$\phi$"),
+    Coordinate("theta", "rad", False, (0.0, np.pi), r"$\theta$"),
+    Coordinate("sigma", "rad", True, (-np.pi, np.pi), r"$\sigma$"))
+
+
+@dataclass(frozen=True)
+class TaskField:
+    """Metadata of a task's field: problem-file key and node parameter ``task.<name>``.
+    ``kind`` is "double", "point" (3 numbers) or "bool". ``positive`` numbers must be > 0."""
+
+    unit: str
+    description: str
+    kind: str = "double"
+    positive: bool = False
+
+
+def _field(default, **meta):
+    factory = {"default_factory": lambda: default} if isinstance(default, (list, dict)) else \
+        {"default": default}
+    return field(**factory, metadata={"task": TaskField(**meta)})
+
+
+def _center():
+    # one parameter, task.center, for the two tasks that have a point in the base frame
+    return _field((0.0, 0.0, 0.0), kind="point", unit="m, base frame",
+                  description="sphere task: centre of the sphere; pivot task: the point c "
+                              "the tool point stays at")
+
+
+TASKS = {}
+
+
+def register(cls):
+    """Class decorator: make ``cls`` a task of problem files, node parameters and slice."""
+    TASKS[cls.type] = cls
+    COORDINATES.update({c.name: c for c in cls.coordinates})
+    return cls
+
+
+class Task:
+    """Base of every task (module doc). Subclasses are frozen dataclasses giving ``type``,
+    ``names``, ``pose``, ``coords``, ``residual`` and, when they restrict the pose,
+    ``equations``."""
+
+    type: ClassVar[str] = ""
+    coordinates: ClassVar[tuple] = ()      # Coordinates the task introduces
+    n_vars: ClassVar[int] = 0              # task variables beside the pose in the manifold
+    costs: ClassVar[tuple] = ("se3",)      # path costs that make sense (planner.task_cost)
+    slerp: ClassVar[bool] = False          # every pose is on the task: direct motions slerp
 
     @property
     def names(self):
         return POSE_NAMES
 
+    @property
+    def periodic(self):
+        """Per task coordinate: is it an angle modulo 2 pi?"""
+        return tuple(COORDINATES[n].periodic for n in self.names)
+
+    @property
+    def default_cost(self):
+        return self.costs[0]
+
+    # ----- the equations (paper Eq. 15) -------------------------------------------------
+    @property
+    def n_equations(self):
+        return 0
+
+    @property
+    def length_rows(self):
+        """Per equation: is it in metres (the constraint divides those by a length scale)?"""
+        return ()
+
+    def equations(self, q, v):
+        """C (k,) and dC/d(q, v) (k, 6 + n_vars) at the pose q = (p m, tau rad) (6,) and the
+        task variables v (n_vars,)."""
+        return np.zeros(0), np.zeros((0, 6 + self.n_vars))
+
+    def variables(self, p, tau):
+        """The task variables (N, n_vars) of poses on the task: its first n_vars coordinates."""
+        return self.coords(p, tau)[:, :self.n_vars]
+
+    # ----- poses <-> task coordinates ---------------------------------------------------
     def pose(self, y):
         y = np.atleast_2d(np.asarray(y, dtype=float))
         return y[:, :3].copy(), y[:, 3:].copy()
@@ -35,20 +140,104 @@ class FreeTask:
         return np.concatenate([np.atleast_2d(p), np.atleast_2d(tau)], axis=1)
 
     def residual(self, p, tau):
-        """Every pose is on the free task: zeros (N,)."""
+        """How far (m or rad) poses are from the task: zeros (N,) when every pose is on it."""
         return np.zeros(np.atleast_2d(p).shape[0])
 
+    def own_cost(self, kind):
+        """cost(p_a, tau_a, p_b, tau_b) of a kind only this task knows (None: not one)."""
+        return None
 
+    def describe(self):
+        """One line for titles and logs."""
+        return f"{self.type} task"
+
+    # ----- problem files and node parameters --------------------------------------------
+    @classmethod
+    def task_fields(cls):
+        """(name, TaskField, default) of each setting of the task."""
+        return [(f.name, f.metadata["task"], f.default if f.default_factory is MISSING
+                 else f.default_factory()) for f in fields(cls) if "task" in f.metadata]
+
+    @classmethod
+    def from_dict(cls, d, where):
+        """The task of its problem-file mapping (``type`` already checked)."""
+        known = {name for name, _, _ in cls.task_fields()}
+        unknown = sorted(set(d) - known - {"type"})
+        if unknown:
+            raise InputError(f"{where}.{unknown[0]}", d[unknown[0]], f"not a key of a '{cls.type}' task"
+                             f" (keys: {', '.join(sorted(known)) or 'none'})")
+        return cls(**{name: _check_field(f"{where}.{name}", meta, d.get(name, default))
+                      for name, meta, default in cls.task_fields()})
+
+    @classmethod
+    def parameters(cls):
+        """(node parameter, TaskField, default) of each setting of the task."""
+        return [(f"task.{name}", meta, default) for name, meta, default in cls.task_fields()]
+
+    @classmethod
+    def dict_of_parameters(cls, values):
+        """The problem-file mapping of the node's flat parameter values (name -> value)."""
+        return {"type": cls.type, **{name: values[f"task.{name}"] for name, _, _ in cls.task_fields()}}
+
+
+
+def _check_field(where, meta, value):
+    if meta.kind == "bool":
+        if not isinstance(value, bool):
+            raise InputError(where, value, "expected true or false")
+        return value
+    if meta.kind == "point":
+        if not isinstance(value, (list, tuple)) or len(value) != 3:
+            raise InputError(where, value, f"expected 3 numbers ({meta.unit})")
+        return tuple(check_finite(f"{where}[{i}]", v) for i, v in enumerate(value))
+    value = check_finite(where, value)
+    if meta.positive and value <= 0:
+        raise InputError(where, value, f"must be positive ({meta.unit})")
+    return value
+
+
+@register
 @dataclass(frozen=True)
-class SliceTask:
+class FreeTask(Task):
+    """Free flight: every pose, y = (x, y, z, phi, theta, sigma)."""
+
+    type: ClassVar[str] = "free"
+    slerp: ClassVar[bool] = True
+
+
+@register
+@dataclass(frozen=True)
+class SliceTask(Task):
     """Pose coordinates in ``fixed`` (name -> value, m or rad) stay constant."""
 
     fixed: dict = field(default_factory=dict)
-    type: str = "slice"
+    type: ClassVar[str] = "slice"
 
     @property
     def names(self):
         return tuple(n for n in POSE_NAMES if n not in self.fixed)
+
+    @property
+    def costs(self):
+        # the paper's SO(3) geodesic where the position is fixed (Robot 1's slices)
+        return ("so3", "se3") if {"x", "y", "z"} <= set(self.fixed) else ("se3",)
+
+    @property
+    def n_equations(self):
+        return len(self.fixed)
+
+    @property
+    def length_rows(self):
+        return tuple(n in ("x", "y", "z") for n in POSE_NAMES if n in self.fixed)
+
+    def equations(self, q, v):
+        rows = [j for j, n in enumerate(POSE_NAMES) if n in self.fixed]
+        C = np.array([q[j] - self.fixed[POSE_NAMES[j]] for j in rows])
+        periodic = np.array([COORDINATES[POSE_NAMES[j]].periodic for j in rows], dtype=bool)
+        C[periodic] = wrap_angle(C[periodic])
+        J = np.zeros((len(rows), 6))
+        J[np.arange(len(rows)), rows] = 1.0
+        return C, J
 
     def pose(self, y):
         y = np.atleast_2d(np.asarray(y, dtype=float))
@@ -65,25 +254,86 @@ class SliceTask:
     def residual(self, p, tau):
         """Largest deviation of the fixed coordinates (m or rad, angles wrapped)."""
         full = np.concatenate([np.atleast_2d(p), np.atleast_2d(tau)], axis=1)
-        dev = [np.abs(full[:, j] - v) if name not in PERIODIC else np.abs(wrap_angle(full[:, j] - v))
+        dev = [np.abs(wrap_angle(full[:, j] - v) if COORDINATES[name].periodic else full[:, j] - v)
                for j, name in enumerate(POSE_NAMES) if name in self.fixed
                for v in [self.fixed[name]]]
         return np.max(dev, axis=0) if dev else np.zeros(full.shape[0])
 
+    def describe(self):
+        return "slice " + ", ".join(describe_value(n, v) for n, v in self.fixed.items())
 
+    @classmethod
+    def from_dict(cls, d, where):
+        unknown = sorted(set(d) - {"type", "fixed"})
+        if unknown:
+            raise InputError(f"{where}.{unknown[0]}", d[unknown[0]], "not a key of a 'slice' task (keys: fixed)")
+        fixed = d.get("fixed")
+        if not isinstance(fixed, dict) or not fixed:
+            raise InputError(f"{where}.fixed", fixed, "expected a mapping of pose coordinates to values")
+        out = {}
+        for name, value in fixed.items():
+            if name not in POSE_NAMES:
+                raise InputError(f"{where}.fixed.{name}", value, f"unknown coordinate (expected {POSE_NAMES})")
+            out[name] = check_finite(f"{where}.fixed.{name}", value)
+        if len(out) >= 6:
+            raise InputError(f"{where}.fixed", fixed, "at least one coordinate must stay free")
+        return cls(fixed=out)
+
+    @classmethod
+    def parameters(cls):
+        return [(f"task.fixed.{n}", TaskField(COORDINATES[n].unit, f"slice task: fixed value of "
+                                              f"{n}, or NaN for free"), float("nan"))
+                for n in POSE_NAMES]
+
+    @classmethod
+    def dict_of_parameters(cls, values):
+        return {"type": cls.type, "fixed": {n: values[f"task.fixed.{n}"] for n in POSE_NAMES
+                                            if not np.isnan(values[f"task.fixed.{n}"])}}
+
+
+@register
 @dataclass(frozen=True)
-class SphereTask:
+class SphereTask(Task):
     """Paper Eq. 17: p = c + r [cos a2 cos a1, cos a2 sin a1, -sin a2],
     phi = a1 - pi, theta = pi/2 - a2, sigma = 0 (or free). ``center`` m, ``radius`` m."""
 
-    center: tuple = (0.0, 0.0, 0.0)
-    radius: float = 0.1
-    free_torsion: bool = False
-    type: str = "sphere"
+    center: tuple = _center()
+    radius: float = _field(0.1, unit="m", positive=True, description="sphere task: radius")
+    free_torsion: bool = _field(False, kind="bool", unit="",
+                                description="sphere task: the torsion sigma is free as well")
+    type: ClassVar[str] = "sphere"
+    coordinates: ClassVar[tuple] = (
+        Coordinate("alpha1", "rad", True, (-np.pi, np.pi), r"$\alpha_1$"),
+        Coordinate("alpha2", "rad", False, (-np.pi / 2, np.pi / 2), r"$\alpha_2$"))
+    n_vars: ClassVar[int] = 2
+    costs: ClassVar[tuple] = ("great_circle", "se3")
 
     @property
     def names(self):
         return ("alpha1", "alpha2", "sigma") if self.free_torsion else ("alpha1", "alpha2")
+
+    @property
+    def n_equations(self):
+        return 5 if self.free_torsion else 6
+
+    @property
+    def length_rows(self):
+        return (True, True, True, False, False, False)[:self.n_equations]
+
+    def equations(self, q, v):
+        (a1, a2), c = v, np.asarray(self.center)
+        c1, s1, c2, s2 = np.cos(a1), np.sin(a1), np.cos(a2), np.sin(a2)
+        C = np.zeros(self.n_equations)
+        J = np.zeros((self.n_equations, 8))
+        C[0:3] = q[0:3] - c - self.radius * np.array([c2 * c1, c2 * s1, -s2])
+        J[0:3, 0:3] = np.eye(3)
+        J[0:3, 6] = -self.radius * np.array([-c2 * s1, c2 * c1, 0.0])
+        J[0:3, 7] = -self.radius * np.array([-s2 * c1, -s2 * s1, -c2])
+        C[3], J[3, 3], J[3, 6] = wrap_angle(q[3] - a1 + np.pi), 1.0, -1.0
+        C[4], J[4, 4], J[4, 7] = q[4] - np.pi / 2 + a2, 1.0, 1.0
+        if not self.free_torsion:
+            C[5], J[5, 5] = wrap_angle(q[5]), 1.0
+        return C, J
 
     def pose(self, y):
         y = np.atleast_2d(np.asarray(y, dtype=float))
@@ -114,76 +364,110 @@ class SphereTask:
         ang = rotation_angle_between(rotation_tt(tau), rotation_tt(tau_ref))
         return np.maximum(np.abs(dist - self.radius), ang)
 
+    def own_cost(self, kind):
+        """great_circle: the arc on the sphere (m), plus r times the torsion change (free
+        torsion)."""
+        if kind != "great_circle":
+            return None
+        c, r = np.asarray(self.center), self.radius
+
+        def arc(pa, ta, pb, tb):
+            na, nb = pa - c, pb - c
+            out = r * float(np.arctan2(np.linalg.norm(np.cross(na, nb)), float(na @ nb)))
+            return out + (r * abs(float(wrap_angle(tb[2] - ta[2]))) if self.free_torsion else 0.0)
+        return arc
+
+    def describe(self):
+        c = ", ".join(f"{v:.4g}" for v in self.center)
+        return f"sphere task, centre [{c}] m, radius {self.radius:.4g} m"
+
+
+@register
+@dataclass(frozen=True)
+class PivotTask(Task):
+    """A tool point ``tool`` (m, platform frame) stays at ``center`` (m, base frame):
+    p + R(tau) t = c, the orientation free (a camera or a tool tip pivoting about a
+    target). y = (phi, theta, sigma), n = 3."""
+
+    tool: tuple = _field((0.0, 0.0, 0.0), kind="point", unit="m, platform frame",
+                         description="pivot task: the tool point t that stays at task.center")
+    center: tuple = _center()
+    type: ClassVar[str] = "pivot"
+    costs: ClassVar[tuple] = ("so3", "se3")
+    n_equations: ClassVar[int] = 3
+    length_rows: ClassVar[tuple] = (True, True, True)
+
+    @property
+    def names(self):
+        return ("phi", "theta", "sigma")
+
+    def equations(self, q, v):
+        R, dR = rotation_tt(q[3:6]), rotation_tt_derivatives(q[3:6])
+        J = np.zeros((3, 6))
+        J[:, :3] = np.eye(3)
+        J[:, 3:] = np.einsum("ijk,j->ik", dR, np.asarray(self.tool))
+        return q[:3] + R @ np.asarray(self.tool) - np.asarray(self.center), J
+
+    def pose(self, y):
+        tau = np.atleast_2d(np.asarray(y, dtype=float)).copy()
+        return np.asarray(self.center) - rotation_tt(tau) @ np.asarray(self.tool), tau
+
+    def coords(self, p, tau):
+        return np.atleast_2d(np.asarray(tau, dtype=float)).copy()
+
+    def residual(self, p, tau):
+        """|p + R t - c| (m) of each pose."""
+        tip = np.atleast_2d(p) + rotation_tt(np.atleast_2d(tau)) @ np.asarray(self.tool)
+        return np.linalg.norm(tip - np.asarray(self.center), axis=1)
+
+    def describe(self):
+        t = ", ".join(f"{v:.4g}" for v in self.tool)
+        c = ", ".join(f"{v:.4g}" for v in self.center)
+        return f"pivot task, tool [{t}] m at [{c}] m"
+
 
 @dataclass(frozen=True)
-class ImplicitTask:
+class ImplicitTask(Task):
     """Paper Eq. 15: poses with C(p, tau) = 0, for library use (a callable is not a file
     value). ``equations(p (3,), tau (3,)) -> (C (k,), dC/d(p, tau) (k, 6))`` with full row
     rank on the poses used; ``count`` = k. Task coordinates are the whole pose, as in free
     flight."""
 
-    equations: object
-    count: int
-    type: str = "implicit"
+    implicit: object = None
+    count: int = 0
+    type: ClassVar[str] = "implicit"
 
     @property
-    def names(self):
-        return POSE_NAMES
+    def n_equations(self):
+        return int(self.count)
 
-    def pose(self, y):
-        return FreeTask().pose(y)
+    @property
+    def length_rows(self):
+        return (False,) * self.count  # the caller's own units
 
-    def coords(self, p, tau):
-        return FreeTask().coords(p, tau)
+    def equations(self, q, v):
+        return self.implicit(q[:3], q[3:6])
 
     def residual(self, p, tau):
         """max |C| of each pose (the equations' own units)."""
         p, tau = np.atleast_2d(p), np.atleast_2d(tau)
-        return np.array([np.max(np.abs(self.equations(a, b)[0])) for a, b in zip(p, tau)])
+        return np.array([np.max(np.abs(self.implicit(a, b)[0])) for a, b in zip(p, tau)])
 
 
 def task_from_dict(d, where="task"):
-    """Build a task from the problem file / parameter form {type, fixed | center, radius, ...}."""
+    """The task of a problem-file / parameter mapping {type, ...} (None: free flight)."""
     if d is None:
         return FreeTask()
     if not isinstance(d, dict):
         raise InputError(where, d, "expected a mapping with 'type'")
     kind = d.get("type", "free")
-    allowed = {"free": {"type"}, "slice": {"type", "fixed"},
-               "sphere": {"type", "center", "radius", "free_torsion"}}
-    if kind not in allowed:
-        raise InputError(f"{where}.type", kind, f"unknown task type (expected one of {', '.join(TASK_TYPES)})")
-    unknown = sorted(set(d) - allowed[kind])
-    if unknown:
-        raise InputError(f"{where}.{unknown[0]}", d[unknown[0]], f"not a key of a '{kind}' task")
-    if kind == "free":
-        return FreeTask()
-    if kind == "slice":
-        fixed = d.get("fixed")
-        if not isinstance(fixed, dict) or not fixed:
-            raise InputError(f"{where}.fixed", fixed, "expected a mapping of pose coordinates to values")
-        out = {}
-        for name, value in fixed.items():
-            if name not in POSE_NAMES:
-                raise InputError(f"{where}.fixed.{name}", value, f"unknown coordinate (expected {POSE_NAMES})")
-            out[name] = _finite(f"{where}.fixed.{name}", value)
-        if len(out) >= 6:
-            raise InputError(f"{where}.fixed", fixed, "at least one coordinate must stay free")
-        return SliceTask(fixed=out)
-    center = d.get("center")
-    if not isinstance(center, (list, tuple)) or len(center) != 3:
-        raise InputError(f"{where}.center", center, "expected 3 numbers (m)")
-    center = tuple(_finite(f"{where}.center[{i}]", c) for i, c in enumerate(center))
-    radius = _finite(f"{where}.radius", d.get("radius"))
-    if radius <= 0:
-        raise InputError(f"{where}.radius", radius, "must be positive (m)")
-    free_torsion = d.get("free_torsion", False)
-    if not isinstance(free_torsion, bool):
-        raise InputError(f"{where}.free_torsion", free_torsion, "expected true or false")
-    return SphereTask(center=center, radius=radius, free_torsion=free_torsion)
+    if kind not in TASKS:
+        raise InputError(f"{where}.type", kind, f"unknown task type (expected one of {', '.join(TASKS)})")
+    return TASKS[kind].from_dict(d, where)
 
 
-def _finite(where, value):
-    if isinstance(value, bool) or not isinstance(value, (int, float)) or not np.isfinite(value):
-        raise InputError(where, value, "expected a finite number")
-    return float(value)
+def describe_value(name, value):
+    """'x = 0 m' or 'sigma = 0.5934 rad (34 deg)'."""
+    if COORDINATES[name].unit == "m":
+        return f"{name} = {value:.4g} m"
+    return f"{name} = {value:.4g} rad ({np.degrees(value):.4g} deg)"

@@ -19,10 +19,11 @@ name                            default    meaning
 ==============================  =========  ================================================
 base_frame                      cdh_base   frame_id requests must use and outputs carry
 robot.*                         (file)     the robot (model/robot.py; from the robot file)
-task.type                       free       free, slice or sphere
+task.type                       free       free, slice, sphere or pivot
 task.fixed.x .. task.fixed.sigma  NaN      slice: fixed coordinate (m, rad); NaN = free
-task.center, task.radius        0 0 0, 0.1 sphere (paper Eq. 17), m
+task.center, task.radius        0 0 0, 0.1 sphere (paper Eq. 17), m; pivot: the point c
 task.free_torsion               false      sphere: sigma free as well
+task.tool                       0 0 0      pivot: tool point t, platform frame (m)
 planner.strategy                auto       auto (astar up to 3-D, gbf above), astar or gbf
 planner.cost                    auto       auto, so3, great_circle or se3
 planner.timeout_s               60         give up after this long (answer TIMEOUT)
@@ -50,7 +51,7 @@ import numpy as np
 
 from ..errors import InputError
 from ..model.robot import robot_from_dict
-from ..model.task import POSE_NAMES, task_from_dict
+from ..model.task import TASKS, task_from_dict
 from ..planner import task_cost
 from ..settings import SETTINGS, PlannerSettings, check_range
 
@@ -127,20 +128,26 @@ def _robot_specs():
     ]
 
 
+def _task_specs():
+    """task.type and every registered task's parameters (model/task.py); a parameter that
+    two tasks share (task.center) is declared once."""
+    kinds = {"double": DOUBLE, "point": DOUBLES, "bool": BOOL}
+    specs = {"task.type": Spec("task.type", STRING, "free", "task constraint: "
+                               + ", ".join(TASKS), choices=tuple(TASKS))}
+    for task in TASKS.values():
+        for name, meta, default in task.parameters():
+            unit = f" ({meta.unit})" if meta.unit else ""
+            specs.setdefault(name, Spec(name, kinds[meta.kind], list(default) if meta.kind == "point"
+                                        else default, meta.description + unit,
+                                        low=0.0 if meta.positive else None, open_low=meta.positive))
+    return list(specs.values())
+
+
 SPECS = (
     [Spec("base_frame", STRING, "cdh_base",
           "frame_id that plan requests must use and every output carries (REP 103, m)")]
     + _robot_specs()
-    + [Spec("task.type", STRING, "free", "task constraint: free, slice or sphere",
-            choices=("free", "slice", "sphere"))]
-    + [Spec(f"task.fixed.{n}", DOUBLE, math.nan,
-            f"slice task: fixed value of {n} ({'m' if n in 'xyz' else 'rad'}); NaN leaves it "
-            f"free") for n in POSE_NAMES]
-    + [Spec("task.center", DOUBLES, [0.0, 0.0, 0.0],
-            "sphere task (paper Eq. 17): centre, base frame (m): 3 numbers"),
-       Spec("task.radius", DOUBLE, 0.1, "sphere task: radius (m)", low=0.0, high=100.0,
-            open_low=True),
-       Spec("task.free_torsion", BOOL, False, "sphere task: torsion sigma free as well")]
+    + _task_specs()
     + [_setting_spec(name) for name in SETTINGS]
     + [Spec("stream_rate_hz", DOUBLE, 50.0,
             "rate of ~/cable_command while executing (Hz)", low=1.0, high=1000.0),
@@ -275,15 +282,7 @@ def _robot_dict(checked):
 
 
 def _task_dict(checked):
-    kind = checked["task.type"]
-    if kind == "sphere":
-        return {"type": kind, "center": checked["task.center"], "radius": checked["task.radius"],
-                "free_torsion": checked["task.free_torsion"]}
-    if kind == "slice":
-        fixed = {n: checked[f"task.fixed.{n}"] for n in POSE_NAMES
-                 if not math.isnan(checked[f"task.fixed.{n}"])}
-        return {"type": kind, "fixed": fixed}
-    return {"type": kind}
+    return TASKS[checked["task.type"]].dict_of_parameters(checked)
 
 
 def needs_new_planner(names, old=None, new=None):
