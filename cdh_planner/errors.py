@@ -27,3 +27,19 @@ def check_finite(field: str, value, positive: bool = False) -> float:
     if positive and float(value) <= 0:
         raise InputError(field, value, "must be positive")
     return float(value)
+
+
+def check_keys(where: str, d, allowed, required=()) -> dict:
+    """``d`` if it is a mapping with only ``allowed`` keys and every ``required`` one, else
+    an InputError naming the first offending key (``where.key``; ``where`` "" at top level)."""
+    if not isinstance(d, dict):
+        raise InputError(where, d, "expected a mapping")
+    name = (lambda key: f"{where}.{key}" if where else str(key))
+    unknown = sorted(set(d) - set(allowed), key=str)
+    if unknown:
+        raise InputError(name(unknown[0]), d[unknown[0]],
+                         f"unknown key (allowed: {', '.join(map(str, allowed)) or 'none'})")
+    missing = sorted(k for k in required if k not in d)
+    if missing:
+        raise InputError(name(missing[0]), None, "required key is missing")
+    return d

@@ -3,6 +3,7 @@ differences and its own pose map, the registry reaching problem files and node p
 a new task as one class, and the pivot task (p + R t = c) end to end: plan, slice, refusals
 and the node."""
 
+import json
 import math
 from dataclasses import dataclass
 from typing import ClassVar
@@ -112,7 +113,8 @@ def test_pivot_problem_file_plans_a_dense_feasible_path_on_the_task(tmp_path, ca
     assert np.allclose(path.tau[0], problem.start.tau) and np.allclose(path.tau[-1], problem.goal.tau)
     out = tmp_path / "plan.json"
     assert main(["plan", str(PIVOT_FILE), "--quiet", "--json", str(out)]) == 0
-    assert "pivot" in out.read_text()
+    doc = json.loads(out.read_text())
+    assert doc["success"] and doc["n"] == 3 and len(doc["path"]) == len(path)
 
 
 def test_pivot_slice_draws(tmp_path, capsys):
@@ -181,3 +183,34 @@ def test_a_new_task_is_one_class(plane_registered):
     x = c.lift(np.array([0.0, 0.0, 0.25]), np.array([0.0, 0.2, 3.0]))
     F, _ = c.residual_and_jacobian(x)
     assert np.max(np.abs(F)) < 1e-9
+
+
+def test_pivot_plans_over_the_node(tmp_path):
+    """The node with task.type pivot (parameters task.tool, task.center) plans the problem
+    file's query; every waypoint of ~/plan's answer keeps the tool point at c."""
+    pytest.importorskip("rclpy")
+    from cdh_planner.model.pose import quaternion_from_tau, rotation_from_quaternion
+    from cdh_planner.ros.client import PlannerClient, pose_stamped
+    from ros_harness import NodeProcess, claimed_domain
+
+    problem = load_problem(PIVOT_FILE)
+    params = ["task.type:=pivot", "task.tool:=[0.0, 0.0, 0.1]", "task.center:=[0.0, 0.0, 0.35]"]
+
+    def msg(pose):
+        return pose_stamped(list(pose.p) + list(quaternion_from_tau(pose.tau)), "cdh_base")
+
+    with claimed_domain() as domain:
+        node = NodeProcess(domain, tmp_path, params=params)
+        try:
+            with PlannerClient(domain_id=domain) as client:
+                client.wait_for_node(30.0)
+                answer = client.plan(msg(problem.start), msg(problem.goal), timeout_s=120)
+        finally:
+            assert node.stop() == 0, node.log()
+    assert answer.success, answer.values
+    poses = answer.path.poses
+    p = np.array([[s.pose.position.x, s.pose.position.y, s.pose.position.z] for s in poses])
+    q = np.array([[s.pose.orientation.x, s.pose.orientation.y, s.pose.orientation.z,
+                   s.pose.orientation.w] for s in poses])
+    tip = p + np.einsum("nij,j->ni", rotation_from_quaternion(q), np.array(PIVOT.tool))
+    assert len(poses) > 2 and np.max(np.linalg.norm(tip - PIVOT.center, axis=1)) < 1e-6

@@ -82,12 +82,12 @@ class Atlas:
     def diff(self, x, y):
         """y - x with periodic coordinates wrapped to [-pi, pi)."""
         d = y - x
-        d[self.periodic] = (d[self.periodic] + np.pi) % TWO_PI - np.pi
+        d[self.periodic] = _wrap_angle(d[self.periodic])
         return d
 
     def wrap(self, x):
         x = x.copy()
-        x[self.periodic] = (x[self.periodic] + np.pi) % TWO_PI - np.pi
+        x[self.periodic] = _wrap_angle(x[self.periodic])
         return x
 
     def in_domain(self, x):
@@ -370,3 +370,8 @@ class _KeyIndex:
             near = np.flatnonzero(np.linalg.norm(tail - key, axis=1) <= radius)
             found.extend((near + self.n_tree).tolist())
         return found
+
+
+def _wrap_angle(a):
+    """Angles to [-pi, pi) (the atlas's own: it imports nothing of the robot model)."""
+    return (a + np.pi) % TWO_PI - np.pi

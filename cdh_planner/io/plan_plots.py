@@ -38,6 +38,7 @@ import numpy as np
 from ..atlas.domain import outline_2d
 from . import plots
 from .plots import DPI, Marker, SliceView, compute_slice, plt
+from ..model.pose import wrap_angle
 from ..model.task import COORDINATES
 
 TWO_PI = 2.0 * np.pi
@@ -61,7 +62,7 @@ def wrap(values, periodic):
     """Periodic columns of ``values`` (N, k) wrapped to [-pi, pi); others unchanged."""
     out = np.array(values, dtype=float, copy=True)
     per = np.asarray(periodic, dtype=bool)
-    out[..., per] = (out[..., per] + np.pi) % TWO_PI - np.pi
+    out[..., per] = wrap_angle(out[..., per])
     return out
 
 

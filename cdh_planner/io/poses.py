@@ -20,7 +20,7 @@ from pathlib import Path
 
 import numpy as np
 
-from ..errors import InputError
+from ..errors import InputError, check_keys
 from ..model.pose import check_quaternion, quaternion_from_tau, rotation_from_quaternion, \
     tau_from_quaternion
 
@@ -59,12 +59,7 @@ def load_poses(path, where="poses"):
 def poses_from_obj(doc, where="poses"):
     """Validate a decoded poses document (a list, or a mapping with only ``poses``)."""
     if isinstance(doc, dict):
-        unknown = sorted(set(doc) - {"poses"})
-        if unknown:
-            raise InputError(f"{unknown[0]}", doc[unknown[0]], "unknown key (expected only 'poses')")
-        if "poses" not in doc:
-            raise InputError(where, None, "required key is missing")
-        doc = doc["poses"]
+        doc = check_keys("", doc, ("poses",), required=("poses",))["poses"]
     if not isinstance(doc, list):
         raise InputError(where, short_repr(doc), "expected a list of poses")
     if not doc:
@@ -80,12 +75,7 @@ def pose_from_dict(d, where):
     """One pose: (position (3,) m, quaternion (4,) with w >= 0, tau (3,) rad)."""
     if not isinstance(d, dict):
         raise InputError(where, short_repr(d), "expected a mapping with 'position' and 'quaternion' or 'tau'")
-    unknown = sorted(set(d) - set(POSE_KEYS))
-    if unknown:
-        raise InputError(f"{where}.{unknown[0]}", d[unknown[0]],
-                         f"unknown key (allowed: {', '.join(POSE_KEYS)})")
-    if "position" not in d:
-        raise InputError(f"{where}.position", None, "required key is missing")
+    check_keys(where, d, POSE_KEYS, required=("position",))
     has_q, has_tau = "quaternion" in d, "tau" in d
     if has_q == has_tau:
         raise InputError(where, short_repr(d), "give exactly one of 'quaternion' or 'tau'")

@@ -16,7 +16,7 @@ from pathlib import Path
 
 import numpy as np
 
-from ..errors import InputError
+from ..errors import InputError, check_keys
 from ..model.robot import load_robot, read_yaml
 from ..model.task import COORDINATES, task_from_dict
 from ..model.pose import Pose
@@ -50,12 +50,7 @@ def load_problem(path):
 def problem_from_dict(doc, base_dir=".", source=""):
     if not isinstance(doc, dict):
         raise InputError("problem", short_repr(doc), "expected a mapping with robot, task, start, goal")
-    unknown = sorted(set(doc) - set(TOP_KEYS))
-    if unknown:
-        raise InputError(unknown[0], doc[unknown[0]], f"unknown key (allowed: {', '.join(TOP_KEYS)})")
-    for key in ("robot", "task", "start", "goal"):
-        if key not in doc:
-            raise InputError(key, None, "required key is missing")
+    check_keys("", doc, TOP_KEYS, required=("robot", "task", "start", "goal"))
     robot_path = doc["robot"]
     if not isinstance(robot_path, str) or not robot_path:
         raise InputError("robot", robot_path, "expected the path of a robot file")
@@ -77,10 +72,7 @@ def settings_from_dict(d, where):
     """PlannerSettings of the ``planner:`` mapping, each value checked by the schema."""
     if not isinstance(d, dict):
         raise InputError(where, short_repr(d), "expected a mapping of planner settings")
-    unknown = sorted(set(d) - set(SETTING_KEYS))
-    if unknown:
-        raise InputError(f"{where}.{unknown[0]}", d[unknown[0]],
-                         f"unknown setting (allowed: {', '.join(SETTING_KEYS)})")
+    check_keys(where, d, SETTING_KEYS)
     return PlannerSettings(**{k: check_setting(k, v, f"{where}.{k}") for k, v in d.items()})
 
 

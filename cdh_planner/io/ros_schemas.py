@@ -35,10 +35,6 @@ from pathlib import Path
 
 import numpy as np
 
-# ament_index_python finds share/ through AMENT_PREFIX_PATH; a venv with ROS 2 from PyPI
-# has the message files under sys.prefix but often no such variable.
-os.environ.setdefault("AMENT_PREFIX_PATH", sys.prefix)
-
 SEPARATOR = "=" * 80
 PRIMITIVES = frozenset({
     "bool", "byte", "char", "float32", "float64", "int8", "uint8", "int16", "uint16",
@@ -69,10 +65,14 @@ def split_type_name(type_name: str) -> tuple[str, str, str]:
     raise ValueError(f"bad ROS type name {type_name!r}")
 
 
+@lru_cache(maxsize=None)
 def _share_dir(pkg: str) -> Path:
-    """``share/<pkg>`` through the ament index, as rosbag2 looks definitions up."""
-    from ament_index_python.packages import get_package_share_directory
-    return Path(get_package_share_directory(pkg))
+    """``share/<pkg>`` through the ament index, as rosbag2 looks definitions up; without
+    AMENT_PREFIX_PATH (a venv with ROS 2 from PyPI often has none) the venv's own share/."""
+    if os.environ.get("AMENT_PREFIX_PATH"):
+        from ament_index_python.packages import get_package_share_directory
+        return Path(get_package_share_directory(pkg))
+    return Path(sys.prefix) / "share" / pkg
 
 
 def _srv_halves(pkg: str, service: str) -> tuple[str, str]:

@@ -17,7 +17,7 @@ from pathlib import Path
 import numpy as np
 import yaml
 
-from ..errors import InputError
+from ..errors import InputError, check_keys
 
 N_CABLES = 6
 ELLIPSOID_FRAMES = ("load", "base")
@@ -106,7 +106,7 @@ CONTACT_KEYS = {"matrix", "center"}
 
 def robot_from_dict(d, source=""):
     """Build and validate a Robot from the ``robot:`` mapping (field names as in YAML)."""
-    _check_keys("robot", d, ROBOT_KEYS, required={"base_anchors", "platform_anchors",
+    check_keys("robot", d, ROBOT_KEYS, required={"base_anchors", "platform_anchors",
                                                   "length_min", "length_max", "tension_min",
                                                   "tension_max", "load", "wrench_ellipsoid"})
     name = str(d.get("name", Path(source).stem or "robot"))
@@ -124,13 +124,13 @@ def robot_from_dict(d, source=""):
     _check_below("robot.tension_min", fmin, "robot.tension_max", fmax)
 
     load = d["load"]
-    _check_keys("robot.load", load, LOAD_KEYS, required={"force"})
+    check_keys("robot.load", load, LOAD_KEYS, required={"force"})
     force = _vector("robot.load.force", load["force"], 3)
     point = _vector("robot.load.point", load.get("point", [0.0, 0.0, 0.0]), 3)
     moment = _vector("robot.load.moment", load.get("moment", [0.0, 0.0, 0.0]), 3)
 
     ell = d["wrench_ellipsoid"]
-    _check_keys("robot.wrench_ellipsoid", ell, ELLIPSOID_KEYS, required={"matrix"})
+    check_keys("robot.wrench_ellipsoid", ell, ELLIPSOID_KEYS, required={"matrix"})
     frame = ell.get("frame", "load")
     if frame not in ELLIPSOID_FRAMES:
         raise InputError("robot.wrench_ellipsoid.frame", frame, f"expected one of {ELLIPSOID_FRAMES}")
@@ -138,7 +138,7 @@ def robot_from_dict(d, source=""):
     offset = _vector("robot.wrench_ellipsoid.offset", ell.get("offset", [0.0] * 6), 6)
     if "contact_ellipsoid" in d:
         con = d["contact_ellipsoid"]
-        _check_keys("robot.contact_ellipsoid", con, CONTACT_KEYS, required={"matrix"})
+        check_keys("robot.contact_ellipsoid", con, CONTACT_KEYS, required={"matrix"})
         E_c = _spd_matrix("robot.contact_ellipsoid.matrix", con["matrix"])
         offset = offset + _vector("robot.contact_ellipsoid.center", con.get("center", [0.0] * 6), 6)
         E = combine_contact_ellipsoid(E, E_c)
@@ -148,17 +148,6 @@ def robot_from_dict(d, source=""):
                  force=force, load_point=point, moment=moment, ellipsoid_frame=frame,
                  ellipsoid_offset=offset, ellipsoid_matrix=E, source=source)
 
-
-def _check_keys(where, d, allowed, required=()):
-    if not isinstance(d, dict):
-        raise InputError(where, d, "expected a mapping")
-    unknown = sorted(set(d) - set(allowed))
-    if unknown:
-        raise InputError(f"{where}.{unknown[0]}", d[unknown[0]],
-                         f"unknown key (allowed: {', '.join(sorted(allowed))})")
-    missing = sorted(set(required) - set(d))
-    if missing:
-        raise InputError(f"{where}.{missing[0]}", None, "required key is missing")
 
 
 def _vector(where, value, n):

@@ -23,7 +23,7 @@ from typing import ClassVar
 
 import numpy as np
 
-from ..errors import InputError, check_finite
+from ..errors import InputError, check_finite, check_keys
 from .pose import rotation_angle_between, rotation_tt, rotation_tt_derivatives, wrap_angle
 
 POSE_NAMES = ("x", "y", "z", "phi", "theta", "sigma")
@@ -161,11 +161,7 @@ class Task:
     @classmethod
     def from_dict(cls, d, where):
         """The task of its problem-file mapping (``type`` already checked)."""
-        known = {name for name, _, _ in cls.task_fields()}
-        unknown = sorted(set(d) - known - {"type"})
-        if unknown:
-            raise InputError(f"{where}.{unknown[0]}", d[unknown[0]], f"not a key of a '{cls.type}' task"
-                             f" (keys: {', '.join(sorted(known)) or 'none'})")
+        check_keys(where, d, ["type"] + [name for name, _, _ in cls.task_fields()])
         return cls(**{name: _check_field(f"{where}.{name}", meta, d.get(name, default))
                       for name, meta, default in cls.task_fields()})
 
@@ -264,9 +260,7 @@ class SliceTask(Task):
 
     @classmethod
     def from_dict(cls, d, where):
-        unknown = sorted(set(d) - {"type", "fixed"})
-        if unknown:
-            raise InputError(f"{where}.{unknown[0]}", d[unknown[0]], "not a key of a 'slice' task (keys: fixed)")
+        check_keys(where, d, ("type", "fixed"))
         fixed = d.get("fixed")
         if not isinstance(fixed, dict) or not fixed:
             raise InputError(f"{where}.fixed", fixed, "expected a mapping of pose coordinates to values")

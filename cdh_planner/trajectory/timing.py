@@ -75,7 +75,7 @@ from dataclasses import dataclass, replace
 
 import numpy as np
 
-from ..errors import InputError
+from ..errors import InputError, check_finite
 from ..model.robot import N_CABLES
 
 DWELL_S = 1e-3  # s, duration of a zero-length segment (duplicated waypoint)
@@ -320,8 +320,8 @@ def time_parameterize(lengths, max_cable_speed, max_cable_accel, *, dwell_s=DWEL
     L = check_lengths(lengths)
     vmax = check_limit("max_cable_speed", max_cable_speed)
     amax = check_limit("max_cable_accel", max_cable_accel)
-    dwell_s = _positive("dwell_s", dwell_s)
-    zero_length_m = _positive("zero_length_m", zero_length_m)
+    dwell_s = check_finite("dwell_s", dwell_s, positive=True)
+    zero_length_m = check_finite("zero_length_m", zero_length_m, positive=True)
     n = L.shape[0]
     if n == 1:
         zero = np.zeros((1, N_CABLES))
@@ -359,15 +359,6 @@ def _schedule(geo, cap, dwell_s):
     h = np.where(geo.moving, h, dwell_s)
     return b, np.concatenate([[0.0], np.cumsum(h)])
 
-
-def _positive(name, value):
-    try:
-        x = float(value)
-    except (TypeError, ValueError):
-        raise InputError(name, value, "must be a positive finite number") from None
-    if not (np.isfinite(x) and x > 0):
-        raise InputError(name, value, "must be a positive finite number")
-    return x
 
 
 def time_path(path, max_cable_speed, max_cable_accel, **options):
