@@ -20,7 +20,7 @@ from pathlib import Path
 
 import numpy as np
 
-from cdh_planner.ros.domains import claimed_domain, isolated_env  # noqa: F401 (re-exported)
+from cdh_planner.ros.domains import claimed_domain, isolated_env, stop_process  # noqa: F401 (re-exported)
 
 from conftest import REPO
 ROBOT2 = REPO / "config" / "robot2.yaml"
@@ -77,15 +77,9 @@ class NodeProcess:
 
     def stop(self, sig=signal.SIGTERM, timeout=15.0):
         """Send ``sig`` (if still running) and wait; the exit code."""
-        if self.proc.poll() is None:
-            self.proc.send_signal(sig)
-            try:
-                self.proc.wait(timeout)
-            except subprocess.TimeoutExpired:
-                self.proc.kill()
-                self.proc.wait()
+        rc = stop_process(self.proc, sig, timeout)
         self._out.close()
-        return self.proc.returncode
+        return rc
 
     def log(self):
         if not self._out.closed:
@@ -129,7 +123,8 @@ class Collector:
 
 
 def stamp_s(stamp):
-    return stamp.sec + 1e-9 * stamp.nanosec
+    from cdh_planner.ros.messages import to_seconds
+    return to_seconds(stamp)
 
 
 def flat_parameters(d, prefix=""):

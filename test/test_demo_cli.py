@@ -13,6 +13,8 @@ import pytest
 
 from cdh_planner import cli
 from cdh_planner.commands import demo as demo_cmd
+from cdh_planner.commands.demo import paper
+from cdh_planner.commands.demo.steps import Step
 from cdh_planner.feasibility import evaluate
 from cdh_planner.trajectory.verify import TaskLinePath
 
@@ -196,8 +198,8 @@ def test_motion_verdicts_and_where_they_leave_c(checked):
 
 
 def test_a_verdict_that_differs_from_the_paper_gives_exit_1(tmp_path, monkeypatch):
-    flipped = (demo_cmd.PaperPose("robot2", "q_2", (0.55, 0.75), feasible=False),)
-    monkeypatch.setattr(demo_cmd, "PAPER_POSES", demo_cmd.PAPER_POSES + flipped)
+    flipped = (paper.PaperPose("robot2", "q_2", (0.55, 0.75), feasible=False),)
+    monkeypatch.setattr(paper, "PAPER_POSES", paper.PAPER_POSES + flipped)
     monkeypatch.setattr(demo_cmd, "STEPS", demo_cmd.STEPS[:2])
     rc, text = run_quiet(cli.main, ["demo", "--out", str(tmp_path)])
     assert rc == 1
@@ -207,7 +209,7 @@ def test_a_verdict_that_differs_from_the_paper_gives_exit_1(tmp_path, monkeypatc
 
 def test_steps_can_be_appended(tmp_path):
     seen = []
-    extra = demo_cmd.Step("later", "A later step", lambda d: seen.append(sorted(d.robots)))
+    extra = Step("later", "A later step", lambda d: seen.append(sorted(d.robots)))
     demo, text = run_quiet(demo_cmd.run_demo, tmp_path, steps=demo_cmd.STEPS[:1] + [extra])
     assert seen == [["robot1", "robot2"]]
     assert "== 2. A later step" in text

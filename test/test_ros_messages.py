@@ -11,6 +11,7 @@ pytest.importorskip("nav_msgs")
 from builtin_interfaces.msg import Duration, Time  # noqa: E402
 from diagnostic_msgs.msg import DiagnosticStatus  # noqa: E402
 from geometry_msgs.msg import PoseStamped  # noqa: E402
+from nav_msgs.msg import Path  # noqa: E402
 from visualization_msgs.msg import Marker  # noqa: E402
 
 from cdh_planner.errors import InputError  # noqa: E402
@@ -63,7 +64,7 @@ def test_time_and_duration_helpers():
     d = M.duration_msg(2.9999999996)
     assert (d.sec, d.nanosec) == (3, 0)  # rounds to the nearest ns, carries into sec
     d = M.duration_msg(1.25)
-    assert (d.sec, d.nanosec) == (1, 250_000_000) and M.duration_s(d) == 1.25
+    assert (d.sec, d.nanosec) == (1, 250_000_000) and M.to_seconds(d) == 1.25
     with pytest.raises(InputError):
         M.duration_msg(float("nan"))
 
@@ -104,7 +105,7 @@ def test_cable_trajectory_field_by_field():
         assert list(pt.velocities) == PATH.velocities[k].tolist()  # m/s
         assert list(pt.accelerations) == PATH.accelerations[k].tolist()  # m/s^2
         assert list(pt.effort) == PATH.tension_nominal[k].tolist()  # N
-        assert M.duration_s(pt.time_from_start) == pytest.approx(PATH.t[k], abs=1e-9)
+        assert M.to_seconds(pt.time_from_start) == pytest.approx(PATH.t[k], abs=1e-9)
     times = [ns(Time(sec=p.time_from_start.sec, nanosec=p.time_from_start.nanosec)) for p in msg.points]
     assert times[0] == 0 and all(b > a for a, b in zip(times, times[1:]))
     # the lengths are those of the poses: |p + R b_i - a_i|
@@ -297,6 +298,33 @@ def test_cable_command_message():
     assert list(msg.velocity) == s.velocities.tolist()
     assert list(msg.effort) == s.effort.tolist()
     assert ns(msg.header.stamp) == ns(START)
+
+
+def test_winch_command_adapter_round_trip():
+    """winch_command -> (wire) -> winch_command_values gives the stamp in s, the positions
+    and the velocities back exactly: the only code that knows the message type."""
+    from rclpy.serialization import deserialize_message, serialize_message
+    positions, velocities = np.linspace(0.2, 0.45, 6), np.linspace(-0.05, 0.05, 6)
+    msg = M.winch_command(ROBOT.winch_names, positions, velocities, START, effort=np.full(6, 1.5))
+    assert isinstance(msg, M.WINCH_COMMAND_TYPE)
+    for m in (msg, deserialize_message(serialize_message(msg), M.WINCH_COMMAND_TYPE)):
+        t, p, v = M.winch_command_values(m)
+        assert t == ns(START) / 1e9 == 1_700_000_000.999
+        np.testing.assert_array_equal(p, positions)
+        np.testing.assert_array_equal(v, velocities)
+    t, p, v = M.winch_command_values(M.winch_command(ROBOT.winch_names, positions, np.zeros(6), START))
+    assert not np.any(v) and p.shape == v.shape == (6,)
+
+
+def test_path_and_trajectory_arrays_round_trip():
+    p, q = M.path_arrays(M.path_msg(PATH, FRAME, START))
+    np.testing.assert_array_equal(p, PATH.p)
+    np.testing.assert_array_equal(q, PATH.quaternion)
+    t, lengths = M.trajectory_arrays(M.cable_trajectory_msg(PATH, ROBOT.winch_names, FRAME))
+    np.testing.assert_allclose(t, PATH.t, atol=1e-9)
+    np.testing.assert_array_equal(lengths, PATH.lengths)
+    p, q = M.path_arrays(Path())  # no plan
+    assert p.shape == (0, 3) and q.shape == (0, 4)
 
 
 # ----------------------------------------------------------------------------- poses

@@ -76,13 +76,11 @@ def q1_q2(ros):
 
 
 def _positions(path_msg):
-    return np.array([[p.pose.position.x, p.pose.position.y, p.pose.position.z]
-                     for p in path_msg.poses])
+    return M.path_arrays(path_msg)[0]
 
 
 def _quaternions(path_msg):
-    return np.array([[p.pose.orientation.x, p.pose.orientation.y, p.pose.orientation.z,
-                      p.pose.orientation.w] for p in path_msg.poses])
+    return M.path_arrays(path_msg)[1]
 
 
 def test_plan_over_ros_is_the_offline_planners_answer(q1_q2):
@@ -129,7 +127,7 @@ def test_cable_trajectory_joint_names_units_and_limits(q1_q2):
     assert list(traj.joint_names) == list(ROBOT.winch_names)
     assert traj.header.frame_id == "cdh_base" and M.time_ns(traj.header.stamp) == 0
     assert len(traj.points) == len(answer.path.poses)
-    t = np.array([M.duration_s(pt.time_from_start) for pt in traj.points])
+    t = np.array([M.to_seconds(pt.time_from_start) for pt in traj.points])
     assert t[0] == 0.0 and np.all(np.diff(t) > 0)
     L = np.array([pt.positions for pt in traj.points])
     V = np.array([pt.velocities for pt in traj.points])

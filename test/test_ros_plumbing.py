@@ -45,9 +45,10 @@ def ros(tmp_path_factory):
             with PlannerClient(domain_id=domain) as client:
                 client.wait_for_node(20.0)
                 client.delay_file = delay_file
+                client.domain = domain
                 client.process = node
-                client.commands = Collector(client.node, JointState, "/cdh_planner/cable_command",
-                                            100)
+                client.command_log = Collector(client.node, JointState,
+                                               "/cdh_planner/cable_command", 100)
                 client.progress = Collector(client.node, DiagnosticStatus,
                                             "/cdh_planner/plan_progress", 100)
                 client.trajectory = Collector(client.node, JointTrajectory,
@@ -163,7 +164,7 @@ def test_streaming_rate_and_stop_within_one_period(ros):
     assert answer.success
     duration = float(answer.values["duration_s"])
     assert duration > 1.6
-    n0 = len(ros.commands.items)
+    n0 = len(ros.command_log.items)
     ok, message = ros.execute()
     assert ok, message
     ok, message = ros.execute()
@@ -173,7 +174,7 @@ def test_streaming_rate_and_stop_within_one_period(ros):
     ok, message = ros.stop()
     assert ok and "stopped" in message
     ros.spin(0.4)
-    got = ros.commands.messages[n0:]
+    got = ros.command_log.messages[n0:]
     stamps = np.array([stamp_s(m.header.stamp) for m in got])
     # rate: commands stamped within the first second of streaming
     in_first_second = np.sum(stamps < stamps[0] + 1.0)
@@ -206,14 +207,46 @@ def test_streaming_ends_on_the_last_waypoint(ros):
                           and len(ros.trajectory.messages[-1].points) == len(answer.path.poses),
                           5.0)
     last_point = ros.trajectory.messages[-1].points[-1]
-    n0 = len(ros.commands.items)
+    n0 = len(ros.command_log.items)
     assert ros.execute()[0]
     duration = float(answer.values["duration_s"])
     ros.spin(duration + 0.5)
-    got = ros.commands.messages[n0:]
+    got = ros.command_log.messages[n0:]
     assert abs(len(got) - (duration * RATE_HZ + 2)) <= 0.1 * duration * RATE_HZ
     np.testing.assert_allclose(got[-1].position, last_point.positions, atol=1e-12)
     assert np.all(np.asarray(got[-1].velocity) == 0.0)
     assert ros.execute()[0]          # the same plan can be executed again
     ros.spin(0.2)
     assert ros.stop()[0]
+
+
+def test_execute_and_follow_reaches_the_last_waypoint(ros, monkeypatch):
+    """PlannerClient.execute_and_follow (``call --execute``, the demo) follows the stream
+    from the first waypoint to the last, at rest; Ctrl-C while following calls ~/stop."""
+    with PlannerClient(domain_id=ros.domain, name="follower") as client:
+        client.wait_for_node(20.0)
+        client.watch_execution()
+        answer = plan(client)
+        assert answer.success
+        run = client.execute_and_follow(answer)
+        assert run.accepted and run.arrived and not run.stopped, run.message
+        points = run.trajectory.points
+        assert len(points) == len(answer.path.poses) and run.envelope is not None
+        np.testing.assert_array_equal(run.goal, points[-1].positions)
+        stamps, positions = run.values()
+        assert run.error_m() <= 1e-9 and len(stamps) == len(run.commands) > 10
+        np.testing.assert_allclose(positions[0], points[0].positions, atol=1e-4)
+        span, rate = run.rate()
+        assert abs(span - float(answer.values["duration_s"])) <= 2.0 / RATE_HZ
+        assert abs(rate - RATE_HZ) <= 0.1 * RATE_HZ
+        # Ctrl-C while following: ~/stop, and the run did not arrive
+        real = client.spin_until
+
+        def interrupted(condition, timeout_s):
+            if condition.__name__ == "arrived":   # following the stream
+                raise KeyboardInterrupt
+            return real(condition, timeout_s)
+
+        monkeypatch.setattr(client, "spin_until", interrupted)
+        run = client.execute_and_follow(answer)
+        assert run.accepted and run.stopped.startswith("stopped at") and not run.arrived

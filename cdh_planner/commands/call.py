@@ -93,47 +93,23 @@ def print_answer(answer):
 
 def execute(client, answer):
     """Call ~/execute and follow ~/cable_command until it reaches the trajectory's last
-    point; Ctrl-C stops the motion. 0 when it got there, 1 otherwise."""
-    import numpy as np
-    from sensor_msgs.msg import JointState
-    from trajectory_msgs.msg import JointTrajectory
-
-    from ..ros.client import path_duration
-    from ..ros.node import LATCHED
-    commands, trajectories = [], []
-    client.node.create_subscription(JointState, f"{client.target}/cable_command",
-                                    commands.append, 100)
-    client.node.create_subscription(JointTrajectory, f"{client.target}/cable_trajectory",
-                                    trajectories.append, LATCHED)
-    n = len(answer.path.poses)
-    client.spin_until(lambda: trajectories and len(trajectories[-1].points) == n, 2.0)
-    goal = np.asarray(trajectories[-1].points[-1].positions) if trajectories else None
-    ok, message = client.execute()
-    print(f"execute: {message}")
-    if not ok:
+    point (``PlannerClient.execute_and_follow``); Ctrl-C stops the motion. 0 when it got
+    there, 1 otherwise."""
+    run = client.execute_and_follow(answer)
+    print(f"execute: {run.message}")
+    if not run.accepted:
         return EXIT_NO_PLAN
-
-    def arrived():
-        return (commands and not any(commands[-1].velocity) and goal is not None
-                and np.allclose(commands[-1].position, goal, rtol=0, atol=1e-9))
-
-    try:
-        client.spin_until(arrived, path_duration(answer.path) + 3.0)
-    except KeyboardInterrupt:
-        print(f"stop: {client.stop()[1]}")
+    if run.stopped:
+        print(f"stop: {run.stopped}")
         return EXIT_NO_PLAN
-    if not commands:
+    if not run.commands:
         print("streamed: no ~/cable_command received")
         return EXIT_NO_PLAN
-    span = _seconds(commands[-1]) - _seconds(commands[0])
-    print(f"streamed: {len(commands)} commands over {span:.3f} s "
-          f"({(len(commands) - 1) / span if span > 0 else 0:.1f} Hz); final cable lengths "
-          f"{' '.join(f'{x:.4f}' for x in commands[-1].position)} m")
-    if not arrived():
+    span, rate = run.rate()
+    _, positions = run.values()
+    print(f"streamed: {len(run.commands)} commands over {span:.3f} s ({rate:.1f} Hz); final "
+          f"cable lengths {' '.join(f'{x:.4f}' for x in positions[-1])} m")
+    if not run.arrived:
         print("execution did not reach the last waypoint (stopped, or the node went away)")
         return EXIT_NO_PLAN
     return EXIT_OK
-
-
-def _seconds(msg):
-    return msg.header.stamp.sec + 1e-9 * msg.header.stamp.nanosec

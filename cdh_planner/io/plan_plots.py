@@ -29,6 +29,7 @@ straddles the edge. Prints nothing; matplotlib with the Agg backend.
 envelopes over time) draw what a node answered and streamed, with the same pieces.
 """
 
+import contextlib
 import itertools
 from dataclasses import dataclass
 from pathlib import Path
@@ -176,25 +177,13 @@ def plot_atlas(planner, problem, result, out, resolution=400, size=ATLAS_SIZE):
     view = SliceView(task=task, axes=names, ranges=ranges)
     grid = compute_slice(problem.robot, view, resolution)
 
-    fig = plt.figure(figsize=(size[0] / DPI, size[1] / DPI), dpi=DPI, layout="constrained")
-    try:
-        ax = fig.add_subplot()
-        plots._draw_classes(ax, grid)
-        has_singular = plots._draw_singular(ax, grid)
+    with _slice_picture(grid, out, size, _title(planner, problem, result)) as (ax, handles):
         _draw_atlas(ax, polygons, periodic, ranges)
         if path is not None:
             _draw_path(ax, path, periodic)
         for label, (a, b) in zip(("start", "goal"), ends):
             plots._draw_marker(ax, Marker(label, a, b), view)
-        plots._label_axes(ax, view)
-        ax.set_xlim(*ranges[0])
-        ax.set_ylim(*ranges[1])
-        ax.set_title(_title(planner, problem, result))
-        fig.legend(handles=_legend_handles(polygons, has_singular, path is not None),
-                   loc="outside lower center", ncol=3, fontsize="small")
-        fig.savefig(out, dpi=DPI, format="png")
-    finally:
-        plt.close(fig)
+        handles += _chart_handles(polygons, path is not None)
 
 
 def axis_range(name, values):
@@ -258,11 +247,31 @@ def _draw_atlas(ax, polygons, periodic, ranges):
                 color=CENTRE_COLOR, zorder=2.2)
 
 
-def _legend_handles(polygons, has_singular, has_path):
+@contextlib.contextmanager
+def _slice_picture(grid, out, size, title):
+    """Yield (axes showing the classified slice of ``grid``, its legend entries); at the
+    end label the axes, limit them to the view, and write ``out`` with the legend below."""
+    fig = plt.figure(figsize=(size[0] / DPI, size[1] / DPI), dpi=DPI, layout="constrained")
+    try:
+        ax = fig.add_subplot()
+        plots._draw_classes(ax, grid)
+        handles = _class_handles(plots._draw_singular(ax, grid))
+        yield ax, handles
+        plots._label_axes(ax, grid.view)
+        ax.set_xlim(*grid.view.ranges[0])  # markers outside must not widen the view
+        ax.set_ylim(*grid.view.ranges[1])
+        ax.set_title(title)
+        fig.legend(handles=handles, loc="outside lower center", ncol=3, fontsize="small")
+        fig.savefig(out, dpi=DPI, format="png")
+    finally:
+        plt.close(fig)
+
+
+def _chart_handles(polygons, has_path):
     from matplotlib.lines import Line2D
     from matplotlib.patches import Patch
 
-    handles = _class_handles(has_singular)
+    handles = []
     counts = {k: sum(1 for kind, _, _ in polygons if kind == k) for k in ("closed", "open", "frontier")}
     handles.append(Patch(facecolor="#e8e8e8", edgecolor=CLOSED_EDGE, lw=0.6,
                          label=f"closed charts ({counts['closed']}): explored"))
@@ -363,11 +372,7 @@ def plot_paths(robot, view, paths, out, markers=(), segment=None, periodic=(Fals
     from matplotlib.lines import Line2D
 
     grid = compute_slice(robot, view, resolution)
-    fig = plt.figure(figsize=(size[0] / DPI, size[1] / DPI), dpi=DPI, layout="constrained")
-    try:
-        ax = fig.add_subplot()
-        plots._draw_classes(ax, grid)
-        handles = _class_handles(plots._draw_singular(ax, grid))
+    with _slice_picture(grid, out, size, title) as (ax, handles):
         if segment is not None:
             plots._draw_segment(ax, segment)
             leaves = ("" if segment.first_unsafe_s is None
@@ -379,14 +384,6 @@ def plot_paths(robot, view, paths, out, markers=(), segment=None, periodic=(Fals
             handles.append(Line2D([], [], color=color, lw=2.2, label=label))
         for m in markers:
             plots._draw_marker(ax, m, view)
-        plots._label_axes(ax, view)
-        ax.set_xlim(*view.ranges[0])
-        ax.set_ylim(*view.ranges[1])
-        ax.set_title(title)
-        fig.legend(handles=handles, loc="outside lower center", ncol=3, fontsize="small")
-        fig.savefig(out, dpi=DPI, format="png")
-    finally:
-        plt.close(fig)
 
 
 @dataclass(frozen=True)

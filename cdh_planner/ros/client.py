@@ -4,12 +4,15 @@ call``, ``replay --requests``, the demo and the tests).
     with PlannerClient("/cdh_planner", args=ros_args) as client:
         client.wait_for_node(timeout_s=10)
         answer = client.plan(start_msg, goal_msg, timeout_s=60)   # PlanAnswer
-        client.execute(); client.stop()
+        run = client.execute_and_follow(answer)                   # Execution
+        client.stop()
 
 Spins its own node with ``spin_once`` (not ``spin_until_future_complete``, which slows down
 call after call in rclpy 7.1 as installed from PyPI). Its subscription to ``~/plan_result`` is
 volatile, so only answers published after it joined arrive; an answer is paired with its
-result by the ``path_stamp`` key (= the response path's header stamp).
+result by the ``path_stamp`` key (= the response path's header stamp). ``execute_and_follow``
+calls ``~/execute`` and follows the streamed ``~/cable_command`` to the last waypoint (used by
+``cdh-planner call --execute`` and the demo). Names of services and topics: ``node.py``.
 """
 
 import math
@@ -25,13 +28,21 @@ from nav_msgs.srv import GetPlan
 from rclpy.executors import SingleThreadedExecutor
 from rclpy.node import Node
 from rclpy.qos import QoSProfile, ReliabilityPolicy
+from std_msgs.msg import Float64MultiArray
 from std_srvs.srv import Trigger
+from trajectory_msgs.msg import JointTrajectory
 
 from ..errors import InputError
 from . import messages as M
+from .node import CABLE_COMMAND, CABLE_TRAJECTORY, EXECUTE, LATCHED, NODE_NAME, PLAN, \
+    PLAN_RESULT, STOP, TENSION_ENVELOPE
 
-DEFAULT_NODE = "/cdh_planner"
+DEFAULT_NODE = "/" + NODE_NAME
 RESULT_WAIT_S = 2.0  # after the response, how long to wait for its ~/plan_result
+LATCHED_WAIT_S = 5.0  # before executing, how long to wait for the plan's latched messages
+FOLLOW_MARGIN_S = 5.0  # how long to follow the stream beyond the path's duration
+ARRIVAL_TOL_M = 1e-9  # the last command is the last waypoint within this (m)
+COMMAND_DEPTH = 1000  # ~/cable_command queue: no command is dropped while spinning late
 # After the services are seen, s of spinning before the first call: the node must also have
 # discovered this client's reply reader, or a fast answer (a direct motion, 30 ms) is dropped
 # by the middleware ("failed to send response (timeout)").
@@ -57,6 +68,43 @@ class PlanAnswer:
             return float(self.values[key])
         except (KeyError, ValueError):
             return default
+
+
+@dataclass
+class Execution:
+    """What ``execute_and_follow`` saw: the ``~/execute`` answer (``accepted``, ``message``),
+    the plan's latched ``trajectory`` (JointTrajectory) and ``envelope`` (tension envelope
+    message; None if they did not arrive), the winch ``commands`` streamed after the call, in
+    arrival order, whether the last one is the last waypoint (``goal``, m) at rest
+    (``arrived``), and ``~/stop``'s answer when Ctrl-C ended the following (``stopped``)."""
+
+    accepted: bool = False
+    message: str = ""
+    trajectory: object = None
+    envelope: object = None
+    goal: Optional[np.ndarray] = None
+    commands: list = field(default_factory=list)
+    arrived: bool = False
+    stopped: str = ""
+
+    def values(self):
+        """(stamps (M,) s, positions (M, joints) m) of the streamed commands."""
+        values = [M.winch_command_values(m) for m in self.commands]
+        return (np.array([v[0] for v in values]),
+                np.array([v[1] for v in values]).reshape(len(values), -1))
+
+    def rate(self):
+        """(span s from the first command's stamp to the last's, commands per s)."""
+        t, _ = self.values()
+        span = float(t[-1] - t[0]) if len(t) else 0.0
+        return span, (len(t) - 1) / span if span > 0 else 0.0
+
+    def error_m(self):
+        """Largest distance (m) of the last command from the last waypoint (nan if none)."""
+        _, positions = self.values()
+        if self.goal is None or not len(positions):
+            return math.nan
+        return float(np.max(np.abs(positions[-1] - self.goal)))
 
 
 class ClientError(RuntimeError):
@@ -96,13 +144,20 @@ class PlannerClient:
         self.node = Node(name, context=self.context)
         self.executor = SingleThreadedExecutor(context=self.context)
         self.executor.add_node(self.node)
-        self.plan_client = self.node.create_client(GetPlan, f"{self.target}/plan")
-        self.execute_client = self.node.create_client(Trigger, f"{self.target}/execute")
-        self.stop_client = self.node.create_client(Trigger, f"{self.target}/stop")
+        self.plan_client = self.node.create_client(GetPlan, self.topic(PLAN))
+        self.execute_client = self.node.create_client(Trigger, self.topic(EXECUTE))
+        self.stop_client = self.node.create_client(Trigger, self.topic(STOP))
         self.results = []
         self.node.create_subscription(
-            DiagnosticStatus, f"{self.target}/plan_result", self.results.append,
+            DiagnosticStatus, self.topic(PLAN_RESULT), self.results.append,
             QoSProfile(depth=50, reliability=ReliabilityPolicy.RELIABLE))
+        # every message received since watch_execution(), in arrival order
+        self.commands, self.trajectories, self.envelopes = None, None, None
+        self._param_client = None
+
+    def topic(self, name):
+        """The absolute name of the node's topic or service ``name`` (node.py's names)."""
+        return f"{self.target}/{name}"
 
     def __enter__(self):
         return self
@@ -140,7 +195,7 @@ class PlannerClient:
                 raise ClientError(f"no service {client.srv_name} after {timeout_s:g} s: is "
                                   f"`cdh-planner node` running (same ROS_DOMAIN_ID)?")
         # let the plan_result subscription match the node's publisher
-        self.spin_until(lambda: self.node.count_publishers(f"{self.target}/plan_result") > 0,
+        self.spin_until(lambda: self.node.count_publishers(self.topic(PLAN_RESULT)) > 0,
                         max(0.0, end - time.monotonic()))
         self.spin_until(lambda: False, DISCOVERY_SETTLE_S)
 
@@ -172,7 +227,7 @@ class PlannerClient:
         return answer
 
     def _parameters(self):
-        if getattr(self, "_param_client", None) is None:
+        if self._param_client is None:
             from rclpy.parameter_client import AsyncParameterClient
             self._param_client = AsyncParameterClient(self.node, self.target)
         return self._param_client
@@ -209,11 +264,59 @@ class PlannerClient:
         r = self.call(self.stop_client, Trigger.Request(), timeout_s)
         return r.success, r.message
 
+    def watch_execution(self):
+        """Subscribe (once) to ``~/cable_command``, ``~/cable_trajectory`` and
+        ``~/tension_envelope``: from now on ``commands``, ``trajectories`` and ``envelopes``
+        keep every message received. Call it early to miss none of the first commands."""
+        if self.commands is not None:
+            return
+        self.commands, self.trajectories, self.envelopes = [], [], []
+        subscribe = self.node.create_subscription
+        subscribe(M.WINCH_COMMAND_TYPE, self.topic(CABLE_COMMAND), self.commands.append,
+                  COMMAND_DEPTH)
+        subscribe(JointTrajectory, self.topic(CABLE_TRAJECTORY), self.trajectories.append,
+                  LATCHED)
+        subscribe(Float64MultiArray, self.topic(TENSION_ENVELOPE), self.envelopes.append,
+                  LATCHED)
+
+    def execute_and_follow(self, answer, margin_s=FOLLOW_MARGIN_S):
+        """Call ``~/execute`` for the plan ``answer`` (a PlanAnswer) and follow
+        ``~/cable_command`` until the last command is the plan's last waypoint at rest, or
+        the path's duration + ``margin_s`` has passed; Ctrl-C calls ``~/stop``. An Execution."""
+        self.watch_execution()
+        n = len(answer.path.poses)
+        self.spin_until(lambda: self.trajectories and len(self.trajectories[-1].points) == n
+                        and self.envelopes
+                        and self.node.count_publishers(self.topic(CABLE_COMMAND)) > 0,
+                        LATCHED_WAIT_S)
+        run = Execution()
+        if self.trajectories and len(self.trajectories[-1].points) == n:
+            run.trajectory = self.trajectories[-1]
+            run.envelope = self.envelopes[-1] if self.envelopes else None
+            run.goal = np.asarray(run.trajectory.points[-1].positions, dtype=float)
+        first = len(self.commands)
+        run.accepted, run.message = self.execute()
+
+        def arrived():
+            if run.goal is None or len(self.commands) == first:
+                return False
+            _, positions, velocities = M.winch_command_values(self.commands[-1])
+            return not np.any(velocities) and np.allclose(positions, run.goal, rtol=0,
+                                                          atol=ARRIVAL_TOL_M)
+
+        if run.accepted:
+            try:
+                self.spin_until(arrived, path_duration(answer.path) + margin_s)
+            except KeyboardInterrupt:
+                run.stopped = self.stop()[1]
+            run.arrived = not run.stopped and arrived()
+        run.commands = self.commands[first:]
+        return run
+
 
 def path_length(path_msg):
     """Length (m) of the platform positions of a nav_msgs/Path."""
-    p = np.array([[q.pose.position.x, q.pose.position.y, q.pose.position.z]
-                  for q in path_msg.poses]).reshape(-1, 3)
+    p, _ = M.path_arrays(path_msg)
     return float(np.sum(np.linalg.norm(np.diff(p, axis=0), axis=1)))
 
 

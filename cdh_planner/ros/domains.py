@@ -4,13 +4,16 @@ Two processes offering the same service name in one ROS_DOMAIN_ID answer each ot
 (DDS matches them by name). ``claimed_domain()`` picks a domain id that no other cooperating process
 (tests, demos) holds: holding one means holding a bound localhost TCP port, released when
 the block ends or the process dies. Discovery should also stay on the machine:
-``ROS_AUTOMATIC_DISCOVERY_RANGE=LOCALHOST`` (``isolated_env``).
+``ROS_AUTOMATIC_DISCOVERY_RANGE=LOCALHOST`` (``isolated_env``). ``stop_process`` ends a
+node started there as a user would (a signal), killing it only if it does not stop.
 """
 
 import contextlib
 import os
 import random
+import signal
 import socket
+import subprocess
 
 PORT_BASE = 41_000
 DOMAINS = range(1, 101)   # 0 is everybody's default; ids up to 101 keep DDS ports < 33000
@@ -46,3 +49,16 @@ def isolated_env(domain, base=None):
                PYTHONUNBUFFERED="1")
     env.pop("ROS_LOCALHOST_ONLY", None)
     return env
+
+
+def stop_process(process, sig=signal.SIGINT, timeout_s=15.0):
+    """Send ``sig`` to a child process (if still running) and wait; kill it if it has not
+    ended within ``timeout_s``. Its exit code."""
+    if process.poll() is None:
+        process.send_signal(sig)
+        try:
+            process.wait(timeout_s)
+        except subprocess.TimeoutExpired:
+            process.kill()
+            process.wait()
+    return process.returncode

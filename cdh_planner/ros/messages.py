@@ -8,8 +8,12 @@ frame), quaternions (x, y, z, w), cable lengths in m, tensions in N, times in s.
     cable_trajectory_msg(path, joint_names, frame_id)    -> trajectory_msgs/JointTrajectory
     tension_envelope_msg(path)                           -> std_msgs/Float64MultiArray
     plan_status(result, run_id, log_file)                -> diagnostic_msgs/DiagnosticStatus
-    cable_command_msg(path, joint_names, t, stamp)       -> sensor_msgs/JointState
+    cable_command_msg(path, joint_names, t, stamp)       -> a winch command
     pose_from_msg(msg, base_frame, field) / pose_msg(pose, frame_id, stamp)
+    path_arrays(path_msg) -> p, quaternion; trajectory_arrays(msg) -> t, positions
+
+The winch command's message type is known here only (``WINCH_COMMAND_TYPE``): everything
+else builds one with ``winch_command`` and reads one with ``winch_command_values``.
 """
 
 import numpy as np
@@ -40,7 +44,7 @@ def time_msg(ns):
 
 
 def time_ns(stamp):
-    """Integer nanoseconds of a builtin_interfaces/Time."""
+    """Integer nanoseconds of a builtin_interfaces/Time (or Duration)."""
     return int(stamp.sec) * NS_PER_S + int(stamp.nanosec)
 
 
@@ -58,9 +62,9 @@ def duration_msg(seconds):
     return Duration(sec=ns // NS_PER_S, nanosec=ns % NS_PER_S)
 
 
-def duration_s(duration):
-    """Seconds (float) of a builtin_interfaces/Duration."""
-    return duration.sec + duration.nanosec * 1e-9
+def to_seconds(stamp):
+    """Seconds (float) of a builtin_interfaces/Time (a header stamp) or Duration."""
+    return time_ns(stamp) / NS_PER_S
 
 
 def _stamp_plus(stamp, seconds):
@@ -117,6 +121,15 @@ def _fill_pose(pose, p, q):
     o.x, o.y, o.z, o.w = (float(v) for v in q)
 
 
+def path_arrays(msg):
+    """(positions (N, 3) m, quaternions (N, 4) x y z w) of a nav_msgs/Path's poses."""
+    poses = [q.pose for q in msg.poses]
+    p = np.array([[q.position.x, q.position.y, q.position.z] for q in poses]).reshape(-1, 3)
+    o = np.array([[q.orientation.x, q.orientation.y, q.orientation.z, q.orientation.w]
+                  for q in poses]).reshape(-1, 4)
+    return p, o
+
+
 # ----------------------------------------------------------------------------- path, trajectory
 
 def path_msg(path, frame_id, stamp):
@@ -157,6 +170,12 @@ def cable_trajectory_msg(path, joint_names, frame_id, stamp=None):
         pt.time_from_start = duration_msg(path.t[k])
         msg.points.append(pt)
     return msg
+
+
+def trajectory_arrays(msg):
+    """(t (N,) s from the start, positions (N, joints)) of a trajectory_msgs/JointTrajectory."""
+    t = np.array([to_seconds(pt.time_from_start) for pt in msg.points])
+    return t, np.array([pt.positions for pt in msg.points], dtype=float).reshape(len(t), -1)
 
 
 ENVELOPE_DIMS = ("waypoint", "cable", "bound")
@@ -256,16 +275,34 @@ def status_values(msg):
     return {kv.key: kv.value for kv in msg.values}
 
 
-def cable_command_msg(path, joint_names, t, stamp, frame_id="", method="quintic"):
-    """sensor_msgs/JointState of the cable command at ``t`` (s from the start): one name
-    per winch, position = cable length (m), velocity (m/s), effort = nominal tension (N);
-    header.stamp = ``stamp`` (when the command is sent)."""
-    sample = sample_cable_state(path, t, method)
-    msg = JointState()
+# ----------------------------------------------------------------------------- winch command
+
+WINCH_COMMAND_TYPE = JointState
+
+
+def winch_command(names, positions, velocities, stamp, effort=(), frame_id=""):
+    """The winch command (``WINCH_COMMAND_TYPE``): per winch ``names``, cable length
+    ``positions`` (m), ``velocities`` (m/s) and ``effort`` (nominal tensions, N);
+    ``stamp`` (builtin_interfaces/Time) is when it is sent."""
+    msg = WINCH_COMMAND_TYPE()
     msg.header.stamp = stamp
     msg.header.frame_id = frame_id
-    msg.name = check_joint_names(joint_names)
-    msg.position = sample.lengths.astype(float)
-    msg.velocity = sample.velocities.astype(float)
-    msg.effort = sample.effort.astype(float)
+    msg.name = list(names)
+    msg.position = np.asarray(positions, dtype=float)
+    msg.velocity = np.asarray(velocities, dtype=float)
+    msg.effort = np.asarray(effort, dtype=float)
     return msg
+
+
+def winch_command_values(msg):
+    """(t s of the stamp, positions (n,) m, velocities (n,) m/s) of a winch command."""
+    return (to_seconds(msg.header.stamp), np.asarray(msg.position, dtype=float),
+            np.asarray(msg.velocity, dtype=float))
+
+
+def cable_command_msg(path, joint_names, t, stamp, frame_id="", method="quintic"):
+    """The winch command at ``t`` (s from the start) of a timed path: one name per winch,
+    position = cable length (m), velocity (m/s), effort = nominal tension (N)."""
+    sample = sample_cable_state(path, t, method)
+    return winch_command(check_joint_names(joint_names), sample.lengths, sample.velocities,
+                         stamp, sample.effort, frame_id)

@@ -15,7 +15,8 @@ Interface (names relative to the node, all remappable; see docs/ros-node.md):
   (the last answer, diagnostic_msgs/DiagnosticStatus, key/values in ``planning.py``).
 - ``~/plan_progress`` diagnostic_msgs/DiagnosticStatus while planning, at most 10 Hz
   (values charts, time_s, best_h, run_id).
-- ``~/cable_command`` sensor_msgs/JointState while executing.
+- ``~/cable_command`` the winch command (``messages.WINCH_COMMAND_TYPE``, sensor_msgs/JointState)
+  while executing.
 
 Parameters: ``ros/params.py``. Changes go through the standard parameter services and are
 checked there (a bad value is refused with the reason); a change of robot.*, task.*,
@@ -44,7 +45,6 @@ from rclpy.callback_groups import ReentrantCallbackGroup
 from rclpy.node import Node
 from rclpy.parameter import Parameter
 from rclpy.qos import DurabilityPolicy, QoSProfile, ReliabilityPolicy
-from sensor_msgs.msg import JointState
 from std_msgs.msg import Float64MultiArray
 from std_srvs.srv import Trigger
 from trajectory_msgs.msg import JointTrajectory
@@ -53,12 +53,18 @@ from visualization_msgs.msg import MarkerArray
 from ..errors import InputError
 from ..io.mcap_log import REQUEST_RECEIVED, RESPONSE_SENT
 from . import planning
+from .messages import WINCH_COMMAND_TYPE
 from .params import BOOL, DOUBLE, DOUBLES, INT, REQUIRED, SPECS, STRING, STRINGS, \
     PLANNER_PREFIXES, needs_new_planner, node_config, parameter_error
 from .recording import RunLog
 from .streaming import Stream
 
 NODE_NAME = "cdh_planner"
+# The interface, relative to the node (module docstring); clients use these names too.
+PLAN, EXECUTE, STOP = "plan", "execute", "stop"
+PATH, CABLE_TRAJECTORY, TENSION_ENVELOPE = "path", "cable_trajectory", "tension_envelope"
+MARKERS, PLAN_RESULT, PLAN_PROGRESS = "markers", "plan_result", "plan_progress"
+CABLE_COMMAND = "cable_command"
 LATCHED = QoSProfile(depth=1, durability=DurabilityPolicy.TRANSIENT_LOCAL,
                      reliability=ReliabilityPolicy.RELIABLE)
 PROGRESS_PERIOD_S = 0.1
@@ -90,13 +96,13 @@ class PlannerNode(Node):
                              warn=self.get_logger().warning)
 
         pub = self.create_publisher
-        self.pub_path = pub(Path, "~/path", LATCHED)
-        self.pub_trajectory = pub(JointTrajectory, "~/cable_trajectory", LATCHED)
-        self.pub_envelope = pub(Float64MultiArray, "~/tension_envelope", LATCHED)
-        self.pub_markers = pub(MarkerArray, "~/markers", LATCHED)
-        self.pub_result = pub(DiagnosticStatus, "~/plan_result", LATCHED)
-        self.pub_progress = pub(DiagnosticStatus, "~/plan_progress", 10)
-        self.pub_command = pub(JointState, "~/cable_command", 10)
+        self.pub_path = pub(Path, f"~/{PATH}", LATCHED)
+        self.pub_trajectory = pub(JointTrajectory, f"~/{CABLE_TRAJECTORY}", LATCHED)
+        self.pub_envelope = pub(Float64MultiArray, f"~/{TENSION_ENVELOPE}", LATCHED)
+        self.pub_markers = pub(MarkerArray, f"~/{MARKERS}", LATCHED)
+        self.pub_result = pub(DiagnosticStatus, f"~/{PLAN_RESULT}", LATCHED)
+        self.pub_progress = pub(DiagnosticStatus, f"~/{PLAN_PROGRESS}", 10)
+        self.pub_command = pub(WINCH_COMMAND_TYPE, f"~/{CABLE_COMMAND}", 10)
 
         self._busy = threading.Lock()
         self._calls = 0
@@ -106,10 +112,10 @@ class PlannerNode(Node):
         self._stream = None
         self._timer = None
         self._timer_period = None
-        self.srv_plan = self.create_service(GetPlan, "~/plan", self._plan,
+        self.srv_plan = self.create_service(GetPlan, f"~/{PLAN}", self._plan,
                                             callback_group=ReentrantCallbackGroup())
-        self.srv_execute = self.create_service(Trigger, "~/execute", self._execute)
-        self.srv_stop = self.create_service(Trigger, "~/stop", self._stop)
+        self.srv_execute = self.create_service(Trigger, f"~/{EXECUTE}", self._execute)
+        self.srv_stop = self.create_service(Trigger, f"~/{STOP}", self._stop)
         c = self.config
         self.get_logger().info(
             f"ready: robot {c.robot.name}, task {c.task.type}, strategy "

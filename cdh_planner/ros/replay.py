@@ -25,6 +25,7 @@ from rclpy.serialization import deserialize_message
 from ..errors import InputError
 from ..io.mcap_log import REQUEST_RECEIVED, RESPONSE_SENT, SERVICE_EVENT_SUFFIX
 from ..io.mcap_log import scan_records as scan_run  # raw records of a (possibly killed) run file
+from .messages import path_arrays
 
 
 MATCH_SETTLE_S = 0.3   # s after the publisher sees its subscribers, before the first message
@@ -174,14 +175,6 @@ def recorded_plans(records):
     return list(calls.values())
 
 
-def _poses(path_msg):
-    p = np.array([[q.pose.position.x, q.pose.position.y, q.pose.position.z]
-                  for q in path_msg.poses]).reshape(-1, 3)
-    quat = np.array([[q.pose.orientation.x, q.pose.orientation.y, q.pose.orientation.z,
-                      q.pose.orientation.w] for q in path_msg.poses]).reshape(-1, 4)
-    return p, quat
-
-
 def quaternion_angle(q0, q1):
     """Angle (rad) of the rotation between unit quaternions (..., 4), well conditioned near
     0 (|q0 - q1| = 2 sin(angle / 4), whichever of q1, -q1 is nearer)."""
@@ -204,8 +197,8 @@ def compare_paths(recorded, new, tolerance_m=1e-6, tolerance_rad=1e-6):
         return False, f"frame {recorded.header.frame_id!r} then, {new.header.frame_id!r} now"
     if n_old != n_new:
         return False, f"{n_old} poses recorded, {n_new} now"
-    p0, q0 = _poses(recorded)
-    p1, q1 = _poses(new)
+    p0, q0 = path_arrays(recorded)
+    p1, q1 = path_arrays(new)
     dp = float(np.max(np.linalg.norm(p1 - p0, axis=1)))
     da = float(np.max(quaternion_angle(q0, q1)))
     ok = dp <= tolerance_m and da <= tolerance_rad

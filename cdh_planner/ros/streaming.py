@@ -9,10 +9,12 @@ The command at wall-clock time ``now`` is the trajectory sampled at ``now - star
 (``trajectory.sampling.sample_cable_state``: linear or quintic between waypoints). Past the end the
 last waypoint is sent with zero velocity and the stream is finished. ``hold`` repeats the
 last command sent with zero velocity: the winches stay where they were last told to be.
+Commands are built by ``messages.winch_command``.
 """
 
 import numpy as np
 
+from ..trajectory.sampling import sample_cable_state
 from . import messages as M
 
 
@@ -26,35 +28,30 @@ class Stream:
         self.start = float(start)
         self.duration = float(path.t[-1])
         self.sent = 0
-        self.last = None  # last JointState sent
+        self.last = None  # last command sent
         self.t = 0.0      # trajectory time of the last command (s)
+        self._held = None  # (lengths, effort) of the last command
 
     def command(self, now, stamp):
-        """(JointState at trajectory time ``now - start``, finished): finished when that
+        """(command at trajectory time ``now - start``, finished): finished when that
         time has reached the end (the command is then the last waypoint, velocity 0)."""
         t = min(max(float(now) - self.start, 0.0), self.duration)
         finished = t >= self.duration
-        msg = M.cable_command_msg(self.path, self.joint_names, t, stamp, method=self.method)
-        if finished:
-            msg.velocity = np.zeros(len(self.joint_names))
+        sample = sample_cable_state(self.path, t, self.method)
         self.t = t
-        self.sent += 1
-        self.last = msg
-        return msg, finished
+        velocities = np.zeros(len(self.joint_names)) if finished else sample.velocities
+        return self._send(sample.lengths, velocities, sample.effort, stamp), finished
 
     def hold(self, stamp):
         """The last command again (or the start, if none was sent), velocity 0, now."""
-        if self.last is None:
-            msg = M.cable_command_msg(self.path, self.joint_names, 0.0, stamp,
-                                      method=self.method)
-        else:
-            msg = M.JointState()
-            msg.header.frame_id = self.last.header.frame_id
-            msg.header.stamp = stamp
-            msg.name = list(self.last.name)
-            msg.position = np.asarray(self.last.position, dtype=float)
-            msg.effort = np.asarray(self.last.effort, dtype=float)
-        msg.velocity = np.zeros(len(self.joint_names))
-        self.last = msg
+        if self._held is None:
+            sample = sample_cable_state(self.path, 0.0, self.method)
+            self._held = (sample.lengths, sample.effort)
+        lengths, effort = self._held
+        return self._send(lengths, np.zeros(len(self.joint_names)), effort, stamp)
+
+    def _send(self, lengths, velocities, effort, stamp):
+        self._held = (lengths, effort)
+        self.last = M.winch_command(self.joint_names, lengths, velocities, stamp, effort)
         self.sent += 1
-        return msg
+        return self.last

@@ -1,6 +1,4 @@
-"""What the demo's two stories (demo.py: the paper's; demo_ros.py: the ROS node's) share:
-a ``Step`` and the table printer. Its own module, so that neither story imports the other's
-module back."""
+"""What the demo's stories share: a ``Step`` and the table printer."""
 
 from dataclasses import dataclass
 from typing import Callable
