@@ -142,8 +142,9 @@ class PlannerNode(Node):
                 descriptor.dynamic_typing = True
                 default = None if spec.default in (REQUIRED, None) else spec.default
                 if spec.kind == DOUBLE and spec.low is not None:
-                    descriptor.floating_point_range = [FloatingPointRange(
-                        from_value=float(spec.low), to_value=float(spec.high))]
+                    descriptor.floating_point_range = [FloatingPointRange(  # ROS ranges are closed
+                        from_value=float(spec.low),
+                        to_value=float(spec.high) if spec.high is not None else sys.float_info.max)]
                 if spec.kind == INT and spec.low is not None:
                     descriptor.integer_range = [IntegerRange(
                         from_value=int(spec.low), to_value=int(spec.high))]
