@@ -54,7 +54,7 @@ def test_equations_vanish_on_the_task_and_match_finite_differences(name):
         C, J = task.equations(q, v)
         assert C.shape == (task.n_equations,) == (len(task.length_rows),)
         assert J.shape == (task.n_equations, 6 + task.n_vars)
-        assert np.allclose(C, 0.0, atol=1e-12) and task.residual(p, tau)[0] < 1e-7  # arccos: sqrt(eps)
+        assert np.allclose(C, 0.0, atol=1e-12) and task.residual(p, tau)[0] < 1e-12
         assert np.allclose(task.coords(p, tau)[0], y, atol=1e-12)  # pose and coords invert
         qv = np.concatenate([q, v]) + 0.01 * rng.standard_normal(6 + task.n_vars)  # off the task
         h, J0 = 1e-6, task.equations(qv[:6], qv[6:])[1]

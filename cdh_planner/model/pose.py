@@ -140,9 +140,14 @@ def rotation_from_quaternion(q):
 
 
 def rotation_angle_between(Ra, Rb):
-    """SO(3) geodesic distance: the angle (radians) of Ra^T Rb, shape (...)."""
-    tr = np.einsum("...ji,...ji->...", Ra, Rb)
-    return np.arccos(np.clip((tr - 1.0) / 2.0, -1.0, 1.0))
+    """SO(3) geodesic distance: the angle (radians) of D = Ra^T Rb, shape (...). From
+    atan2(sin, cos) with 2 sin = |axial vector of D - D^T|: exact to rounding near 0 and
+    pi, where arccos of the trace loses half the digits."""
+    D = np.einsum("...ki,...kj->...ij", Ra, Rb)
+    tr = D[..., 0, 0] + D[..., 1, 1] + D[..., 2, 2]
+    axial = np.stack([D[..., 2, 1] - D[..., 1, 2], D[..., 0, 2] - D[..., 2, 0],
+                      D[..., 1, 0] - D[..., 0, 1]], axis=-1)
+    return np.arctan2(0.5 * np.linalg.norm(axial, axis=-1), 0.5 * (tr - 1.0))
 
 
 @dataclass(frozen=True)

@@ -23,6 +23,7 @@ from rclpy.qos import DurabilityPolicy, QoSProfile, ReliabilityPolicy
 from rclpy.serialization import deserialize_message
 
 from ..errors import InputError
+from ..model.pose import rotation_angle_between, rotation_from_quaternion
 from ..io.mcap_log import REQUEST_RECEIVED, RESPONSE_SENT, SERVICE_EVENT_SUFFIX
 from ..io.mcap_log import scan_records as scan_run  # raw records of a (possibly killed) run file
 from .messages import path_arrays
@@ -175,14 +176,6 @@ def recorded_plans(records):
     return list(calls.values())
 
 
-def quaternion_angle(q0, q1):
-    """Angle (rad) of the rotation between unit quaternions (..., 4), well conditioned near
-    0 (|q0 - q1| = 2 sin(angle / 4), whichever of q1, -q1 is nearer)."""
-    q0, q1 = np.asarray(q0, dtype=float), np.asarray(q1, dtype=float)
-    d = np.minimum(np.linalg.norm(q0 - q1, axis=-1), np.linalg.norm(q0 + q1, axis=-1))
-    return 4.0 * np.arcsin(np.clip(d / 2.0, 0.0, 1.0))
-
-
 def compare_paths(recorded, new, tolerance_m=1e-6, tolerance_rad=1e-6):
     """(match, text): do two nav_msgs/Path agree pose by pose (same count, positions within
     ``tolerance_m``, orientations within ``tolerance_rad``, same frame)? Two empty paths
@@ -200,7 +193,7 @@ def compare_paths(recorded, new, tolerance_m=1e-6, tolerance_rad=1e-6):
     p0, q0 = path_arrays(recorded)
     p1, q1 = path_arrays(new)
     dp = float(np.max(np.linalg.norm(p1 - p0, axis=1)))
-    da = float(np.max(quaternion_angle(q0, q1)))
+    da = float(np.max(rotation_angle_between(rotation_from_quaternion(q0), rotation_from_quaternion(q1))))
     ok = dp <= tolerance_m and da <= tolerance_rad
     return ok, (f"{n_new} poses, max deviation {dp:.3g} m, {math.degrees(da):.3g} deg "
                 f"({'within' if ok else 'beyond'} {tolerance_m:g} m / {tolerance_rad:g} rad)")
