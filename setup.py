@@ -20,7 +20,7 @@ setup(
         ('share/' + package_name + '/config', sorted(glob('config/*.yaml'))),
         ('share/' + package_name + '/config/problems', sorted(glob('config/problems/*.yaml'))),
     ],
-    install_requires=['setuptools', 'numpy', 'scipy', 'pyyaml', 'matplotlib', 'tqdm', 'threadpoolctl', 'numba'],
+    install_requires=['setuptools', 'numpy', 'scipy', 'pyyaml', 'matplotlib', 'tqdm', 'threadpoolctl', 'numba', 'toppra'],
     zip_safe=True,
     maintainer='cdh_planner maintainers',
     maintainer_email='maintainer@example.com',

@@ -1,0 +1,282 @@
+"""Time-optimal timing that keeps the tensions in range under the motion's own accelerations
+(TOPP-RA, the ``toppra`` library).
+
+    timing = dynamic_timing(robot, path, mass=0.6, inertia=I, max_cable_speed=0.05,
+                            max_cable_accel=0.2)
+    timing.path   # PlannedPath: t, cable rates, dynamic tension envelope at the waypoints
+
+Model (SI units)
+----------------
+The geometric path is C2 through the planned waypoints: p(s) a cubic spline, R(s) scipy's
+RotationSpline (C2 on SO(3)), s the cumulative pose distance |dp| + L |d angle| (m).
+With u = s'' and x = s'^2, the centre of mass c = p + R g (g: the load point, platform
+frame) has c'' = c_s u + c_ss x; the body angular velocity is w s' and its derivative
+w u + w_s x (w = dR/ds in the body frame). Newton-Euler about O gives the inertial wrench
+
+    w_in = A u + B x,  A = [m c_s; c x m c_s + R I w],
+                       B = [m c_ss; c x m c_ss + R (I w_s + w x I w)],
+
+and the cables must balance w0 - w_in (w0: the load wrench of the quasi-static model, its
+gravity force m g). Tensions f = J^-1 (w0 - w_in) are linear in (u, x), the ellipsoid's
+spread v = sqrt(diag(J^-1 E^-1 J^-T)) does not depend on them, so every constraint
+
+    fmin + v <= f <= fmax - v,   |L_s u + L_ss x| <= a_max,   L_s^2 x <= v_max^2
+
+is linear in (u, x) at each gridpoint: exactly TOPP-RA's setting. toppra solves it on a
+grid of the path (collocation) and gives the largest x(s), time-optimal at the grid.
+``toppra`` is used rather than our own pass because it is the maintained reference
+implementation of TOPP-RA (Pham & Pham 2018), with its LP-based reachability.
+
+The result is then checked densely in time (every ``check_dt`` s): positions, velocities
+and accelerations of the spline motion, the dynamic wrench, lengths, tensions with the
+ellipsoid's spread, winch speeds and accelerations. Between gridpoints the collocation may
+miss a violation; then the timing is slowed by ``SLOWDOWN`` and checked again. When no
+dynamically feasible timing exists (a zero static margin, or more rounds than
+``MAX_SLOWDOWNS``), ``feasible`` is False and the reason is given.
+"""
+
+from dataclasses import dataclass, replace
+
+import numpy as np
+import toppra
+import toppra.algorithm
+import toppra.constraint
+from scipy.interpolate import CubicSpline
+from scipy.spatial.transform import Rotation, RotationSpline
+
+from ..errors import InputError, check_finite
+from ..feasibility import cable_vectors, evaluate, inverse_ellipsoid_factor, load_point, \
+    nominal_wrench, screw_jacobian
+from .path import PlannedPath
+
+GRID_POINTS = 400       # toppra gridpoints along the path (at least one per waypoint)
+CHECK_DT = 1e-3         # s: the dense check's time step
+SLOWDOWN = 1.02         # time scale per failed dense check
+MAX_SLOWDOWNS = 40
+TOL = 1e-9              # N, m/s, m/s^2: rounding allowed in the dense check
+DERATE = 1e-3           # share of the winch limits kept in reserve (see dynamic_timing)
+toppra.setup_logging("WARNING")
+
+
+@dataclass
+class DynamicTiming:
+    """``path`` (PlannedPath re-timed, tensions dynamic at the waypoints), ``feasible``,
+    ``reason`` (when not), ``duration`` (s), ``slowdown`` (time scale over toppra's
+    optimum, 1.0 when its timing passed the dense check), the dense check's least tension
+    margin (N) and its sample count, and the profile (``s`` gridpoints, ``sd`` = s')."""
+
+    path: PlannedPath
+    feasible: bool
+    reason: str
+    duration: float
+    slowdown: float
+    least_tension_margin_n: float
+    samples: int
+    s: np.ndarray
+    sd: np.ndarray
+    geometry: object = None
+
+    def pose_at(self, t):
+        """The timed motion itself: positions (M, 3) m and rotations (M, 3, 3) at times t (s)."""
+        t = np.clip(np.asarray(t, dtype=float), 0.0, self.duration)
+        ss, _, _ = _state_at(t, self.s, self.sd, _grid_times(self.s, self.sd))
+        return self.geometry.p(ss), self.geometry.R(ss).as_matrix()
+
+
+class _Geometry:
+    """The C2 path through the waypoints and its derivatives in s."""
+
+    def __init__(self, robot, path):
+        L_ref = float(np.mean(np.linalg.norm(robot.platform_anchors, axis=1)))
+        rot = Rotation.from_quat(path.quaternion)
+        step = np.linalg.norm(np.diff(path.p, axis=0), axis=1) + L_ref * (rot[:-1].inv() * rot[1:]).magnitude()
+        keep = np.concatenate([[True], step > 1e-12])  # drop repeated waypoints
+        self.s_wp = np.concatenate([[0.0], np.cumsum(step)])
+        self.keep = keep
+        knots = self.s_wp[keep]
+        if knots.size < 2:
+            raise InputError("path", len(path), "needs two distinct waypoints to be timed")
+        self.length = float(knots[-1])
+        self.p = CubicSpline(knots, path.p[keep], bc_type="natural")
+        self.R = RotationSpline(knots, rot[keep])
+
+    def at(self, s):
+        """p, R, c_s-ready pieces at s (M,): p, p_s, p_ss (M,3), R (M,3,3), w, w_s (M,3) body."""
+        s = np.clip(s, 0.0, self.length)
+        return (self.p(s), self.p(s, 1), self.p(s, 2), self.R(s).as_matrix(), self.R(s, 1),
+                self.R(s, 2))
+
+
+def _terms(robot, geo, s, mass, inertia):
+    """Per s: cable lengths L (M,6), L_s, L_ss, static tensions f0 (M,6), spread v (M,6),
+    tension rates a_f, b_f (M,6) with f = f0 + a_f u + b_f x, and J singular flags."""
+    p, p_s, p_ss, R, w, w_s = geo.at(s)
+    g = robot.load_point
+    Rg = np.einsum("nij,j->ni", R, g)
+    c = p + Rg
+    wxg = np.cross(w, g)
+    c_s = p_s + np.einsum("nij,nj->ni", R, wxg)
+    c_ss = p_ss + np.einsum("nij,nj->ni", R, np.cross(w_s, g) + np.cross(w, wxg))
+    Iw, Iws = w @ inertia.T, w_s @ inertia.T
+    A = np.concatenate([mass * c_s, np.cross(c, mass * c_s) + np.einsum("nij,nj->ni", R, Iw)], axis=1)
+    B = np.concatenate([mass * c_ss, np.cross(c, mass * c_ss)
+                        + np.einsum("nij,nj->ni", R, Iws + np.cross(w, Iw))], axis=1)
+    d = cable_vectors(robot, p, R)
+    L = np.linalg.norm(d, axis=-1)
+    u = d / L[..., None]
+    J = screw_jacobian(robot, u)
+    J_inv = np.linalg.inv(J)
+    f0 = np.einsum("nij,nj->ni", J_inv, nominal_wrench(robot, load_point(robot, p, R)))
+    v = np.linalg.norm(J_inv @ inverse_ellipsoid_factor(robot, c), axis=-1)
+    # dL/ds = u . d(p + R b)/ds; second derivative by differences of the first (smooth spline)
+    L_s = _length_rate(robot, p_s, R, w, u)
+    h = 1e-6 * max(geo.length, 1e-9)
+    L_s_plus = _length_rate_at(robot, geo, s + h)
+    L_s_minus = _length_rate_at(robot, geo, s - h)
+    L_ss = (L_s_plus - L_s_minus) / (2 * h)
+    return L, L_s, L_ss, f0, v, -np.einsum("nij,nj->ni", J_inv, A), -np.einsum("nij,nj->ni", J_inv, B)
+
+
+def _length_rate(robot, p_s, R, w, u):
+    """dL_i/ds = u_i . (p_s + R (w x b_i))."""
+    vel = p_s[:, None, :] + np.einsum("nij,nkj->nki", R, np.cross(w[:, None, :], robot.platform_anchors))
+    return np.einsum("nki,nki->nk", u, vel)
+
+
+def _length_rate_at(robot, geo, s):
+    p, p_s, _, R, w, _ = geo.at(s)
+    d = cable_vectors(robot, p, R)
+    return _length_rate(robot, p_s, R, w, d / np.linalg.norm(d, axis=-1)[..., None])
+
+
+class _WrenchConstraint(toppra.constraint.LinearConstraint):
+    """Tensions with the ellipsoid's spread and the winch limits, as toppra's canonical
+    linear constraint v = a u + b x + c, F v <= g, with x bounded by the winch speeds."""
+
+    def __init__(self, terms, robot, vmax, amax):
+        super().__init__()
+        self.terms, self.robot, self.vmax, self.amax = terms, robot, vmax, amax
+        self.discretization_type = toppra.constraint.DiscretizationType.Interpolation
+
+    def compute_constraint_params(self, path, gridpoints, *args, **kwargs):
+        L, L_s, L_ss, f0, v, a_f, b_f = self.terms
+        n = len(gridpoints)
+        a = np.concatenate([L_s, a_f], axis=1)
+        b = np.concatenate([L_ss, b_f], axis=1)
+        c = np.concatenate([np.zeros_like(f0), f0], axis=1)
+        eye = np.eye(12)
+        F = np.broadcast_to(np.concatenate([eye, -eye]), (n, 24, 12)).copy()
+        r = self.robot
+        g = np.concatenate([np.broadcast_to(self.amax, (n, 6)), r.tension_max - v,
+                            np.broadcast_to(self.amax, (n, 6)), -(r.tension_min + v)], axis=1)
+        with np.errstate(divide="ignore"):
+            x_max = np.min(np.where(np.abs(L_s) > 1e-12, self.vmax ** 2 / L_s ** 2, np.inf), axis=1)
+        xbound = np.column_stack([np.zeros(n), np.minimum(x_max, 1e12)])
+        # interpolation: each interval's constraints also hold at its far end (toppra's
+        # first-order scheme), which the collocation at gridpoints alone misses
+        return toppra.constraint.canlinear_colloc_to_interpolate(a, b, c, F, g, None, xbound,
+                                                                 np.asarray(gridpoints))
+
+
+class _Interval:
+    """The minimal geometric path toppra needs: its interval and dimension."""
+
+    def __init__(self, length):
+        self.path_interval = np.array([0.0, length])
+        self.dof = 6
+        self.duration = length
+
+
+def dynamic_timing(robot, path, mass, inertia, max_cable_speed, max_cable_accel,
+                   grid_points=GRID_POINTS, check_dt=CHECK_DT):
+    """DynamicTiming of ``path`` (a PlannedPath) for a load of ``mass`` (kg) and
+    ``inertia`` (3x3 kg m^2 about the centre of mass, platform frame) at robot.load_point,
+    winch limits in m/s and m/s^2 (one number or 6). Never raises for an infeasible
+    timing: ``feasible`` False with the reason."""
+    mass = check_finite("load.mass", mass, positive=True)
+    inertia = np.asarray(inertia, dtype=float).reshape(3, 3)
+    vmax = np.broadcast_to(np.asarray(max_cable_speed, dtype=float), (6,))
+    amax = np.broadcast_to(np.asarray(max_cable_accel, dtype=float), (6,))
+    geo = _Geometry(robot, path)
+    grid = np.unique(np.concatenate([np.linspace(0.0, geo.length, grid_points), geo.s_wp]))
+    terms = _terms(robot, geo, grid, mass, inertia)
+    # the winch limits derated by DERATE: between gridpoints a profile at the limit
+    # overshoots it by about 1e-4 (measured), which the dense check would refuse
+    instance = toppra.algorithm.TOPPRA([_WrenchConstraint(terms, robot, vmax * (1 - DERATE),
+                                                          amax * (1 - DERATE))],
+                                       _Interval(geo.length), gridpoints=grid)
+    _, sd, _ = instance.compute_parameterization(0.0, 0.0)  # (s'', s', extra variables)
+    if sd is None or not np.all(np.isfinite(sd)):
+        return _infeasible(path, geo, grid, "no dynamically feasible timing: the path has no "
+                                              "speed at which every tension stays in range")
+    for k in range(MAX_SLOWDOWNS + 1):
+        scale = SLOWDOWN ** k
+        t_grid = _grid_times(grid, sd / scale)
+        if not np.all(np.isfinite(t_grid)):
+            break
+        check = _dense_check(robot, geo, grid, sd / scale, t_grid, mass, inertia, vmax, amax, check_dt)
+        if check[0]:
+            timed = _retimed(robot, path, geo, grid, sd / scale, t_grid, mass, inertia)
+            return DynamicTiming(path=timed, feasible=True, reason="", duration=float(t_grid[-1]),
+                                 slowdown=scale, least_tension_margin_n=check[1], samples=check[2],
+                                 s=grid, sd=sd / scale, geometry=geo)
+    return _infeasible(path, geo, grid, f"the dense check failed after {MAX_SLOWDOWNS} slowdowns "
+                                        f"({check[3]})")
+
+
+def _infeasible(path, geo, grid, reason):
+    return DynamicTiming(path=path, feasible=False, reason=reason, duration=float(path.t[-1]),
+                         slowdown=np.inf, least_tension_margin_n=-np.inf, samples=0, s=grid,
+                         sd=np.zeros_like(grid))
+
+
+def _grid_times(s, sd):
+    """Times at the gridpoints with constant s'' between them: dt = 2 ds / (sd0 + sd1)."""
+    mean = sd[:-1] + sd[1:]
+    with np.errstate(divide="ignore"):
+        dt = np.where(mean > 0, 2 * np.diff(s) / mean, np.inf)
+    return np.concatenate([[0.0], np.cumsum(dt)])
+
+
+def _state_at(t, s, sd, t_grid):
+    """s, s', s'' at times t (constant s'' between gridpoints)."""
+    k = np.clip(np.searchsorted(t_grid, t, side="right") - 1, 0, len(s) - 2)
+    h = t_grid[k + 1] - t_grid[k]
+    u = (sd[k + 1] - sd[k]) / h
+    tau = t - t_grid[k]
+    return s[k] + sd[k] * tau + 0.5 * u * tau ** 2, sd[k] + u * tau, u
+
+
+def _dense_check(robot, geo, s, sd, t_grid, mass, inertia, vmax, amax, dt):
+    """(ok, least tension margin N, samples, what failed) of the timing, every dt s."""
+    t = np.append(np.arange(0.0, t_grid[-1], dt), t_grid[-1])
+    ss, sdot, sddot = _state_at(t, s, sd, t_grid)
+    L, L_s, L_ss, f0, v, a_f, b_f = _terms(robot, geo, ss, mass, inertia)
+    f = f0 + a_f * sddot[:, None] + b_f * (sdot ** 2)[:, None]
+    margin = np.minimum(f - v - robot.tension_min, robot.tension_max - f - v)
+    speed = np.abs(L_s * sdot[:, None])
+    accel = np.abs(L_s * sddot[:, None] + L_ss * (sdot ** 2)[:, None])
+    least = float(np.min(margin))
+    bad = []
+    if least < -TOL:
+        bad.append(f"tension margin {least:.3g} N")
+    if np.any(L < robot.length_min - TOL) or np.any(L > robot.length_max + TOL):
+        bad.append("cable length")
+    if np.any(speed > vmax + TOL):
+        bad.append(f"winch speed {np.max(speed / vmax):.4g} x the limit")
+    if np.any(accel > amax + TOL):
+        bad.append(f"winch acceleration {np.max(accel / amax):.4g} x the limit")
+    return not bad, least, len(t), ", ".join(bad)
+
+
+def _retimed(robot, path, geo, s, sd, t_grid, mass, inertia):
+    """The PlannedPath with t, cable rates and dynamic tensions at its waypoints."""
+    t_wp = np.interp(geo.s_wp, s, t_grid)
+    sdot = np.interp(geo.s_wp, s, sd)
+    k = np.clip(np.searchsorted(s, geo.s_wp, side="right") - 1, 0, len(s) - 2)
+    sddot = (sd[k + 1] ** 2 - sd[k] ** 2) / (2 * (s[k + 1] - s[k]))
+    L, L_s, L_ss, f0, v, a_f, b_f = _terms(robot, geo, geo.s_wp, mass, inertia)
+    f = f0 + a_f * sddot[:, None] + b_f * (sdot ** 2)[:, None]
+    return replace(path, t=t_wp, velocities=L_s * sdot[:, None],
+                   accelerations=L_s * sddot[:, None] + L_ss * (sdot ** 2)[:, None],
+                   tension_nominal=f, tension_min=f - v, tension_max=f + v)
