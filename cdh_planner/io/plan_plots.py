@@ -434,3 +434,44 @@ def plot_execution(robot, motions, out, size=EXECUTION_SIZE):
         fig.savefig(out, dpi=DPI, format="png")
     finally:
         plt.close(fig)
+
+
+def plot_dynamics(robot, timing, tensions, out, title="", size=TENSION_SIZE):
+    """Top: the tension envelope [f - v, f + v] over time of the cable nearest a limit,
+    with the motion's own accelerations (dynamic) and without (static), and the limits.
+    Bottom: the path speed s'(s) against its limit curve (the largest feasible s').
+    ``tensions``: ``trajectory.dynamics.tensions_over_time`` of ``timing``."""
+    t, f, f0, v = tensions
+    slack = np.minimum(f - v - robot.tension_min, robot.tension_max - f - v)
+    i = int(np.argmin(np.min(slack, axis=0)))
+    fig = plt.figure(figsize=(size[0] / DPI, size[1] / DPI), dpi=DPI, layout="constrained")
+    try:
+        top, bottom = fig.subplots(2, 1)
+        top.fill_between(t, f0[:, i] - v[:, i], f0[:, i] + v[:, i], color="#bbbbbb", alpha=0.6,
+                         label="static (quasi-static model)")
+        top.fill_between(t, f[:, i] - v[:, i], f[:, i] + v[:, i], color=BAND_COLOR, alpha=0.5,
+                         label="dynamic (m c'' and rotational terms)")
+        for limit in (robot.tension_min[i], robot.tension_max[i]):
+            top.axhline(limit, color="#e41a1c", ls="--", lw=1.2)
+        lower = np.min(f[:, i] - v[:, i] - robot.tension_min[i]) < np.min(robot.tension_max[i] - f[:, i] - v[:, i])
+        near = robot.tension_min[i] if lower else robot.tension_max[i]  # zoom on the binding limit
+        data = np.concatenate([f[:, i] - v[:, i], f[:, i] + v[:, i], f0[:, i] - v[:, i], f0[:, i] + v[:, i], [near]])
+        pad = 0.05 * (np.max(data) - np.min(data))
+        top.set_ylim(np.min(data) - pad, np.max(data) + pad)
+        top.set_xlabel("time (s)")
+        top.set_ylabel(f"cable {i + 1} tension (N)")
+        top.set_title(f"cable {i + 1} (nearest a limit): least slack {np.min(slack[:, i]):.3g} N "
+                      f"with dynamics; duration {timing.duration:.3f} s", fontsize="small")
+        top.legend(loc="best", fontsize="small")
+        top.grid(alpha=0.3)
+        bottom.plot(timing.s, timing.limit, color="#e41a1c", lw=1.2, label="limit curve (largest feasible s')")
+        bottom.plot(timing.s, timing.sd, color="black", lw=1.8, label="s'(s), time-optimal (TOPP-RA)")
+        bottom.set_xlabel("path parameter s (m: |dp| + L |d angle|)")
+        bottom.set_ylabel("s' (m/s)")
+        bottom.set_ylim(0, 1.15 * float(np.max(timing.sd)) if np.max(timing.sd) > 0 else 1)
+        bottom.legend(loc="best", fontsize="small")
+        bottom.grid(alpha=0.3)
+        fig.suptitle(title or "dynamic timing", fontsize="medium")
+        fig.savefig(out, dpi=DPI, format="png")
+    finally:
+        plt.close(fig)

@@ -55,7 +55,7 @@ SLOWDOWN = 1.02         # time scale per failed dense check
 MAX_SLOWDOWNS = 40
 TOL = 1e-9              # N, m/s, m/s^2: rounding allowed in the dense check
 DERATE = 1e-3           # share of the winch limits kept in reserve (see dynamic_timing)
-toppra.setup_logging("WARNING")
+toppra.setup_logging("ERROR")  # its warnings repeat what feasible=False says
 
 
 @dataclass
@@ -75,6 +75,7 @@ class DynamicTiming:
     s: np.ndarray
     sd: np.ndarray
     geometry: object = None
+    limit: np.ndarray = None  # largest s' at each gridpoint over every feasible s'' (m/s)
 
     def pose_at(self, t):
         """The timed motion itself: positions (M, 3) m and rotations (M, 3, 3) at times t (s)."""
@@ -206,6 +207,7 @@ def dynamic_timing(robot, path, mass, inertia, max_cable_speed, max_cable_accel,
                                                           amax * (1 - DERATE))],
                                        _Interval(geo.length), gridpoints=grid)
     _, sd, _ = instance.compute_parameterization(0.0, 0.0)  # (s'', s', extra variables)
+    limit = np.sqrt(np.maximum(instance.compute_feasible_sets()[:, 1], 0.0))
     if sd is None or not np.all(np.isfinite(sd)):
         return _infeasible(path, geo, grid, "no dynamically feasible timing: the path has no "
                                               "speed at which every tension stays in range")
@@ -219,9 +221,19 @@ def dynamic_timing(robot, path, mass, inertia, max_cable_speed, max_cable_accel,
             timed = _retimed(robot, path, geo, grid, sd / scale, t_grid, mass, inertia)
             return DynamicTiming(path=timed, feasible=True, reason="", duration=float(t_grid[-1]),
                                  slowdown=scale, least_tension_margin_n=check[1], samples=check[2],
-                                 s=grid, sd=sd / scale, geometry=geo)
+                                 s=grid, sd=sd / scale, geometry=geo, limit=limit)
     return _infeasible(path, geo, grid, f"the dense check failed after {MAX_SLOWDOWNS} slowdowns "
                                         f"({check[3]})")
+
+
+def tensions_over_time(robot, timing, mass, inertia, dt=CHECK_DT):
+    """(t (M,), dynamic f (M, 6), static f0 (M, 6), spread v (M, 6)) of a feasible timing,
+    every dt s: what the cables carry with and without the motion's own accelerations (N)."""
+    t_grid = _grid_times(timing.s, timing.sd)
+    t = np.append(np.arange(0.0, t_grid[-1], dt), t_grid[-1])
+    ss, sdot, sddot = _state_at(t, timing.s, timing.sd, t_grid)
+    _, _, _, f0, v, a_f, b_f = _terms(robot, timing.geometry, ss, mass, inertia)
+    return t, f0 + a_f * sddot[:, None] + b_f * (sdot ** 2)[:, None], f0, v
 
 
 def _infeasible(path, geo, grid, reason):
