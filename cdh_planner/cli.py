@@ -2,25 +2,43 @@
 
 Subcommands live in ``cdh_planner.commands.<name>`` (see that package's docstring).
 This module only builds the top-level parser, collects the subcommands that exist
-and turns user errors into a one-line message and an exit code.
+and holds the exit-code contract of every command:
+
+    0  ok
+    1  no path, or not feasible (the command's answer is "no")
+    2  bad input: arguments, input files (unreadable, not UTF-8, beyond the limits of
+       ``cdh_planner.files``, wrong types or magnitudes), output paths that cannot be
+       written (checked before the work starts; a write that fails at the end, a full
+       disk, is exit 2 too)
+    3  internal error: any other exception (a bug)
+    130 interrupted (Ctrl-C); 141 stdout closed by its reader (``| head``), silently
+
+Whatever happens, stderr gets one line (``cdh-planner: error: ...``), never a
+traceback; ``cdh-planner --debug COMMAND ...`` prints the traceback as well.
 """
 from __future__ import annotations
 
 import argparse
 import importlib
 import importlib.util
+import os
 import sys
+import traceback
 
 from cdh_planner import __version__
-from cdh_planner.errors import InputError
+from cdh_planner.errors import MAX_MESSAGE_CHARS, InputError, clip
 
 PROG = 'cdh-planner'
 
 # Order here is the order in --help. A name whose module does not exist yet is skipped.
 COMMANDS = ['verify', 'slice', 'plan', 'node', 'call', 'replay', 'demo']
 
-EXIT_USAGE = 2
+EXIT_OK = 0
+EXIT_NO = 1  # no path, infeasible
+EXIT_USAGE = 2  # bad input (arguments, files)
+EXIT_INTERNAL = 3  # an unexpected exception
 EXIT_INTERRUPTED = 130
+EXIT_BROKEN_PIPE = 141  # 128 + SIGPIPE, as a shell reports a process killed by it
 
 
 def _command_module(name: str):
@@ -41,6 +59,9 @@ def build_parser() -> argparse.ArgumentParser:
         description='Wrench-feasible path planning for cable-driven hexapods.',
     )
     parser.add_argument('--version', action='version', version=f'%(prog)s {__version__}')
+    parser.add_argument('--debug', action='store_true',
+                        help='on an error, also print the traceback (exit codes: 0 ok, 1 no '
+                             'path / infeasible, 2 bad input, 3 internal error)')
     subparsers = parser.add_subparsers(dest='command', required=True, metavar='COMMAND')
     for name in COMMANDS:
         module = _command_module(name)
@@ -49,34 +70,57 @@ def build_parser() -> argparse.ArgumentParser:
     return parser
 
 
-def _error(message: str) -> int:
-    print(f'{PROG}: error: {message}', file=sys.stderr)
-    return EXIT_USAGE
+def _error(message: str, code: int = EXIT_USAGE, debug: bool = False) -> int:
+    """Print ``message`` as one line on stderr (and the traceback being handled when
+    ``debug``); return ``code``."""
+    if debug:
+        traceback.print_exc()
+    print(f'{PROG}: error: {clip(message, MAX_MESSAGE_CHARS)}', file=sys.stderr)
+    return code
 
 
 def main(argv: list[str] | None = None) -> int:
-    """Run ``cdh-planner`` with ``argv`` (default: ``sys.argv[1:]``); return the exit code."""
+    """Run ``cdh-planner`` with ``argv`` (default: ``sys.argv[1:]``); return the exit code
+    (the contract in this module's docstring)."""
     if argv is None:
         argv = sys.argv[1:]
+    debug = '--debug' in argv  # until the arguments are parsed
     try:
         parser = build_parser()
         try:
             args = parser.parse_args(argv)
         except SystemExit as exc:  # --help, --version, usage errors: argparse already printed
             return exc.code if isinstance(exc.code, int) else EXIT_USAGE
+        debug = bool(getattr(args, 'debug', False))
         func = getattr(args, 'func', None)
         if func is None:  # a subcommand module that forgot set_defaults(func=run)
-            return _error(f'command {args.command!r} has no handler')
+            return _error(f'command {args.command!r} has no handler', EXIT_INTERNAL)
         rc = func(args)
         return 0 if rc is None else int(rc)
     except InputError as exc:
-        return _error(str(exc))
+        return _error(str(exc), EXIT_USAGE, debug)
+    except BrokenPipeError:  # stdout closed by its reader (`| head`): stop quietly
+        try:
+            sys.stdout = open(os.devnull, 'w')  # so that the exit's flush does not fail again
+        except OSError:
+            pass
+        return EXIT_BROKEN_PIPE
     except FileNotFoundError as exc:
         path = exc.filename if exc.filename is not None else str(exc)
-        return _error(f'file not found: {path}')
+        return _error(f'file not found: {path}', EXIT_USAGE, debug)
+    except OSError as exc:  # a file the command could not read or write (EIO, ENOSPC, EISDIR)
+        where = f': {exc.filename}' if exc.filename is not None else ''
+        return _error(f'{exc.strerror or type(exc).__name__}{where}', EXIT_USAGE, debug)
     except KeyboardInterrupt:
         print(f'{PROG}: interrupted', file=sys.stderr)
         return EXIT_INTERRUPTED
+    except (Exception, RecursionError, MemoryError) as exc:
+        try:
+            text = str(exc)
+        except Exception:
+            text = '?'
+        return _error(f'internal error: {type(exc).__name__}: {text} (run with --debug for '
+                      'the traceback)', EXIT_INTERNAL, debug)
 
 
 if __name__ == '__main__':  # python -m cdh_planner.cli

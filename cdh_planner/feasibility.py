@@ -8,6 +8,7 @@ B^-1 = J^-1 E^-1 J^-T, the largest change of tension i over the wrench ellipsoid
 """
 
 from dataclasses import dataclass
+from functools import cached_property
 
 import numpy as np
 
@@ -102,19 +103,20 @@ class Feasibility:
     margin: np.ndarray  # (N,)
     binding: np.ndarray  # (N,) str
 
-    @property
+    # Computed once: a report reads them per pose (each a whole-array operation).
+    @cached_property
     def tension_min(self):
         return self.tension_nominal - self.tension_spread
 
-    @property
+    @cached_property
     def tension_max(self):
         return self.tension_nominal + self.tension_spread
 
-    @property
+    @cached_property
     def feasible(self):
         return self.margin > 0
 
-    @property
+    @cached_property
     def singular(self):
         return ~np.isfinite(self.margin)
 
@@ -130,7 +132,8 @@ def evaluate(robot, p, tau=None, R=None):
     lengths = np.linalg.norm(dvec, axis=-1)
     u = dvec / np.where(lengths > 0, lengths, 1.0)[..., None]
     J = screw_jacobian(robot, u)
-    det = np.linalg.det(J)
+    with np.errstate(divide="ignore", invalid="ignore"):  # singular J: reported below
+        det = np.linalg.det(J)
     singular = ~(np.abs(det) > SINGULAR_DET) | (lengths.min(axis=1) <= 0)
     J_safe = np.where(singular[:, None, None], np.eye(6), J)
     c = load_point(robot, p, R)

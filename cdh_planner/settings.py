@@ -80,11 +80,11 @@ class PlannerSettings:
     max_cable_speed: float = _setting(
         0.05, parameter="trajectory.max_cable_speed", flag="--max-cable-speed", unit="m/s",
         description="per-winch cable speed limit of the trajectory",
-        low=0.0, high=100.0, open_low=True)
+        low=1e-4, high=100.0)
     max_cable_accel: float = _setting(
         0.2, parameter="trajectory.max_cable_accel", flag="--max-cable-accel", unit="m/s^2",
         description="per-winch cable acceleration limit of the trajectory",
-        low=0.0, high=1000.0, open_low=True)
+        low=1e-4, high=1000.0)
 
     def check(self, name_of=lambda f: f):
         """Validate every field; the InputError names ``name_of(field)``."""

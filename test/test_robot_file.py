@@ -64,7 +64,8 @@ BAD_ROBOTS = [
     ("unknown_load_key", "load.mass", 1.0, "robot.load.mass", "unknown key"),
     ("unknown_ellipsoid_key", "wrench_ellipsoid.centre", [0.0] * 6, "robot.wrench_ellipsoid.centre", "unknown key"),
     ("missing_tension_max", "tension_max", None, "robot.tension_max", "missing"),
-    ("text_instead_of_number", "length_max", [0.55, "long", 0.55, 0.55, 0.55, 0.55], "robot.length_max", "numbers"),
+    ("text_instead_of_number", "length_max", [0.55, "long", 0.55, 0.55, 0.55, 0.55], "robot.length_max[1]",
+     "expected a number"),
 ]
 
 BAD_POSES = [

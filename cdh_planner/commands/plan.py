@@ -8,7 +8,8 @@ problem file use too).
 
 Prints the outcome (reason, charts, seconds, cost, waypoints, duration, least margin) with a
 progress bar while the atlas grows. Exit 0 with a path, 1 without one (no path at this
-resolution, timeout, chart or memory limit, infeasible start or goal), 2 for bad input.
+resolution, timeout, chart or memory limit, infeasible start or goal), 2 for bad input
+(the output paths are checked before planning), 3 for an internal error.
 
 ``--json OUT`` writes the plan JSON contract (README, the plan command): success, reason, message, strategy,
 n, m, charts, time_s, cost, and path: [{p, quaternion, tau, lengths, tension_min,
@@ -18,12 +19,11 @@ tension_nominal, tension_max, t}] (m, rad, N, s).
 import json
 import math
 from dataclasses import replace
-from pathlib import Path
 
 import numpy as np
 from tqdm import tqdm
 
-from ..errors import InputError
+from ..io.outputs import check_output, write_text, writing
 from ..io.problem import load_problem
 from ..planner import Planner
 from ..settings import SETTINGS, check_setting
@@ -64,18 +64,22 @@ def run(args):
     overrides = {name: check_setting(name, getattr(args, name), s.flag)
                  for name, (_, _, s) in SETTINGS.items() if getattr(args, name) is not None}
     settings = replace(settings, **overrides)
-    for path in (args.json, args.plot):
-        if path and not Path(path).resolve().parent.is_dir():
-            raise InputError("--json" if path == args.json else "--plot", path, "directory does not exist")
+    if args.json is not None:
+        check_output("--json", args.json)
+    if args.plot is not None:
+        plot = check_output("--plot", args.plot)
+        check_output("--plot", plot.with_name(plot.stem + "_tensions.png"))
     planner = Planner(problem.robot, problem.task, settings)
     result = plan_with_progress(planner, problem.start, problem.goal, quiet=args.quiet)
     print_result(result, problem)
     if args.json:
-        Path(args.json).write_text(json.dumps(result_dict(result), indent=1))
+        write_text("--json", args.json, json.dumps(result_dict(result), indent=1))
         print(f"JSON: {args.json}")
     if args.plot:
         from ..io.plan_plots import plot_plan
-        for out in plot_plan(planner, problem, result, args.plot):
+        with writing("--plot", args.plot):
+            outs = plot_plan(planner, problem, result, args.plot)
+        for out in outs:
             print(f"picture: {out}")
     return EXIT_OK if result.success else EXIT_NO_PLAN
 

@@ -31,6 +31,7 @@ from typing import Optional
 
 from ..errors import InputError
 from ..feasibility import evaluate
+from ..io.outputs import check_output, writing
 from ..io.plots import FEASIBLE, Marker, SegmentOverlay, SliceGrid, SliceView, \
     compute_slice, plot_slice
 from ..io.poses import parse_angle, parse_length
@@ -47,6 +48,7 @@ EXAMPLES = """examples:
 """
 MAX_RESOLUTION = 4000
 MAX_PIXELS = 8000
+MAX_LABEL_CHARS = 200
 
 
 def add_parser(subparsers):
@@ -92,6 +94,9 @@ def run(args):
     """Compute, draw and summarise the slice; 0 when the picture was written."""
     robot = load_robot(args.robot)
     out = _check_output(args.output)
+    for option, text in (("--title", args.title), ("--start-label", args.start_label),
+                         ("--goal-label", args.goal_label)):
+        _check_label(option, text)
     size = _parse_size(args.size)
     resolution = _check_resolution(args.resolution)
     view = build_view(args)
@@ -104,8 +109,9 @@ def run(args):
         raise InputError("--segment", "start -> goal", "needs both --start and --goal")
     segment = (start, goal) if args.segment else None
 
-    result = render_slice(robot, view, out, resolution=resolution, size=size,
-                          title=args.title or _title(robot, view), markers=markers, segment=segment)
+    with writing("--output", out):
+        result = render_slice(robot, view, out, resolution=resolution, size=size,
+                              title=args.title or _title(robot, view), markers=markers, segment=segment)
     if result.segment is not None:
         _print_segment(result.segment, args.start_label, args.goal_label)
     _report(robot, view, result.grid, result.elapsed, markers, out, size)
@@ -274,7 +280,14 @@ def _parse_point(text, view):
     label, sep, rest = text.partition("=")
     if not sep or not label:
         raise InputError("--point", text, "expected LABEL=A,B")
+    _check_label("--point", label)
     return Marker(label, *_axis_point(f"--point {label}", [rest], view))
+
+
+def _check_label(option, text):
+    """A title or label is drawn: at most MAX_LABEL_CHARS characters."""
+    if text is not None and len(text) > MAX_LABEL_CHARS:
+        raise InputError(option, text, f"at most {MAX_LABEL_CHARS} characters")
 
 
 def _parse_size(text):
@@ -295,12 +308,9 @@ def _check_resolution(n):
 
 
 def _check_output(path):
-    out = Path(path)
-    if out.suffix.lower() != ".png":
+    if Path(path).suffix.lower() != ".png":
         raise InputError("--output", path, "must be a .png file")
-    if not out.parent.is_dir():
-        raise InputError("--output", path, "directory does not exist")
-    return out
+    return check_output("--output", path)
 
 
 def _print_segment(check, start_label, goal_label):

@@ -7,7 +7,9 @@ the tension envelope (min / nominal / max over the wrench ellipsoid). For every 
 consecutive poses, the motion a controller executes (position linear, orientation slerp)
 is checked by dense sampling (see cdh_planner.trajectory.verify): worst point and first
 unsafe point. Exit code 0 if everything is feasible, 1 if some pose or segment is not,
-2 for bad input.
+2 for bad input (including a segment that would need more than
+``trajectory.verify.MAX_SEGMENT_SAMPLES`` samples at the given steps). Time and memory
+are linear in the number of poses.
 
 ``--json OUT`` writes (non-finite numbers as null)::
 
@@ -21,12 +23,13 @@ unsafe point. Exit code 0 if everything is feasible, 1 if some pose or segment i
 """
 
 import json
-from pathlib import Path
+import math
 
 import numpy as np
 
 from ..errors import InputError
 from ..feasibility import evaluate
+from ..io.outputs import check_output, write_text
 from ..io.poses import load_poses, parse_angle, parse_length
 from ..model.robot import load_robot
 from ..trajectory.verify import DEFAULT_STEP_M, DEFAULT_STEP_RAD, check_motion
@@ -59,7 +62,7 @@ def run(args):
     poses = load_poses(args.poses)
     step_m = _positive(parse_length(args.step, "--step"), "--step", args.step)
     step_rad = _positive(parse_angle(args.angle_step, "--angle-step"), "--angle-step", args.angle_step)
-    json_out = _check_json_path(args.json) if args.json else None
+    json_out = check_output("--json", args.json) if args.json is not None else None
 
     feas = evaluate(robot, poses.positions, R=poses.rotations)
     segments = check_motion(robot, poses.positions, poses.quaternions, step_m, step_rad)
@@ -68,7 +71,7 @@ def run(args):
     print_report(robot, poses, feas, segments, ok)
     if json_out:
         doc = result_dict(robot, poses, feas, segments, ok, step_m, step_rad)
-        json_out.write_text(json.dumps(finite_or_none(doc), indent=2, allow_nan=False) + "\n")
+        write_text("--json", json_out, dump_rows(doc))
         print(f"wrote {json_out}")
     return EXIT_OK if ok else EXIT_INFEASIBLE
 
@@ -79,29 +82,14 @@ def _positive(value, option, text):
     return value
 
 
-def _check_json_path(path):
-    out = Path(path)
-    if not out.parent.is_dir():
-        raise InputError("--json", path, "directory does not exist")
-    return out
-
-
 def result_dict(robot, poses, feas, segments, ok, step_m, step_rad):
     """The JSON document (plain Python types; non-finite floats still present)."""
-    pose_rows = []
-    for i in range(len(poses)):
-        pose_rows.append({
-            "position": poses.positions[i].tolist(),
-            "quaternion": poses.quaternions[i].tolist(),
-            "tau": poses.tau[i].tolist(),
-            "feasible": bool(feas.feasible[i]),
-            "margin": float(feas.margin[i]),
-            "binding": str(feas.binding[i]),
-            "lengths": feas.lengths[i].tolist(),
-            "tension_min": feas.tension_min[i].tolist(),
-            "tension_nominal": feas.tension_nominal[i].tolist(),
-            "tension_max": feas.tension_max[i].tolist(),
-        })
+    columns = {"position": poses.positions, "quaternion": poses.quaternions, "tau": poses.tau,
+               "feasible": feas.feasible, "margin": feas.margin, "binding": feas.binding,
+               "lengths": feas.lengths, "tension_min": feas.tension_min,
+               "tension_nominal": feas.tension_nominal, "tension_max": feas.tension_max}
+    columns = {k: _finite_list(v) for k, v in columns.items()}  # Python types, once
+    pose_rows = [{k: v[i] for k, v in columns.items()} for i in range(len(poses))]
     seg_rows = [{
         "from": s.index_from, "to": s.index_to, "feasible": bool(s.feasible),
         "samples": s.samples, "unresolved": s.unresolved,
@@ -118,10 +106,45 @@ def _point_dict(pt):
             "position": pt.position.tolist(), "quaternion": pt.quaternion.tolist()}
 
 
+def _finite_list(values):
+    """``values`` (an array) as nested lists, non-finite floats as None."""
+    arr = np.asarray(values)
+    if arr.dtype.kind == "f" and not np.all(np.isfinite(arr)):
+        arr = np.where(np.isfinite(arr), arr, None)
+    return arr.tolist()
+
+
+def dump_rows(doc):
+    """``doc`` as JSON text: its top-level keys on their own lines, and each entry of its
+    lists (a pose, a segment) on one line; non-finite numbers as null. Written by the C
+    encoder: linear and fast for 10^5 poses, unlike ``indent``."""
+    parts = []
+    for key, value in doc.items():
+        if isinstance(value, list):
+            rows = ",\n".join("    " + _encode(row) for row in value)
+            text = f"[\n{rows}\n  ]" if value else "[]"
+        else:
+            text = _encode(value)
+        parts.append(f"  {_encode(key)}: {text}")
+    return "{\n" + ",\n".join(parts) + "\n}\n"
+
+
+_ENCODER = json.JSONEncoder(allow_nan=False)
+
+
+def _encode(value):
+    try:
+        return _ENCODER.encode(value)
+    except ValueError:  # a NaN or an infinity: null
+        return _ENCODER.encode(finite_or_none(value))
+
+
 def finite_or_none(obj):
     """Replace NaN and +-inf floats by None, recursively (JSON has no such numbers)."""
     if isinstance(obj, float):
-        return obj if np.isfinite(obj) else None
+        return obj if math.isfinite(obj) else None
+    if isinstance(obj, list) and all(type(v) is float and math.isfinite(v) for v in obj):
+        return obj
     if isinstance(obj, dict):
         return {k: finite_or_none(v) for k, v in obj.items()}
     if isinstance(obj, (list, tuple)):
@@ -130,11 +153,19 @@ def finite_or_none(obj):
 
 
 def print_report(robot, poses, feas, segments, ok):
-    """Human-readable tables on stdout."""
+    """Human-readable tables on stdout (linear in the number of poses: the arrays are
+    turned into Python lists once)."""
     print(f"robot {robot.name} ({robot.source}): {len(poses)} poses, {len(segments)} segments")
     print()
+    rows = _PoseRows(robot, poses, feas)
+    lines = []
     for i in range(len(poses)):
-        _print_pose(robot, poses, feas, i)
+        lines.extend(rows.lines(i))
+        if len(lines) > 10_000:
+            print("\n".join(lines))
+            lines = []
+    if lines:
+        print("\n".join(lines))
     for s in segments:
         _print_segment(s)
     n_pose_ok = int(np.sum(feas.feasible))
@@ -144,18 +175,30 @@ def print_report(robot, poses, feas, segments, ok):
           f"feasible: {verdict}")
 
 
-def _print_pose(robot, poses, feas, i):
-    state = "feasible" if feas.feasible[i] else "NOT FEASIBLE"
-    print(f"pose {i}: {state}, margin {_num(feas.margin[i], '+.4f')}, binding {feas.binding[i]}")
-    print(f"  position {_vec(poses.positions[i], '.4f')} m, quaternion {_vec(poses.quaternions[i], '.4f')}, "
-          f"tau {_vec(poses.tau[i], '.4f')} rad")
-    print(f"  {'cable':<10} {'length m':>9} {'f_min N':>9} {'f_nom N':>9} {'f_max N':>9}   limits")
-    for c, name in enumerate(robot.winch_names):
-        lim = (f"d ({robot.length_min[c]:g}, {robot.length_max[c]:g}) "
-               f"f ({robot.tension_min[c]:g}, {robot.tension_max[c]:g})")
-        print(f"  {name:<10} {feas.lengths[i, c]:9.4f} {_num(feas.tension_min[i, c], '9.4f')} "
-              f"{_num(feas.tension_nominal[i, c], '9.4f')} {_num(feas.tension_max[i, c], '9.4f')}   {lim}")
-    print()
+class _PoseRows:
+    """The report lines of each pose, from Python lists made once."""
+
+    def __init__(self, robot, poses, feas):
+        self.feasible, self.margin = feas.feasible.tolist(), feas.margin.tolist()
+        self.binding = [str(b) for b in feas.binding]
+        self.p, self.q, self.tau = (a.tolist() for a in (poses.positions, poses.quaternions, poses.tau))
+        self.lengths, self.f_min = feas.lengths.tolist(), feas.tension_min.tolist()
+        self.f_nom, self.f_max = feas.tension_nominal.tolist(), feas.tension_max.tolist()
+        self.cables = [(name, f"d ({robot.length_min[c]:g}, {robot.length_max[c]:g}) "
+                              f"f ({robot.tension_min[c]:g}, {robot.tension_max[c]:g})")
+                       for c, name in enumerate(robot.winch_names)]
+
+    def lines(self, i):
+        state = "feasible" if self.feasible[i] else "NOT FEASIBLE"
+        out = [f"pose {i}: {state}, margin {_num(self.margin[i], '+.4f')}, binding {self.binding[i]}",
+               f"  position {_vec(self.p[i], '.4f')} m, quaternion {_vec(self.q[i], '.4f')}, "
+               f"tau {_vec(self.tau[i], '.4f')} rad",
+               f"  {'cable':<10} {'length m':>9} {'f_min N':>9} {'f_nom N':>9} {'f_max N':>9}   limits"]
+        for c, (name, lim) in enumerate(self.cables):
+            out.append(f"  {name:<10} {self.lengths[i][c]:9.4f} {_num(self.f_min[i][c], '9.4f')} "
+                       f"{_num(self.f_nom[i][c], '9.4f')} {_num(self.f_max[i][c], '9.4f')}   {lim}")
+        out.append("")
+        return out
 
 
 def _print_segment(s):
@@ -175,7 +218,7 @@ def _point_text(pt):
 
 def _num(x, fmt):
     width = fmt.split(".")[0].lstrip("+")
-    return f"{x:{fmt}}" if np.isfinite(x) else f"{'-inf' if x < 0 else 'inf' if x > 0 else 'nan':>{width or 1}}"
+    return f"{x:{fmt}}" if math.isfinite(x) else f"{'-inf' if x < 0 else 'inf' if x > 0 else 'nan':>{width or 1}}"
 
 
 def _vec(v, fmt):

@@ -5,22 +5,23 @@ A poses file is JSON: a list of poses, or ``{"poses": [...]}``. Each pose is
     {"position": [x, y, z], "quaternion": [x, y, z, w]}     (m; ROS order, unit norm)
     {"position": [x, y, z], "tau": [phi, theta, sigma]}     (m; rad, theta in [0, pi])
 
-Every error is an InputError naming the entry, e.g. ``poses[3].quaternion``. Nothing is
+Positions lie within +-1e3 m (``errors.MAX_POSITION_M``); a file holds at most MAX_POSES
+poses. Every error is an InputError naming the entry, e.g. ``poses[3].quaternion``. Nothing is
 silently fixed: a non-normalised quaternion or an out-of-range tilt is usually a unit or
 ordering mistake (degrees, w first) and is reported, not normalised away.
 
 Command-line quantities: ``parse_angle`` accepts radians (``0.75``, ``-pi``, ``pi/2``,
-``3pi/4``, ``0.5*pi``) or degrees (``34deg``).
+``3pi/4``, ``0.5*pi``) or degrees (``34deg``), ``parse_length`` metres (``0.35``, ``350mm``);
+both within +-1e3.
 """
 
-import json
 import re
 from dataclasses import dataclass
-from pathlib import Path
 
 import numpy as np
 
-from ..errors import InputError, check_keys
+from ..errors import MAX_POSITION_M, InputError, check_keys, check_numbers
+from ..files import read_json
 from ..model.pose import check_quaternion, quaternion_from_tau, rotation_from_quaternion, \
     tau_from_quaternion
 
@@ -28,6 +29,7 @@ POSE_KEYS = ("position", "quaternion", "tau")
 # |phi|, |sigma| beyond this (rad) are almost surely degrees; theta must be in [0, pi].
 ANGLE_LIMIT = 2.0 * np.pi + 1e-9
 THETA_TOL = 1e-9
+MAX_POSES = 100_000
 
 
 @dataclass(frozen=True)
@@ -45,15 +47,9 @@ class PoseList:
 
 
 def load_poses(path, where="poses"):
-    """Read and validate a poses JSON file; InputError on any bad content."""
-    path = Path(path)
-    if not path.is_file():
-        raise InputError(where, str(path), "file not found")
-    try:
-        doc = json.loads(path.read_text())
-    except (json.JSONDecodeError, UnicodeDecodeError) as exc:
-        raise InputError(where, str(path), f"not valid JSON: {exc}") from None
-    return poses_from_obj(doc, where)
+    """Read and validate a poses JSON file; InputError on any bad content (the file's size,
+    depth and list lengths bounded by ``files.JSON_LIMITS``, at most MAX_POSES poses)."""
+    return poses_from_obj(read_json(path, where), where)
 
 
 def poses_from_obj(doc, where="poses"):
@@ -61,48 +57,54 @@ def poses_from_obj(doc, where="poses"):
     if isinstance(doc, dict):
         doc = check_keys("", doc, ("poses",), required=("poses",))["poses"]
     if not isinstance(doc, list):
-        raise InputError(where, short_repr(doc), "expected a list of poses")
+        raise InputError(where, doc, "expected a list of poses")
     if not doc:
         raise InputError(where, doc, "empty pose list: give at least one pose")
-    parsed = [pose_from_dict(d, f"{where}[{i}]") for i, d in enumerate(doc)]
-    p = np.array([x[0] for x in parsed])
-    q = np.array([x[1] for x in parsed])
-    tau = np.array([x[2] for x in parsed])
+    if len(doc) > MAX_POSES:
+        raise InputError(where, f"{len(doc)} poses", f"at most {MAX_POSES} poses")
+    fields = [_pose_fields(d, f"{where}[{i}]") for i, d in enumerate(doc)]
+    p = np.array([f[0] for f in fields], dtype=float)
+    has_q = np.array([f[1] == "quaternion" for f in fields])
+    values = np.array([f[2] for f in fields if f[1] == "quaternion"], dtype=float).reshape(-1, 4)
+    q = np.empty((len(doc), 4))
+    tau = np.empty((len(doc), 3))
+    if has_q.any():
+        q[has_q] = values
+        tau[has_q] = tau_from_quaternion(values)
+    if not has_q.all():
+        tau[~has_q] = np.array([f[2] for f in fields if f[1] == "tau"], dtype=float)
+        q[~has_q] = quaternion_from_tau(tau[~has_q])
     return PoseList(positions=p, quaternions=q, rotations=rotation_from_quaternion(q), tau=tau)
 
 
 def pose_from_dict(d, where):
     """One pose: (position (3,) m, quaternion (4,) with w >= 0, tau (3,) rad)."""
+    p, kind, value = _pose_fields(d, where)
+    if kind == "quaternion":
+        return np.asarray(p), value, tau_from_quaternion(value)
+    return np.asarray(p), quaternion_from_tau(value), value
+
+
+def _pose_fields(d, where):
+    """(position (3,), "quaternion" or "tau", the checked quaternion (w >= 0) or tau)."""
     if not isinstance(d, dict):
-        raise InputError(where, short_repr(d), "expected a mapping with 'position' and 'quaternion' or 'tau'")
+        raise InputError(where, d, "expected a mapping with 'position' and 'quaternion' or 'tau'")
     check_keys(where, d, POSE_KEYS, required=("position",))
     has_q, has_tau = "quaternion" in d, "tau" in d
     if has_q == has_tau:
-        raise InputError(where, short_repr(d), "give exactly one of 'quaternion' or 'tau'")
-    p = number_list(f"{where}.position", d["position"], 3)
+        raise InputError(where, d, "give exactly one of 'quaternion' or 'tau'")
+    p = number_list(f"{where}.position", d["position"], 3, limit=MAX_POSITION_M)
     if has_q:
-        q = check_quaternion(number_list(f"{where}.quaternion", d["quaternion"], 4),
+        q = check_quaternion(number_list(f"{where}.quaternion", d["quaternion"], 4, limit=2.0),
                              field=f"{where}.quaternion")
-        q = -q if q[3] < 0 else q
-        tau = tau_from_quaternion(q)
-    else:
-        tau = check_tau(number_list(f"{where}.tau", d["tau"], 3), f"{where}.tau")
-        q = quaternion_from_tau(tau)
-    return p, q, tau
+        return p, "quaternion", -q if q[3] < 0 else q
+    return p, "tau", check_tau(number_list(f"{where}.tau", d["tau"], 3), f"{where}.tau")
 
 
-def number_list(where, value, n):
-    """A list of exactly ``n`` finite numbers (JSON NaN/Infinity and booleans rejected)."""
-    if not isinstance(value, (list, tuple)):
-        raise InputError(where, short_repr(value), f"expected a list of {n} numbers")
-    if len(value) != n:
-        raise InputError(where, short_repr(value), f"expected {n} numbers, got {len(value)}")
-    for i, x in enumerate(value):
-        if isinstance(x, bool) or not isinstance(x, (int, float)):
-            raise InputError(f"{where}[{i}]", x, "expected a number")
-        if not np.isfinite(x):
-            raise InputError(f"{where}[{i}]", x, "must be a finite number")
-    return np.asarray(value, dtype=float)
+def number_list(where, value, n, limit=None):
+    """A list of exactly ``n`` finite numbers (JSON NaN/Infinity, booleans and strings
+    rejected), each within +-``limit`` when given."""
+    return np.asarray(check_numbers(where, value, n, limit), dtype=float)
 
 
 def check_tau(tau, where):
@@ -139,6 +141,8 @@ def parse_angle(text, where="angle"):
         raise InputError(where, text, "expected an angle: radians (0.75, -pi, 3pi/4) or degrees (34deg)") from None
     if not np.isfinite(value):
         raise InputError(where, text, "must be a finite angle")
+    if abs(value) > MAX_POSITION_M:
+        raise InputError(where, text, f"must be within +-{MAX_POSITION_M:g} rad")
     return float(value)
 
 
@@ -156,6 +160,8 @@ def parse_length(text, where="length"):
         raise InputError(where, text, "expected a length in m (0.35) or with a unit (350mm)") from None
     if not np.isfinite(value):
         raise InputError(where, text, "must be a finite length")
+    if abs(value) > MAX_POSITION_M:
+        raise InputError(where, text, f"must be within +-{MAX_POSITION_M:g} m")
     return float(value)
 
 
@@ -163,9 +169,3 @@ def _plain_number(s):
     if not re.fullmatch(_NUMBER, s):
         raise ValueError(s)
     return float(s)
-
-
-def short_repr(value, limit=80):
-    """A value for an error message, abbreviated when it is long."""
-    text = repr(value)
-    return value if len(text) <= limit else text[: limit - 3] + "..."

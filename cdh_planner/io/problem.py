@@ -16,17 +16,18 @@ from pathlib import Path
 
 import numpy as np
 
-from ..errors import InputError, check_keys
+from ..errors import MAX_POSITION_M, InputError, check_keys
 from ..model.robot import load_robot, read_yaml
 from ..model.task import COORDINATES, task_from_dict
 from ..model.pose import Pose
 from ..settings import SETTINGS, PlannerSettings, check_setting
-from .poses import number_list, pose_from_dict, short_repr
+from .poses import number_list, pose_from_dict
 
 # the settings schema decides which keys go beside ``planner:`` (strategy, cost) and which in it
 TOP_SETTINGS = tuple(k for k, (_, _, s) in SETTINGS.items() if s.top_level)
 TOP_KEYS = ("robot", "task", *TOP_SETTINGS, "planner", "start", "goal", "description")
 SETTING_KEYS = tuple(k for k in SETTINGS if k not in TOP_SETTINGS)
+MAX_TEXT_CHARS = 4096  # the robot path and the description
 
 
 @dataclass
@@ -49,15 +50,19 @@ def load_problem(path):
 
 def problem_from_dict(doc, base_dir=".", source=""):
     if not isinstance(doc, dict):
-        raise InputError("problem", short_repr(doc), "expected a mapping with robot, task, start, goal")
+        raise InputError("problem", doc, "expected a mapping with robot, task, start, goal")
     check_keys("", doc, TOP_KEYS, required=("robot", "task", "start", "goal"))
     robot_path = doc["robot"]
-    if not isinstance(robot_path, str) or not robot_path:
+    if not isinstance(robot_path, str) or not robot_path or len(robot_path) > MAX_TEXT_CHARS \
+            or "\x00" in robot_path:
         raise InputError("robot", robot_path, "expected the path of a robot file")
     robot_file = Path(robot_path) if Path(robot_path).is_absolute() else Path(base_dir) / robot_path
-    if not robot_file.is_file():
+    if not robot_file.exists():
         raise InputError("robot", robot_path, f"robot file not found ({robot_file})")
     robot = load_robot(robot_file)
+    description = doc.get("description", "")
+    if not isinstance(description, str) or len(description) > MAX_TEXT_CHARS:
+        raise InputError("description", description, f"expected a text of at most {MAX_TEXT_CHARS} characters")
     task = task_from_dict(doc["task"])
     settings = settings_from_dict(doc.get("planner") or {}, "planner")
     for key in TOP_SETTINGS:
@@ -65,13 +70,13 @@ def problem_from_dict(doc, base_dir=".", source=""):
             settings = replace(settings, **{key: check_setting(key, doc[key])})
     start = pose_in_task(doc["start"], task, "start")
     goal = pose_in_task(doc["goal"], task, "goal")
-    return Problem(robot, task, settings, start, goal, source, str(doc.get("description", "")))
+    return Problem(robot, task, settings, start, goal, source, description)
 
 
 def settings_from_dict(d, where):
     """PlannerSettings of the ``planner:`` mapping, each value checked by the schema."""
     if not isinstance(d, dict):
-        raise InputError(where, short_repr(d), "expected a mapping of planner settings")
+        raise InputError(where, d, "expected a mapping of planner settings")
     check_keys(where, d, SETTING_KEYS)
     return PlannerSettings(**{k: check_setting(k, v, f"{where}.{k}") for k, v in d.items()})
 
@@ -83,7 +88,7 @@ def pose_in_task(d, task, where):
         extra = sorted(set(d) - {"lambda"})
         if extra:
             raise InputError(f"{where}.{extra[0]}", d[extra[0]], "give lambda alone")
-        lam = number_list(f"{where}.lambda", d["lambda"], len(task.names))
+        lam = number_list(f"{where}.lambda", d["lambda"], len(task.names), limit=MAX_POSITION_M)
         for j, name in enumerate(task.names):
             c = COORDINATES[name]
             if c.bounds is not None and not c.periodic and not c.bounds[0] <= lam[j] <= c.bounds[1]:

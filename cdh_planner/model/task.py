@@ -23,7 +23,7 @@ from typing import ClassVar
 
 import numpy as np
 
-from ..errors import InputError, check_finite, check_keys
+from ..errors import MAX_POSITION_M, InputError, check_finite, check_keys
 from .pose import rotation_angle_between, rotation_tt, rotation_tt_derivatives, wrap_angle
 
 POSE_NAMES = ("x", "y", "z", "phi", "theta", "sigma")
@@ -57,7 +57,8 @@ COORDINATES = _coordinates(
 @dataclass(frozen=True)
 class TaskField:
     """Metadata of a task's field: problem-file key and node parameter ``task.<name>``.
-    ``kind`` is "double", "point" (3 numbers) or "bool". ``positive`` numbers must be > 0."""
+    ``kind`` is "double", "point" (3 numbers) or "bool". ``positive`` numbers must be > 0.
+    Every number (m or rad) lies within +-``errors.MAX_POSITION_M`` (1e3)."""
 
     unit: str
     description: str
@@ -185,8 +186,8 @@ def _check_field(where, meta, value):
     if meta.kind == "point":
         if not isinstance(value, (list, tuple)) or len(value) != 3:
             raise InputError(where, value, f"expected 3 numbers ({meta.unit})")
-        return tuple(check_finite(f"{where}[{i}]", v) for i, v in enumerate(value))
-    value = check_finite(where, value)
+        return tuple(check_finite(f"{where}[{i}]", v, limit=MAX_POSITION_M) for i, v in enumerate(value))
+    value = check_finite(where, value, limit=MAX_POSITION_M)
     if meta.positive and value <= 0:
         raise InputError(where, value, f"must be positive ({meta.unit})")
     return value
@@ -268,7 +269,7 @@ class SliceTask(Task):
         for name, value in fixed.items():
             if name not in POSE_NAMES:
                 raise InputError(f"{where}.fixed.{name}", value, f"unknown coordinate (expected {POSE_NAMES})")
-            out[name] = check_finite(f"{where}.fixed.{name}", value)
+            out[name] = check_finite(f"{where}.fixed.{name}", value, limit=MAX_POSITION_M)
         if len(out) >= 6:
             raise InputError(f"{where}.fixed", fixed, "at least one coordinate must stay free")
         return cls(fixed=out)
@@ -455,7 +456,7 @@ def task_from_dict(d, where="task"):
     if not isinstance(d, dict):
         raise InputError(where, d, "expected a mapping with 'type'")
     kind = d.get("type", "free")
-    if kind not in TASKS:
+    if not isinstance(kind, str) or kind not in TASKS:
         raise InputError(f"{where}.type", kind, f"unknown task type (expected one of {', '.join(TASKS)})")
     return TASKS[kind].from_dict(d, where)
 

@@ -83,6 +83,8 @@ ZERO_LENGTH_M = 1e-9  # m, a segment this short (Euclidean, all 6 cables) has le
 REL_TOL = 1e-9  # a reported value within limit * (1 + REL_TOL) is within the limit (rounding)
 SHRINK_ROUNDS = 8  # rounds of lowering offending vertex caps before stopping there
 SHRINK_MAX = 0.9  # each round lowers an offending b_k by at least this factor
+MAX_DURATION_S = 1e6  # s (11.6 days): a longer trajectory is refused (slow limits, long path)
+MAX_WAYPOINTS = 1_000_000  # waypoints of one trajectory
 
 
 @dataclass(frozen=True)
@@ -138,6 +140,8 @@ def check_lengths(lengths, name="lengths"):
         raise InputError(name, lengths, "expected an (N, 6) array of cable lengths (m)") from None
     if L.ndim != 2 or L.shape[1] != N_CABLES or L.shape[0] < 1:
         raise InputError(name, f"shape {L.shape}", "expected an (N, 6) array with N >= 1")
+    if L.shape[0] > MAX_WAYPOINTS:
+        raise InputError(name, f"shape {L.shape}", f"at most {MAX_WAYPOINTS} waypoints")
     bad = np.argwhere(~np.isfinite(L))
     if bad.size:
         k, i = (int(x) for x in bad[0])
@@ -316,7 +320,9 @@ def time_parameterize(lengths, max_cable_speed, max_cable_accel, *, dwell_s=DWEL
     """Time-optimal timing of the cable-space polyline through ``lengths`` (N, 6) m under
     per-winch ``max_cable_speed`` (m/s) and ``max_cable_accel`` (m/s^2) (a number or 6),
     starting and ending at rest. Returns a Timing (see the module docstring for the model,
-    the reported values and the guarantees). Raises InputError naming a bad argument."""
+    the reported values and the guarantees). Raises InputError naming a bad argument, or
+    the speed limit when the trajectory would last over MAX_DURATION_S (or has more than
+    MAX_WAYPOINTS waypoints)."""
     L = check_lengths(lengths)
     vmax = check_limit("max_cable_speed", max_cable_speed)
     amax = check_limit("max_cable_accel", max_cable_accel)
@@ -336,6 +342,7 @@ def time_parameterize(lengths, max_cable_speed, max_cable_accel, *, dwell_s=DWEL
         ratio = limit_ratio(v, a, vmax, amax)
         bad = ratio > 1.0 + REL_TOL
         if not bad.any():
+            _check_duration(t[-1], vmax, amax)
             return Timing(t=t, velocities=v, accelerations=a, path_speed=np.sqrt(b),
                           rest=geo.rest.copy(), repairs=repairs)
         if np.any(bad & (geo.rest | (b == 0))):
@@ -348,6 +355,15 @@ def time_parameterize(lengths, max_cable_speed, max_cable_accel, *, dwell_s=DWEL
     k = int(np.argmax(ratio))
     raise RuntimeError(f"time parameterisation: waypoint {k} exceeds the winch limits by a "
                        f"factor {ratio[k]:.6g} after {repairs} repairs")
+
+
+def _check_duration(duration, vmax, amax):
+    """InputError naming the limits if the trajectory would last over MAX_DURATION_S."""
+    if not duration <= MAX_DURATION_S:  # NaN / inf included (limits that underflow)
+        raise InputError("max_cable_speed", float(np.min(vmax)),
+                         f"the trajectory would last {duration:.3g} s, over the "
+                         f"{MAX_DURATION_S:.0f} s limit (with max_cable_accel "
+                         f"{float(np.min(amax)):.3g}): raise the limits")
 
 
 def _schedule(geo, cap, dwell_s):

@@ -7,7 +7,9 @@ plane). Feasibility along it is checked by **dense sampling**, not by a proof:
 
 1. each segment is sampled uniformly in s in [0, 1] so that consecutive samples are at
    most ``max_step_m`` apart in position and ``max_step_rad`` apart in orientation
-   (SO(3) angle), defaults 1 mm and 0.2 deg;
+   (SO(3) angle), defaults 1 mm and 0.2 deg; a segment needing more than
+   MAX_SEGMENT_SAMPLES samples (200 m at 1 mm), or segments needing more than
+   MAX_INITIAL_SAMPLES in all, are refused up front (InputError) with the numbers;
 2. adaptive refinement: the margin m(s) is estimated to be Lipschitz with constant
    L = the steepest secant slope of the interval and its neighbours; an interval with
    both ends feasible (before the first infeasible sample) is subdivided (8 sub-intervals
@@ -29,6 +31,7 @@ from typing import Optional
 import numpy as np
 from scipy.spatial.transform import Rotation
 
+from ..errors import InputError
 from ..feasibility import evaluate
 from ..model.pose import rotation_angle_between, rotation_tt
 
@@ -39,6 +42,8 @@ SUBDIVISION = 8  # sub-intervals per flagged interval and refinement round
 MAX_ROUNDS = 8
 MIN_DS = 1e-9  # do not refine intervals shorter than this (in s)
 MAX_SAMPLES = 2_000_000  # budget of evaluated samples per call
+MAX_SEGMENT_SAMPLES = 200_000  # a segment needing more initial samples is refused (~2 s)
+MAX_INITIAL_SAMPLES = MAX_SAMPLES  # and so are segments needing more in all
 BISECTIONS = 40
 CHUNK = 20_000  # poses per feasibility call (bounds memory)
 SPEED_SAMPLES = 64  # coarse samples per segment to bound the speed of a task line
@@ -158,13 +163,28 @@ def check_path(robot, path, max_step_m=DEFAULT_STEP_M, max_step_rad=DEFAULT_STEP
     samples.add(*_initial_grid(path, max_step_m, max_step_rad))
     unresolved = _refine(samples)
     first = _first_unsafe(samples)
-    return [_segment_result(samples, k, first.get(k), unresolved[k]) for k in range(path.n_segments)]
+    return _segment_results(samples, first, unresolved)
 
 
 def _initial_grid(path, max_step_m, max_step_rad):
-    """Uniform s grids with steps below max_step_m / max_step_rad along each segment."""
+    """Uniform s grids with steps below max_step_m / max_step_rad along each segment.
+    InputError, before anything is allocated, when a segment needs more than
+    MAX_SEGMENT_SAMPLES samples or all of them more than MAX_INITIAL_SAMPLES."""
     dp, da = path.speeds()
-    n = np.maximum(1, np.ceil(np.maximum(dp / max_step_m, da / max_step_rad))).astype(int)
+    with np.errstate(divide="ignore", invalid="ignore", over="ignore"):
+        need = np.maximum(dp / max_step_m, da / max_step_rad)
+    need = np.where(np.isnan(need), np.inf, need)
+    worst = int(np.argmax(need)) if need.size else 0
+    if need.size and not need[worst] <= MAX_SEGMENT_SAMPLES:
+        raise InputError(f"segment {worst} -> {worst + 1}", f"{need[worst]:.3g} samples",
+                         f"over the {MAX_SEGMENT_SAMPLES} samples of one segment ({dp[worst]:.3g} m, "
+                         f"{da[worst]:.3g} rad at steps of {max_step_m:.3g} m, {max_step_rad:.3g} rad): "
+                         "add poses between, or use a larger step")
+    n = np.maximum(1, np.ceil(need)).astype(int)
+    if int(np.sum(n + 1)) > MAX_INITIAL_SAMPLES:
+        raise InputError("segments", f"{int(np.sum(n + 1))} samples",
+                         f"over the {MAX_INITIAL_SAMPLES} samples of one check: use a larger "
+                         "step or fewer poses")
     seg = np.repeat(np.arange(path.n_segments), n + 1)
     start = np.repeat(np.cumsum(n + 1) - (n + 1), n + 1)
     s = (np.arange(seg.size) - start) / np.repeat(n, n + 1)
@@ -240,7 +260,7 @@ def _doubtful_intervals(samples):
     L[:-1] = np.maximum(L[:-1], np.where(same[1:], slope[1:], 0.0))
     # Past the first infeasible sample the segment is unsafe anyway: nothing to refine.
     bad_so_far = _count_within_segments(m <= 0, seg)
-    bound = SAFETY * L * h
+    bound = SAFETY * L * np.where(same, h, 0.0)  # (h is inf between segments)
     doubtful = same & (bad_so_far[1:] == 0) & (m[:-1] + m[1:] <= bound)
     idx = np.flatnonzero(doubtful)
     return idx, (m[idx] + m[idx + 1]) / np.maximum(bound[idx], 1e-300), h[idx]
@@ -279,19 +299,32 @@ def _first_unsafe(samples):
     return {int(k): (hi[i], m_hi[i], b_hi[i]) for i, k in enumerate(segs)}
 
 
-def _segment_result(samples, k, first, unresolved):
-    a, b = np.searchsorted(samples.seg, [k, k + 1])
-    i = a + int(np.argmin(samples.margin[a:b]))
-    worst = _point(samples, k, samples.s[i], samples.margin[i], samples.binding[i])
-    first_unsafe = None if first is None else _point(samples, k, *first)
-    return SegmentCheck(index_from=k, index_to=k + 1, feasible=first is None, worst=worst,
-                        first_unsafe=first_unsafe, samples=int(b - a), unresolved=int(unresolved))
+def _segment_results(samples, first, unresolved):
+    """The SegmentCheck of every segment; the worst and first unsafe points of all
+    segments are evaluated in one call each (linear in the number of segments)."""
+    n = samples.path.n_segments
+    bounds = np.searchsorted(samples.seg, np.arange(n + 1))
+    # least margin of each segment, the first sample of it on ties (as argmin)
+    order = np.lexsort((np.arange(samples.s.size), samples.margin, samples.seg))
+    i = order[bounds[:-1]]
+    worst = _points(samples, np.arange(n), samples.s[i], samples.margin[i], samples.binding[i])
+    segs = sorted(first)
+    unsafe = dict(zip(segs, _points(samples, np.array(segs, dtype=int),
+                                    *(np.array([first[k][j] for k in segs]) for j in range(3)))))
+    return [SegmentCheck(index_from=k, index_to=k + 1, feasible=k not in first, worst=worst[k],
+                         first_unsafe=unsafe.get(k), samples=int(bounds[k + 1] - bounds[k]),
+                         unresolved=int(unresolved[k])) for k in range(n)]
 
 
-def _point(samples, k, s, margin, binding):
-    p, R = samples.path(np.array([k]), np.array([float(s)]))
-    return PointCheck(s=float(s), margin=float(margin), binding=str(binding),
-                      position=p[0], quaternion=_quaternions(R)[0])
+def _points(samples, segs, s, margin, binding):
+    """PointChecks at s (M,) of segments ``segs`` (M,)."""
+    if not len(segs):
+        return []
+    s = np.asarray(s, dtype=float)
+    p, R = samples.path(segs, s)
+    q = _quaternions(R)
+    return [PointCheck(s=float(s[j]), margin=float(margin[j]), binding=str(binding[j]),
+                       position=p[j], quaternion=q[j]) for j in range(len(segs))]
 
 
 def _quaternions(R):

@@ -1,0 +1,208 @@
+"""Bounded reading of the input files: robot, problem and task files (YAML), pose files
+(JSON). Whatever a file holds, reading it takes bounded time and memory and either
+returns plain Python data or raises an InputError naming the file and what is wrong:
+
+- plain numbers are read as YAML 1.2 does (``1.0e4`` is a float, as for ROS 2), quoted
+  ones stay strings (and are refused where a number belongs);
+- only a regular file is read (not a directory, a FIFO or a device), at most
+  ``max_bytes`` of it (1 MiB for YAML, 16 MiB for a pose file); an OSError while reading
+  (EIO, EACCES, ...) is an InputError;
+- the text must be UTF-8 without NUL characters (a binary file is refused);
+- YAML anchors and aliases are refused (a 300-byte "billion laughs" file would expand to
+  billions of nodes), and so is a document nested deeper than ``max_depth`` levels, a list
+  or mapping of more than ``max_items`` entries or more than ``max_nodes`` values in all.
+  These are checked on the parser's events, before any Python object is built.
+
+The limits are far above what the files of this project need (a robot file has about 150
+values in 4 levels).
+"""
+
+import json
+import os
+import re
+import stat
+from dataclasses import dataclass
+from pathlib import Path
+
+import yaml
+
+from .errors import InputError
+
+
+class _Loader(getattr(yaml, "CSafeLoader", yaml.SafeLoader)):
+    """PyYAML's safe loader (libyaml's parser when PyYAML has it: 25x faster than the
+    pure-Python one) that also reads YAML 1.2 floats such as ``1.0e4`` and ``1e-3`` as
+    numbers, as ROS 2's parameter parser does (YAML 1.1 wants ``1.0e+4``). A quoted
+    ``"0.1"`` stays a string."""
+
+
+_Loader.add_implicit_resolver(
+    "tag:yaml.org,2002:float",
+    re.compile(r"^[-+]?(?:\.[0-9]+|[0-9]+(?:\.[0-9]*)?)(?:[eE][-+]?[0-9]+)?$"),
+    list("-+0123456789."))
+_LOADER = _Loader
+
+
+@dataclass(frozen=True)
+class Limits:
+    """Bounds on one input file: bytes, nesting depth, entries of one list or mapping,
+    values (scalars and collections) in all."""
+
+    max_bytes: int = 1 << 20
+    max_depth: int = 32
+    max_items: int = 10_000
+    max_nodes: int = 100_000
+
+
+YAML_LIMITS = Limits()
+JSON_LIMITS = Limits(max_bytes=16 << 20, max_items=100_000, max_nodes=2_000_000)
+
+
+def read_text(path, where, max_bytes=YAML_LIMITS.max_bytes):
+    """The UTF-8 text of the regular file ``path`` (at most ``max_bytes``); InputError
+    naming ``where`` otherwise."""
+    path = Path(path)
+    try:
+        st = os.stat(path)
+    except FileNotFoundError:
+        raise InputError(where, str(path), "file not found") from None
+    except (OSError, ValueError) as exc:
+        raise InputError(where, str(path), f"cannot read: {_strerror(exc)}") from None
+    if stat.S_ISDIR(st.st_mode):
+        raise InputError(where, str(path), "is a directory, not a file")
+    if not stat.S_ISREG(st.st_mode):
+        raise InputError(where, str(path), "not a regular file (a FIFO, socket or device?)")
+    if st.st_size > max_bytes:
+        raise InputError(where, str(path), f"file too large: {st.st_size} bytes "
+                                           f"(at most {max_bytes})")
+    try:
+        with open(path, "rb") as f:
+            data = f.read(max_bytes + 1)
+    except OSError as exc:
+        raise InputError(where, str(path), f"cannot read: {_strerror(exc)}") from None
+    if len(data) > max_bytes:
+        raise InputError(where, str(path), f"file too large: over {max_bytes} bytes")
+    try:
+        text = data.decode("utf-8")
+    except UnicodeDecodeError as exc:
+        raise InputError(where, str(path), f"not UTF-8 text (a binary file?): byte "
+                                           f"0x{data[exc.start]:02x} at offset {exc.start}") from None
+    if "\x00" in text:
+        raise InputError(where, str(path), f"not text (a binary file?): NUL character at "
+                                           f"offset {text.index(chr(0))}")
+    return text
+
+
+def _strerror(exc):
+    if isinstance(exc, OSError):
+        return exc.strerror or type(exc).__name__
+    return str(exc)
+
+
+# ----------------------------------------------------------------------------- YAML
+
+def read_yaml(path, where, limits=YAML_LIMITS):
+    """The parsed YAML file at ``path`` (one document; aliases, depth and sizes bounded)."""
+    text = read_text(path, where, limits.max_bytes)
+    return parse_yaml(text, where, str(path), limits)
+
+
+def parse_yaml(text, where, name="", limits=YAML_LIMITS):
+    """Parse YAML ``text`` after checking its events against ``limits``; InputError
+    naming ``where`` (and ``name``, the file) otherwise."""
+    label = name or "<text>"
+    try:
+        _check_yaml_events(text, where, label, limits)
+        return yaml.load(text, Loader=_LOADER)
+    except InputError:
+        raise
+    except yaml.MarkedYAMLError as exc:
+        mark = exc.problem_mark or exc.context_mark
+        at = f" (line {mark.line + 1}, column {mark.column + 1})" if mark is not None else ""
+        raise InputError(where, label, f"not valid YAML: {exc.problem or exc.context}{at}") from None
+    except (yaml.YAMLError, ValueError, OverflowError, RecursionError, MemoryError) as exc:
+        # ValueError: an integer of over 4300 digits; the rest are PyYAML's own refusals
+        raise InputError(where, label, f"not valid YAML: {type(exc).__name__}: {exc}") from None
+
+
+def _check_yaml_events(text, where, label, limits):
+    """Walk the parser's events (no Python objects built) and refuse what breaks a limit."""
+    # [entries so far, most allowed] of each open collection; a mapping's entries are
+    # its keys and its values
+    open_ = []
+    nodes = 0
+    for event in yaml.parse(text, Loader=_LOADER):
+        if isinstance(event, yaml.AliasEvent):
+            _refuse(where, label, event, "YAML aliases (*name) are not allowed")
+        if not isinstance(event, yaml.NodeEvent):
+            if isinstance(event, yaml.CollectionEndEvent):
+                open_.pop()
+            continue
+        if event.anchor is not None:
+            _refuse(where, label, event, "YAML anchors (&name) are not allowed")
+        nodes += 1
+        if nodes > limits.max_nodes:
+            _refuse(where, label, event, f"more than {limits.max_nodes} values")
+        if open_:
+            open_[-1][0] += 1
+            if open_[-1][0] > open_[-1][1]:
+                _refuse(where, label, event, f"a list or mapping of more than "
+                                             f"{limits.max_items} entries")
+        if isinstance(event, yaml.CollectionStartEvent):
+            pairs = isinstance(event, yaml.MappingStartEvent)
+            open_.append([0, (2 if pairs else 1) * limits.max_items])
+            if len(open_) > limits.max_depth:
+                _refuse(where, label, event, f"nested deeper than {limits.max_depth} levels")
+
+
+def _refuse(where, label, event, reason):
+    mark = event.start_mark
+    at = f" (line {mark.line + 1}, column {mark.column + 1})" if mark is not None else ""
+    raise InputError(where, label, reason + at)
+
+
+# ----------------------------------------------------------------------------- JSON
+
+def read_json(path, where, limits=JSON_LIMITS):
+    """The parsed JSON file at ``path`` (depth and sizes bounded)."""
+    text = read_text(path, where, limits.max_bytes)
+    label = str(path)
+    try:
+        doc = json.loads(text)
+    except json.JSONDecodeError as exc:
+        raise InputError(where, label, f"not valid JSON: {exc.msg} (line {exc.lineno}, "
+                                       f"column {exc.colno})") from None
+    except RecursionError:
+        raise InputError(where, label, f"nested deeper than {limits.max_depth} levels") from None
+    except ValueError as exc:  # an integer of over 4300 digits
+        raise InputError(where, label, f"not valid JSON: {exc}") from None
+    check_structure(doc, where, label, limits)
+    return doc
+
+
+def check_structure(doc, where, label, limits):
+    """Refuse plain data (lists, dicts, scalars) nested deeper than ``limits.max_depth``,
+    with a collection of more than ``limits.max_items`` entries or more than
+    ``limits.max_nodes`` values in all. Iterative: any depth is safe to walk."""
+    stack = [(doc, 1)]
+    nodes = 0
+    while stack:
+        value, depth = stack.pop()
+        nodes += 1
+        if nodes > limits.max_nodes:
+            raise InputError(where, label, f"more than {limits.max_nodes} values")
+        if isinstance(value, dict):
+            items = list(value.values())
+        elif isinstance(value, list):
+            items = value
+        else:
+            continue
+        if depth > limits.max_depth:
+            raise InputError(where, label, f"nested deeper than {limits.max_depth} levels")
+        if len(items) > limits.max_items:
+            raise InputError(where, label, f"a list or mapping of {len(items)} entries "
+                                           f"(at most {limits.max_items})")
+        nodes += sum(1 for x in items if not isinstance(x, (list, dict)))
+        stack.extend((x, depth + 1) for x in items if isinstance(x, (list, dict)))
+    if nodes > limits.max_nodes:
+        raise InputError(where, label, f"more than {limits.max_nodes} values")

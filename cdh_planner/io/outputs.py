@@ -1,0 +1,54 @@
+"""Output files of the commands (``--json``, ``--plot``, ``-o``): checked before the work
+starts, and a failure to write them (a full disk, EIO) is an InputError naming the
+option, i.e. one line and exit 2, never a traceback after minutes of planning.
+"""
+
+import os
+from contextlib import contextmanager
+from pathlib import Path
+
+from ..errors import InputError
+
+
+def check_output(option, path, suffixes=()):
+    """``path`` as a Path if a file can be written there: its directory exists and is
+    writable, and the path is not a directory itself (nor a name with a NUL character);
+    an existing file must be writable (``/dev/null`` is fine). ``suffixes``: the
+    extensions allowed (e.g. ``(".png",)``), any when empty."""
+    text = os.fspath(path)
+    if not text or "\x00" in text:
+        raise InputError(option, text, "expected the path of a file to write")
+    out = Path(text)
+    if suffixes and out.suffix.lower() not in suffixes:
+        raise InputError(option, text, f"expected a {' or '.join(suffixes)} file")
+    try:
+        if out.is_dir():
+            raise InputError(option, text, "is a directory: give a file name")
+        parent = out.parent if str(out.parent) else Path(".")
+        if not parent.is_dir():
+            raise InputError(option, text, "directory does not exist")
+        if out.exists():
+            if not os.access(out, os.W_OK):
+                raise InputError(option, text, "file is not writable")
+        elif not os.access(parent, os.W_OK | os.X_OK):
+            raise InputError(option, text, "directory is not writable")
+    except OSError as exc:  # a name too long, a loop of links
+        raise InputError(option, text, f"cannot write: {exc.strerror or exc}") from None
+    return out
+
+
+@contextmanager
+def writing(option, path):
+    """Turn an OSError raised inside the block (full disk, EIO, removed directory) into
+    an InputError naming ``option`` and ``path``."""
+    try:
+        yield
+    except OSError as exc:
+        raise InputError(option, os.fspath(path),
+                         f"cannot write: {exc.strerror or type(exc).__name__}") from None
+
+
+def write_text(option, path, text):
+    """Write ``text`` to ``path``; an OSError becomes an InputError naming ``option``."""
+    with writing(option, path):
+        Path(path).write_text(text)
