@@ -21,7 +21,6 @@ from mcap.reader import make_reader  # noqa: E402
 from nav_msgs.msg import Path as PathMsg  # noqa: E402
 from nav_msgs.srv import GetPlan  # noqa: E402
 from rosbags.highlevel import AnyReader, AnyReaderError  # noqa: E402
-from rosbags.typesys.msg import normalize_msgtype  # noqa: E402
 from sensor_msgs.msg import JointState  # noqa: E402
 from std_msgs.msg import ColorRGBA, Float64MultiArray, MultiArrayDimension  # noqa: E402
 from trajectory_msgs.msg import JointTrajectory, JointTrajectoryPoint  # noqa: E402
@@ -206,10 +205,7 @@ def test_rosbags_reads_every_field(run_file):
         assert len(got) == len(expected)
         for (conn, log_time, raw), (topic, msg, cls, t) in zip(got, expected):
             assert (conn.topic, log_time) == (topic, t)
-            # rosbags files 'pkg/srv/T' under 'pkg/srv/msg/T'
-            typ = conn.msgtype if conn.msgtype in reader.typestore.fielddefs \
-                else normalize_msgtype(conn.msgtype)
-            assert_same(msg, reader.deserialize(raw, typ), topic)
+            assert_same(msg, reader.deserialize(raw, conn.msgtype), topic)
             # rclpy's deserializer (the reference CDR) reads it back too. (Bytes differ from
             # rclpy's serialize_message only in alignment padding, which rmw leaves unset.)
             assert_same(msg, deserialize_message(raw, cls), f"rclpy {topic}")
@@ -260,7 +256,7 @@ def test_file_layout(run_file):
         "nav_msgs/msg/Path", "trajectory_msgs/msg/JointTrajectory",
         "std_msgs/msg/Float64MultiArray", "sensor_msgs/msg/JointState",
         "diagnostic_msgs/msg/DiagnosticStatus", "visualization_msgs/msg/MarkerArray",
-        "nav_msgs/srv/GetPlan_Event"}
+        "nav_msgs/msg/GetPlanEvent"}
     assert {s.encoding for s in schemas.values()} == {"ros2msg"}
     assert {c.message_encoding for c in summary.channels.values()} == {"cdr"}
 
@@ -272,11 +268,15 @@ def test_file_layout(run_file):
                        "MSG: std_msgs/Header", "MSG: builtin_interfaces/Time"]
     assert text.count("\n" + "=" * 80 + "\nMSG: ") == len(headers)
     assert text.startswith("# An array of poses")
-    event = schemas["nav_msgs/srv/GetPlan_Event"].data.decode()
+    # service events: rosbag2's layout under names every reader decodes (ros_schemas)
+    event = schemas["nav_msgs/msg/GetPlanEvent"].data.decode()
     assert event.startswith("service_msgs/ServiceEventInfo info\n"
-                            "nav_msgs/GetPlan_Request[<=1] request\n"
-                            "nav_msgs/GetPlan_Response[<=1] response\n")
+                            "nav_msgs/GetPlanRequest[<=1] request\n"
+                            "nav_msgs/GetPlanResponse[<=1] response\n")
     assert "\nMSG: service_msgs/ServiceEventInfo\n" in event
+    headers = [line for line in event.splitlines() if line.startswith("MSG: ")]
+    assert {"MSG: nav_msgs/GetPlanRequest", "MSG: nav_msgs/GetPlanResponse"} <= set(headers)
+    assert not any("_" in h.split("/")[-1] for h in headers)
     assert event == full_definition("nav_msgs/srv/GetPlan_Event")
 
     by_topic = {c.topic: c for c in summary.channels.values()}

@@ -3,7 +3,11 @@
 File layout (MCAP ``ros2`` profile, as rosbag2's MCAP storage writes it): one ``ros2msg``
 schema per type named ``pkg/msg/Type`` with the full definition (see ``ros_schemas``), one
 ``cdr`` channel per topic with ``offered_qos_profiles`` metadata, a statistics record. No
-``rosbag2`` metadata record (optional, and if present it must be complete).
+``rosbag2`` metadata record (optional, and if present it must be complete). One departure:
+service events are recorded as ``pkg/msg/SEvent``, not rosbag2's ``pkg/srv/S_Event``, which
+neither mcap_ros2 nor rosbags (nor ``rosbags-convert``) decodes (``ros_schemas`` explains).
+Every record decodes with mcap_ros2's stock ``DecoderFactory`` and rosbags' ``AnyReader``,
+and ``rosbags-convert`` turns a file into a rosbag2 directory.
 
 Messages are CDR-encoded from the schema text by mcap_ros2's encoder, never by
 ``rclpy.serialization`` (its buffers can carry rmw's padding, which rosbags rejects).
@@ -22,7 +26,10 @@ summary and footer. What is left is still a valid MCAP data section:
 - rosbags ``AnyReader`` refuses it ("File end magic is invalid");
 - rosbag2's MCAP plugin reads the summary with ``AllowFallbackScan`` and so should open it
   (from its source; not checked here, the ros2 CLI is not on PyPI);
-- ``recover_run(src, dst)`` rewrites it with a summary, after which all of them open it.
+- ``recover_run(src, dst)`` (``cdh-planner recover FILE``) rewrites it with a summary, after
+  which all of them open it.
+
+``check_recording`` refuses what is not a recording (empty, not MCAP) with the reason.
 
 SIGTERM/SIGKILL leave such a truncated file; SIGINT raises KeyboardInterrupt, so a ``with``
 block closes the file properly. Signal handling is the node's business: it calls ``close()``.
@@ -32,6 +39,7 @@ import os
 import struct
 import threading
 import time
+from dataclasses import dataclass
 from pathlib import Path
 
 from mcap.exceptions import EndOfFile
@@ -42,14 +50,19 @@ from mcap.writer import CompressionType, Writer
 from mcap_ros2._dynamic import serialize_dynamic
 from mcap_ros2.decoder import DecoderFactory
 
-from .ros_schemas import encodable, full_definition, mcap_ros2_alias, split_type_name, \
-    type_name_of
+from .ros_schemas import encodable, full_definition, mcap_ros2_alias, recorded_type, \
+    rosidl_type, split_type_name, type_name_of
 
 # service_msgs/msg/ServiceEventInfo event types
 REQUEST_SENT, REQUEST_RECEIVED, RESPONSE_SENT, RESPONSE_RECEIVED = 0, 1, 2, 3
 SERVICE_EVENT_SUFFIX = "/_service_event"
 LIBRARY = "cdh_planner mcap_log"
 MAGIC = b"\x89MCAP0\r\n"     # starts and ends every MCAP file
+
+
+class NotARecording(ValueError):
+    """The file is not an MCAP recording (empty, another format, no message); the message
+    says why, on one line."""
 
 
 def offered_qos_yaml(transient_local: bool = False) -> str:
@@ -77,7 +90,8 @@ class RunRecorder:
 
     ``write`` takes rosidl message instances (``nav_msgs.msg.Path()`` ...) and registers the
     schema and channel of a topic on first use. Thread-safe: the node may record from its
-    executor and from the planning thread.
+    executor and from the planning thread. ``size`` (bytes written), ``messages`` and
+    ``opened`` (time.monotonic() at open) let the caller rotate files.
     """
 
     def __init__(self, path):
@@ -92,6 +106,13 @@ class RunRecorder:
         self._channels: dict[str, tuple[int, str]] = {}     # topic -> (channel id, type)
         self._lock = threading.Lock()
         self._closed = False
+        self.opened = time.monotonic()
+        self.messages = 0
+
+    @property
+    def size(self) -> int:
+        """Bytes in the file so far (everything written has been flushed)."""
+        return self._file.tell()
 
     def __enter__(self):
         return self
@@ -124,6 +145,8 @@ class RunRecorder:
             raise ValueError(f"client_gid must be 16 bytes, got {len(client_gid)}")
         log_time_ns = time.time_ns() if log_time_ns is None else log_time_ns
         stamp_ns = log_time_ns if stamp_ns is None else stamp_ns
+        if request is not None and response is not None:
+            raise ValueError("a service event holds a request or a response, not both")
         event = {
             "info": {"event_type": event_type,
                      "stamp": {"sec": stamp_ns // 10**9, "nanosec": stamp_ns % 10**9},
@@ -153,13 +176,15 @@ class RunRecorder:
             if self._closed:
                 raise ValueError(f"recorder for {self.path} is closed")
             channel_id, encoder = self._channel(topic, type_name, transient_local)
-            data = encoder(encodable(msg, type_name))
+            data = encoder(encodable(msg, type_name))   # raises before anything is written
             self._writer.add_message(channel_id=channel_id, log_time=log_time_ns,
                                      data=data, publish_time=log_time_ns)
             self._writer.flush()     # finishes the chunk and flushes the file: kill-safe
+            self.messages += 1
 
     def _channel(self, topic, type_name, transient_local):
         """(channel id, encoder) for ``topic``, registering schema and channel on first use."""
+        type_name = recorded_type(type_name)
         if topic in self._channels:
             channel_id, known = self._channels[topic]
             if known != type_name:
@@ -167,9 +192,8 @@ class RunRecorder:
             return channel_id, self._schemas[type_name][1]
         if type_name not in self._schemas:
             text = full_definition(type_name)
+            encoder = serialize_dynamic(type_name, text)[type_name]   # before registering
             schema_id = self._writer.register_schema(type_name, "ros2msg", text.encode())
-            alias = mcap_ros2_alias(type_name)
-            encoder = serialize_dynamic(alias, mcap_ros2_alias(text))[alias]
             self._schemas[type_name] = (schema_id, encoder)
         schema_id, encoder = self._schemas[type_name]
         channel_id = self._writer.register_channel(
@@ -180,8 +204,9 @@ class RunRecorder:
 
 
 class _DecoderFactory(DecoderFactory):
-    """mcap_ros2's decoders, fed aliased schemas so that service types parse (see
-    ``mcap_ros2_alias``); decoded classes are named after the alias (``GetPlanEvent``)."""
+    """mcap_ros2's decoders; schemas of files recorded with rosbag2's service names
+    (``pkg/srv/S_Event``) are fed to them aliased (``mcap_ros2_alias``); for files recorded
+    since, the alias changes nothing."""
 
     def decoder_for(self, message_encoding, schema):
         if schema is not None and schema.encoding == "ros2msg":
@@ -191,22 +216,48 @@ class _DecoderFactory(DecoderFactory):
         return super().decoder_for(message_encoding, schema)
 
 
+def check_recording(path) -> tuple[int, bool]:
+    """(size in bytes, complete) of the MCAP file ``path``; NotARecording if it is empty, not
+    a regular file or does not start with the MCAP magic (FileNotFoundError if missing).
+    ``complete``: it also ends with the magic (closed properly; a killed run's does not)."""
+    path = Path(path)
+    if path.is_dir():
+        raise NotARecording(f"{path} is a directory, not an MCAP file")
+    with open(path, "rb") as f:
+        head = f.read(len(MAGIC))
+        size = f.seek(0, os.SEEK_END)
+        if size == 0:
+            raise NotARecording(f"{path} is empty (0 bytes): not a recording")
+        if head != MAGIC:
+            raise NotARecording(f"{path} is not an MCAP file (it does not start with the MCAP "
+                                f"magic; first bytes {head[:8]!r})")
+        return size, _ends_with_magic(f)
+
+
 def scan_records(path, decode: bool):
     """(schema, channel, message, decoded or None) in file order, by linear scan.
 
     A killed writer leaves a torn last record: the scan stops there quietly (chunk CRCs are
     checked, so a torn chunk is dropped whole, never half-decoded). The same errors in a
-    complete file (one that ends with the MCAP magic) are real damage and are raised.
+    complete file (one that ends with the MCAP magic) are real damage and are raised. No
+    record is read beyond the file's size (a corrupt length cannot make it allocate more).
     """
     with open(path, "rb") as f:
-        reader = NonSeekingReader(f, validate_crcs=True, decoder_factories=[_DecoderFactory()])
-        records = (reader.iter_decoded_messages(log_time_order=False) if decode else
-                   (r + (None,) for r in reader.iter_messages(log_time_order=False)))
-        try:
-            yield from records
-        except (EndOfFile, CRCValidationError, struct.error):
-            if _ends_with_magic(f):
-                raise
+        size = f.seek(0, os.SEEK_END)
+        f.seek(0)
+        yield from _scan_file(f, size, decode)
+
+
+def _scan_file(f, size, decode):
+    reader = NonSeekingReader(f, validate_crcs=True, decoder_factories=[_DecoderFactory()],
+                              record_size_limit=max(size, 1))
+    records = (reader.iter_decoded_messages(log_time_order=False) if decode else
+               (r + (None,) for r in reader.iter_messages(log_time_order=False)))
+    try:
+        yield from records
+    except (EndOfFile, CRCValidationError, struct.error):
+        if _ends_with_magic(f):
+            raise
 
 
 def _ends_with_magic(f) -> bool:
@@ -219,36 +270,86 @@ def _ends_with_magic(f) -> bool:
 
 def read_run(path) -> list[tuple[str, str, object, int]]:
     """All messages of a run file as (topic, type name, decoded message, log time ns), in
-    log-time order (stable). Also reads files of killed runs (no summary, torn tail).
+    log-time order (stable). Also reads files of killed runs (no summary, torn tail). Type
+    names are rosidl's (``nav_msgs/srv/GetPlan_Event``, whatever the file calls it).
 
     Messages are mcap_ros2's decoded objects (attributes named like the fields; nested
     messages as objects, arrays as lists; ``char`` decoded as int8 by mcap_ros2).
     """
-    out = [(c.topic, s.name, m, msg.log_time) for s, c, msg, m in scan_records(path, decode=True)]
+    out = [(c.topic, rosidl_type(s.name), m, msg.log_time)
+           for s, c, msg, m in scan_records(path, decode=True)]
     out.sort(key=lambda item: item[3])
     return out
 
 
-def recover_run(src, dst) -> int:
+@dataclass(frozen=True)
+class Recovery:
+    """What ``recover`` did: messages and topics copied, whether the source was complete
+    already, bytes of the source after its last readable message (a torn tail, or the
+    summary of a complete file), schemas renamed to the current service names."""
+
+    messages: int
+    topics: int
+    complete: bool
+    dropped_bytes: int
+    renamed_schemas: tuple
+
+
+def recover(src, dst) -> Recovery:
     """Copy the readable messages of ``src`` (e.g. a killed run) to a complete file ``dst``
-    (summary, indexes, footer) that rosbag2 and rosbags open. Returns the message count."""
-    count = 0
-    schema_ids, channel_ids = {}, {}
-    with open(dst, "wb") as out:
-        writer = Writer(out, compression=CompressionType.NONE)
-        writer.start(profile="ros2", library=LIBRARY)
-        for schema, channel, message, _ in scan_records(src, decode=False):
-            if schema is not None and schema.id not in schema_ids:
-                schema_ids[schema.id] = writer.register_schema(
-                    schema.name, schema.encoding, schema.data)
-            if channel.id not in channel_ids:
-                channel_ids[channel.id] = writer.register_channel(
-                    channel.topic, channel.message_encoding,
-                    schema_ids[schema.id] if schema is not None else 0,
-                    metadata=dict(channel.metadata))
-            writer.add_message(channel_id=channel_ids[channel.id], log_time=message.log_time,
-                               data=message.data, publish_time=message.publish_time,
-                               sequence=message.sequence)
-            count += 1
-        writer.finish()
-    return count
+    (summary, indexes, footer) that rosbag2, rosbags and mcap's indexed reader open. Schemas
+    of older files named as rosbag2 names service events (``pkg/srv/S_Event``) are renamed
+    (``ros_schemas.recorded_type``; same bytes). ``dst`` is written in full or not at all (a
+    temporary file renamed at the end). NotARecording if ``src`` is not an MCAP recording
+    or holds no readable message."""
+    size, complete = check_recording(src)
+    src, dst = Path(src), Path(dst)
+    if dst.exists() and dst.resolve() == src.resolve():
+        raise NotARecording(f"{dst}: the output must not be the file being recovered")
+    count, end = 0, len(MAGIC)
+    schema_ids, channel_ids, renamed = {}, {}, []
+    tmp = dst.with_name(f".{dst.name}.{os.getpid()}.tmp")
+    try:
+        with open(tmp, "wb") as out:
+            writer = Writer(out, compression=CompressionType.NONE)
+            writer.start(profile="ros2", library=LIBRARY)
+            with open(src, "rb") as f:
+                for schema, channel, message, _ in _scan_file(f, size, decode=False):
+                    if schema is not None and schema.id not in schema_ids:
+                        name, data = schema.name, schema.data
+                        if schema.encoding == "ros2msg" and recorded_type(name) != name:
+                            try:
+                                name = recorded_type(schema.name)
+                                data = full_definition(name).encode()
+                                renamed.append(schema.name)
+                            except (LookupError, OSError, ValueError):
+                                name, data = schema.name, schema.data  # not installed here
+                        schema_ids[schema.id] = writer.register_schema(name, schema.encoding,
+                                                                       data)
+                    if channel.id not in channel_ids:
+                        channel_ids[channel.id] = writer.register_channel(
+                            channel.topic, channel.message_encoding,
+                            schema_ids[schema.id] if schema is not None else 0,
+                            metadata=dict(channel.metadata))
+                    writer.add_message(channel_id=channel_ids[channel.id],
+                                       log_time=message.log_time, data=message.data,
+                                       publish_time=message.publish_time,
+                                       sequence=message.sequence)
+                    count += 1
+                    end = f.tell()
+            if count == 0:
+                raise NotARecording(f"{src} holds no readable message (cut off before the "
+                                    f"first one, or an empty recording): nothing to recover")
+            writer.finish()
+            out.flush()
+            os.fsync(out.fileno())
+        os.replace(tmp, dst)
+    finally:
+        tmp.unlink(missing_ok=True)
+    return Recovery(messages=count, topics=len(channel_ids), complete=complete,
+                    dropped_bytes=max(0, size - end), renamed_schemas=tuple(renamed))
+
+
+def recover_run(src, dst) -> int:
+    """``recover(src, dst)``; the number of messages copied."""
+    return recover(src, dst).messages

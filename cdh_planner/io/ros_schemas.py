@@ -15,15 +15,26 @@ own text, then for each nested type, sorted by name, depth first, each once::
 Service types have no .msg files. ``pkg/srv/S_Request`` and ``_Response`` are the two halves
 of ``S.srv``; ``pkg/srv/S_Event`` is the introspection message rosidl generates for every
 service (``service_msgs/ServiceEventInfo info``, ``S_Request[<=1] request``,
-``S_Response[<=1] response``). rosbag2's current source writes service event schemas as the
-raw .srv text behind a ``SRV:`` header, which neither rosbags nor mcap_ros2 (nor Foxglove /
-Lichtblick: ros2/rosbag2#2365, open) can parse; we write the Event as an ordinary message
-definition instead, the form that issue asks for, which all of them decode. (rosbag2 does
-not need the schema text to play a topic back: it goes by the type name.)
+``S_Response[<=1] response``).
 
-Nested service halves are named ``pkg/S_Request`` in ``MSG:`` headers and field types (not
-``pkg/srv/...``): mcap_ros2 rejects three-part field types, and rosbags resolves relative
-names (``Path`` in nav_msgs' GetPlan) against the ``pkg/msg`` namespace only that way.
+Service types are recorded under names without the underscore: ``pkg/msg/SEvent``, with
+the halves nested as ``pkg/SRequest`` and ``pkg/SResponse`` (``recorded_type``; the CDR
+bytes are those of ``pkg/srv/S_Event``). rosbag2 itself names them ``pkg/srv/S_Event``, but
+no stock reader decodes that name:
+
+- mcap_ros2's rosidl parser accepts only ``[A-Z][A-Za-z0-9]*`` message names, in the schema
+  name, ``MSG:`` headers and field types alike (``InvalidResourceName``);
+- rosbags files a ``pkg/srv/T`` definition under ``pkg/srv/msg/T`` and then looks the
+  channel's ``pkg/srv/T`` up and fails (``KeyError``; ``rosbags-convert``: "Type ... is
+  unknown", exit 1);
+- rosbag2's current source writes the schema as the raw .srv text behind a ``SRV:`` header,
+  which neither of them (nor Foxglove / Lichtblick: ros2/rosbag2#2365, open) parses.
+
+``pkg/msg/SEvent`` with an ordinary message definition decodes in all of them (and in
+Foxglove). The cost: tools that go by the type name alone (``ros2 bag play``) do not find a
+``pkg/msg/SEvent`` type and skip those topics. ``rosidl_type`` maps the recorded name back;
+files recorded before (``pkg/srv/S_Event``, halves ``pkg/S_Request``) are still read
+(``mcap_ros2_alias``), and ``io.mcap_log.recover_run`` rewrites them to the new names.
 """
 
 import array
@@ -39,7 +50,7 @@ SEPARATOR = "=" * 80
 PRIMITIVES = frozenset({
     "bool", "byte", "char", "float32", "float64", "int8", "uint8", "int16", "uint16",
     "int32", "uint32", "int64", "uint64", "string", "wstring"})
-SERVICE_SUFFIXES = ("_Request", "_Response", "_Event")
+SERVICE_PARTS = ("Request", "Response", "Event")
 
 
 def type_name_of(msg) -> str:
@@ -104,32 +115,66 @@ def _field_types(text: str, pkg: str) -> set[str]:
     return deps
 
 
-def _service_text(pkg: str, name: str) -> str | None:
-    """Text of ``name`` if it is ``S_Request``, ``S_Response`` or ``S_Event`` of an installed
-    service ``pkg/srv/S``, else None."""
-    for suffix in SERVICE_SUFFIXES:
-        service = name[: -len(suffix)]
-        if not (name.endswith(suffix) and (_share_dir(pkg) / "srv" / f"{service}.srv").is_file()):
-            continue
-        if suffix == "_Event":      # rosidl's generated introspection message, as .msg text
-            return (f"service_msgs/ServiceEventInfo info\n"
-                    f"{pkg}/{service}_Request[<=1] request\n"
-                    f"{pkg}/{service}_Response[<=1] response\n")
-        return _srv_halves(pkg, service)[0 if suffix == "_Request" else 1]
+@lru_cache(maxsize=None)
+def _service_part(pkg: str, name: str) -> tuple[str, str] | None:
+    """(S, part) if ``name`` is ``S_Request``, ``S_Response`` or ``S_Event`` (or the same
+    without the underscore) of an installed service ``pkg/srv/S``, else None."""
+    for part in SERVICE_PARTS:
+        service = name[: -len(part)]
+        service = service[:-1] if service.endswith("_") else service
+        if name.endswith(part) and service and \
+                (_share_dir(pkg) / "srv" / f"{service}.srv").is_file():
+            return service, part
     return None
+
+
+def _is_msg(pkg: str, name: str) -> bool:
+    return (_share_dir(pkg) / "msg" / f"{name}.msg").is_file()
+
+
+def recorded_type(type_name: str) -> str:
+    """The name ``type_name`` is recorded under: itself, except the parts of a service
+    (``nav_msgs/srv/GetPlan_Event`` -> ``nav_msgs/msg/GetPlanEvent``; module docstring)."""
+    pkg, ns, name = split_type_name(type_name)
+    part = None if ns == "msg" and _is_msg(pkg, name) else _service_part(pkg, name)
+    return type_name if part is None else f"{pkg}/msg/{part[0]}{part[1]}"
+
+
+def rosidl_type(recorded: str) -> str:
+    """The rosidl name of a recorded type name (``nav_msgs/msg/GetPlanEvent`` ->
+    ``nav_msgs/srv/GetPlan_Event``; ``pkg/srv/S_Event`` of older files stays). Names of
+    packages not installed here stay as they are."""
+    pkg, ns, name = split_type_name(recorded)
+    if ns != "msg" or _is_msg(pkg, name) or (part := _service_part(pkg, name)) is None:
+        return recorded
+    return f"{pkg}/srv/{part[0]}_{part[1]}"
+
+
+def _service_text(pkg: str, name: str) -> str | None:
+    """Text of ``name`` if it is a part of an installed service ``pkg/srv/S`` (``S_Request``,
+    ``SRequest`` ...; ``_service_part``), else None. The Event's own text names the halves
+    ``pkg/SRequest`` and ``pkg/SResponse``."""
+    found = _service_part(pkg, name)
+    if found is None:
+        return None
+    service, part = found
+    if part == "Event":      # rosidl's generated introspection message, as .msg text
+        return (f"service_msgs/ServiceEventInfo info\n"
+                f"{pkg}/{service}Request[<=1] request\n"
+                f"{pkg}/{service}Response[<=1] response\n")
+    return _srv_halves(pkg, service)[0 if part == "Request" else 1]
 
 
 @lru_cache(maxsize=None)
 def own_definition(type_name: str) -> tuple[str, tuple[str, ...]]:
     """(text, sorted nested type names) of one type, without its dependencies' texts.
 
-    Nested names are as they appear in ``MSG:`` headers (``pkg/Type``). A two-part name may
-    be a service half (``nav_msgs/GetPlan_Request``): that is how nested ones are written.
+    Nested names are as they appear in ``MSG:`` headers (``pkg/Type``). A name may be a
+    service part in either spelling (``nav_msgs/GetPlanRequest``, ``nav_msgs/srv/GetPlan_Event``).
     """
     pkg, ns, name = split_type_name(type_name)
-    msg_file = _share_dir(pkg) / "msg" / f"{name}.msg"
-    if ns == "msg" and msg_file.is_file():
-        text = msg_file.read_text()
+    if ns == "msg" and _is_msg(pkg, name):
+        text = (_share_dir(pkg) / "msg" / f"{name}.msg").read_text()
     elif (text := _service_text(pkg, name)) is None:
         raise LookupError(f"no definition of {type_name} under {_share_dir(pkg)}")
     return text, tuple(sorted(_field_types(text, pkg)))
@@ -157,12 +202,9 @@ _UNDERSCORED_TYPE = re.compile(
 
 
 def mcap_ros2_alias(text: str) -> str:
-    """``text`` (a type name or schema) with underscores dropped from type names.
-
-    mcap_ros2's vendored rosidl parser only accepts ``[A-Z][A-Za-z0-9]*`` message names, so
-    it refuses the service types ``S_Request``, ``S_Response`` and ``S_Event``. CDR does not
-    depend on names, so encoding and decoding under ``SRequest`` ... gives the same bytes;
-    the file keeps the real names.
+    """``text`` (a type name or schema) with underscores dropped from type names: to decode
+    files recorded with rosbag2's service names (``pkg/srv/S_Event``, ``pkg/S_Request``) with
+    mcap_ros2, which refuses them. CDR does not depend on names: the bytes decode the same.
     """
     return _UNDERSCORED_TYPE.sub(lambda m: m[1] + m[2].replace("_", ""), text)
 

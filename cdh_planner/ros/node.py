@@ -22,9 +22,10 @@ Parameters: ``ros/params.py``. Changes go through the standard parameter service
 checked there (a bad value is refused with the reason); a change of robot.*, task.*,
 planner.* or trajectory.* builds a new Planner for the next request.
 
-Recording: ``ros/recording.py`` (one MCAP file per node run in ``log_dir``): each plan call's
-request and response events, every message published for it (progress included), the
-execute / stop calls and every streamed command.
+Recording: ``ros/recording.py`` (MCAP files in ``log_dir``, from the node's start, rotated
+by ``log_max_file_mb`` / ``log_max_file_s``): the parameters at start and every change, each
+plan call's request and response events, every message published for it (progress
+included), the execute / stop calls and every streamed command.
 """
 
 import os
@@ -56,7 +57,7 @@ from . import planning
 from .messages import WINCH_COMMAND_TYPE
 from .params import BOOL, DOUBLE, DOUBLES, INT, REQUIRED, SPECS, STRING, STRINGS, \
     PLANNER_PREFIXES, needs_new_planner, node_config, parameter_error
-from .recording import RunLog
+from .recording import RunLog, log_limits
 from .streaming import Stream
 
 NODE_NAME = "cdh_planner"
@@ -93,7 +94,12 @@ class PlannerNode(Node):
         self._config_lock = threading.Lock()
         self.add_on_set_parameters_callback(self._on_set_parameters)
         self.runlog = RunLog(self.config.log_dir, self.config.log_enabled,
-                             warn=self.get_logger().warning)
+                             warn=self.get_logger().warning, info=self.get_logger().info,
+                             node_name=self.get_fully_qualified_name(),
+                             **log_limits(self.config.values))
+        self.runlog.parameters([p.to_parameter_msg() for p in
+                                self.get_parameters_by_prefix("").values()], initial=True)
+        log_file = self.runlog.open()
 
         pub = self.create_publisher
         self.pub_path = pub(Path, f"~/{PATH}", LATCHED)
@@ -119,8 +125,9 @@ class PlannerNode(Node):
         c = self.config
         self.get_logger().info(
             f"ready: robot {c.robot.name}, task {c.task.type}, strategy "
-            f"{c.settings.strategy}, base frame {c.base_frame}, recording "
-            f"{'to ' + c.log_dir if c.log_enabled else 'off'}")
+            f"{c.settings.strategy}, base frame {c.base_frame}, "
+            + (f"recording to {log_file}; if the node is killed: cdh-planner recover {log_file}"
+               if log_file else "recording " + ("off" if not c.log_enabled else "failed")))
 
     # ------------------------------------------------------------------ parameters
 
@@ -166,7 +173,8 @@ class PlannerNode(Node):
             return SetParametersResult(successful=False, reason=str(exc))
         with self._config_lock:
             self._values, self.config, self._planner = values, config, planner
-        self.runlog.configure(config.log_dir, config.log_enabled)
+        self.runlog.configure(config.log_dir, config.log_enabled, **log_limits(config.values))
+        self.runlog.parameters([p.to_parameter_msg() for p in params], log_time_ns=self._now())
         self.get_logger().info(f"parameters set: {', '.join(p.name for p in params)}")
         return SetParametersResult(successful=True)
 

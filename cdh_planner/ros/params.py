@@ -39,6 +39,8 @@ stream_rate_hz                  50         rate of ~/cable_command while executi
 stream_interpolation            linear     linear (never above the speed limit) or quintic
 log_dir                         ~/.ros/cdh_planner  where run MCAP files go
 log_enabled                     true       record plan calls to MCAP
+log_max_file_mb                 100        next run file beyond this size (MiB); 0: none
+log_max_file_s                  0          next run file after this long (s); 0: no limit
 ==============================  =========  ================================================
 """
 
@@ -158,7 +160,11 @@ SPECS = (
        Spec("log_dir", STRING, "~/.ros/cdh_planner",
             "directory of the run MCAP files (one file per node run; created when needed)"),
        Spec("log_enabled", BOOL, True, "record plan calls, published messages and streamed "
-            "commands to MCAP in log_dir")]
+            "commands to MCAP in log_dir"),
+       Spec("log_max_file_mb", DOUBLE, 100.0, "rotation: a run file that has reached this "
+            "size (MiB) is closed and the next record starts a new one; 0: no limit", low=0.0),
+       Spec("log_max_file_s", DOUBLE, 0.0, "rotation: a run file open this long (s) is "
+            "closed and the next record starts a new one; 0: no limit", low=0.0)]
 )
 SPEC = {s.name: s for s in SPECS}
 

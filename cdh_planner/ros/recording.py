@@ -1,14 +1,28 @@
-"""The node's run log: one MCAP file per node run (``io.mcap_log.RunRecorder``).
+"""The node's run log: MCAP files of one node run (``io.mcap_log.RunRecorder``).
 
-The file is opened when the first thing is recorded (the first plan call), named
-``<log_dir>/cdh_planner_<YYYYmmdd-HHMMSS>_<pid>.mcap``, and closed when the node shuts down
-(SIGINT / SIGTERM included). Changing ``log_dir`` or turning ``log_enabled`` off closes it;
-the next record opens a new file (``..._<n>.mcap``). Every message is flushed as it is
-written, so a killed node loses nothing already recorded (``io.mcap_log`` explains what a
-killed file looks like and how to read it).
+The first file is opened when the node starts, named
+``<log_dir>/cdh_planner_<YYYYmmdd-HHMMSS>_<pid>.mcap``; later ones (rotation, or after a
+change of ``log_dir`` / ``log_enabled``) add ``_<n>`` to the name. The last one is closed
+when the node shuts down (SIGINT / SIGTERM included). Every message is flushed as it is
+written, so a killed node loses nothing already recorded; its file lacks the summary, and
+``cdh-planner recover FILE`` completes it (``io.mcap_log`` explains).
 
-Recording never raises into the node: a failure (disk full, directory gone) is reported
-once through ``warn`` and recording stops until the configuration changes.
+Parameters: every file begins with a ``rcl_interfaces/msg/ParameterEvent`` on
+``/parameter_events`` (the topic and type ROS itself publishes them on) listing all the
+node's parameters as ``new_parameters``, and each accepted change is recorded as one with
+``changed_parameters``. So any one file says which parameters were in effect at each of its
+requests (``replay --requests`` applies them).
+
+Rotation: with ``max_bytes`` or ``max_s`` (> 0), a file that has reached either limit is
+closed before the next record and the record starts the next file. A plan call's request
+and response stay in one file: while a call is open, rotation waits (up to twice the
+limits). A file thus holds at least one record after its parameter snapshot, and exceeds
+``max_bytes`` by at most one record (one message, or one call at twice the limit).
+
+Recording never raises into the node. A failure of the file (disk full, directory gone) is
+reported once through ``warn`` and recording stops until the configuration changes; a
+message that cannot be encoded (e.g. a number beyond its field's type) is dropped with a
+warning (once per topic) and recording goes on.
 """
 
 import os
@@ -16,21 +30,43 @@ import threading
 import time
 from pathlib import Path
 
-from ..io.mcap_log import RunRecorder
+from rcl_interfaces.msg import ParameterEvent
+
+from ..io.mcap_log import REQUEST_RECEIVED, REQUEST_SENT, RESPONSE_RECEIVED, RESPONSE_SENT, \
+    RunRecorder
+
+PARAMETER_EVENTS = "/parameter_events"
+MIB = 1024 * 1024
+# while a call is open, a file may grow to this many times its limits before it rotates
+OPEN_CALL_SLACK = 2.0
 
 
 class RunLog:
-    """Thread-safe: the planning thread and the executor both record."""
+    """Thread-safe: the planning thread and the executor both record.
 
-    def __init__(self, log_dir, enabled, warn=print):
+    ``warn(text)``: failures; ``info(text)``: each file opened on its own (rotation, new
+    ``log_dir``), with the command that completes it if the node is killed.
+    """
+
+    def __init__(self, log_dir, enabled, warn=print, info=print, max_bytes=0, max_s=0.0,
+                 node_name="/cdh_planner"):
         self._lock = threading.Lock()
         self._recorder = None
         self._dir = log_dir
         self._enabled = enabled
+        self._max_bytes = max_bytes
+        self._max_s = max_s
         self._failed = False
         self._warn = warn
+        self._info = info
+        self._node = node_name
         self._files = 0
         self._stem = f"cdh_planner_{time.strftime('%Y%m%d-%H%M%S')}_{os.getpid()}"
+        self._parameters = {}       # name -> rcl_interfaces/msg/Parameter: current values
+        self._open_calls = set()    # (service, sequence) requested, not yet answered
+        self._dropped = set()       # topics whose undecodable message was reported
+        self._written = 0           # records in the current file after its snapshot
+        self._rotated = ""          # why the last file was closed by rotation
         self.closed = False
 
     @property
@@ -39,9 +75,14 @@ class RunLog:
         recorder = self._recorder
         return str(recorder.path) if recorder is not None else ""
 
-    def configure(self, log_dir, enabled):
-        """New settings: a change closes the current file."""
+    def configure(self, log_dir, enabled, max_bytes=None, max_s=None):
+        """New settings: a change of directory or on/off closes the current file; new limits
+        apply to it from the next record (``None``: unchanged)."""
         with self._lock:
+            if max_bytes is not None:
+                self._max_bytes = max_bytes
+            if max_s is not None:
+                self._max_s = max_s
             if (log_dir, enabled) != (self._dir, self._enabled):
                 self._close_locked()
                 self._dir, self._enabled, self._failed = log_dir, enabled, False
@@ -49,13 +90,32 @@ class RunLog:
     def open(self):
         """Open the file now if recording is on and none is open; return its path or ""."""
         with self._lock:
-            return self._open_locked()
+            return self._open_locked(announce=False)
+
+    def parameters(self, params, initial=False, log_time_ns=None):
+        """The node's parameters (rcl_interfaces/msg/Parameter): ``initial``, all of them (the
+        snapshot each file begins with; nothing is written now), else the ones just changed
+        (recorded as a ParameterEvent with ``changed_parameters``)."""
+        with self._lock:
+            if initial:
+                self._parameters = {p.name: p for p in params}
+                return
+            self._parameters.update({p.name: p for p in params})
+        event = ParameterEvent(node=self._node, changed_parameters=list(params))
+        self._call("write", PARAMETER_EVENTS, _stamped(event, log_time_ns), log_time_ns)
 
     def write(self, topic, msg, log_time_ns=None, transient_local=False):
         self._call("write", topic, msg, log_time_ns, transient_local=transient_local)
 
     def service_event(self, service, srv_type, event_type, request=None, response=None,
                       sequence_number=0, log_time_ns=None):
+        call = (service, sequence_number)
+        answer = event_type in (RESPONSE_SENT, RESPONSE_RECEIVED)
+        with self._lock:
+            if event_type in (REQUEST_RECEIVED, REQUEST_SENT):
+                self._open_calls.add(call)
+            elif answer:
+                self._open_calls.discard(call)
         self._call("write_service_event", service, srv_type, event_type, request=request,
                    response=response, sequence_number=sequence_number,
                    log_time_ns=log_time_ns)
@@ -68,14 +128,40 @@ class RunLog:
 
     def _call(self, method, *args, **kwargs):
         with self._lock:
-            if not self._open_locked():
+            self._rotate_locked()
+            if not self._open_locked(announce=True):
                 return
+            recorder = self._recorder
             try:
-                getattr(self._recorder, method)(*args, **kwargs)
-            except (OSError, ValueError) as exc:
-                self._fail(f"recording to {self._recorder.path} failed: {exc}")
+                getattr(recorder, method)(*args, **kwargs)
+                self._written += 1
+            except OSError as exc:
+                self._fail(f"recording to {recorder.path} failed: {exc}")
+            except Exception as exc:  # noqa: BLE001 - encoding: drop this message, go on
+                topic = args[0]
+                if topic not in self._dropped:
+                    self._dropped.add(topic)
+                    self._warn(f"not recorded: a message on {topic} that cannot be encoded "
+                               f"({type(exc).__name__}: {exc}); later ones on this topic "
+                               f"that fail are dropped silently")
 
-    def _open_locked(self):
+    def _rotate_locked(self):
+        """Close the current file if it has reached a limit (module docstring)."""
+        r = self._recorder
+        if r is None or self._written == 0 or not (self._max_bytes or self._max_s):
+            return
+        slack = OPEN_CALL_SLACK if self._open_calls else 1.0
+        age = time.monotonic() - r.opened
+        if self._max_bytes and r.size >= slack * self._max_bytes:
+            reason = f"reached {r.size / MIB:.3g} MiB (log_max_file_mb {self._max_bytes / MIB:g})"
+        elif self._max_s and age >= slack * self._max_s:
+            reason = f"open for {age:.3g} s (log_max_file_s {self._max_s:g})"
+        else:
+            return
+        self._close_locked()
+        self._rotated = f"{r.path.name} {reason}"
+
+    def _open_locked(self, announce):
         if self.closed or not self._enabled or self._failed:
             return ""
         if self._recorder is None:
@@ -84,9 +170,21 @@ class RunLog:
             path = Path(self._dir) / f"{self._stem}{suffix}.mcap"
             try:
                 self._recorder = RunRecorder(path)
+                if self._parameters:
+                    event = ParameterEvent(node=self._node,
+                                           new_parameters=list(self._parameters.values()))
+                    self._recorder.write(PARAMETER_EVENTS, _stamped(event, None))
             except OSError as exc:
                 self._fail(f"cannot record to {path}: {exc}")
                 return ""
+            except Exception as exc:  # noqa: BLE001 - never into the node
+                self._warn(f"the parameters could not be recorded in {path}: "
+                           f"{type(exc).__name__}: {exc}")
+            self._written = 0
+            rotated, self._rotated = self._rotated, ""
+            if announce:
+                self._info(f"recording to {path}" + (f" ({rotated})" if rotated else "")
+                           + f"; if the node is killed: cdh-planner recover {path}")
         return str(self._recorder.path)
 
     def _close_locked(self):
@@ -106,3 +204,17 @@ class RunLog:
         except (OSError, ValueError):
             pass
         self._recorder = None
+
+
+def _stamped(event, log_time_ns):
+    """``event`` with its stamp set to ``log_time_ns`` (default: now)."""
+    t = time.time_ns() if log_time_ns is None else int(log_time_ns)
+    event.stamp.sec, event.stamp.nanosec = t // 10**9, t % 10**9
+    return event
+
+
+def log_limits(values):
+    """RunLog's rotation limits (``max_bytes``, ``max_s``) from the node's parameter values
+    ``log_max_file_mb`` and ``log_max_file_s``."""
+    return {"max_bytes": int(float(values.get("log_max_file_mb") or 0.0) * MIB),
+            "max_s": float(values.get("log_max_file_s") or 0.0)}

@@ -26,6 +26,7 @@ from ..errors import InputError
 from ..model.pose import rotation_angle_between, rotation_from_quaternion
 from ..io.mcap_log import REQUEST_RECEIVED, RESPONSE_SENT, SERVICE_EVENT_SUFFIX
 from ..io.mcap_log import scan_records as scan_run  # raw records of a (possibly killed) run file
+from ..io.ros_schemas import rosidl_type
 from .messages import path_arrays
 
 
@@ -45,7 +46,7 @@ def read_records(path):
     """Every message of the run file ``path``, in log-time order; InputError if it is not a
     readable MCAP file."""
     try:
-        out = [Record(topic=c.topic, type_name=s.name if s is not None else "",
+        out = [Record(topic=c.topic, type_name=rosidl_type(s.name) if s is not None else "",
                       data=bytes(m.data), log_time_ns=m.log_time,
                       transient_local="durability: transient_local"
                       in c.metadata.get("offered_qos_profiles", ""))
