@@ -85,6 +85,12 @@ class PlannerSettings:
         0.2, parameter="trajectory.max_cable_accel", flag="--max-cable-accel", unit="m/s^2",
         description="per-winch cable acceleration limit of the trajectory",
         low=1e-4, high=1000.0)
+    dynamics: str = _setting(
+        "auto", parameter="trajectory.dynamics", flag="--dynamics", unit="",
+        description="time parameterisation: quasi_static (winch limits, static tensions), "
+                    "dynamic (TOPP-RA: tensions in range under the motion's own accelerations; "
+                    "needs robot.load.mass) or auto (dynamic when the robot has a load mass)",
+        choices=("auto", "quasi_static", "dynamic"))
 
     def check(self, name_of=lambda f: f):
         """Validate every field; the InputError names ``name_of(field)``."""

@@ -107,3 +107,15 @@ def test_no_feasible_speed_is_answered_not_raised(q2_q3):
     tight = replace(problem.robot, tension_max=np.full(6, limit))
     timing = dynamic_timing(tight, path, MASS, INERTIA, 0.05, 0.2)
     assert not timing.feasible and "no dynamically feasible timing" in timing.reason
+
+
+def test_robot_file_mass_properties():
+    from cdh_planner.errors import InputError
+    from cdh_planner.model.robot import read_yaml, robot_from_dict, ros_parameters
+    from conftest import CONFIG
+    problem = load_problem(PROBLEMS / "robot2_q2_q3.yaml")
+    assert problem.robot.mass == MASS and np.allclose(problem.robot.inertia, INERTIA)
+    doc = ros_parameters(read_yaml(CONFIG / "robot2.yaml", "robot"), "robot2.yaml")["robot"]
+    doc["load"]["inertia"] = [0.001, -0.001, 0.001]
+    with pytest.raises(InputError, match="robot.load.inertia .*positive semi-definite"):
+        robot_from_dict(doc)

@@ -54,6 +54,8 @@ class Robot:
     ellipsoid_offset: np.ndarray  # (6,)
     ellipsoid_matrix: np.ndarray  # (6, 6) SPD, combined with the contact ellipsoid if any
     source: str = field(default="", compare=False)
+    mass: float = None  # kg, the load's (optional): enables the dynamic timing
+    inertia: np.ndarray = None  # (3, 3) kg m^2 about the centre of mass (load_point), platform frame
 
     @property
     def wrench_center_local(self):
@@ -98,7 +100,8 @@ ROBOT_KEYS = {
     "name", "winch_names", "base_anchors", "platform_anchors", "length_min", "length_max",
     "tension_min", "tension_max", "load", "wrench_ellipsoid", "contact_ellipsoid",
 }
-LOAD_KEYS = {"force", "point", "moment"}
+LOAD_KEYS = {"force", "point", "moment", "mass", "inertia"}
+GRAVITY = 9.80665  # m/s^2: |force| of a load with a mass is its weight (within 2 %)
 ELLIPSOID_KEYS = {"frame", "matrix", "offset"}
 CONTACT_KEYS = {"matrix", "center"}
 
@@ -136,6 +139,7 @@ def robot_from_dict(d, source=""):
     force = _vector("robot.load.force", load["force"], 3, MAX_FORCE_N)
     point = _vector("robot.load.point", load.get("point", [0.0, 0.0, 0.0]), 3, MAX_POSITION_M)
     moment = _vector("robot.load.moment", load.get("moment", [0.0, 0.0, 0.0]), 3, MAX_FORCE_N)
+    mass, inertia = _mass_properties(load, force)
 
     ell = d["wrench_ellipsoid"]
     check_keys("robot.wrench_ellipsoid", ell, ELLIPSOID_KEYS, required={"matrix"})
@@ -156,7 +160,33 @@ def robot_from_dict(d, source=""):
     return Robot(name=name, winch_names=tuple(winches), base_anchors=A, platform_anchors=B,
                  length_min=lmin, length_max=lmax, tension_min=fmin, tension_max=fmax,
                  force=force, load_point=point, moment=moment, ellipsoid_frame=frame,
-                 ellipsoid_offset=offset, ellipsoid_matrix=E, source=source)
+                 ellipsoid_offset=offset, ellipsoid_matrix=E, source=source, mass=mass,
+                 inertia=inertia)
+
+
+def _mass_properties(load, force):
+    """(mass kg, inertia (3, 3) kg m^2) of ``load`` (None, None without ``mass``). The force
+    must then be the load's weight (|force| = mass g within 2 %), so that gravity and the
+    inertial terms of the dynamic timing agree; inertia is 9 numbers (row-major) or 3
+    (diagonal), symmetric positive semi-definite, default 0 (a point mass)."""
+    if load.get("mass") is None:
+        if load.get("inertia") is not None:
+            raise InputError("robot.load.inertia", load["inertia"], "needs robot.load.mass")
+        return None, None
+    mass = float(_vector("robot.load.mass", load["mass"], 1, MAX_FORCE_N)[0])
+    if mass <= 0:
+        raise InputError("robot.load.mass", mass, "must be positive (kg)")
+    weight = mass * GRAVITY
+    if abs(float(np.linalg.norm(force)) - weight) > 0.02 * weight:
+        raise InputError("robot.load.mass", mass, f"the load force ({np.linalg.norm(force):.4g} N) "
+                         f"must be its weight, {weight:.4g} N (mass x {GRAVITY} m/s^2, 2 %)")
+    value = load.get("inertia", [0.0, 0.0, 0.0])
+    n = len(value) if isinstance(value, (list, tuple)) else -1
+    I = np.diag(_vector("robot.load.inertia", value, 3, MAX_FORCE_N)) if n == 3 else \
+        _vector("robot.load.inertia", value, 9, MAX_FORCE_N).reshape(3, 3)
+    if not np.allclose(I, I.T, rtol=1e-9, atol=1e-15) or np.linalg.eigvalsh(I)[0] < -1e-12:
+        raise InputError("robot.load.inertia", value, "must be symmetric positive semi-definite (kg m^2)")
+    return mass, I
 
 
 def check_not_degenerate(A, B, length_min, length_max):

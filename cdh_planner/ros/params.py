@@ -114,6 +114,10 @@ def _robot_specs():
         Spec(r + "load.point", DOUBLES, [0.0, 0.0, 0.0],
              "where the load force acts, platform frame (m): 3 numbers"),
         Spec(r + "load.moment", DOUBLES, [0.0, 0.0, 0.0], "load moment, base frame (N m)"),
+        Spec(r + "load.mass", DOUBLE, None, "load mass (kg; optional: enables the dynamic "
+             "timing; load.force must then be its weight)", low=0.0, high=1e7, open_low=True),
+        Spec(r + "load.inertia", DOUBLES, None, "load inertia about its centre of mass, "
+             "platform frame (kg m^2): 9 numbers row-major or 3 for a diagonal; empty: 0"),
         Spec(r + "wrench_ellipsoid.frame", STRING, "load",
              "frame of the wrench ellipsoid: load (F3, parallel to base at the load point) "
              "or base", choices=("load", "base")),

@@ -292,3 +292,19 @@ def _retimed(robot, path, geo, s, sd, t_grid, mass, inertia):
     return replace(path, t=t_wp, velocities=L_s * sdot[:, None],
                    accelerations=L_s * sddot[:, None] + L_ss * (sdot ** 2)[:, None],
                    tension_nominal=f, tension_min=f - v, tension_max=f + v)
+
+
+def timed_path(robot, path, dynamics, max_cable_speed, max_cable_accel):
+    """(PlannedPath, note): ``path`` (quasi-statically timed) re-timed by ``dynamics``
+    ("auto": dynamic when the robot has a load mass; "dynamic"; "quasi_static"). The note
+    says what was done ("" for quasi-static); when no dynamically feasible timing exists
+    the quasi-static one is kept and the note says so."""
+    if dynamics == "quasi_static" or (dynamics == "auto" and robot.mass is None):
+        return path, ""
+    if robot.mass is None:
+        raise InputError("trajectory.dynamics", dynamics, "needs robot.load.mass in the robot file")
+    timing = dynamic_timing(robot, path, robot.mass, robot.inertia, max_cable_speed, max_cable_accel)
+    if not timing.feasible:
+        return path, f"dynamic timing impossible ({timing.reason}): quasi-static timing kept"
+    return timing.path, (f"dynamic timing {timing.duration:.3f} s (least tension slack "
+                         f"{timing.least_tension_margin_n:.3g} N, checked every {CHECK_DT * 1e3:g} ms)")
