@@ -42,7 +42,7 @@ import time
 from dataclasses import dataclass
 from pathlib import Path
 
-from mcap.exceptions import EndOfFile
+from mcap.exceptions import EndOfFile, RecordLengthLimitExceeded
 from mcap.reader import NonSeekingReader
 from mcap.records import Schema
 from mcap.stream_reader import CRCValidationError
@@ -62,7 +62,7 @@ MAGIC = b"\x89MCAP0\r\n"     # starts and ends every MCAP file
 
 class NotARecording(ValueError):
     """The file is not an MCAP recording (empty, another format, no message); the message
-    says why, on one line."""
+    says why, on one line, without the file's name."""
 
 
 def offered_qos_yaml(transient_local: bool = False) -> str:
@@ -222,15 +222,15 @@ def check_recording(path) -> tuple[int, bool]:
     ``complete``: it also ends with the magic (closed properly; a killed run's does not)."""
     path = Path(path)
     if path.is_dir():
-        raise NotARecording(f"{path} is a directory, not an MCAP file")
+        raise NotARecording("a directory, not an MCAP file")
     with open(path, "rb") as f:
         head = f.read(len(MAGIC))
         size = f.seek(0, os.SEEK_END)
         if size == 0:
-            raise NotARecording(f"{path} is empty (0 bytes): not a recording")
+            raise NotARecording("empty (0 bytes): not a recording")
         if head != MAGIC:
-            raise NotARecording(f"{path} is not an MCAP file (it does not start with the MCAP "
-                                f"magic; first bytes {head[:8]!r})")
+            raise NotARecording(f"not an MCAP file (it does not start with the MCAP magic; "
+                                f"first bytes {head[:8]!r})")
         return size, _ends_with_magic(f)
 
 
@@ -255,7 +255,7 @@ def _scan_file(f, size, decode):
                (r + (None,) for r in reader.iter_messages(log_time_order=False)))
     try:
         yield from records
-    except (EndOfFile, CRCValidationError, struct.error):
+    except (EndOfFile, CRCValidationError, RecordLengthLimitExceeded, struct.error):
         if _ends_with_magic(f):
             raise
 
@@ -305,7 +305,7 @@ def recover(src, dst) -> Recovery:
     size, complete = check_recording(src)
     src, dst = Path(src), Path(dst)
     if dst.exists() and dst.resolve() == src.resolve():
-        raise NotARecording(f"{dst}: the output must not be the file being recovered")
+        raise NotARecording(f"the output {dst} is the file being recovered")
     count, end = 0, len(MAGIC)
     schema_ids, channel_ids, renamed = {}, {}, []
     tmp = dst.with_name(f".{dst.name}.{os.getpid()}.tmp")
@@ -338,8 +338,8 @@ def recover(src, dst) -> Recovery:
                     count += 1
                     end = f.tell()
             if count == 0:
-                raise NotARecording(f"{src} holds no readable message (cut off before the "
-                                    f"first one, or an empty recording): nothing to recover")
+                raise NotARecording("no complete message (an MCAP file cut off before its "
+                                    "first message, or an empty recording): nothing to recover")
             writer.finish()
             out.flush()
             os.fsync(out.fileno())

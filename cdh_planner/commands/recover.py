@@ -1,0 +1,73 @@
+"""``cdh-planner recover``: complete the run file of a killed node.
+
+    cdh-planner recover RUN.mcap [-o OUT.mcap]
+
+A node killed by SIGKILL (or a power cut, an OOM kill) leaves its run file without the MCAP
+summary and footer, perhaps with a torn last record: ``replay`` and the project's own reader
+still read it, but rosbag2, rosbags and mcap's indexed reader refuse it. ``recover`` copies
+every complete message to a complete file (default ``RUN.recovered.mcap`` next to it),
+drops the torn tail, and renames the service-event schemas of files recorded with rosbag2's
+names (``pkg/srv/S_Event``) to the names every reader decodes (``io/ros_schemas.py``). The
+output is written in full or not at all; the input is never changed. A complete file is
+copied the same way. Do not point it at the file of a node still running: it copies what
+is there so far.
+
+Exit codes: 0 recovered; 2 bad input (not a recording, no complete message, an output that
+exists or cannot be written).
+"""
+
+import argparse
+from pathlib import Path
+
+
+def add_parser(subparsers):
+    p = subparsers.add_parser(
+        "recover", help="complete the run file of a killed node (summary, indexes, footer)",
+        description="Copy every complete message of a run file whose node was killed (no "
+                    "MCAP summary, maybe a torn last record) to a complete file that rosbag2, "
+                    "rosbags and mcap's indexed reader open. The input is not changed.",
+        epilog="example:\n  cdh-planner recover ~/.ros/cdh_planner/cdh_planner_20250101-120000_42.mcap",
+        formatter_class=argparse.RawDescriptionHelpFormatter)
+    p.add_argument("run", metavar="RUN.mcap", help="the run file (of a killed node)")
+    p.add_argument("-o", "--output", metavar="OUT.mcap",
+                   help="where to write the complete file (default: RUN.recovered.mcap; "
+                        "must not exist)")
+    p.set_defaults(func=run)
+
+
+def default_output(path):
+    path = Path(path)
+    stem = path.name[:-5] if path.name.endswith(".mcap") else path.name
+    return path.with_name(f"{stem}.recovered.mcap")
+
+
+def run(args):
+    from ..errors import InputError
+    from ..io.mcap_log import NotARecording, check_recording, recover
+    from ..io.outputs import check_output, writing
+    src = Path(args.run)
+    try:
+        check_recording(src)
+    except FileNotFoundError:
+        raise InputError("RUN", str(src), "file not found") from None
+    except NotARecording as exc:
+        raise InputError("RUN", str(src), str(exc)) from None
+    # the output, checked before the work
+    out = check_output("--output", args.output if args.output else default_output(src))
+    if out.exists():
+        raise InputError("--output", str(out), "exists already: give another -o, or remove "
+                                               "it first")
+    try:
+        with writing("--output", out):
+            result = recover(src, out)
+    except NotARecording as exc:
+        raise InputError("RUN", str(src), str(exc)) from None
+    state = ("it was complete already" if result.complete else
+             f"it had no summary (the node was killed); "
+             f"{result.dropped_bytes} bytes after the last complete message dropped")
+    print(f"{src}: {result.messages} messages on {result.topics} topics written to {out} "
+          f"({state})")
+    if result.renamed_schemas:
+        print(f"  service-event schemas renamed to the names every reader decodes: "
+              f"{', '.join(result.renamed_schemas)}")
+    return 0
