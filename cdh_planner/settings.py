@@ -17,22 +17,29 @@ from .search.search import STRATEGIES
 COSTS = ("auto", "so3", "great_circle", "se3")
 
 
+@dataclass(frozen=True, kw_only=True)
+class Bounds:
+    """What a value may be: a range ``low`` .. ``high`` (None: unbounded; ``open_low`` /
+    ``open_high``: the bound itself excluded) or ``choices``. Shared by the settings schema
+    and the node's parameter specs; ``check_range`` reads it."""
+
+    low: Optional[float] = None
+    high: Optional[float] = None
+    open_low: bool = False
+    open_high: bool = False
+    choices: tuple = ()
+
+
 @dataclass(frozen=True)
-class Setting:
+class Setting(Bounds):
     """Metadata of one setting: ``parameter`` (the node's), ``flag`` (the CLI's),
-    ``unit``, ``description``, a range ``low`` .. ``high`` (``open_low`` / ``open_high``:
-    the bound itself excluded) or ``choices``; ``top_level``: a problem-file key beside
+    ``unit``, ``description``, its Bounds; ``top_level``: a problem-file key beside
     ``planner:`` rather than inside it."""
 
     parameter: str
     flag: str
     unit: str
     description: str
-    low: Optional[float] = None
-    high: Optional[float] = None
-    open_low: bool = False
-    open_high: bool = False
-    choices: tuple = ()
     top_level: bool = False
 
 

@@ -47,7 +47,6 @@ log_max_file_s                  0          next run file after this long (s); 0:
 import math
 import os
 from dataclasses import dataclass, field
-from typing import Optional
 
 import numpy as np
 
@@ -55,7 +54,7 @@ from ..errors import InputError
 from ..model.robot import robot_from_dict
 from ..model.task import TASKS, task_from_dict
 from ..planner import task_cost
-from ..settings import SETTINGS, PlannerSettings, check_range
+from ..settings import SETTINGS, Bounds, PlannerSettings, check_range
 
 STRING, BOOL, INT, DOUBLE, DOUBLES, STRINGS = "string", "bool", "int", "double", "doubles", \
     "strings"
@@ -67,21 +66,15 @@ INTERPOLATIONS = ("linear", "quintic")
 
 
 @dataclass(frozen=True)
-class Spec:
+class Spec(Bounds):
     """One parameter: ``kind`` (STRING, BOOL, INT, DOUBLE, DOUBLES, STRINGS), ``default``
-    (REQUIRED: no default; None for an optional array left empty), a description, and for
-    numbers a closed range ``low``..``high`` (None: unbounded) and whether ``low`` itself is
-    excluded (``open_low``), ``high`` (``open_high``)."""
+    (REQUIRED: no default; None for an optional array left empty), a description, and its
+    Bounds (settings.py)."""
 
     name: str
     kind: str
     default: object
     description: str
-    low: Optional[float] = None
-    high: Optional[float] = None
-    open_low: bool = False
-    open_high: bool = False
-    choices: tuple = ()
 
 
 _KINDS = {str: STRING, bool: BOOL, int: INT, float: DOUBLE}
