@@ -1,16 +1,22 @@
 """Run recording and replay over real DDS, nodes in their own processes and ROS domain:
 a node stopped with SIGTERM mid-stream leaves a complete MCAP holding, field by field, what
-subscribers received; one killed with SIGKILL leaves a readable file that lost nothing it
-had published; ``cdh-planner replay`` republishes with the recorded timing and re-sends
-requests; ``cdh-planner call`` prints the outcome and exits by it.
+subscribers received, which stock mcap_ros2, rosbags and rosbags-convert read whole; one
+killed with SIGKILL leaves a readable file that lost nothing it had published, which
+``cdh-planner recover`` (named in the node's start-up line) completes; ``cdh-planner replay``
+republishes with the recorded timing and re-sends requests with the recorded parameters
+(rotated files and runtime parameter changes included); ``cdh-planner call`` prints the
+outcome and exits by it.
 
 The node runs around the TEST DOUBLE planner (test/doubles/fake_planner.py): these are tests
 of recording and replay, not of planning.
 """
 
+import re
 import signal
 import subprocess
+import sys
 import time
+from pathlib import Path
 
 import numpy as np
 import pytest
@@ -19,15 +25,16 @@ pytest.importorskip("rosbags")
 pytest.importorskip("rclpy")
 
 from diagnostic_msgs.msg import DiagnosticStatus  # noqa: E402
+from mcap.reader import make_reader  # noqa: E402
+from mcap_ros2.decoder import DecoderFactory  # noqa: E402
 from nav_msgs.msg import Path as PathMsg  # noqa: E402
 from rclpy.qos import DurabilityPolicy, QoSProfile, ReliabilityPolicy  # noqa: E402
 from rosbags.highlevel import AnyReader, AnyReaderError  # noqa: E402
-from rosbags.typesys.msg import normalize_msgtype  # noqa: E402
 from sensor_msgs.msg import JointState  # noqa: E402
 from std_msgs.msg import Float64MultiArray  # noqa: E402
 from trajectory_msgs.msg import JointTrajectory  # noqa: E402
 
-from cdh_planner.io.mcap_log import REQUEST_RECEIVED, RESPONSE_SENT, read_run, recover_run  # noqa: E402
+from cdh_planner.io.mcap_log import REQUEST_RECEIVED, RESPONSE_SENT, read_run  # noqa: E402
 from cdh_planner.ros.client import PlannerClient  # noqa: E402
 from ros_harness import (Q1, Q2, Collector, NodeProcess, claimed_domain, cli,  # noqa: E402
                          pose_text, ros_env, run_cli, sphere_pose_msg, stamp_s)
@@ -81,6 +88,8 @@ def sigterm_run(domain, client, tmp_path_factory):
     assert rc == 0, node.log()
     assert "shutting down while executing: held the last setpoint" in node.log()
     [run_file] = node.run_files()
+    assert f"recording to {run_file}; if the node is killed: cdh-planner recover {run_file}" \
+        in node.log()
     live = {t: _since(c, t0) for t, c in client.live.items()}
     return run_file, live, answer, start
 
@@ -89,10 +98,7 @@ def _rosbags_messages(path):
     out = {}
     with AnyReader([path]) as reader:
         for conn, _, raw in reader.messages():
-            # rosbags files 'pkg/srv/T' under 'pkg/srv/msg/T'
-            typ = conn.msgtype if conn.msgtype in reader.typestore.fielddefs \
-                else normalize_msgtype(conn.msgtype)
-            out.setdefault(conn.topic, []).append(reader.deserialize(raw, typ))
+            out.setdefault(conn.topic, []).append(reader.deserialize(raw, conn.msgtype))
     return out
 
 
@@ -138,6 +144,32 @@ def test_sigterm_leaves_a_complete_file_with_what_subscribers_got(sigterm_run):
     assert len(events[1].response[0].plan.poses) == len(answer.path.poses)
     trig = recorded["/cdh_planner/execute/_service_event"]
     assert trig[1].response[0].success
+    # the parameters at start
+    [params] = recorded["/parameter_events"]
+    assert params.node == "/cdh_planner" and not params.changed_parameters
+    values = {p.name: p.value for p in params.new_parameters}
+    assert values["task.type"].string_value == "sphere"
+    assert values["log_max_file_mb"].double_value == 100.0
+
+
+def test_every_record_decodes_in_every_tool(sigterm_run, tmp_path):
+    """Stock mcap_ros2 (no aliasing), rosbags, and rosbags-convert to a rosbag2 directory."""
+    run_file = sigterm_run[0]
+    with open(run_file, "rb") as f:
+        total = make_reader(f).get_summary().statistics.message_count
+        f.seek(0)
+        decoded = list(make_reader(f, decoder_factories=[DecoderFactory()])
+                       .iter_decoded_messages())
+    assert len(decoded) == total > 40
+    assert sum(len(v) for v in _rosbags_messages(run_file).values()) == total
+    dst = tmp_path / "rosbag2"
+    r = subprocess.run([str(Path(sys.executable).with_name("rosbags-convert")), "--src",
+                        str(run_file), "--dst", str(dst)], capture_output=True, text=True,
+                       timeout=60)
+    assert r.returncode == 0, r.stdout + r.stderr
+    converted = _rosbags_messages(dst)
+    assert sum(len(v) for v in converted.values()) == total
+    assert len(converted["/cdh_planner/plan/_service_event"]) == 2
 
 
 def test_mcap_decoder_reads_the_same(sigterm_run):
@@ -169,9 +201,17 @@ def test_sigkill_loses_nothing_that_was_published(domain, client, tmp_path):
     live = _since(client.live["/cdh_planner/cable_command"], t0)
     assert len(live) >= 25
     assert all((c.header.stamp.sec, c.header.stamp.nanosec) in stamps for c in live)
+    # the start-up line says what to do; doing it gives a file every tool reads
+    assert f"if the node is killed: cdh-planner recover {run_file}" in node.log()
     fixed = tmp_path / "recovered.mcap"
-    assert recover_run(run_file, fixed) == sum(len(v) for v in recorded.values())
+    r = run_cli(domain, "recover", str(run_file), "-o", str(fixed))
+    total = sum(len(v) for v in recorded.values())
+    assert r.returncode == 0, r.stdout + r.stderr
+    assert f"{total} messages on" in r.stdout and "the node was killed" in r.stdout
     assert len(_rosbags_messages(fixed)["/cdh_planner/cable_command"]) == len(stamps)
+    with open(fixed, "rb") as f:
+        assert len(list(make_reader(f, decoder_factories=[DecoderFactory()])
+                        .iter_decoded_messages())) == total
 
 
 def test_replay_republishes_with_recorded_timing(domain, client, sigterm_run):
@@ -221,12 +261,68 @@ def test_replay_requests_and_call_against_a_live_node(domain, client, sigterm_ru
                     "--frame", "world")
         assert r.returncode == 1
         assert "outcome: NO PLAN (error code 202)" in r.stdout
-        # a changed sphere: same requests, other answers
+        # a changed sphere: replay sets the recorded parameters first (the next test shows
+        # the answers that differ without them, and why)
         assert client.set_parameters({"task.radius": 0.12}) == [(True, "")]
         r = run_cli(domain, "replay", str(run_file), "--requests")
-        assert r.returncode == 1 and "request 1: DIFFERS" in r.stdout, r.stdout
+        assert r.returncode == 0 and "request 1: MATCHES" in r.stdout, r.stdout
+        assert re.search(r"request 1: set as recorded: \d+ parameters", r.stdout), r.stdout
+        assert client.get_parameters(["task.radius"]) == {"task.radius": 0.13}
     r = run_cli(domain, "call", "--start", pose_text(Q1), "--goal", pose_text(Q2),
                 "--timeout", "1")
     assert r.returncode == 3 and "no service /cdh_planner/plan" in r.stderr
     r = run_cli(domain, "call", "--start", "1 2 3", "--goal", pose_text(Q2))
     assert r.returncode == 2 and r.stderr.count("\n") == 1 and "--start" in r.stderr
+
+
+def test_replay_after_parameter_changes_matches_every_request(domain, client, tmp_path):
+    """A node whose parameters change between requests, recording to rotated files; a fresh
+    node gets the recorded changes before each request and answers every one as recorded.
+    Without them, the answers that came after a change differ, and the replay says why."""
+    node = NodeProcess(domain, tmp_path / "recorded", fake=True,
+                       params=["log_max_file_mb:=0.06"])
+    try:
+        client.wait_for_node(20.0)
+        start, goal = sphere_pose_msg(Q1), sphere_pose_msg(Q2)
+        changes = {2: {"task.radius": 0.12}, 4: {"task.radius": 0.125, "stream_rate_hz": 40.0}}
+        for k in range(1, 6):
+            for name, value in changes.get(k, {}).items():    # one set call each
+                assert client.set_parameters({name: value}) == [(True, "")]
+            assert client.plan(start, goal, timeout_s=30).success
+    finally:
+        assert node.stop() == 0, node.log()
+    files = node.run_files()
+    assert len(files) >= 2                                  # rotated
+    assert node.log().count("; if the node is killed: cdh-planner recover ") == len(files)
+    with NodeProcess(domain, tmp_path / "fresh", fake=True, params=["log_enabled:=false"]):
+        client.wait_for_node(20.0)
+        r = run_cli(domain, "replay", *map(str, files), "--requests")
+        assert r.returncode == 0, r.stdout + r.stderr
+        assert "5 of 5 answers match the recording" in r.stdout, r.stdout
+        assert "request 2: set as recorded: task.radius" in r.stdout
+        assert "stream_rate_hz" not in r.stdout          # not a parameter of the answers
+        assert "not applied" not in r.stdout
+        # the node keeps the last recorded values; without setting the recorded ones, the
+        # answers planned on another sphere differ, each saying why
+        r = run_cli(domain, "replay", *map(str, files), "--requests", "--keep-parameters")
+        assert r.returncode == 1, r.stdout + r.stderr
+        assert "2 of 5 answers match the recording" in r.stdout, r.stdout
+        for k, radius in ((1, 0.13), (2, 0.12), (3, 0.12)):
+            line = next(x for x in r.stdout.splitlines() if x.startswith(f"request {k}:"))
+            assert "DIFFERS" in line and (f"why: parameters differ: task.radius is 0.125 "
+                                          f"here, {radius:g} in the recording") in line, line
+
+
+def test_replay_caps_each_wait(domain, client, tmp_path):
+    """A 30-year gap between two recorded messages is waited --max-gap seconds, and said."""
+    from cdh_planner.io.mcap_log import RunRecorder
+    path = tmp_path / "gap.mcap"
+    with RunRecorder(path) as rec:
+        rec.write("/cmd", JointState(name=["w"], position=[0.0]), 10**9)
+        rec.write("/cmd", JointState(name=["w"], position=[1.0]), 10**9 + 30 * 365 * 86400 * 10**9)
+    t0 = time.monotonic()
+    r = run_cli(domain, "replay", str(path), "--delay", "0", "--max-gap", "0.5", timeout=30)
+    assert r.returncode == 0, r.stdout + r.stderr
+    assert time.monotonic() - t0 < 15
+    assert "1 wait between messages longer than --max-gap 0.5 s cut to 0.5 s" in r.stdout
+    assert "republished 2 messages" in r.stdout

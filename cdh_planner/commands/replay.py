@@ -1,15 +1,26 @@
 """``cdh-planner replay``: play a recorded run back.
 
-    cdh-planner replay RUN.mcap [--rate X] [--topics T ...] [--delay S]
-    cdh-planner replay RUN.mcap --requests [--node /cdh_planner] [--tolerance M]
+    cdh-planner replay RUN.mcap [RUN_2.mcap ...] [--rate X] [--topics T ...] [--delay S]
+                       [--max-gap S]
+    cdh-planner replay RUN.mcap [RUN_2.mcap ...] --requests [--node /cdh_planner]
+                       [--tolerance M] [--keep-parameters]
 
 Without ``--requests``: republish the recorded topics with their original timing (scaled by
-``--rate``), e.g. the streamed ``/cdh_planner/cable_command`` to test a winch controller.
+``--rate``; no wait between two messages longer than ``--max-gap``), e.g. the streamed
+``/cdh_planner/cable_command`` to test a winch controller.
 With ``--requests``: re-send the recorded plan requests to a running node and report, for
-each, whether the new answer matches the recorded one (pose by pose, within the tolerance).
-The planner keeps its atlas between requests, so the answers are the recorded ones on a node
-in the state the recording started from: a freshly started node with the same parameters. A
-node that has already planned may answer with other (equally valid) paths.
+each, whether the new answer matches the recorded one (pose by pose, within the tolerance),
+and for an answer that differs, why it may (parameters that differ, the node's history).
+Before each request the parameters recorded since the previous one (the file's snapshot,
+then each change) are set on the node, those that decide answers (``base_frame``,
+``robot.*``, ``task.*``, ``planner.*``, ``trajectory.*``), each recorded change in one atomic
+call; ``--keep-parameters`` leaves the node's own. The planner keeps its atlas between
+requests, so the answers are the recorded ones on a node in the state the recording started
+from: a freshly started node. A node that has already planned may answer with other
+(equally valid) paths.
+
+A file that is not a recording (missing, empty, not MCAP, no complete message) is refused
+with the reason (exit 2); a killed run's file is read (``cdh-planner recover`` completes it).
 
 Exit codes: 0 done (every answer matches); 1 an answer differs; 2 bad input; 3 the node
 did not answer.
@@ -21,6 +32,7 @@ import sys
 from collections import Counter
 
 EXIT_OK, EXIT_DIFFERS, EXIT_NO_NODE = 0, 1, 3
+MAX_GAP_S = 5.0     # = ros.replay.MAX_GAP_S (not imported: --help needs no rclpy)
 
 
 def add_parser(subparsers):
@@ -34,19 +46,28 @@ def add_parser(subparsers):
                "  cdh-planner replay RUN.mcap --topics /cdh_planner/cable_command\n"
                "  cdh-planner replay RUN.mcap --requests --tolerance 1e-4",
         formatter_class=argparse.RawDescriptionHelpFormatter)
-    p.add_argument("run", metavar="RUN.mcap", help="a run file written by the node")
+    p.add_argument("run", nargs="+", metavar="RUN.mcap",
+                   help="a run file written by the node; several (e.g. the files of a "
+                        "rotated run) are replayed as one, in log-time order")
     p.add_argument("--rate", type=float, default=1.0, metavar="X",
                    help="playback speed factor (default: %(default)g, real time)")
     p.add_argument("--topics", nargs="+", metavar="T",
-                   help="only these topics (default: all but service events)")
+                   help="only these topics (default: all but service events and "
+                        "/parameter_events)")
     p.add_argument("--delay", type=float, default=1.0, metavar="S",
                    help="wait up to S seconds for a subscriber on every replayed topic before "
                         "the first message (default: %(default)g)")
+    p.add_argument("--max-gap", dest="max_gap", type=float, default=MAX_GAP_S, metavar="S",
+                   help="never wait more than S seconds between two messages: longer "
+                        "recorded gaps (after --rate) are cut to S (default: %(default)g)")
     p.add_argument("--requests", action="store_true",
-                   help="re-send the recorded plan requests to a running node and compare "
-                        "(to reproduce the recorded answers: a freshly started node with the "
-                        "recording's parameters; the planner keeps its atlas between requests)")
+                   help="re-send the recorded plan requests to a running node, after setting "
+                        "the parameters recorded before each, and compare (to reproduce the "
+                        "recorded answers: a freshly started node, since the planner keeps its "
+                        "atlas between requests)")
     p.add_argument("--node", help="node for --requests (default: the recorded one)")
+    p.add_argument("--keep-parameters", dest="keep_parameters", action="store_true",
+                   help="--requests: do not set the recorded parameters on the node")
     p.add_argument("--tolerance", type=float, default=1e-6, metavar="M",
                    help="--requests: largest pose difference that still matches, in m for "
                         "positions and rad for orientations (default: %(default)g)")
@@ -60,18 +81,28 @@ def add_parser(subparsers):
 
 def run(args):
     from ..errors import InputError
+    from ..io.mcap_log import check_recording
     from ..ros import replay as R
-    for name in ("rate", "timeout", "tolerance", "delay"):
+    for name in ("rate", "timeout", "tolerance", "delay", "max_gap"):
         value = getattr(args, name)
-        low_ok = value >= 0 if name in ("tolerance", "delay") else value > 0
+        low_ok = value >= 0 if name in ("tolerance", "delay", "max_gap") else value > 0
         if not (math.isfinite(value) and low_ok):
-            raise InputError(f"--{name}", value, "must be a positive finite number")
-    records = R.read_records(args.run)
+            raise InputError(f"--{name.replace('_', '-')}", value,
+                             "must be a positive finite number")
+    records = []
+    for path in args.run:
+        records += R.read_records(path)     # InputError (exit 2) if not a recording
+    records.sort(key=lambda r: r.log_time_ns)
     counts = Counter(r.topic for r in records)
-    span = (records[-1].log_time_ns - records[0].log_time_ns) * 1e-9 if records else 0.0
-    print(f"{args.run}: {len(records)} messages on {len(counts)} topics over {span:.3f} s")
+    span = (records[-1].log_time_ns - records[0].log_time_ns) * 1e-9
+    print(f"{' '.join(args.run)}: {len(records)} messages on {len(counts)} topics over "
+          f"{span:.3f} s")
     for topic, n in sorted(counts.items()):
         print(f"  {topic}: {n}")
+    for path in args.run:
+        if not check_recording(path)[1]:
+            print(f"  ({path} has no summary: the recording node was killed; cdh-planner "
+                  f"recover {path} writes a complete copy)")
     if args.requests:
         return replay_requests(args, records)
     return replay_topics(args, records)
@@ -87,7 +118,13 @@ def replay_topics(args, records):
     rclpy.init(args=["cdh-planner-replay", "--ros-args", *args.ros_args], context=context)
     try:
         node = Node("cdh_planner_replay", context=context)
-        stats = R.replay_topics(node, chosen, rate=args.rate, delay_s=args.delay)
+        offsets, capped, skipped = R.schedule(chosen, args.rate, args.max_gap)
+        if capped:
+            print(f"{capped} wait{'s' if capped > 1 else ''} between messages longer than "
+                  f"--max-gap {args.max_gap:g} s cut to {args.max_gap:g} s "
+                  f"({skipped:.6g} s of recorded time skipped)")
+        stats = R.replay_topics(node, chosen, rate=args.rate, delay_s=args.delay,
+                                max_gap_s=args.max_gap)
         print(f"republished {stats.messages} messages on {stats.topics} topics in "
               f"{stats.replay_s:.3f} s (recorded span {stats.recorded_s:.3f} s, rate "
               f"{args.rate:g}; latest {1e3 * stats.late_s:.1f} ms behind schedule)")
@@ -104,26 +141,81 @@ def replay_requests(args, records):
     if not plans:
         print("no recorded plan requests in this file")
         return EXIT_OK
-    node = args.node or plans[0].service.rsplit("/", 1)[0]
+    node = args.node or R.node_of(plans[0].service)
+    if not args.keep_parameters and not any(p.parameters for p in plans):
+        print("no recorded parameters in this file (recorded before they were): the node's "
+              "own are used")
     differs = 0
+    first_call = None
     with PlannerClient(node, args=["cdh-planner-replay", "--ros-args", *args.ros_args]) \
             as client:
         try:
             client.wait_for_node(min(args.timeout, 30.0))
+            setter = R.ParameterSetter(client, min(args.timeout, 30.0))
             for plan in plans:
+                problems = [] if args.keep_parameters else _apply(setter, plan)
                 answer = client.plan(plan.request.start, plan.request.goal, args.timeout,
                                      tolerance=plan.request.tolerance)
+                call = R.call_number(answer.values)
+                first_call = call if first_call is None else first_call
                 if plan.response is None:
                     print(f"request {plan.sequence}: no recorded response (run ended); now "
                           f"{len(answer.path.poses)} poses")
                     continue
                 ok, text = R.compare_paths(plan.response.plan, answer.path, args.tolerance,
                                            args.tolerance)
-                differs += not ok
                 why = "" if answer.success else f" ({answer.values.get('error_msg', '')})"
+                if not ok:
+                    differs += 1
+                    why += "; why: " + "; ".join(
+                        _reasons(args, setter, plan, plans[0], problems, first_call))
                 print(f"request {plan.sequence}: {'MATCHES' if ok else 'DIFFERS'}: {text}{why}")
         except ClientError as exc:
             print(f"cdh-planner replay: error: {exc}", file=sys.stderr)
             return EXIT_NO_NODE
     print(f"{len(plans) - differs} of {len(plans)} answers match the recording")
     return EXIT_DIFFERS if differs else EXIT_OK
+
+
+def _apply(setter, plan):
+    """Set the parameters recorded before ``plan``; print what was set; the problems."""
+    problems = []
+    for params in plan.parameter_sets:
+        names, problem = setter.set(params)
+        if names:
+            shown = ", ".join(names) if len(names) <= 4 else f"{len(names)} parameters"
+            print(f"request {plan.sequence}: set as recorded: {shown}")
+        if problem:
+            problems.append(problem)
+            print(f"request {plan.sequence}: parameters not applied: {problem}")
+    return problems
+
+
+def _reasons(args, setter, plan, first, problems, first_call):
+    """Why an answer may differ from the recorded one (the likeliest first)."""
+    from ..ros import replay as R
+    from ..ros.client import ClientError
+    out = []
+    if problems:
+        out.append("recorded parameters not applied (" + "; ".join(problems) + ")")
+    if not plan.parameters:
+        out.append("the file records no parameters for this request, so the node's own "
+                   "were used")
+    else:
+        try:
+            diff = R.parameter_differences(plan.parameters, setter.get(plan.parameters))
+        except ClientError as exc:
+            diff = f"could not read the node's parameters: {exc}"
+        if diff:
+            out.append(("parameters differ: " if args.keep_parameters else "") + diff)
+    if first_call is not None and first_call > 1:
+        out.append(f"the node had answered {first_call - 1} plan call(s) before this replay "
+                   f"(a planner keeps its atlas between calls: a fresh node reproduces a "
+                   f"recording)")
+    if first.sequence > 1:
+        out.append(f"the recording's node had answered {first.sequence - 1} call(s) before "
+                   f"this file's first request (e.g. a rotated file)")
+    if not out:
+        out.append("same parameters, and both nodes fresh: the planner itself answered "
+                   "differently")
+    return out

@@ -15,9 +15,9 @@ requests (``replay --requests`` applies them).
 
 Rotation: with ``max_bytes`` or ``max_s`` (> 0), a file that has reached either limit is
 closed before the next record and the record starts the next file. A plan call's request
-and response stay in one file: while a call is open, rotation waits (up to twice the
-limits). A file thus holds at least one record after its parameter snapshot, and exceeds
-``max_bytes`` by at most one record (one message, or one call at twice the limit).
+and response stay in one file: a response never starts a file, and while a call is open
+the other records wait for rotation up to twice the limits. A file thus holds at least
+one record after its parameter snapshot.
 
 Recording never raises into the node. A failure of the file (disk full, directory gone) is
 reported once through ``warn`` and recording stops until the configuration changes; a
@@ -102,23 +102,23 @@ class RunLog:
                 return
             self._parameters.update({p.name: p for p in params})
         event = ParameterEvent(node=self._node, changed_parameters=list(params))
-        self._call("write", PARAMETER_EVENTS, _stamped(event, log_time_ns), log_time_ns)
+        self._call("write", PARAMETER_EVENTS, _stamped(event, log_time_ns), log_time_ns,
+                   at=log_time_ns)
 
     def write(self, topic, msg, log_time_ns=None, transient_local=False):
-        self._call("write", topic, msg, log_time_ns, transient_local=transient_local)
+        self._call("write", topic, msg, log_time_ns, transient_local=transient_local,
+                   at=log_time_ns)
 
     def service_event(self, service, srv_type, event_type, request=None, response=None,
                       sequence_number=0, log_time_ns=None):
         call = (service, sequence_number)
         answer = event_type in (RESPONSE_SENT, RESPONSE_RECEIVED)
-        with self._lock:
-            if event_type in (REQUEST_RECEIVED, REQUEST_SENT):
-                self._open_calls.add(call)
-            elif answer:
-                self._open_calls.discard(call)
+        opens = call if event_type in (REQUEST_RECEIVED, REQUEST_SENT) else None
         self._call("write_service_event", service, srv_type, event_type, request=request,
                    response=response, sequence_number=sequence_number,
-                   log_time_ns=log_time_ns)
+                   log_time_ns=log_time_ns, at=log_time_ns, opens=opens,
+                   closes=call if answer else None,
+                   rotate=not answer)   # an answer joins its request
 
     def close(self):
         """Close the file (summary, footer, fsync); later records are dropped."""
@@ -126,10 +126,16 @@ class RunLog:
             self._close_locked()
             self.closed = True
 
-    def _call(self, method, *args, **kwargs):
+    def _call(self, method, *args, at=None, rotate=True, opens=None, closes=None, **kwargs):
+        """``method`` of the recorder; ``at``: the record's log time (a file it opens begins
+        with the parameters at that time); ``opens`` / ``closes``: the call it begins / ends."""
         with self._lock:
-            self._rotate_locked()
-            if not self._open_locked(announce=True):
+            if rotate:
+                self._rotate_locked()
+            if opens is not None:
+                self._open_calls.add(opens)
+            self._open_calls.discard(closes)
+            if not self._open_locked(announce=True, log_time_ns=at):
                 return
             recorder = self._recorder
             try:
@@ -161,7 +167,7 @@ class RunLog:
         self._close_locked()
         self._rotated = f"{r.path.name} {reason}"
 
-    def _open_locked(self, announce):
+    def _open_locked(self, announce, log_time_ns=None):
         if self.closed or not self._enabled or self._failed:
             return ""
         if self._recorder is None:
@@ -173,7 +179,8 @@ class RunLog:
                 if self._parameters:
                     event = ParameterEvent(node=self._node,
                                            new_parameters=list(self._parameters.values()))
-                    self._recorder.write(PARAMETER_EVENTS, _stamped(event, None))
+                    self._recorder.write(PARAMETER_EVENTS, _stamped(event, log_time_ns),
+                                         log_time_ns)
             except OSError as exc:
                 self._fail(f"cannot record to {path}: {exc}")
                 return ""

@@ -1,20 +1,24 @@
 """Replaying a recorded run (an MCAP file of the node, or any ros2-profile MCAP).
 
 - ``replay_topics``: republish the recorded messages with their original timing (scaled by
-  ``rate``), each topic with its recorded type and QoS (latched topics stay latched). The
-  CDR bytes are published as recorded (``Publisher.publish(bytes)``), so nothing is decoded
-  and re-encoded on the way. Service event topics (``.../_service_event``) are not
-  republished: they are the recorded calls, which ``--requests`` re-sends.
-- ``recorded_plans`` + ``compare_paths``: the recorded GetPlan requests and responses, to
-  re-send to a live node and compare the answers pose by pose.
+  ``rate``; no wait longer than ``max_gap_s``), each topic with its recorded type and QoS
+  (latched topics stay latched). The CDR bytes are published as recorded
+  (``Publisher.publish(bytes)``), so nothing is decoded and re-encoded on the way. Service
+  event topics (``.../_service_event``) are not republished: they are the recorded calls,
+  which ``--requests`` re-sends; nor is ``/parameter_events`` unless asked for (it would tell
+  every listener that the node's parameters changed).
+- ``recorded_plans`` + ``ParameterReplay`` + ``compare_paths``: the recorded GetPlan
+  requests and responses with the parameters in effect at each, to re-send to a live node
+  (after applying the recorded parameter changes) and compare the answers pose by pose.
 
-Killed runs (no summary, torn tail) are read too (``io.mcap_log``'s linear scan).
+Killed runs (no summary, torn tail) are read too (``io.mcap_log``'s linear scan); what is
+not a recording is refused (InputError, with the reason).
 """
 
 import importlib
 import math
 import time
-from dataclasses import dataclass
+from dataclasses import dataclass, field
 from typing import Optional
 
 import numpy as np
@@ -24,13 +28,19 @@ from rclpy.serialization import deserialize_message
 
 from ..errors import InputError
 from ..model.pose import rotation_angle_between, rotation_from_quaternion
-from ..io.mcap_log import REQUEST_RECEIVED, RESPONSE_SENT, SERVICE_EVENT_SUFFIX
+from ..io.mcap_log import REQUEST_RECEIVED, RESPONSE_SENT, SERVICE_EVENT_SUFFIX, \
+    NotARecording, check_recording
 from ..io.mcap_log import scan_records as scan_run  # raw records of a (possibly killed) run file
 from ..io.ros_schemas import rosidl_type
 from .messages import path_arrays
+from .recording import PARAMETER_EVENTS
 
 
 MATCH_SETTLE_S = 0.3   # s after the publisher sees its subscribers, before the first message
+MAX_GAP_S = 5.0        # default longest wait between two republished messages (s)
+# the parameters that decide a plan's answer (the others: streaming, recording)
+ANSWER_PREFIXES = ("robot.", "task.", "planner.", "trajectory.")
+ANSWER_PARAMETERS = ("base_frame",)
 
 
 @dataclass(frozen=True)
@@ -40,23 +50,39 @@ class Record:
     data: bytes        # CDR, as recorded
     log_time_ns: int
     transient_local: bool
+    encoding: str = "cdr"   # the channel's message encoding
 
 
 def read_records(path):
-    """Every message of the run file ``path``, in log-time order; InputError if it is not a
-    readable MCAP file."""
+    """Every message of the run file ``path``, in log-time order. InputError (naming the
+    file, one line) if it is not a recording: missing, empty, not MCAP, damaged, no complete
+    message, or a channel that is not CDR-encoded ROS 2."""
     try:
+        check_recording(path)
         out = [Record(topic=c.topic, type_name=rosidl_type(s.name) if s is not None else "",
                       data=bytes(m.data), log_time_ns=m.log_time,
                       transient_local="durability: transient_local"
-                      in c.metadata.get("offered_qos_profiles", ""))
+                      in c.metadata.get("offered_qos_profiles", ""),
+                      encoding=c.message_encoding)
                for s, c, m, _ in scan_run(path, decode=False)]
     except FileNotFoundError:
         raise InputError("RUN", str(path), "file not found") from None
+    except NotARecording as exc:
+        raise InputError("RUN", str(path), str(exc)) from None
     except Exception as exc:  # noqa: BLE001 - mcap's many error types
-        raise InputError("RUN", str(path), f"not a readable MCAP run file: {exc}") from None
-    out.sort(key=lambda r: r.log_time_ns)
-    return out
+        raise InputError("RUN", str(path), f"not a readable MCAP run file: "
+                                           f"{type(exc).__name__}: {exc}") from None
+    if not out:
+        raise InputError("RUN", str(path), "no complete message (an MCAP file cut off before "
+                                           "its first message, or an empty recording)")
+    other = next((r for r in out if r.encoding != "cdr" or not r.type_name), None)
+    if other is not None:
+        raise InputError("RUN", str(path), f"not a ROS 2 recording: topic {other.topic} is "
+                                           f"{other.encoding!r} without a ros2msg schema"
+                         if other.encoding == "cdr" else
+                         f"not a ROS 2 recording: topic {other.topic} is encoded as "
+                         f"{other.encoding!r}, not CDR")
+    return sorted(out, key=lambda r: r.log_time_ns)
 
 
 def message_class(type_name):
@@ -80,8 +106,8 @@ def is_service_event(record):
 
 
 def select_topics(records, topics=None):
-    """The records to republish: no service events; only ``topics`` if given (InputError
-    naming a topic that is not in the file)."""
+    """The records to republish: no service events, and no ``/parameter_events`` unless
+    named; only ``topics`` if given (InputError naming a topic that is not in the file)."""
     available = sorted({r.topic for r in records if not is_service_event(r)})
     if topics:
         missing = [t for t in topics if t not in available]
@@ -90,7 +116,7 @@ def select_topics(records, topics=None):
                              f"not a recorded topic (recorded: {', '.join(available)})")
         wanted = set(topics)
     else:
-        wanted = set(available)
+        wanted = set(available) - {PARAMETER_EVENTS}
     return [r for r in records if r.topic in wanted]
 
 
@@ -108,13 +134,34 @@ class ReplayStats:
     recorded_s: float   # span of the recorded log times
     replay_s: float     # wall time from the first to the last publish
     late_s: float       # worst lateness of a publish behind its schedule
+    capped: int = 0     # waits cut to max_gap_s
+    skipped_s: float = 0.0   # replay time those cuts saved (s)
+
+
+def schedule(records, rate=1.0, max_gap_s=MAX_GAP_S):
+    """(offsets, capped, skipped_s): when to publish each record, in s after the first: the
+    recorded intervals / ``rate``, each cut to ``max_gap_s``; how many were cut, and by how
+    much in all."""
+    offsets, capped, skipped, t = [], 0, 0.0, 0.0
+    previous = records[0].log_time_ns if records else 0
+    for r in records:
+        gap = (r.log_time_ns - previous) * 1e-9 / rate
+        previous = r.log_time_ns
+        if gap > max_gap_s:
+            capped += 1
+            skipped += gap - max_gap_s
+            gap = max_gap_s
+        t += max(gap, 0.0)
+        offsets.append(t)
+    return offsets, capped, skipped
 
 
 def replay_topics(node, records, rate=1.0, delay_s=1.0, clock=time.monotonic,
-                  sleep=time.sleep):
-    """Publish ``records`` on ``node`` at their recorded times / ``rate``. The first goes out
-    when every topic has a subscriber, or after ``delay_s`` (s) without; at the end, waits
-    (up to 2 s) for subscribers to acknowledge. Returns ReplayStats."""
+                  sleep=time.sleep, max_gap_s=MAX_GAP_S):
+    """Publish ``records`` on ``node`` at their recorded times / ``rate``, never waiting more
+    than ``max_gap_s`` between two. The first goes out when every topic has a subscriber, or
+    after ``delay_s`` (s) without; at the end, waits (up to 2 s) for subscribers to
+    acknowledge. Returns ReplayStats."""
     if not records:
         return ReplayStats(0, 0, 0.0, 0.0, 0.0)
     publishers = {}
@@ -130,12 +177,12 @@ def replay_topics(node, records, rate=1.0, delay_s=1.0, clock=time.monotonic,
         # discovery is not symmetric: the subscriber may not know this publisher yet when
         # the publisher sees it, and would drop the first (volatile) messages
         sleep(MATCH_SETTLE_S)
-    t_first = records[0].log_time_ns
+    offsets, capped, skipped = schedule(records, rate, max_gap_s)
     start = clock()
     late = 0.0
     first = last = None
-    for r in records:
-        due = start + (r.log_time_ns - t_first) * 1e-9 / rate
+    for r, offset in zip(records, offsets):
+        due = start + offset
         wait = due - clock()
         if wait > 0:
             sleep(wait)
@@ -147,8 +194,14 @@ def replay_topics(node, records, rate=1.0, delay_s=1.0, clock=time.monotonic,
     for p in publishers.values():   # reliable delivery of the last ones before we leave
         p.wait_for_all_acked(Duration(seconds=2.0))
     return ReplayStats(messages=len(records), topics=len(publishers),
-                       recorded_s=(records[-1].log_time_ns - t_first) * 1e-9,
-                       replay_s=last - first, late_s=late)
+                       recorded_s=(records[-1].log_time_ns - records[0].log_time_ns) * 1e-9,
+                       replay_s=last - first, late_s=late, capped=capped, skipped_s=skipped)
+
+
+def decides_answers(name):
+    """True for the parameters that decide a plan's answer (``replay --requests`` applies
+    them); streaming and recording parameters do not."""
+    return name in ANSWER_PARAMETERS or name.startswith(ANSWER_PREFIXES)
 
 
 @dataclass
@@ -157,24 +210,149 @@ class RecordedPlan:
     service: str
     request: object             # nav_msgs/srv/GetPlan.Request
     response: Optional[object]  # GetPlan.Response, None if the run ended before it
+    # the recorded parameter sets (each a list of rcl_interfaces/msg/Parameter, one per
+    # accepted set call; the first may be the file's snapshot) since the previous request,
+    # only those that decide answers
+    parameter_sets: list = field(default_factory=list)
+    # name -> rcl_interfaces/msg/Parameter in effect at this request (answer-deciding ones)
+    parameters: dict = field(default_factory=dict)
+
+
+def node_of(service):
+    """``/ns/node`` of a service ``/ns/node/plan``."""
+    return service.rsplit("/", 1)[0] or "/"
 
 
 def recorded_plans(records):
-    """The recorded GetPlan calls (request, response) in order, paired by sequence number."""
+    """The recorded GetPlan calls (request, response) in order, paired by sequence number,
+    each with the parameters recorded for its node since the previous call (``/parameter_
+    events``: the snapshot a file begins with, then each accepted change)."""
     from nav_msgs.srv import GetPlan
+    from rcl_interfaces.msg import ParameterEvent
     calls = {}
+    pending = {}     # node -> parameter sets recorded since its last request
+    state = {}       # node -> name -> Parameter
     for r in records:
+        if r.topic == PARAMETER_EVENTS and r.type_name == "rcl_interfaces/msg/ParameterEvent":
+            event = deserialize_message(r.data, ParameterEvent)
+            params = [p for p in (*event.new_parameters, *event.changed_parameters)
+                      if decides_answers(p.name)]
+            if params:
+                pending.setdefault(event.node, []).append(params)
+                state.setdefault(event.node, {}).update({p.name: p for p in params})
+            continue
         if not (is_service_event(r) and r.type_name == "nav_msgs/srv/GetPlan_Event"):
             continue
         event = deserialize_message(r.data, GetPlan.Event)
         seq = int(event.info.sequence_number)
         service = r.topic[: -len(SERVICE_EVENT_SUFFIX)]
         if event.info.event_type == REQUEST_RECEIVED and event.request:
-            calls[(service, seq)] = RecordedPlan(seq, service, event.request[0], None)
+            node = node_of(service)
+            calls[(service, seq)] = RecordedPlan(seq, service, event.request[0], None,
+                                                 pending.pop(node, []),
+                                                 dict(state.get(node, {})))
         elif event.info.event_type == RESPONSE_SENT and event.response \
                 and (service, seq) in calls:
             calls[(service, seq)].response = event.response[0]
     return list(calls.values())
+
+
+def parameter_value(msg):
+    """The Python value of a rcl_interfaces/msg/Parameter (lists for arrays)."""
+    from rclpy.parameter import parameter_value_to_python
+    value = parameter_value_to_python(msg.value)
+    return list(value) if hasattr(value, "__len__") and not isinstance(value, str) else value
+
+
+def parameter_differences(recorded, live, limit=3):
+    """Text naming the parameters whose ``live`` value (name -> Python value) differs from
+    the ``recorded`` one (name -> rcl_interfaces/msg/Parameter); "" if none."""
+    from ..errors import short_repr
+    from .params import _same
+    diffs = [f"{name} is {short_repr(live.get(name), 40)} here, "
+             f"{short_repr(parameter_value(msg), 40)} in the recording"
+             for name, msg in sorted(recorded.items())
+             if not _same(parameter_value(msg), _plain(live.get(name)))]
+    if len(diffs) > limit:
+        diffs = diffs[:limit] + [f"and {len(diffs) - limit} more"]
+    return "; ".join(diffs)
+
+
+def _plain(value):
+    return list(value) if hasattr(value, "__len__") and not isinstance(value, str) else value
+
+
+def settable(params):
+    """The parameters of ``params`` that can be set on a node (a NOT_SET value would
+    undeclare the parameter instead), and the names of the others."""
+    from rcl_interfaces.msg import ParameterType
+    ok = [p for p in params if p.value.type != ParameterType.PARAMETER_NOT_SET]
+    return ok, [p.name for p in params if p.value.type == ParameterType.PARAMETER_NOT_SET]
+
+
+class ParameterSetter:
+    """Sets recorded parameters on the node ``client`` (a PlannerClient) talks to: each
+    recorded set in one atomic call, as the recording node accepted it, so that the node
+    rebuilds its planner exactly where the recording's did. Parameters the node does not
+    declare, or recorded as not set (setting that would undeclare them), are left out."""
+
+    def __init__(self, client, timeout_s):
+        from rclpy.parameter_client import AsyncParameterClient
+        self._client = client
+        self._params = AsyncParameterClient(client.node, client.target)
+        self._timeout = timeout_s
+        self._names = None
+
+    def _wait(self, future, what):
+        from .client import ClientError
+        if not self._client.spin_until(future.done, self._timeout):
+            raise ClientError(f"{self._client.target}: {what} timed out")
+        return future.result()
+
+    def declared(self):
+        """The names of the node's parameters."""
+        from .client import ClientError
+        if self._names is None:
+            if not self._params.wait_for_services(timeout_sec=self._timeout):
+                raise ClientError(f"no parameter services on {self._client.target}")
+            result = self._wait(self._params.list_parameters(), "list_parameters")
+            self._names = set(result.result.names)
+        return self._names
+
+    def set(self, params):
+        """(names set, problems): set ``params`` (rcl_interfaces/msg/Parameter) in one atomic
+        call; ``problems`` says what was left out or refused ("" if nothing)."""
+        declared = self.declared()
+        ok, unset = settable([p for p in params if p.name in declared])
+        problems = []
+        missing = sorted(p.name for p in params if p.name not in declared)
+        if missing:
+            problems.append(f"not on this node: {', '.join(missing[:3])}"
+                            + (f" and {len(missing) - 3} more" if len(missing) > 3 else ""))
+        unset = [n for n, v in self.get(unset).items() if v is not None] if unset else []
+        if unset:       # not set in the recording, set on the node: ROS cannot unset them
+            problems.append(f"recorded as not set, cannot be unset: {', '.join(unset[:3])}")
+        if not ok:
+            return [], "; ".join(problems)
+        result = self._wait(self._params.set_parameters_atomically(ok),
+                            "set_parameters_atomically").result
+        if not result.successful:
+            return [], "; ".join(problems + [f"refused: {result.reason or 'no reason given'}"])
+        return [p.name for p in ok], "; ".join(problems)
+
+    def get(self, names):
+        """name -> Python value of the node's parameters ``names``."""
+        from rclpy.parameter import parameter_value_to_python
+        names = [n for n in names if n in self.declared()]
+        result = self._wait(self._params.get_parameters(names), "get_parameters")
+        return {n: parameter_value_to_python(v) for n, v in zip(names, result.values)}
+
+
+def call_number(values):
+    """The node's call counter in a ``~/plan_result``'s ``run_id`` (``stem#7`` or ``7``), or
+    None."""
+    tail = str(values.get("run_id", "")).rsplit("#", 1)[-1]
+    return int(tail) if tail.isdigit() else None
 
 
 def compare_paths(recorded, new, tolerance_m=1e-6, tolerance_rad=1e-6):
