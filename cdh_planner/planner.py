@@ -29,6 +29,7 @@ from .model.pose import (Pose, quaternion_from_tau, rotation_angle_between, rota
 from .search.search import MB, Stop, run
 from .settings import COSTS, PlannerSettings  # noqa: F401  (PlannerSettings: part of this API)
 from .status import Status
+from .trajectory import clearance
 from .trajectory.path import PlannedPath
 from .trajectory.timing import time_path
 from .trajectory.verify import SlerpPath, TaskLinePath, check_motion, check_path
@@ -48,6 +49,9 @@ class PlanResult:
     cost: float  # path cost in the task's metric (rad, or m for the sphere / free flight)
     path: Optional["PlannedPath"] = None  # noqa: F821  (trajectory.path.PlannedPath)
     stats: dict = field(default_factory=dict)
+    # over the waypoints and the motion between them (trajectory.clearance.path_margins)
+    least_margin: float = math.nan  # normalised (feasibility.evaluate)
+    least_tension_margin: float = math.nan  # N: min over cables of f - v - fmin, fmax - f - v
 
 
 ProgressCallback = Callable[[dict], None]  # called with {"charts": int, "time_s": float, "best_h": float}
@@ -58,12 +62,24 @@ DENSIFY_ROUNDS = 10
 CHORD_SAMPLES = 9  # poses probed between two link points before the dense check
 COARSE_SAMPLES = 17  # a direct motion is first checked at these few points (a cheap "no")
 DIRECT_STEP_M, DIRECT_STEP_RAD = 5e-3, np.deg2rad(1.0)  # waypoint spacing on a direct motion
+# Clearance (weight > 0): a motion longer than CLEARANCE_LINK chart radii (a direct motion,
+# not a chart link) has its margin sampled along it; smoothing resamples the waypoints at
+# most CLEARANCE_STEP_M / _RAD apart and moves them while the clearance cost goes down.
+CLEARANCE_LINK = 2.5
+CLEARANCE_STEP_M, CLEARANCE_STEP_RAD = 1e-2, np.deg2rad(2.0)
+CLEARANCE_ITERATIONS = 40
+CLEARANCE_STEPS = (1.0, 0.5, 0.25, 0.125, 0.0625)  # step fractions tried (line search)
+CLEARANCE_TOL = 1e-4  # stop when an iteration lowers the cost by less than this fraction
+CLEARANCE_FD = 1e-5  # finite-difference step of the margin gradient (task coordinates)
 
 
-def default_strategy(dim):
+def default_strategy(dim, clearance_weight=0.0):
     """A* (shortest on the chart graph) up to 3-D; Greedy Best-First above, where A* must
-    close charts of dozens of neighbours each (6-D free flight: measured in the README)."""
-    return "astar" if dim <= 3 else "gbf"
+    close charts of dozens of neighbours each (6-D free flight: measured in the README),
+    and under a clearance cost (weight > 0), where A*'s heuristic, the task metric, is far
+    below the cost and A* grows most of the component (README, Clearance: the sigma-free
+    row times out at 60 s); GBF's route is then optimised by the clearance smoothing."""
+    return "astar" if dim <= 3 and clearance_weight == 0 else "gbf"
 
 
 def default_radius(dim):
@@ -83,12 +99,20 @@ class Planner:
         s = self.settings
         self.constraint = TaskConstraint(robot, task, margin_floor=s.margin_floor)
         self.radius = s.radius or default_radius(self.constraint.dim)
-        self.strategy = default_strategy(self.constraint.dim) if s.strategy == "auto" else s.strategy
+        self.clearance_weight = s.clearance_weight
+        self.strategy = (default_strategy(self.constraint.dim, self.clearance_weight)
+                         if s.strategy == "auto" else s.strategy)
         self.atlas = Atlas(self.constraint, radius=self.radius)
         self.pose_cost = task_cost(robot, task, self.settings.cost)
+        self.pose_costs = task_costs(robot, task, self.settings.cost)
         pose = self.constraint.pose
-        self.cost = lambda xa, xb: self.pose_cost(*pose(xa), *pose(xb))
-        self._edge_costs = {}  # (i, j), i < j -> task cost between the chart centres
+        self.length = lambda xa, xb: self.pose_cost(*pose(xa), *pose(xb))
+        if self.clearance_weight == 0:  # the task metric: cost and heuristic
+            self.cost, self.heuristic = self.length, None
+        else:  # the clearance cost (trajectory.clearance); A* keeps the metric, a lower bound
+            self.cost = self._clearance_cost
+            self.heuristic = self.length if self.strategy == "astar" else self._greedy_heuristic
+        self._edge_costs = {}  # (i, j), i < j -> cost between the chart centres
 
     # ----- the query -------------------------------------------------------------------
     def plan(self, start: Pose, goal: Pose, progress: Optional[ProgressCallback] = None,
@@ -119,7 +143,7 @@ class Planner:
             y, charts, direct = self._direct_points(ys[0], ys[1]), 0, True
         else:
             out = run(self.atlas, points["start"], points["goal"], self.cost, stop, self.strategy,
-                      self._direct_x, progress, self._edge_costs, self._link_ok)
+                      self._direct_x, progress, self._edge_costs, self._link_ok, self.heuristic)
             if out.status != Status.OK:
                 return answer(False, out.status, _failure_message(out.status, len(self.atlas.charts),
                                                                   s, self.radius),
@@ -128,7 +152,8 @@ class Planner:
         if s.complete:
             self.atlas.chart_at(points["start"])
             self.grow_complete(stop.deadline)
-        for y in (self._smooth(y), y):  # smoothing can cut a corner through a thin gap of C
+        smooth = self._smooth if self.clearance_weight == 0 else self._smooth_clearance
+        for y in (smooth(y), y):  # smoothing can cut a corner through a thin gap of C
             y, verified = self._densify(y)
             path = self._planned_path(y, verified)
             if path is not None:
@@ -139,8 +164,11 @@ class Planner:
         cost = float(sum(self.pose_cost(path.p[k], path.tau[k], path.p[k + 1], path.tau[k + 1])
                          for k in range(len(path) - 1)))
         how = "the direct motion" if direct else f"{charts} charts"
-        return answer(True, Status.OK, f"path of {len(path)} waypoints over {how}", cost=cost,
-                      path=path, chart_path=charts, direct=direct)
+        least = clearance.path_margins(self.robot, path.p, path.quaternion)
+        out = answer(True, Status.OK, f"path of {len(path)} waypoints over {how}", cost=cost,
+                     path=path, chart_path=charts, direct=direct)
+        out.least_margin, out.least_tension_margin = least
+        return out
 
     def grow_complete(self, deadline=None):
         """Grow every open chart until the atlas covers the start's component (or the
@@ -210,6 +238,31 @@ class Planner:
         (the dense check of the whole path comes later)."""
         return self._probe(self._task_coords(xs), CHORD_SAMPLES)
 
+    # ----- clearance (trajectory.clearance) ------------------------------------------------
+    def _clearance_cost(self, xa, xb):
+        """Clearance cost between two points of M: their task-metric length times
+        1 + w times the mean of phi(margin) along the direct motion between them, from the
+        two ends (a chart link: margins read from the points) or sampled every half chart
+        radius (a direct motion longer than CLEARANCE_LINK radii)."""
+        c = self.constraint
+        ends = clearance.phi(np.array([c.margin(xa), c.margin(xb)]))
+        n = int(np.linalg.norm(c.key(xa) - c.key(xb)) / (0.5 * self.radius))
+        if n <= 2 * CLEARANCE_LINK:
+            mean = 0.5 * float(ends.sum())
+        else:
+            motion = self._direct_motion(self._task_coords([xa, xb]))
+            p, R = motion(np.zeros(n - 1, dtype=int), np.arange(1, n) / n)
+            inner = clearance.phi(evaluate(self.robot, p, R=R).margin)
+            mean = (0.5 * float(ends.sum()) + float(inner.sum())) / n  # trapezoid
+        return self.length(xa, xb) * (1.0 + self.clearance_weight * mean)
+
+    def _greedy_heuristic(self, x, target):
+        """Greedy Best-First's order under the clearance cost: the metric to the target
+        times the clearance density where the chart is (charts near the boundary of C
+        come later)."""
+        return self.length(x, target) * float(clearance.density(self.constraint.margin(x),
+                                                                self.clearance_weight))
+
     def _route_coords(self, out):
         """Task coordinates of the search's points, direct motions sampled on the way."""
         y = self._task_coords(out.points)
@@ -268,6 +321,96 @@ class Planner:
             ok = self._feasible(trial)
             y[1:-1][ok] = trial[ok]
         return y
+
+    def _smooth_clearance(self, y):
+        """Smoothing under the clearance cost J = sum of length (1 + w mean phi) over the
+        segments (weight w > 0, trajectory.clearance): the waypoints are spaced evenly
+        (CLEARANCE_STEP_M / _RAD apart), then moved by damped Newton steps on J, all at once.
+
+        The model, in task coordinates: each segment a spring of stiffness rho / length
+        (rho its clearance density), each waypoint pushed by w times its segments' mean
+        length times the gradient of phi across the path (central differences), damped by
+        the square of that gradient (phi = -ln m + c, whose Hessian is about grad phi
+        grad phi^T). One tridiagonal solve gives the step; the step is halved until J
+        (task-metric lengths, margins from the closed form) goes down, waypoints that would
+        fall below the margin floor stay. J never increases: smoothing cannot pull the
+        path back to the boundary for length it is not worth."""
+        from scipy.linalg import solve_banded
+        w = self.clearance_weight
+        per = self._periodic_mask()
+        y = self._resample(y)
+        if len(y) < 3:
+            return y
+        dim = y.shape[1]
+        eye = np.eye(dim) * CLEARANCE_FD
+        margin = self._margins(y)
+        length = self._lengths(y[:-1], y[1:])
+        cost = float(np.sum(clearance.segment_costs(length, margin, w)))
+        for _ in range(CLEARANCE_ITERATIONS):
+            d = _wrapped(np.diff(y, axis=0), per)
+            seg = np.maximum(np.linalg.norm(d, axis=1), 1e-12)
+            ph = clearance.phi(margin)
+            rho = 1.0 + w * 0.5 * (ph[:-1] + ph[1:])
+            inner = y[1:-1]
+            probe = (inner[:, None, :] + np.stack([eye, -eye])[:, None]).reshape(-1, dim)
+            g = clearance.phi(self._margins(_wrapped(probe, per))).reshape(2, len(inner), dim)
+            gphi = (g[0] - g[1]) / (2 * CLEARANCE_FD)
+            tangent = d[1:] / seg[1:, None] + d[:-1] / seg[:-1, None]
+            tangent /= np.maximum(np.linalg.norm(tangent, axis=1), 1e-12)[:, None]
+            gphi -= np.sum(gphi * tangent, axis=1)[:, None] * tangent  # across the path only
+            reach = 0.5 * (seg[:-1] + seg[1:])
+            grad = (rho[:-1, None] * d[:-1] / seg[:-1, None] - rho[1:, None] * d[1:] / seg[1:, None]
+                    + w * reach[:, None] * gphi)
+            stiff = rho / seg
+            band = np.zeros((3, len(inner)))
+            band[1] = stiff[:-1] + stiff[1:] + w * reach * np.sum(gphi ** 2, axis=1)
+            band[0, 1:] = -stiff[1:-1]
+            band[2, :-1] = -stiff[1:-1]
+            step = solve_banded((1, 1), band, -grad)
+            improved = False
+            for alpha in CLEARANCE_STEPS:
+                trial = _wrapped(inner + alpha * step, per)
+                m_t = self._margins(trial)
+                keep = m_t < self.settings.margin_floor
+                trial[keep], m_t[keep] = inner[keep], margin[1:-1][keep]
+                y_t = np.concatenate([y[:1], trial, y[-1:]])
+                m_all = np.concatenate([margin[:1], m_t, margin[-1:]])
+                l_t = self._lengths(y_t[:-1], y_t[1:])
+                c_t = float(np.sum(clearance.segment_costs(l_t, m_all, w)))
+                if c_t < cost:
+                    improved = cost - c_t > CLEARANCE_TOL * cost
+                    y, margin, length, cost = y_t, m_all, l_t, c_t
+                    break
+            if not improved:
+                break
+        return y
+
+    def _resample(self, y):
+        """Task coordinates y (N, k) resampled evenly along their polyline (straight in y),
+        at most CLEARANCE_STEP_M / _RAD apart in the pose; the ends kept."""
+        per = self._periodic_mask()
+        if len(y) < 2:
+            return y
+        dp, da = self._direct_motion(y).speeds()
+        u = np.concatenate([[0.0], np.cumsum(np.maximum(dp / CLEARANCE_STEP_M, da / CLEARANCE_STEP_RAD))])
+        n = max(1, int(np.ceil(u[-1])))
+        t = np.linspace(0.0, u[-1], n + 1)
+        k = np.clip(np.searchsorted(u, t, side="right") - 1, 0, len(y) - 2)
+        frac = np.where(u[k + 1] > u[k], (t - u[k]) / np.maximum(u[k + 1] - u[k], 1e-300), 0.0)
+        out = _wrapped(y[k] + frac[:, None] * _wrapped(y[k + 1] - y[k], per), per)
+        out[0], out[-1] = y[0], y[-1]
+        return out
+
+    def _margins(self, y):
+        """Normalised margins of task coordinate rows (N, k)."""
+        p, tau = self.task.pose(y)
+        return evaluate(self.robot, p, tau).margin
+
+    def _lengths(self, ya, yb):
+        """Task-metric lengths between task coordinate rows ya, yb (N, k) (the path cost)."""
+        pa, ta = self.task.pose(ya)
+        pb, tb = self.task.pose(yb)
+        return self.pose_costs(pa, ta, pb, tb)
 
     def _densify(self, y):
         """Insert feasible midpoints (task coordinates) until the motion between consecutive
@@ -341,6 +484,23 @@ def task_cost(robot, task, kind="auto"):
     if kind == "se3":
         return lambda pa, ta, pb, tb: float(np.linalg.norm(pb - pa)) + L * angle(ta, tb)
     return task.own_cost(kind)
+
+
+def task_costs(robot, task, kind="auto"):
+    """``task_cost`` over rows: cost(p_a, tau_a, p_b, tau_b) with arrays (N, 3) -> (N,)
+    (so3 and se3 in numpy; a task's own cost one pair at a time)."""
+    one = task_cost(robot, task, kind)
+    kind = task.default_cost if kind == "auto" else kind
+    L = float(np.mean(np.linalg.norm(robot.platform_anchors, axis=1)))
+    if kind in ("so3", "se3"):
+        def costs(pa, ta, pb, tb):
+            angle = rotation_angle_between(rotation_tt(ta), rotation_tt(tb))
+            if kind == "so3":
+                return angle
+            return np.linalg.norm(pb - pa, axis=1) + L * angle
+        return costs
+    return task.own_costs(kind) or (
+        lambda pa, ta, pb, tb: np.array([one(*q) for q in zip(pa, ta, pb, tb)], dtype=float))
 
 
 # ----- small helpers -------------------------------------------------------------------------

@@ -53,8 +53,9 @@ class PlannerSettings:
 
     strategy: str = _setting(
         "auto", parameter="planner.strategy", flag="--strategy", unit="",
-        description="search strategy, from both ends: auto (astar up to 3-D, gbf above), "
-                    "astar (A*, shortest on the chart graph) or gbf (greedy best-first, faster)",
+        description="search strategy, from both ends: auto (astar up to 3-D, gbf above or with "
+                    "a clearance weight), astar (A*, least cost on the chart graph) or gbf "
+                    "(greedy best-first, faster)",
         choices=("auto",) + STRATEGIES, top_level=True)
     cost: str = _setting(
         "auto", parameter="planner.cost", flag="--cost", unit="",
@@ -84,6 +85,13 @@ class PlannerSettings:
         1e-3, parameter="planner.margin_floor", flag="--margin-floor", unit="normalised",
         description="least normalised feasibility margin of a planned waypoint",
         low=0.0, high=1.0, open_low=True, open_high=True)
+    clearance_weight: float = _setting(
+        0.0, parameter="planner.clearance_weight", flag="--clearance-weight", unit="",
+        description="trade length for clearance: a path costs its length times "
+                    "1 + w ln(0.5 / margin) along it, so doubling the margin along a stretch "
+                    "saves 0.69 w per unit of its length, at any margin (0: the shortest path, "
+                    "the paper's cost)",
+        low=0.0, high=1000.0)
     max_cable_speed: float = _setting(
         0.05, parameter="trajectory.max_cable_speed", flag="--max-cable-speed", unit="m/s",
         description="per-winch cable speed limit of the trajectory",

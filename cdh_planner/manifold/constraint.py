@@ -90,3 +90,7 @@ class TaskConstraint:
         """(p m, tau rad) of a scaled point."""
         X = x[:I_G] * self.scale[:I_G]
         return X[I_P:I_TAU].copy(), X[I_TAU:I_TAU + 3].copy()
+
+    def margin(self, x):
+        """The normalised feasibility margin of a scaled point on M (``nav.margin``)."""
+        return self.nav.margin(x[:N_VARS] * self.scale[:N_VARS])

@@ -257,6 +257,15 @@ class NavigationManifold:
         """Smallest normalised margin encoded by the slacks of X (> 0 on M)."""
         return float(np.exp(np.min(X[I_G:N_VARS]) / self.kappa))
 
+    def margin(self, X):
+        """The normalised margin of ``feasibility.evaluate`` at the pose of X on M, read from
+        X without evaluating the pose: the cable lengths over their range and the tension
+        margins exp(s / kappa), exp(t / kappa) (the length slacks g use another
+        normalisation, see the module doc)."""
+        r = self.robot
+        a = (X[I_L:I_F] - r.length_min) / (r.length_max - r.length_min)
+        return float(min(np.min(a), np.min(1.0 - a), np.exp(np.min(X[I_S:N_VARS]) / self.kappa)))
+
 
 def _cross(a, b):
     return np.array([a[1] * b[2] - a[2] * b[1], a[2] * b[0] - a[0] * b[2], a[0] * b[1] - a[1] * b[0]])

@@ -6,7 +6,10 @@
     outcome.points          # points on M from x_start to x_goal (when OK)
 
 Knows nothing of robots: it sees an ``Atlas``, a ``cost(x_a, x_b)`` between two points of
-the manifold (the task metric, also the heuristic) and, optionally, ``direct(x_a, x_b)``:
+the manifold (the task metric, or the planner's clearance cost; the cost of a chart link
+and of a direct motion), optionally a ``heuristic(x, target)`` (default: ``cost``; for A*
+a lower bound of the cost, e.g. the task metric under the clearance cost) and
+``direct(x_a, x_b)``:
 whether the caller's direct motion between two points of M is safe (a dense closed-form
 check, much cheaper than charts). The direct motion from start to goal itself is the
 caller's to try first, before any chart exists (``Planner.plan`` does).
@@ -19,8 +22,9 @@ it, so the same loop answers a first query, which builds the atlas, and later qu
 which mostly walk charts that already exist (multi-query).
 
 - A*: each side pops least g + h and grows the chart until closed. Direct motions to the
-  other root are edges of cost h, so the answer is the least-cost route of the chart graph
-  (Pohl's stopping rule: the best meeting cost mu <= the larger of the two least f).
+  other root are edges of their cost (h itself when h is the cost), so the answer is the
+  least-cost route of the chart graph (Pohl's stopping rule: the best meeting cost
+  mu <= the larger of the two least f).
 - Greedy Best-First: each side pops least h and grows the chart one child at a time,
   towards its target, until a child beats its parent; the first meeting is the answer.
 
@@ -83,19 +87,21 @@ class SearchOutcome:
 
 def run(atlas, x_start, x_goal, cost: Callable, stop: Stop, strategy="astar",
         direct: Optional[Callable] = None, progress: Optional[Callable] = None,
-        edge_costs: Optional[dict] = None, link_ok: Optional[Callable] = None) -> SearchOutcome:
+        edge_costs: Optional[dict] = None, link_ok: Optional[Callable] = None,
+        heuristic: Optional[Callable] = None) -> SearchOutcome:
     """One query from x_start to x_goal (points on M) on ``atlas``; module docstring.
     ``progress`` is called with {"charts", "time_s", "best_h"} every PROGRESS_PERIOD_S;
     ``edge_costs`` caches chart-link costs across queries; ``link_ok(points)`` is the
     caller's check of the points that join two charts (a link that fails it is cut and
-    the search is run again)."""
+    the search is run again); ``heuristic(x, target)`` orders the search (default
+    ``cost``)."""
     if strategy not in STRATEGIES:
         raise ValueError(f"unknown strategy {strategy!r} (expected {STRATEGIES})")
     i_start, i_goal = atlas.chart_at(x_start), atlas.chart_at(x_goal)
     direct_cache = {}
     while True:  # lazy links: a route's links are checked once found; a bad one is cut
         search = _Bidirectional(atlas, cost, stop, strategy, direct, progress,
-                                {} if edge_costs is None else edge_costs, direct_cache)
+                                {} if edge_costs is None else edge_costs, direct_cache, heuristic)
         status, route, hops = search.run(i_start, i_goal)
         if status != Status.OK:
             return SearchOutcome(status, expanded=search.expanded)
@@ -150,9 +156,11 @@ class _Side:
 
 
 class _Bidirectional:
-    def __init__(self, atlas, cost, stop, strategy, direct, progress, edge_costs, direct_cache):
+    def __init__(self, atlas, cost, stop, strategy, direct, progress, edge_costs, direct_cache,
+                 heuristic=None):
         self.atlas = atlas
         self.cost = cost
+        self.heuristic = cost if heuristic is None else heuristic
         self.stop = stop
         self.strategy = strategy
         self.direct = direct
@@ -163,14 +171,25 @@ class _Bidirectional:
         self._t0 = time.perf_counter()
         self._last_progress = 0.0
         self._h = {}
+        self._hop = {}
         self._count = itertools.count()
 
     # ----- helpers ---------------------------------------------------------------------
     def h(self, side, i):
         key = (side.root, i)
         if key not in self._h:
-            self._h[key] = self.cost(self.atlas.charts[i].x, side.target)
+            self._h[key] = self.heuristic(self.atlas.charts[i].x, side.target)
         return self._h[key]
+
+    def hop_cost(self, side, i):
+        """Cost of the direct motion from chart i to the other end (h itself when the
+        heuristic is the cost)."""
+        if self.heuristic is self.cost:
+            return self.h(side, i)
+        key = (side.root, i)
+        if key not in self._hop:
+            self._hop[key] = self.cost(self.atlas.charts[i].x, side.target)
+        return self._hop[key]
 
     def edge_cost(self, i, j):
         key = (i, j) if i < j else (j, i)
@@ -273,8 +292,9 @@ class _Bidirectional:
             gi = side.g[i]
             if i in other.g and gi + other.g[i] < mu:
                 mu, meet = gi + other.g[i], (side, i, i, False)
-            if closer and gi + self.h(side, i) < mu and self.direct_ok(i, other.root):
-                mu, meet = gi + self.h(side, i), (side, i, other.root, True)
+            if closer and gi + self.h(side, i) < mu and self.direct_ok(i, other.root) \
+                    and gi + self.hop_cost(side, i) < mu:
+                mu, meet = gi + self.hop_cost(side, i), (side, i, other.root, True)
             for j in self.atlas.charts[i].neighbours:
                 if j in side.done:
                     continue
