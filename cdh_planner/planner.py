@@ -26,6 +26,7 @@ from .feasibility import evaluate
 from .manifold.constraint import TaskConstraint
 from .model.pose import (Pose, quaternion_from_tau, rotation_angle_between, rotation_tt,
                          tau_from_rotation, wrap_angle)
+from .model.task import COORDINATES
 from .search.search import MB, Stop, run
 from .settings import COSTS, PlannerSettings  # noqa: F401  (PlannerSettings: part of this API)
 from .status import Status
@@ -343,6 +344,7 @@ class Planner:
             return y
         dim = y.shape[1]
         eye = np.eye(dim) * CLEARANCE_FD
+        lo, hi = self._coordinate_bounds()
         margin = self._margins(y)
         length = self._lengths(y[:-1], y[1:])
         cost = float(np.sum(clearance.segment_costs(length, margin, w)))
@@ -369,7 +371,7 @@ class Planner:
             step = solve_banded((1, 1), band, -grad)
             improved = False
             for alpha in CLEARANCE_STEPS:
-                trial = _wrapped(inner + alpha * step, per)
+                trial = np.clip(_wrapped(inner + alpha * step, per), lo, hi)
                 m_t = self._margins(trial)
                 keep = m_t < self.settings.margin_floor
                 trial[keep], m_t[keep] = inner[keep], margin[1:-1][keep]
@@ -400,6 +402,13 @@ class Planner:
         out = _wrapped(y[k] + frac[:, None] * _wrapped(y[k + 1] - y[k], per), per)
         out[0], out[-1] = y[0], y[-1]
         return out
+
+    def _coordinate_bounds(self):
+        """(lo, hi) of each task coordinate: its natural bounds if it is not periodic
+        (theta in [0, pi], the sphere's alpha2), else unbounded."""
+        bounds = [COORDINATES[n].bounds if COORDINATES[n].bounds and not COORDINATES[n].periodic
+                  else (-np.inf, np.inf) for n in self.task.names]
+        return np.array([b[0] for b in bounds]), np.array([b[1] for b in bounds])
 
     def _margins(self, y):
         """Normalised margins of task coordinate rows (N, k)."""

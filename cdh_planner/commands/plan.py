@@ -6,21 +6,21 @@
 Every planner setting has a flag (settings.py: the schema the node's parameters and the
 problem file use too).
 
-Prints the outcome (reason, charts, seconds, cost, waypoints, duration, least margin) with a
-progress bar while the atlas grows. Exit 0 with a path, 1 without one (no path at this
-resolution, timeout, chart or memory limit, infeasible start or goal), 2 for bad input
+Prints the outcome (reason, charts, seconds, cost, waypoints, duration, least margin and
+least tension margin) with a progress bar while the atlas grows. Exit 0 with a path, 1
+without one (no path at this resolution, timeout, chart or memory limit, infeasible start
+or goal), 2 for bad input
 (the output paths are checked before planning), 3 for an internal error.
 
 ``--json OUT`` writes the plan JSON contract (README, the plan command): success, reason, message, strategy,
-n, m, charts, time_s, cost, and path: [{p, quaternion, tau, lengths, tension_min,
-tension_nominal, tension_max, t}] (m, rad, N, s).
+n, m, charts, time_s, cost, least_margin, least_tension_margin_n, and path: [{p, quaternion,
+tau, lengths, tension_min, tension_nominal, tension_max, margin, t}] (m, rad, N, s).
 """
 
 import json
 import math
 from dataclasses import replace
 
-import numpy as np
 from tqdm import tqdm
 
 from ..io.outputs import check_output, write_text, writing
@@ -103,14 +103,16 @@ def print_result(result, problem):
         path = result.path
         print(f"  cost {result.cost:.4f}, {len(path)} waypoints, platform path "
               f"{path.length_m():.4f} m, duration {path.t[-1]:.2f} s, least margin "
-              f"{float(np.min(path.margin)):.4f}")
+              f"{result.least_margin:.4f} ({result.least_tension_margin:.3g} N)")
 
 
 def result_dict(result):
     """The plan JSON contract (README); non-finite numbers become null."""
     out = {"success": result.success, "reason": result.reason, "message": result.message,
            "strategy": result.strategy, "n": result.n, "m": result.m, "charts": result.charts,
-           "time_s": result.time_s, "cost": _num(result.cost), "path": []}
+           "time_s": result.time_s, "cost": _num(result.cost),
+           "least_margin": _num(result.least_margin),
+           "least_tension_margin_n": _num(result.least_tension_margin), "path": []}
     path = result.path
     if path is not None:
         for k in range(len(path)):
