@@ -6,7 +6,6 @@ its waits; older files (rosbag2's service names) are read and recovered."""
 
 import subprocess
 import sys
-import time
 from pathlib import Path
 
 import pytest
@@ -35,7 +34,7 @@ from cdh_planner.ros.recording import PARAMETER_EVENTS, RunLog  # noqa: E402
 
 NODE = "/cdh_planner"
 SERVICE = "/cdh_planner/plan"
-T0 = time.time_ns() + 60 * 10**9    # log times, all after the files are opened
+T0 = 1_700_000_000 * 10**9          # log times (the first record opens the file)
 
 
 def _params(**values):
@@ -72,8 +71,8 @@ def run(tmp_path):
     """A node's run: parameters at start, a call, a change, a call, execute, stop; the file."""
     log = RunLog(tmp_path, True, warn=pytest.fail, info=lambda _: None, node_name=NODE)
     log.parameters(INITIAL, initial=True)
-    path = log.open()
     _call(log, 1, T0 + 10_000)
+    path = log.path
     log.parameters(_params(task__radius=0.12, stream_rate_hz=100.0), log_time_ns=T0 + 20_000)
     log.parameters(_params(stream_rate_hz=60.0), log_time_ns=T0 + 20_500)
     _call(log, 2, T0 + 30_000)
@@ -160,15 +159,15 @@ def test_rotation_keeps_calls_whole_and_starts_each_file_with_the_parameters(tmp
     log = RunLog(tmp_path, True, warn=pytest.fail, info=said.append, node_name=NODE,
                  max_bytes=20_000)
     log.parameters(INITIAL, initial=True)
-    first = log.open()
     for seq in range(1, 9):
         _call(log, seq, T0 + seq * 1000, n_poses=20)
+        first = first if seq > 1 else log.path
     log.close()
     files = sorted(tmp_path.glob("*.mcap"), key=lambda p: p.stat().st_mtime_ns)
     assert str(files[0]) == first and 2 <= len(files) <= 4
-    assert len(said) == len(files) - 1
-    assert all("reached" in s and "; if the node is killed: cdh-planner recover " in s
-               for s in said)
+    assert [f"recording to {f}" in s for f, s in zip(files, said)] == [True] * len(files)
+    assert all("; if the node is killed: cdh-planner recover " in s for s in said)
+    assert ["reached" in s for s in said] == [False] + [True] * (len(files) - 1)
     sequences = []
     for f in files:
         assert check_recording(f)[1]                                   # complete
