@@ -17,7 +17,7 @@ from dataclasses import dataclass, field
 from typing import Callable, Optional
 
 import numpy as np
-
+from scipy.linalg import solve_banded
 from threadpoolctl import threadpool_limits
 
 from .atlas.atlas import Atlas
@@ -336,7 +336,6 @@ class Planner:
         (task-metric lengths, margins from the closed form) goes down, waypoints that would
         fall below the margin floor stay. J never increases: smoothing cannot pull the
         path back to the boundary for length it is not worth."""
-        from scipy.linalg import solve_banded
         w = self.clearance_weight
         per = self._periodic_mask()
         y = self._resample(y)
