@@ -5,6 +5,9 @@ SHELL := /bin/bash
 VENV   := .venv
 PY     := $(VENV)/bin/python
 STAMP  := $(VENV)/.installed
+# The ROS 2 interface packages of interfaces/, built with CMake into the venv.
+IFACE_STAMP := $(VENV)/.interfaces
+IFACE_SRC   := interfaces/build_in_venv.py $(shell find interfaces/*/ -type f 2>/dev/null)
 # Prefer python3.11; fall back to python3.
 PYTHON ?= $(shell command -v python3.11 2>/dev/null || command -v python3)
 
@@ -16,7 +19,7 @@ export PIP_DISABLE_PIP_VERSION_CHECK := 1
 
 .PHONY: venv demo test bench clean
 
-venv: $(STAMP)
+venv: $(STAMP) $(IFACE_STAMP)
 
 $(VENV)/bin/python:
 	@test -n "$(PYTHON)" || { echo "python3.11 / python3 not found" >&2; exit 1; }
@@ -32,6 +35,14 @@ $(STAMP): $(VENV)/bin/python requirements.txt setup.py setup.cfg package.xml cdh
 	  p = load_problem('config/problems/robot2_q1_q2.yaml'); c = TaskConstraint(p.robot, p.task); \
 	  c.residual_and_jacobian(c.lift(p.start.p, p.start.tau))"
 	touch $(STAMP)
+
+# cdh_planner_interfaces (PlanPath, TensionEnvelope) and, unless a real one is importable, the
+# copy of control_msgs' FollowJointTrajectory: first the pip-installed wheels' CMake files get
+# this venv's include folders (they name the Python the wheels were built with), then a plain
+# CMake build (build/interfaces/) installs each package into the venv.
+$(IFACE_STAMP): $(STAMP) $(IFACE_SRC)
+	$(PY) interfaces/build_in_venv.py --build-dir build/interfaces
+	touch $(IFACE_STAMP)
 
 demo: venv
 	$(VENV)/bin/cdh-planner demo
