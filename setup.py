@@ -2,6 +2,13 @@
 
 Works both under colcon (ROS 2 Jazzy install) and as a plain `pip install -e .`.
 Exact dependency pins live in requirements.txt; install_requires only names them.
+
+install_requires names the runtime dependencies that are Python distributions. The ROS ones
+(rclpy, builtin_interfaces, rcl_interfaces, ament_index_python, the message packages,
+cdh_planner_interfaces, control_msgs) are declared in package.xml: under colcon they come
+from the ROS install and the workspace; for the venv, requirements.txt pins their PyPI wheels
+and `make venv` builds the interfaces of interfaces/ (test/test_packaging.py checks that
+every import of the package is declared here or there).
 """
 from glob import glob
 
@@ -15,12 +22,14 @@ setup(
     packages=find_packages(exclude=['test', 'test.*']),
     data_files=[
         ('share/ament_index/resource_index/packages', ['resource/' + package_name]),
-        ('share/' + package_name, ['package.xml']),
+        ('share/' + package_name, ['package.xml', 'LICENSE']),
         # glob so robot / problem files added later are picked up without editing here
         ('share/' + package_name + '/config', sorted(glob('config/*.yaml'))),
         ('share/' + package_name + '/config/problems', sorted(glob('config/problems/*.yaml'))),
+        ('share/' + package_name + '/launch', sorted(glob('launch/*.launch.py'))),
     ],
-    install_requires=['setuptools', 'numpy', 'scipy', 'pyyaml', 'matplotlib', 'tqdm', 'threadpoolctl', 'numba', 'toppra'],
+    install_requires=['setuptools', 'numpy', 'scipy', 'pyyaml', 'matplotlib', 'tqdm', 'threadpoolctl', 'numba', 'toppra',
+                      'mcap', 'mcap-ros2-support', 'rosbags'],
     zip_safe=True,
     maintainer='cdh_planner maintainers',
     maintainer_email='maintainer@example.com',

@@ -1,0 +1,158 @@
+"""Packaging: package.xml and setup.py declare every runtime dependency the package imports,
+setup.py installs the launch file, the launch file (read with ast: ``launch`` is not on
+PyPI) starts the node through an entry point that exists, and the licences ship."""
+
+import ast
+import runpy
+import sys
+import xml.etree.ElementTree as ET
+
+import pytest
+import setuptools
+
+from conftest import PACKAGE, REPO
+
+LAUNCH = REPO / "launch" / "cdh_planner.launch.py"
+
+# top-level import -> (package.xml key, setup.py install_requires name or None for ROS
+# packages, which package.xml alone declares)
+THIRD_PARTY = {
+    "numpy": ("python3-numpy", "numpy"),
+    "scipy": ("python3-scipy", "scipy"),
+    "yaml": ("python3-yaml", "pyyaml"),
+    "matplotlib": ("python3-matplotlib", "matplotlib"),
+    "tqdm": ("python3-tqdm", "tqdm"),
+    "threadpoolctl": ("python3-threadpoolctl", "threadpoolctl"),
+    "numba": ("python3-numba", "numba"),
+    "toppra": ("python3-toppra-pip", "toppra"),
+    "mcap": ("mcap-ros2-support", "mcap"),
+    "mcap_ros2": ("mcap-ros2-support", "mcap-ros2-support"),
+    "rosbags": ("python3-rosbags-pip", "rosbags"),
+}
+ROS = {"rclpy", "ament_index_python", "builtin_interfaces", "rcl_interfaces", "action_msgs",
+       "std_msgs", "std_srvs", "geometry_msgs", "nav_msgs", "trajectory_msgs", "sensor_msgs",
+       "diagnostic_msgs", "visualization_msgs", "service_msgs", "cdh_planner_interfaces",
+       "control_msgs"}
+# declared although no module imports them (yet): the node's action and its
+# ros2_control client use them (issue 9)
+DECLARED_AHEAD = {"action_msgs", "cdh_planner_interfaces", "control_msgs"}
+
+
+def package_imports():
+    """Top-level names of the non-standard-library modules that cdh_planner imports."""
+    names = set()
+    for f in PACKAGE.rglob("*.py"):
+        for node in ast.walk(ast.parse(f.read_text())):
+            if isinstance(node, ast.Import):
+                names |= {a.name.split(".")[0] for a in node.names}
+            elif isinstance(node, ast.ImportFrom) and node.level == 0 and node.module:
+                names.add(node.module.split(".")[0])
+    return {n for n in names if n not in sys.stdlib_module_names and n != "cdh_planner"}
+
+
+def exec_depends():
+    root = ET.parse(REPO / "package.xml").getroot()
+    return {e.text.strip() for tag in ("exec_depend", "depend") for e in root.iter(tag)}
+
+
+@pytest.fixture(scope="module")
+def setup_kwargs(monkeypatch_module):
+    """The keyword arguments setup.py gives setuptools.setup (setup.py run, setup not)."""
+    captured = {}
+    monkeypatch_module.setattr(setuptools, "setup", lambda **kw: captured.update(kw))
+    monkeypatch_module.chdir(REPO)
+    runpy.run_path(str(REPO / "setup.py"), run_name="__main__")
+    return captured
+
+
+@pytest.fixture(scope="module")
+def monkeypatch_module():
+    mp = pytest.MonkeyPatch()
+    yield mp
+    mp.undo()
+
+
+def test_every_import_is_a_known_dependency():
+    unknown = package_imports() - set(THIRD_PARTY) - ROS
+    assert not unknown, (f"cdh_planner imports {sorted(unknown)}: declare them in package.xml "
+                         f"and setup.py (or requirements.txt) and add them to this test's tables")
+
+
+def test_package_xml_declares_every_runtime_dependency():
+    declared = exec_depends()
+    needed = {THIRD_PARTY[n][0] if n in THIRD_PARTY else n for n in package_imports()}
+    assert needed - declared == set()
+    assert DECLARED_AHEAD <= declared
+    assert {"launch", "launch_ros"} <= declared   # for the launch file
+
+
+def test_setup_py_requires_every_python_dependency(setup_kwargs):
+    required = set(setup_kwargs["install_requires"])
+    needed = {THIRD_PARTY[n][1] for n in package_imports() if n in THIRD_PARTY}
+    assert needed - required == set()
+    pinned = {line.split("==")[0].strip().lower() for line in
+              (REPO / "requirements.txt").read_text().splitlines() if "==" in line}
+    assert {r.lower() for r in required} - {"setuptools"} <= pinned
+
+
+def test_setup_py_installs_the_launch_file_and_licence(setup_kwargs):
+    files = dict(setup_kwargs["data_files"])
+    assert files["share/cdh_planner/launch"] == ["launch/cdh_planner.launch.py"]
+    assert "LICENSE" in files["share/cdh_planner"]
+    scripts = setup_kwargs["entry_points"]["console_scripts"]
+    assert "cdh-planner = cdh_planner.cli:main" in scripts
+
+
+def _calls(tree, name):
+    return [n for n in ast.walk(tree) if isinstance(n, ast.Call)
+            and getattr(n.func, "id", getattr(n.func, "attr", None)) == name]
+
+
+def _kwargs(call):
+    return {k.arg: k.value for k in call.keywords}
+
+
+def test_launch_file_declares_the_robot_argument_and_starts_the_node():
+    tree = ast.parse(LAUNCH.read_text())
+    functions = {f.name for f in tree.body if isinstance(f, ast.FunctionDef)}
+    assert "generate_launch_description" in functions
+    imported = {(n.module, a.name) for n in ast.walk(tree) if isinstance(n, ast.ImportFrom)
+                for a in n.names}
+    assert {("launch.actions", "DeclareLaunchArgument"), ("launch_ros.actions", "Node"),
+            ("launch.substitutions", "LaunchConfiguration")} <= imported
+
+    (declare,) = _calls(tree, "DeclareLaunchArgument")
+    assert ast.literal_eval(declare.args[0]) == "robot"
+    default = _kwargs(declare)["default_value"]
+    parts = [ast.literal_eval(a) for a in default.elts[1:]] if isinstance(default, ast.List) \
+        else [ast.literal_eval(a) for a in default.args[0].elts[1:]]
+    assert (REPO / "/".join(parts)).is_file()   # config/robot2.yaml, installed by setup.py
+
+    (node,) = _calls(tree, "Node")
+    kw = _kwargs(node)
+    assert ast.literal_eval(kw["package"]) == "cdh_planner"
+    assert ast.literal_eval(kw["executable"]) == "cdh-planner"
+    assert ast.literal_eval(kw["arguments"]) == ["node"]
+    (param,) = kw["parameters"].elts
+    assert param.func.id == "LaunchConfiguration" and ast.literal_eval(param.args[0]) == "robot"
+
+
+def test_the_launch_files_command_exists_and_knows_node():
+    """``cdh-planner node`` is what the launch file runs: the entry point resolves and
+    ``node`` is one of its commands."""
+    from importlib.metadata import entry_points
+    (ep,) = [e for e in entry_points(group="console_scripts") if e.name == "cdh-planner"]
+    assert ep.value == "cdh_planner.cli:main" and callable(ep.load())
+    assert (PACKAGE / "commands" / "node.py").is_file()
+
+
+def test_licences_ship():
+    text = (REPO / "LICENSE").read_text()
+    assert "Apache License" in text and "Version 2.0, January 2004" in text
+    assert "END OF TERMS AND CONDITIONS" in text
+    root = ET.parse(REPO / "package.xml").getroot()
+    assert root.findtext("license") == "Apache-2.0"
+    copy = REPO / "interfaces" / "control_msgs"
+    assert "Redistribution and use in source and binary forms" in (copy / "LICENSE").read_text()
+    assert ET.parse(copy / "package.xml").getroot().findtext("license") == "BSD-3-Clause"
+    assert "install(FILES LICENSE" in (copy / "CMakeLists.txt").read_text()
