@@ -32,6 +32,7 @@ from .settings import COSTS, PlannerSettings  # noqa: F401  (PlannerSettings: pa
 from .status import Status
 from .trajectory import clearance
 from .trajectory.path import PlannedPath
+from .trajectory.dynamics import timed_path
 from .trajectory.timing import time_path
 from .trajectory.verify import SlerpPath, TaskLinePath, check_motion, check_path
 
@@ -104,6 +105,8 @@ class Planner:
         self.strategy = (default_strategy(self.constraint.dim, self.clearance_weight)
                          if s.strategy == "auto" else s.strategy)
         self.atlas = Atlas(self.constraint, radius=self.radius)
+        if self.settings.dynamics == "dynamic" and robot.mass is None:
+            raise InputError("dynamics", "dynamic", "needs the load's mass (robot.load.mass)")
         self.pose_cost = task_cost(robot, task, self.settings.cost)
         self.pose_costs = task_costs(robot, task, self.settings.cost)
         pose = self.constraint.pose
@@ -166,8 +169,9 @@ class Planner:
                          for k in range(len(path) - 1)))
         how = "the direct motion" if direct else f"{charts} charts"
         least = clearance.path_margins(self.robot, path.p, path.quaternion)
+        path, timing = timed_path(self.robot, path, s.dynamics, s.max_cable_speed, s.max_cable_accel)
         out = answer(True, Status.OK, f"path of {len(path)} waypoints over {how}", cost=cost,
-                     path=path, chart_path=charts, direct=direct)
+                     path=path, chart_path=charts, direct=direct, timing=timing or "quasi-static")
         out.least_margin, out.least_tension_margin = least
         return out
 

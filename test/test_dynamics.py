@@ -119,3 +119,13 @@ def test_robot_file_mass_properties():
     doc["load"]["inertia"] = [0.001, -0.001, 0.001]
     with pytest.raises(InputError, match="robot.load.inertia .*positive semi-definite"):
         robot_from_dict(doc)
+
+
+def test_the_planner_times_dynamically_when_the_robot_has_a_mass(q2_q3):
+    problem, _, timing = q2_q3
+    result = Planner(problem.robot, problem.task, problem.settings).plan(problem.start, problem.goal)
+    assert result.stats["timing"].startswith("dynamic timing")
+    assert np.allclose(result.path.t, timing.path.t) and np.allclose(result.path.tension_max,
+                                                                     timing.path.tension_max)
+    quasi = Planner(problem.robot, problem.task, replace(problem.settings, dynamics="quasi_static"))
+    assert quasi.plan(problem.start, problem.goal).stats["timing"] == "quasi-static"

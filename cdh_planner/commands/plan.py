@@ -104,6 +104,7 @@ def print_result(result, problem):
         print(f"  cost {result.cost:.4f}, {len(path)} waypoints, platform path "
               f"{path.length_m():.4f} m, duration {path.t[-1]:.2f} s, least margin "
               f"{result.least_margin:.4f} ({result.least_tension_margin:.3g} N)")
+        print(f"  timing: {result.stats.get('timing', 'quasi-static')}")
 
 
 def result_dict(result):
@@ -112,7 +113,8 @@ def result_dict(result):
            "strategy": result.strategy, "n": result.n, "m": result.m, "charts": result.charts,
            "time_s": result.time_s, "cost": _num(result.cost),
            "least_margin": _num(result.least_margin),
-           "least_tension_margin_n": _num(result.least_tension_margin), "path": []}
+           "least_tension_margin_n": _num(result.least_tension_margin),
+           "timing": result.stats.get("timing", ""), "path": []}
     path = result.path
     if path is not None:
         for k in range(len(path)):

@@ -303,7 +303,10 @@ def timed_path(robot, path, dynamics, max_cable_speed, max_cable_accel):
         return path, ""
     if robot.mass is None:
         raise InputError("trajectory.dynamics", dynamics, "needs robot.load.mass in the robot file")
-    timing = dynamic_timing(robot, path, robot.mass, robot.inertia, max_cable_speed, max_cable_accel)
+    try:
+        timing = dynamic_timing(robot, path, robot.mass, robot.inertia, max_cable_speed, max_cable_accel)
+    except (np.linalg.LinAlgError, ValueError) as exc:  # e.g. J singular between waypoints
+        return path, f"dynamic timing failed ({exc}): quasi-static timing kept"
     if not timing.feasible:
         return path, f"dynamic timing impossible ({timing.reason}): quasi-static timing kept"
     return timing.path, (f"dynamic timing {timing.duration:.3f} s (least tension slack "
