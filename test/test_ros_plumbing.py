@@ -23,7 +23,9 @@ from sensor_msgs.msg import JointState  # noqa: E402
 from trajectory_msgs.msg import JointTrajectory  # noqa: E402
 
 from cdh_planner.model.robot import load_robot  # noqa: E402
+from cdh_planner.ros import messages as M  # noqa: E402
 from cdh_planner.ros.client import PlannerClient  # noqa: E402
+from cdh_planner.ros.planning import PLAN_QUEUE_DEPTH  # noqa: E402
 from ros_harness import (Q1, Q2, ROBOT2, Collector, NodeProcess,  # noqa: E402
                          claimed_domain, sphere_pose_msg, stamp_s)
 
@@ -103,24 +105,31 @@ def test_bad_request_answered_with_reason_then_next_served(ros, label, mutate, e
     assert plan(ros).success                           # the node still serves
 
 
-def test_busy_is_refused_at_once_and_progress_is_published(ros):
+def test_requests_queue_then_busy_is_refused_at_once_and_progress_is_published(ros):
+    """While one plan is computed, PLAN_QUEUE_DEPTH more requests wait their turn (and are
+    planned in order); the next is refused at once with ``busy``."""
     ros.delay_file.write_text("1.5")
+    request = GetPlan.Request(start=sphere_pose_msg(Q1), goal=sphere_pose_msg(Q2))
     try:
         n_progress = len(ros.progress.items)
-        first = ros.plan_client.call_async(GetPlan.Request(start=sphere_pose_msg(Q1),
-                                                           goal=sphere_pose_msg(Q2)))
+        first = ros.plan_client.call_async(request)
         ros.spin(0.4)
+        queued = [ros.plan_client.call_async(request) for _ in range(PLAN_QUEUE_DEPTH)]
+        ros.spin(0.2)
+        ros.delay_file.unlink()        # the waiting ones plan at once when their turn comes
         t0 = time.monotonic()
-        second = plan(ros)
+        refused = plan(ros)
         refused_in = time.monotonic() - t0
-        assert not second.success
-        assert second.values["error_msg"].startswith("busy"), second.values
+        assert not refused.success
+        assert refused.values["error_msg"].startswith("busy"), refused.values
         assert refused_in < 0.5, refused_in
-        assert not first.done()
-        assert ros.spin_until(first.done, 10.0)
-        assert len(first.result().plan.poses) > 0
+        assert not first.done() and not any(f.done() for f in queued)
+        assert ros.spin_until(lambda: first.done() and all(f.done() for f in queued), 10.0)
+        assert all(len(f.result().plan.poses) > 0 for f in [first, *queued])
+        stamps = [M.time_ns(f.result().plan.header.stamp) for f in [first, *queued]]
+        assert stamps == sorted(stamps)                     # planned in arrival order
     finally:
-        ros.delay_file.unlink()
+        ros.delay_file.unlink(missing_ok=True)
     progress = [m for m in ros.progress.messages[n_progress:]]
     assert len(progress) >= 5       # at most 10 Hz over 1.5 s of planning
     values = {kv.key: kv.value for kv in progress[-1].values}

@@ -35,7 +35,7 @@ from trajectory_msgs.msg import JointTrajectory
 from ..errors import InputError
 from . import messages as M
 from .node import CABLE_COMMAND, CABLE_TRAJECTORY, EXECUTE, LATCHED, NODE_NAME, PLAN, \
-    PLAN_RESULT, STOP, TENSION_ENVELOPE
+    PLAN_RESULT, SERVICE_QOS, STOP, TENSION_ENVELOPE
 
 DEFAULT_NODE = "/" + NODE_NAME
 RESULT_WAIT_S = 2.0  # after the response, how long to wait for its ~/plan_result
@@ -144,9 +144,12 @@ class PlannerClient:
         self.node = Node(name, context=self.context)
         self.executor = SingleThreadedExecutor(context=self.context)
         self.executor.add_node(self.node)
-        self.plan_client = self.node.create_client(GetPlan, self.topic(PLAN))
-        self.execute_client = self.node.create_client(Trigger, self.topic(EXECUTE))
-        self.stop_client = self.node.create_client(Trigger, self.topic(STOP))
+        # deep queues, as the node's: every client's reply reader receives the replies to
+        # all clients of the service, and rclpy's default (10) drops them in a burst
+        create = self.node.create_client
+        self.plan_client = create(GetPlan, self.topic(PLAN), qos_profile=SERVICE_QOS)
+        self.execute_client = create(Trigger, self.topic(EXECUTE), qos_profile=SERVICE_QOS)
+        self.stop_client = create(Trigger, self.topic(STOP), qos_profile=SERVICE_QOS)
         self.results = []
         self.node.create_subscription(
             DiagnosticStatus, self.topic(PLAN_RESULT), self.results.append,

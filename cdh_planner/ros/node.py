@@ -5,18 +5,26 @@
 Interface (names relative to the node, all remappable; see docs/ros-node.md):
 
 - ``~/plan`` nav_msgs/srv/GetPlan: start, goal -> path (empty: no plan; reason on
-  ``~/plan_result``). Planned on a thread of a MultiThreadedExecutor (reentrant group), one
-  at a time: a request while planning is refused at once (``busy``). ``tolerance`` is not
-  used (the goal is reached exactly).
-- ``~/execute``, ``~/stop`` std_srvs/srv/Trigger: stream the last successful plan on
+  ``~/plan_result``). Every call is answered. Taken at once on a thread of a
+  MultiThreadedExecutor (reentrant group); planned one at a time in arrival order, with at
+  most ``planning.PLAN_QUEUE_DEPTH`` requests waiting: beyond that, refused at once
+  (``busy``). ``tolerance`` is not used (the goal is reached exactly).
+- ``~/execute``, ``~/stop`` std_srvs/srv/Trigger: stream the last good plan on
   ``~/cable_command`` at ``stream_rate_hz``; stop at once and hold the last setpoint.
 - latched (transient local, depth 1): ``~/path``, ``~/cable_trajectory``,
-  ``~/tension_envelope``, ``~/markers`` (the last successful plan), ``~/plan_result``
+  ``~/tension_envelope``, ``~/markers`` (the last good plan), ``~/plan_result``
   (the last answer, diagnostic_msgs/DiagnosticStatus, key/values in ``planning.py``).
 - ``~/plan_progress`` diagnostic_msgs/DiagnosticStatus while planning, at most 10 Hz
   (values charts, time_s, best_h, run_id).
 - ``~/cable_command`` the winch command (``messages.WINCH_COMMAND_TYPE``, sensor_msgs/JointState)
   while executing.
+
+A plan becomes the last good plan (latched, executable) only once all its outputs are built
+(within ``planning.MAX_DURATION_S`` / ``MAX_WAYPOINTS``), recorded and published; anything
+failing before leaves the previous one and answers an error. A plan made while executing is
+answered at once, but published (and made executable) only when the execution ends: the
+latched ``~/cable_trajectory`` commands a controller. Recording never decides an answer: a
+failure is logged.
 
 Parameters: ``ros/params.py``. Changes go through the standard parameter services and are
 checked there (a bad value is refused with the reason); a change of robot.*, task.*,
@@ -68,6 +76,16 @@ MARKERS, PLAN_RESULT, PLAN_PROGRESS = "markers", "plan_result", "plan_progress"
 CABLE_COMMAND = "cable_command"
 LATCHED = QoSProfile(depth=1, durability=DurabilityPolicy.TRANSIENT_LOCAL,
                      reliability=ReliabilityPolicy.RELIABLE)
+# The services' DDS queues (requests not yet taken by the executor; rclpy's default keeps
+# 10 and drops older ones silently). The executor takes a plan request at once (busy beyond
+# the node's own queue), so this only holds what arrives in one burst.
+SERVICE_DEPTH = 1000
+SERVICE_QOS = QoSProfile(depth=SERVICE_DEPTH, reliability=ReliabilityPolicy.RELIABLE,
+                         durability=DurabilityPolicy.VOLATILE)
+# executor threads: the plan being computed, the requests waiting their turn, and spare ones
+# (busy answers, execute / stop, the stream timer, parameters) that are never all blocked
+EXECUTOR_THREADS = 1 + planning.PLAN_QUEUE_DEPTH + 3
+RECORD_ERROR_PERIOD_S = 10.0  # at most one log line per this many s about failed recording
 PROGRESS_PERIOD_S = 0.1
 SHUTDOWN_JOIN_S = 5.0
 STATIC_TYPES = {STRING: Parameter.Type.STRING, BOOL: Parameter.Type.BOOL,
@@ -97,9 +115,9 @@ class PlannerNode(Node):
                              warn=self.get_logger().warning, info=self.get_logger().info,
                              node_name=self.get_fully_qualified_name(),
                              **log_limits(self.config.values))
-        self.runlog.parameters([p.to_parameter_msg() for p in
-                                self.get_parameters_by_prefix("").values()], initial=True)
-        log_file = self.runlog.open()
+        self._record(self.runlog.parameters, [p.to_parameter_msg() for p in
+                     self.get_parameters_by_prefix("").values()], initial=True)
+        log_file = self._record(self.runlog.open) or ""
 
         pub = self.create_publisher
         self.pub_path = pub(Path, f"~/{PATH}", LATCHED)
@@ -110,18 +128,24 @@ class PlannerNode(Node):
         self.pub_progress = pub(DiagnosticStatus, f"~/{PLAN_PROGRESS}", 10)
         self.pub_command = pub(WINCH_COMMAND_TYPE, f"~/{CABLE_COMMAND}", 10)
 
-        self._busy = threading.Lock()
+        self._queue = planning.PlanQueue(planning.PLAN_QUEUE_DEPTH)
         self._calls = 0
         self._shutting_down = False
         self.planning = False
-        self._last = None            # (PlannedPath, Robot) of the last successful plan
+        # _lock guards _stream, _last, _pending and the latched plan outputs
+        self._lock = threading.RLock()
+        self._last = None            # (PlannedPath, Robot, PlanOutputs) of the last good plan
+        self._pending = None         # the same, of a plan made while executing
         self._stream = None
         self._timer = None
         self._timer_period = None
         self.srv_plan = self.create_service(GetPlan, f"~/{PLAN}", self._plan,
+                                            qos_profile=SERVICE_QOS,
                                             callback_group=ReentrantCallbackGroup())
-        self.srv_execute = self.create_service(Trigger, f"~/{EXECUTE}", self._execute)
-        self.srv_stop = self.create_service(Trigger, f"~/{STOP}", self._stop)
+        self.srv_execute = self.create_service(Trigger, f"~/{EXECUTE}", self._execute,
+                                               qos_profile=SERVICE_QOS)
+        self.srv_stop = self.create_service(Trigger, f"~/{STOP}", self._stop,
+                                            qos_profile=SERVICE_QOS)
         c = self.config
         self.get_logger().info(
             f"ready: robot {c.robot.name}, task {c.task.type}, strategy "
@@ -173,8 +197,10 @@ class PlannerNode(Node):
             return SetParametersResult(successful=False, reason=str(exc))
         with self._config_lock:
             self._values, self.config, self._planner = values, config, planner
-        self.runlog.configure(config.log_dir, config.log_enabled, **log_limits(config.values))
-        self.runlog.parameters([p.to_parameter_msg() for p in params], log_time_ns=self._now())
+        self._record(self.runlog.configure, config.log_dir, config.log_enabled,
+                     **log_limits(config.values))
+        self._record(self.runlog.parameters, [p.to_parameter_msg() for p in params],
+                     log_time_ns=self._now())
         self.get_logger().info(f"parameters set: {', '.join(p.name for p in params)}")
         return SetParametersResult(successful=True)
 
@@ -188,61 +214,112 @@ class PlannerNode(Node):
     # ------------------------------------------------------------------ plan
 
     def _plan(self, request, response):
-        try:
-            return self._answer_plan(request, response)
-        except Exception as exc:  # noqa: BLE001 - never take the node down; answer "no plan"
-            self.get_logger().error(f"plan call failed: {traceback.format_exc()}")
-            response.plan = planning.empty_path(self.config.base_frame,
-                                                self.get_clock().now().to_msg())
-            try:
-                self._publish(self.pub_result, planning.result_status(
-                    planning.refusal("internal_error", f"internal error: {exc}"),
-                    self.config.robot, "", "", response.plan.header.stamp), latched=True)
-            except Exception:  # noqa: BLE001
-                pass
-            return response
-
-    def _answer_plan(self, request, response):
+        """~/plan: every call is answered, and its request and response are recorded,
+        whatever happens in between (an exception: ``internal_error``)."""
         with self._config_lock:
-            config, planner = self.config, self._planner
             self._calls += 1
             seq = self._calls
-        log_file = self.runlog.open()
+            config = self.config
+        log_file = self._record(self.runlog.open) or ""
         run_id = f"{_stem(log_file)}#{seq}" if log_file else str(seq)
-        service = self.resolve_service_name(self.srv_plan.srv_name)
-        self.runlog.service_event(service, "nav_msgs/srv/GetPlan", REQUEST_RECEIVED,
-                                  request=request, sequence_number=seq, log_time_ns=self._now())
-        strategy = config.settings.strategy
-        if not self._busy.acquire(blocking=False):
-            result = planning.refusal("busy", "busy: another plan is being computed; "
-                                              "call again when it is answered", strategy)
-        else:
-            try:
-                result = self._compute(request, planner, config, run_id)
-            finally:
-                self._busy.release()
-        stamp = self.get_clock().now().to_msg()
-        if result.success:
-            out = planning.plan_outputs(result, config.robot, config.base_frame, stamp)
-            self._last = (result.path, config.robot)
-            self._publish(self.pub_path, out.path, latched=True)
-            self._publish(self.pub_trajectory, out.cable_trajectory, latched=True)
-            self._publish(self.pub_envelope, out.tension_envelope, latched=True)
-            self._publish(self.pub_markers, out.markers, latched=True)
-            response.plan = out.path
-        else:
-            response.plan = planning.empty_path(config.base_frame, stamp)
-        status = planning.result_status(result, config.robot, run_id, log_file, stamp)
-        self._publish(self.pub_result, status, latched=True)
-        self.runlog.service_event(service, "nav_msgs/srv/GetPlan", RESPONSE_SENT,
-                                  response=response, sequence_number=seq,
-                                  log_time_ns=self._now())
+        self._record_plan(REQUEST_RECEIVED, seq, request=request)
+        try:
+            result, response.plan = self._serve(request, run_id, log_file)
+        except Exception as exc:  # noqa: BLE001 - never take the node down: answer no plan
+            self.get_logger().error(f"[{run_id}] plan call failed: {traceback.format_exc()}")
+            result = planning.refusal(
+                "internal_error", f"internal error: {_name(exc)}: {_one_line(exc)}",
+                config.settings.strategy)
+            response.plan = self._no_path(config)
+            self._publish_result(result, config, run_id, log_file, response.plan)
+        self._record_plan(RESPONSE_SENT, seq, response=response)
         line = f"[{run_id}] {planning.result_line(result)}"
         if result.success:
             self.get_logger().info(line)
         else:
             self.get_logger().warning(line)
         return response
+
+    def _serve(self, request, run_id, log_file):
+        """(PlanResult, the answer's nav_msgs/Path) of one request: wait for its turn in
+        the queue (or be refused: busy, shutting down), plan, bound and build the outputs,
+        commit them (``_commit``); ``~/plan_result`` published."""
+        turn = self._queue.enter()
+        config = self.config
+        if turn is None:
+            result = planning.refusal(
+                "busy", f"busy: {len(self._queue)} plan requests are being computed or wait "
+                        f"(at most 1 + {self._queue.depth}); call again when one is answered",
+                config.settings.strategy)
+        elif not self._queue.wait(turn):
+            result = planning.refusal("canceled", "canceled: the node is shutting down",
+                                      config.settings.strategy)
+        else:
+            try:
+                with self._config_lock:
+                    config, planner = self.config, self._planner
+                result = self._compute(request, planner, config, run_id)
+                result = planning.output_refusal(result) or result
+                if result.success:
+                    out = planning.plan_outputs(result, config.robot, config.base_frame,
+                                                self.get_clock().now().to_msg())
+                    self._commit(result, config, out, run_id, log_file)
+                    return result, out.path
+            finally:
+                self._queue.leave()
+        path = self._no_path(config)
+        self._publish_result(result, config, run_id, log_file, path)
+        return result, path
+
+    def _commit(self, result, config, out, run_id, log_file):
+        """Make a successful plan the last good plan: its status built, its outputs recorded
+        and published (``_publish_outputs``), then ``_last`` set and the status published.
+        While executing, the outputs wait in ``_pending`` for the end of the stream. Raises
+        (and leaves the previous last good plan) if building or publishing fails."""
+        with self._lock:
+            deferred = self._stream is not None
+            status = planning.result_status(
+                result, config.robot, run_id, log_file, out.path.header.stamp,
+                outputs=planning.DEFERRED if deferred else planning.PUBLISHED)
+            plan = (result.path, config.robot, out)
+            if deferred:
+                self._pending = plan
+            else:
+                self._publish_outputs(out)
+                self._last, self._pending = plan, None
+        self._publish_result(result, config, run_id, log_file, out.path, status)
+
+    def _publish_outputs(self, out, restore=True):
+        """Publish a plan's latched outputs; if one fails, put the last good plan's back
+        (as far as possible) and raise."""
+        try:
+            for publisher, msg in ((self.pub_path, out.path),
+                                   (self.pub_trajectory, out.cable_trajectory),
+                                   (self.pub_envelope, out.tension_envelope),
+                                   (self.pub_markers, out.markers)):
+                self._publish(publisher, msg, latched=True)
+        except Exception:
+            if restore and self._last is not None:
+                try:
+                    self._publish_outputs(self._last[2], restore=False)
+                except Exception:  # noqa: BLE001 - the error raised below says what failed
+                    pass
+            raise
+
+    def _publish_result(self, result, config, run_id, log_file, path, status=None):
+        """Publish ``~/plan_result`` (``status``, or that of ``result`` answered with
+        ``path``); a failure is logged: the service answer stands."""
+        try:
+            if status is None:
+                status = planning.result_status(result, config.robot, run_id, log_file,
+                                                path.header.stamp)
+            self._publish(self.pub_result, status, latched=True)
+        except Exception:  # noqa: BLE001 - a diagnostic, never the answer
+            self.get_logger().error(f"[{run_id}] publishing the plan result failed: "
+                                    f"{traceback.format_exc()}")
+
+    def _no_path(self, config):
+        return planning.empty_path(config.base_frame, self.get_clock().now().to_msg())
 
     def _compute(self, request, planner, config, run_id):
         try:
@@ -286,16 +363,23 @@ class PlannerNode(Node):
     def _answer_execute(self, request, response):
         self._record_trigger(self.srv_execute, request, None, REQUEST_RECEIVED)
         response.success = False
-        if self._stream is not None:
-            response.message = (f"refused: already executing (at {self._stream.t:.2f} s of "
-                                f"{self._stream.duration:.2f} s); call ~/stop first")
-        elif self._last is None:
+        with self._lock:
+            stream, last = self._stream, self._last
+            if stream is None and last is not None:
+                path, robot, _ = last
+                config = self.config
+                stream = self._stream = Stream(path, robot.winch_names,
+                                               config.stream_interpolation,
+                                               start=time.monotonic())
+                started = True
+            else:
+                started = False
+        if not started and stream is not None:
+            response.message = (f"refused: already executing (at {stream.t:.2f} s of "
+                                f"{stream.duration:.2f} s); call ~/stop first")
+        elif not started:
             response.message = "refused: no plan to execute; call ~/plan first"
         else:
-            path, robot = self._last
-            config = self.config
-            self._stream = Stream(path, robot.winch_names, config.stream_interpolation,
-                                  start=time.monotonic())
             period = 1.0 / config.stream_rate_hz
             if self._timer is None or self._timer_period != period:
                 if self._timer is not None:
@@ -341,43 +425,79 @@ class PlannerNode(Node):
         self._record_trigger(self.srv_stop, None, response, RESPONSE_SENT)
         return response
 
-    def _end_stream(self, message):
+    def _end_stream(self, message, publish_pending=True):
+        """The stream is over: a plan made meanwhile is published and becomes the last good
+        plan now (``_commit``)."""
         if self._timer is not None:
             self._timer.cancel()
-        self._stream = None
         self.get_logger().info(message)
+        with self._lock:
+            self._stream = None
+            pending, self._pending = self._pending, None
+            if pending is None or not publish_pending:
+                return
+            try:
+                self._publish_outputs(pending[2])
+            except Exception:  # noqa: BLE001 - the previous last good plan stays
+                self.get_logger().error(f"publishing the plan made while executing failed "
+                                        f"(it cannot be executed): {traceback.format_exc()}")
+                return
+            self._last = pending
+        self.get_logger().info("published the plan made while executing: ~/execute runs it")
 
     def _record_trigger(self, srv, request, response, event):
-        self.runlog.service_event(self.resolve_service_name(srv.srv_name), "std_srvs/srv/Trigger", event, request=request,
-                                  response=response, log_time_ns=self._now())
+        self._record(self.runlog.service_event, self.resolve_service_name(srv.srv_name),
+                     "std_srvs/srv/Trigger", event, request=request, response=response,
+                     log_time_ns=self._now())
+
+    def _record_plan(self, event, seq, request=None, response=None):
+        self._record(self.runlog.service_event, self.resolve_service_name(self.srv_plan.srv_name),
+                     "nav_msgs/srv/GetPlan", event, request=request, response=response,
+                     sequence_number=seq, log_time_ns=self._now())
 
     # ------------------------------------------------------------------ helpers
+
+    def _record(self, method, *args, **kwargs):
+        """Call a recording method; what it raises is logged (at most once every
+        RECORD_ERROR_PERIOD_S), never passed on: recording does not decide an answer."""
+        try:
+            return method(*args, **kwargs)
+        except Exception as exc:  # noqa: BLE001
+            self.get_logger().error(
+                f"recording failed ({getattr(method, '__name__', method)}): "
+                f"{type(exc).__name__}: {_one_line(exc)}",
+                throttle_duration_sec=RECORD_ERROR_PERIOD_S)
+            return None
 
     def _publish(self, publisher, msg, latched=False):
         """Record, then publish: whatever a subscriber got is in the run file, even if the
         process is killed right after."""
-        self.runlog.write(publisher.topic_name, msg, self._now(), transient_local=latched)
+        self._record(self.runlog.write, publisher.topic_name, msg, self._now(),
+                     transient_local=latched)
         publisher.publish(msg)
 
     def _now(self):
         return self.get_clock().now().nanoseconds
 
     def begin_shutdown(self):
-        """From now on a running plan is ended at its next progress report."""
+        """From now on a running plan is ended at its next progress report, and waiting
+        requests are answered (canceled)."""
         self._shutting_down = True
+        self._queue.close()
 
     def close(self):
         """Stop streaming (holding), end a running plan at its next progress report, and
         close the run file. Safe to call after the context has shut down."""
-        self._shutting_down = True
+        self.begin_shutdown()
         if self._stream is not None:
             try:
                 self._publish(self.pub_command, self._stream.hold(
                     self.get_clock().now().to_msg()))
             except Exception:  # noqa: BLE001 - context already gone: nothing to tell
                 pass
-            self._end_stream("shutting down while executing: held the last setpoint")
-        self.runlog.close()
+            self._end_stream("shutting down while executing: held the last setpoint",
+                             publish_pending=False)
+        self._record(self.runlog.close)
 
 
 def _stem(path):
@@ -411,7 +531,7 @@ def main(ros_args=(), planner_factory=default_planner_factory, log=print):
         log(f"cdh-planner node: error: {exc if isinstance(exc, InputError) else _one_line(exc)}")
         rclpy.try_shutdown(context=context)
         return 2
-    executor = MultiThreadedExecutor(num_threads=4, context=context)
+    executor = MultiThreadedExecutor(num_threads=EXECUTOR_THREADS, context=context)
     executor.add_node(node)
 
     def spin():
@@ -446,6 +566,12 @@ def main(ros_args=(), planner_factory=default_planner_factory, log=print):
         sys.stderr.flush()
         os._exit(0)
     return 0
+
+
+def _name(exc):
+    """``ZeroDivisionError``, ``struct.error``: the exception's type, named so one knows it."""
+    kind = type(exc)
+    return kind.__name__ if kind.__module__ == "builtins" else f"{kind.__module__}.{kind.__name__}"
 
 
 def _one_line(exc):

@@ -2,16 +2,23 @@
 
 The node (``ros/node.py``) only moves these values between ROS and this module:
 
+    turn = queue.enter()                                      # None: full, answer busy
+    queue.wait(turn)                                          # False: closed (shutdown)
     start, goal = request_poses(request, base_frame)          # InputError: refuse
     result = run_planner(planner, start, goal, progress)      # never raises
+    queue.leave()
+    result = output_refusal(result) or result                 # too long / too many points
     outputs = plan_outputs(result, robot, base_frame, stamp)  # messages to publish
-    status = result_status(result, robot, run_id, log_file, stamp)
+    status = result_status(result, robot, run_id, log_file, stamp, outputs=...)
 
-Refusals before planning (bad frame, invalid pose, busy) are PlanResults too (``refusal``),
-so every answer has one ``~/plan_result`` with a nav2 error code (``messages.ERROR_CODES``).
+Refusals before planning (bad frame, invalid pose, busy) and after it (outputs beyond the
+bounds, internal errors) are PlanResults too (``refusal``), so every answer has one
+``~/plan_result`` with a nav2 error code (``messages.ERROR_CODES``).
 """
 
+import collections
 import math
+import threading
 import traceback
 from dataclasses import dataclass
 from typing import Optional
@@ -29,8 +36,17 @@ SINGULAR_SIN = 1e-9  # |sin theta| below this: phi is not determined by the orie
 
 # keys that ``result_status`` adds to messages.plan_status's (strings; numbers by repr)
 EXTRA_KEYS = ("path_stamp", "waypoints", "path_length_m", "duration_s", "min_margin",
-              "min_tension_margin_n")
+              "min_tension_margin_n", "outputs")
 PROGRESS_NAME = "cdh_planner: planning"
+# ``outputs`` value of a successful result: the plan is on the latched topics now, or will be
+# when the running execution ends (``docs/ros-node.md``, "Planning while executing")
+PUBLISHED, DEFERRED = "published", "deferred until the running execution ends"
+
+# The node's outputs of one plan are bounded (messages, recording, streaming): a plan beyond
+# either bound is refused (``output_limit``), never published nor executable.
+MAX_DURATION_S = 86_400.0   # one day of motion
+MAX_WAYPOINTS = 50_000      # ~25 MB of messages (path, trajectory, envelope)
+PLAN_QUEUE_DEPTH = 4        # requests waiting behind the one being planned; more: ``busy``
 
 
 @dataclass
@@ -69,6 +85,92 @@ def refusal(reason, message, strategy=""):
     ``busy``): no path, no charts, no time."""
     return PlanResult(success=False, reason=reason, message=message, strategy=strategy, n=0,
                       m=0, charts=0, time_s=0.0, cost=math.nan, path=None)
+
+
+def output_refusal(result):
+    """The refusal (``output_limit``) for a successful PlanResult whose path the node must not
+    publish: longer than MAX_DURATION_S, more than MAX_WAYPOINTS waypoints, or times that are
+    not finite and increasing from 0. None when the path is within the bounds (or there is
+    no path)."""
+    path = result.path
+    if not result.success or path is None:
+        return None
+    n = len(path)
+    t = np.asarray(path.t, dtype=float)
+    duration = float(t[-1]) if t.size else math.nan
+    if n > MAX_WAYPOINTS:
+        why = f"{n} waypoints, more than the node's bound of {MAX_WAYPOINTS}"
+    elif not duration <= MAX_DURATION_S:   # NaN included
+        why = (f"a trajectory of {duration:.4g} s, longer than the node's bound of "
+               f"{MAX_DURATION_S:.0f} s (one day): check trajectory.max_cable_speed and "
+               f"trajectory.max_cable_accel")
+    elif t.shape != (n,) or not np.all(np.isfinite(t)) or t[0] != 0.0 or np.any(np.diff(t) < 0):
+        why = "trajectory times that are not finite and increasing from 0"
+    else:
+        return None
+    return refusal("output_limit", f"refused: the plan has {why}", result.strategy)
+
+
+class PlanQueue:
+    """One plan computed at a time, at most ``depth`` more requests waiting their turn in
+    arrival order; a request beyond that is not queued (the node answers ``busy`` at once).
+
+        turn = queue.enter()        # None: full
+        if queue.wait(turn):        # blocks until it is this request's turn; False: closed
+            try: ...plan...
+            finally: queue.leave()
+
+    ``close`` (shutdown) wakes every waiting request (``wait`` returns False) and refuses
+    later ones. Thread-safe."""
+
+    def __init__(self, depth=PLAN_QUEUE_DEPTH):
+        self.depth = int(depth)
+        self._cond = threading.Condition()
+        self._waiting = collections.deque()
+        self._turns = 0
+        self._running = False
+        self.closed = False
+
+    def __len__(self):
+        """Requests in the queue: the one being planned and those waiting."""
+        with self._cond:
+            return len(self._waiting) + int(self._running)
+
+    def enter(self):
+        """A turn (int) for a new request, or None when ``depth`` requests already wait
+        (or the queue is closed)."""
+        with self._cond:
+            if self.closed or len(self._waiting) + int(self._running) > self.depth:
+                return None
+            self._turns += 1
+            self._waiting.append(self._turns)
+            return self._turns
+
+    def wait(self, turn, timeout_s=None):
+        """Block until ``turn`` is first and nothing is planned; then it is running: True.
+        False if the queue was closed (or ``timeout_s`` passed): the turn is given up."""
+        with self._cond:
+            ok = self._cond.wait_for(
+                lambda: self.closed or (not self._running and self._waiting[0] == turn),
+                timeout_s)
+            if ok and not self.closed:
+                self._waiting.popleft()
+                self._running = True
+                return True
+            self._waiting.remove(turn)
+            self._cond.notify_all()
+            return False
+
+    def leave(self):
+        """The running request is answered: the next one's turn."""
+        with self._cond:
+            self._running = False
+            self._cond.notify_all()
+
+    def close(self):
+        with self._cond:
+            self.closed = True
+            self._cond.notify_all()
 
 
 def input_refusal(exc, strategy=""):
@@ -128,15 +230,17 @@ def path_summary(path, robot):
             "min_tension_margin_n": float(np.min(np.minimum(low, high)))}
 
 
-def result_status(result, robot, run_id, log_file, stamp):
+def result_status(result, robot, run_id, log_file, stamp, outputs=PUBLISHED):
     """diagnostic_msgs/DiagnosticStatus for ``~/plan_result``: ``messages.plan_status`` plus
     ``path_stamp`` (the answered path's header stamp, integer ns: pairs this result with its
-    service response) and, on success, the ``path_summary`` numbers."""
+    service response) and, on success, the ``path_summary`` numbers and ``outputs``
+    (PUBLISHED or DEFERRED)."""
     msg = M.plan_status(result, run_id=run_id, log_file=log_file)
     extra = {"path_stamp": str(M.time_ns(stamp))}
     if result.success and result.path is not None:
         extra.update({k: repr(v) if isinstance(v, float) else str(v)
                       for k, v in path_summary(result.path, robot).items()})
+        extra["outputs"] = outputs
     msg.values.extend(KeyValue(key=k, value=v) for k, v in extra.items())
     return msg
 
