@@ -475,11 +475,12 @@ def _wrapped(d, periodic):
 
 
 # ----- task metrics ------------------------------------------------------------------------
-def task_cost(robot, task, kind="auto"):
-    """cost(p_a, tau_a, p_b, tau_b) between two poses (m, rad) of ``kind`` (COSTS), one of
-    the task's ``costs``: ``so3`` the SO(3) geodesic (rad, the paper's for orientation
-    slices), ``se3`` |dp| + L |angle| (m, L = mean platform anchor radius), or the task's
-    own (the sphere's ``great_circle``). ``auto``: the task's ``default_cost``."""
+def task_costs(robot, task, kind="auto"):
+    """cost(p_a, tau_a, p_b, tau_b) between poses (m, rad; arrays (..., 3) -> (...)) of
+    ``kind`` (COSTS), one of the task's ``costs``: ``so3`` the SO(3) geodesic (rad, the
+    paper's for orientation slices), ``se3`` |dp| + L |angle| (m, L = mean platform anchor
+    radius), or the task's own (the sphere's ``great_circle``). ``auto``: the task's
+    ``default_cost``."""
     kind = task.default_cost if kind == "auto" else kind
     if kind not in COSTS:
         raise InputError("cost", kind, f"expected one of {', '.join(COSTS)}")
@@ -487,32 +488,18 @@ def task_cost(robot, task, kind="auto"):
         raise InputError("cost", kind, f"not a cost of the {task.describe()} (its costs: "
                                        f"{', '.join(task.costs)})")
     L = float(np.mean(np.linalg.norm(robot.platform_anchors, axis=1)))
-
-    def angle(ta, tb):
-        return float(rotation_angle_between(rotation_tt(ta), rotation_tt(tb)))
-
     if kind == "so3":
-        return lambda pa, ta, pb, tb: angle(ta, tb)
+        return lambda pa, ta, pb, tb: rotation_angle_between(rotation_tt(ta), rotation_tt(tb))
     if kind == "se3":
-        return lambda pa, ta, pb, tb: float(np.linalg.norm(pb - pa)) + L * angle(ta, tb)
+        return lambda pa, ta, pb, tb: (np.linalg.norm(pb - pa, axis=-1)
+                                       + L * rotation_angle_between(rotation_tt(ta), rotation_tt(tb)))
     return task.own_cost(kind)
 
 
-def task_costs(robot, task, kind="auto"):
-    """``task_cost`` over rows: cost(p_a, tau_a, p_b, tau_b) with arrays (N, 3) -> (N,)
-    (so3 and se3 in numpy; a task's own cost one pair at a time)."""
-    one = task_cost(robot, task, kind)
-    kind = task.default_cost if kind == "auto" else kind
-    L = float(np.mean(np.linalg.norm(robot.platform_anchors, axis=1)))
-    if kind in ("so3", "se3"):
-        def costs(pa, ta, pb, tb):
-            angle = rotation_angle_between(rotation_tt(ta), rotation_tt(tb))
-            if kind == "so3":
-                return angle
-            return np.linalg.norm(pb - pa, axis=1) + L * angle
-        return costs
-    return task.own_costs(kind) or (
-        lambda pa, ta, pb, tb: np.array([one(*q) for q in zip(pa, ta, pb, tb)], dtype=float))
+def task_cost(robot, task, kind="auto"):
+    """``task_costs`` of one pair of poses, as a float."""
+    costs = task_costs(robot, task, kind)
+    return lambda pa, ta, pb, tb: float(costs(pa, ta, pb, tb))
 
 
 # ----- small helpers -------------------------------------------------------------------------

@@ -145,11 +145,8 @@ class Task:
         return np.zeros(np.atleast_2d(p).shape[0])
 
     def own_cost(self, kind):
-        """cost(p_a, tau_a, p_b, tau_b) of a kind only this task knows (None: not one)."""
-        return None
-
-    def own_costs(self, kind):
-        """``own_cost`` over rows (arrays (N, 3) -> (N,)), or None: the caller loops."""
+        """cost(p_a, tau_a, p_b, tau_b) of a kind only this task knows (None: not one), over
+        rows: arrays (..., 3) -> (...)."""
         return None
 
     def describe(self):
@@ -370,21 +367,10 @@ class SphereTask(Task):
             return None
         c, r = np.asarray(self.center), self.radius
 
-        def arc(pa, ta, pb, tb):
-            na, nb = pa - c, pb - c
-            out = r * float(np.arctan2(np.linalg.norm(np.cross(na, nb)), float(na @ nb)))
-            return out + (r * abs(float(wrap_angle(tb[2] - ta[2]))) if self.free_torsion else 0.0)
-        return arc
-
-    def own_costs(self, kind):
-        if kind != "great_circle":
-            return None
-        c, r = np.asarray(self.center), self.radius
-
         def arcs(pa, ta, pb, tb):
             na, nb = pa - c, pb - c
-            out = r * np.arctan2(np.linalg.norm(np.cross(na, nb), axis=1), np.sum(na * nb, axis=1))
-            return out + (r * np.abs(wrap_angle(tb[:, 2] - ta[:, 2])) if self.free_torsion else 0.0)
+            out = r * np.arctan2(np.linalg.norm(np.cross(na, nb), axis=-1), np.sum(na * nb, axis=-1))
+            return out + (r * np.abs(wrap_angle(tb[..., 2] - ta[..., 2])) if self.free_torsion else 0.0)
         return arcs
 
     def describe(self):
