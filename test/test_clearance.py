@@ -125,3 +125,15 @@ def test_plan_command_reports_the_least_margins(tmp_path, capsys):
     assert 0 < doc["least_margin"] <= min(w["margin"] for w in doc["path"]) + 1e-9
     line = capsys.readouterr().out
     assert f"least margin {doc['least_margin']:.4f} ({doc['least_tension_margin_n']:.3g} N)" in line
+
+
+def test_node_plan_result_carries_the_least_margins():
+    pytest.importorskip("diagnostic_msgs")
+    from builtin_interfaces.msg import Time
+    from cdh_planner.ros import planning
+    _, pr, res = plan("robot2_q1_q2", clearance_weight=WEIGHT)
+    status = planning.result_status(res, pr.robot, "r#1", "", Time(sec=1))
+    values = {kv.key: kv.value for kv in status.values}
+    assert float(values["least_margin"]) == res.least_margin
+    assert float(values["least_tension_margin_n"]) == res.least_tension_margin
+    assert float(values["least_margin"]) <= float(values["min_margin"]) + 1e-9

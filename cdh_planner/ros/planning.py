@@ -36,7 +36,7 @@ SINGULAR_SIN = 1e-9  # |sin theta| below this: phi is not determined by the orie
 
 # keys that ``result_status`` adds to messages.plan_status's (strings; numbers by repr)
 EXTRA_KEYS = ("path_stamp", "waypoints", "path_length_m", "duration_s", "min_margin",
-              "min_tension_margin_n", "outputs")
+              "min_tension_margin_n", "least_margin", "least_tension_margin_n", "outputs")
 PROGRESS_NAME = "cdh_planner: planning"
 # ``outputs`` value of a successful result: the plan is on the latched topics now, or will be
 # when the running execution ends (``docs/ros-node.md``, "Planning while executing")
@@ -233,13 +233,16 @@ def path_summary(path, robot):
 def result_status(result, robot, run_id, log_file, stamp, outputs=PUBLISHED):
     """diagnostic_msgs/DiagnosticStatus for ``~/plan_result``: ``messages.plan_status`` plus
     ``path_stamp`` (the answered path's header stamp, integer ns: pairs this result with its
-    service response) and, on success, the ``path_summary`` numbers and ``outputs``
-    (PUBLISHED or DEFERRED)."""
+    service response) and, on success, the ``path_summary`` numbers (at the waypoints),
+    ``least_margin`` and ``least_tension_margin_n`` (the PlanResult's, as in the plan JSON:
+    over the waypoints and the motion between them) and ``outputs`` (PUBLISHED or DEFERRED)."""
     msg = M.plan_status(result, run_id=run_id, log_file=log_file)
     extra = {"path_stamp": str(M.time_ns(stamp))}
     if result.success and result.path is not None:
         extra.update({k: repr(v) if isinstance(v, float) else str(v)
                       for k, v in path_summary(result.path, robot).items()})
+        extra["least_margin"] = repr(float(result.least_margin))
+        extra["least_tension_margin_n"] = repr(float(result.least_tension_margin))
         extra["outputs"] = outputs
     msg.values.extend(KeyValue(key=k, value=v) for k, v in extra.items())
     return msg
