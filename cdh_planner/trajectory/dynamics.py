@@ -54,7 +54,7 @@ CHECK_DT = 1e-3         # s: the dense check's time step
 SLOWDOWN = 1.02         # time scale per failed dense check
 MAX_SLOWDOWNS = 40
 TOL = 1e-9              # N, m/s, m/s^2: rounding allowed in the dense check
-DERATE = 1e-3           # share of the winch limits kept in reserve (see dynamic_timing)
+DERATE = 1e-3           # share of the winch limits and tension ranges kept in reserve
 toppra.setup_logging("ERROR")  # its warnings repeat what feasible=False says
 
 
@@ -168,8 +168,9 @@ class _WrenchConstraint(toppra.constraint.LinearConstraint):
         eye = np.eye(12)
         F = np.broadcast_to(np.concatenate([eye, -eye]), (n, 24, 12)).copy()
         r = self.robot
-        g = np.concatenate([np.broadcast_to(self.amax, (n, 6)), r.tension_max - v,
-                            np.broadcast_to(self.amax, (n, 6)), -(r.tension_min + v)], axis=1)
+        reserve = DERATE * (r.tension_max - r.tension_min)
+        g = np.concatenate([np.broadcast_to(self.amax, (n, 6)), r.tension_max - v - reserve,
+                            np.broadcast_to(self.amax, (n, 6)), -(r.tension_min + v + reserve)], axis=1)
         with np.errstate(divide="ignore"):
             x_max = np.min(np.where(np.abs(L_s) > 1e-12, self.vmax ** 2 / L_s ** 2, np.inf), axis=1)
         xbound = np.column_stack([np.zeros(n), np.minimum(x_max, 1e12)])
@@ -199,10 +200,10 @@ def dynamic_timing(robot, path, mass, inertia, max_cable_speed, max_cable_accel,
     vmax = np.broadcast_to(np.asarray(max_cable_speed, dtype=float), (6,))
     amax = np.broadcast_to(np.asarray(max_cable_accel, dtype=float), (6,))
     geo = _Geometry(robot, path)
-    grid = np.unique(np.concatenate([np.linspace(0.0, geo.length, grid_points), geo.s_wp]))
+    grid = _grid(geo, grid_points)
     terms = _terms(robot, geo, grid, mass, inertia)
-    # the winch limits derated by DERATE: between gridpoints a profile at the limit
-    # overshoots it by about 1e-4 (measured), which the dense check would refuse
+    # the winch limits (and tension ranges) derated by DERATE: between gridpoints a profile
+    # at the limit overshoots it by about 1e-4 (measured), which the dense check would refuse
     instance = toppra.algorithm.TOPPRA([_WrenchConstraint(terms, robot, vmax * (1 - DERATE),
                                                           amax * (1 - DERATE))],
                                        _Interval(geo.length), gridpoints=grid)
@@ -234,6 +235,15 @@ def tensions_over_time(robot, timing, mass, inertia, dt=CHECK_DT):
     ss, sdot, sddot = _state_at(t, timing.s, timing.sd, t_grid)
     _, _, _, f0, v, a_f, b_f = _terms(robot, timing.geometry, ss, mass, inertia)
     return t, f0 + a_f * sddot[:, None] + b_f * (sdot ** 2)[:, None], f0, v
+
+
+def _grid(geo, n):
+    """The waypoints' s and n evenly spaced ones, none closer than a tenth of the spacing to
+    a waypoint (a sliver interval would turn toppra's rounding into a huge s'')."""
+    even = np.linspace(0.0, geo.length, n)
+    wp = np.unique(geo.s_wp)
+    gap = np.min(np.abs(even[:, None] - wp[None, :]), axis=1)
+    return np.unique(np.concatenate([wp, even[gap > 0.1 * geo.length / (n - 1)]]))
 
 
 def _infeasible(path, geo, grid, reason):
