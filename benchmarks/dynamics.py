@@ -21,7 +21,7 @@ import numpy as np
 from cdh_planner.io.plan_plots import plot_dynamics
 from cdh_planner.io.problem import load_problem
 from cdh_planner.planner import Planner
-from cdh_planner.trajectory.dynamics import dynamic_timing, tensions_over_time
+from cdh_planner.trajectory.dynamics import DynamicTiming, _Geometry, dynamic_timing, tensions_over_time
 
 PROBLEMS = Path(__file__).resolve().parents[1] / "config" / "problems"
 ROWS = ("robot1_qs_qg", "robot1_qs1_qg", "robot1_qs2_qg", "robot2_q1_q2", "robot2_q2_q3",
@@ -38,13 +38,13 @@ def disc_inertia(robot, mass):
 def quasi_static_slack(robot, path, mass, inertia):
     """Least tension slack (N) of the quasi-static timing with the dynamic wrench: the
     quasi-static waypoint times on the same C2 path, checked by the dynamic model."""
-    timing = dynamic_timing(robot, path, mass, inertia, 1e3, 1e3)  # the path's geometry
-    if not timing.feasible:
-        return float("nan")
-    s_wp = timing.geometry.s_wp
-    sd = np.interp(timing.s, s_wp, np.gradient(s_wp, path.t, edge_order=1))
-    slow = replace(timing, sd=sd)
-    t, f, _, v = tensions_over_time(robot, slow, mass, inertia)
+    geo = _Geometry(robot, path)
+    s, t = geo.s_wp[geo.keep], path.t[geo.keep]
+    sd = np.gradient(s, t)
+    sd[0] = sd[-1] = 0.0  # at rest at both ends
+    timing = DynamicTiming(path=path, feasible=True, reason="", duration=float(t[-1]), slowdown=1.0,
+                           least_tension_margin_n=np.nan, samples=0, s=s, sd=sd, geometry=geo)
+    _, f, _, v = tensions_over_time(robot, timing, mass, inertia)
     return float(np.min(np.minimum(f - v - robot.tension_min, robot.tension_max - f - v)))
 
 
@@ -59,7 +59,8 @@ def main():
           f"{'dynamic s':>10} {'slack N':>9} {'time s':>7}  note")
     for name in ROWS:
         problem = load_problem(PROBLEMS / f"{name}.yaml")
-        result = Planner(problem.robot, problem.task, problem.settings).plan(problem.start, problem.goal)
+        quasi = replace(problem.settings, dynamics="quasi_static")  # the baseline timing
+        result = Planner(problem.robot, problem.task, quasi).plan(problem.start, problem.goal)
         if not result.success:
             print(f"{name:26} no path: {result.message}")
             continue
