@@ -120,13 +120,15 @@ class Planner:
 
     # ----- the query -------------------------------------------------------------------
     def plan(self, start: Pose, goal: Pose, progress: Optional[ProgressCallback] = None,
-             cancel=None):
+             cancel=None, tolerance: Optional[float] = None):
         """A PlanResult from ``start`` to ``goal``. ``cancel``: an object with ``is_set()``
-        (threading.Event) that stops the search (answer ``canceled``)."""
+        (threading.Event) that stops the search (answer ``canceled``). ``tolerance`` (m or
+        rad, > 0; default the settings' ``task_tolerance``): how far start and goal may be off
+        the task; within it they are projected onto it."""
         with threadpool_limits(limits=1, user_api="blas"):  # many small solves: threads only hurt
-            return self._plan(start, goal, progress, cancel)
+            return self._plan(start, goal, progress, cancel, tolerance)
 
-    def _plan(self, start, goal, progress, cancel):
+    def _plan(self, start, goal, progress, cancel, tolerance=None):
         t0 = time.perf_counter()
         s = self.settings
         c = self.constraint
@@ -137,7 +139,7 @@ class Planner:
 
         points = {}
         for label, pose in (("start", start), ("goal", goal)):
-            x, why = self._lift(label, pose)
+            x, why = self._lift(label, pose, tolerance or self.settings.task_tolerance)
             if x is None:
                 return answer(False, why[0], why[1])
             points[label] = x
@@ -277,15 +279,21 @@ class Planner:
         return np.concatenate(parts)
 
     # ----- start and goal ----------------------------------------------------------------
-    def _lift(self, label, pose):
-        """(x on M, None) or (None, (reason, message))."""
+    def _lift(self, label, pose, tolerance):
+        """(x on M, None) or (None, (reason, message)). A pose within ``tolerance`` (m or
+        rad) of the task is projected onto it (the pose of its own task coordinates)."""
         p = _finite_vector(f"{label}.p", pose.p, 3)
         tau = _finite_vector(f"{label}.tau", pose.tau, 3)
-        off = float(self.task.residual(p[None], tau[None])[0]) if hasattr(self.task, "residual") else 0.0
-        if off > TASK_TOL:
+        off = float(self.task.residual(p[None], tau[None])[0])
+        if off > max(tolerance, TASK_TOL):
             return None, ("invalid", f"{label} pose is off the {self.task.type} task by "
-                                     f"{off:.3g} (m or rad): {_describe(p, tau)}")
+                                     f"{off:.3g} (m or rad), beyond the tolerance {tolerance:g}: "
+                                     f"{_describe(p, tau)}")
         p, tau = (a[0] for a in self.task.pose(self.task.coords(p[None], tau[None])))
+        if float(self.task.residual(p[None], tau[None])[0]) > TASK_TOL:  # e.g. an implicit task
+            return None, ("invalid", f"{label} pose is off the {self.task.type} task by "
+                                     f"{off:.3g} (m or rad) and cannot be projected onto it: "
+                                     f"{_describe(p, tau)}")
         f = evaluate(self.robot, p[None], tau[None])
         if not f.feasible[0]:
             return None, (f"{label}_infeasible", f"{label} pose is not wrench-feasible: "

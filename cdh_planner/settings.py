@@ -100,6 +100,12 @@ class PlannerSettings:
         0.2, parameter="trajectory.max_cable_accel", flag="--max-cable-accel", unit="m/s^2",
         description="per-winch cable acceleration limit of the trajectory",
         low=1e-4, high=1000.0)
+    task_tolerance: float = _setting(
+        1e-3, parameter="task.tolerance", flag="--task-tolerance", unit="m or rad",
+        description="how far a start or goal may be off the task (m for positions, rad for "
+                    "angles; a GetPlan request's tolerance > 0 overrides it): within it the "
+                    "pose is projected onto the task and planned from there",
+        low=1e-9, high=0.1)
     dynamics: str = _setting(
         "auto", parameter="trajectory.dynamics", flag="--dynamics", unit="",
         description="time parameterisation: quasi_static (winch limits, static tensions), "

@@ -243,3 +243,20 @@ def test_start_equal_to_goal_gives_a_path_that_stays(tmp_path):
     assert res.success and len(res.path) == 2 and res.cost == 0.0
     assert np.all(np.diff(res.path.t) > 0)
     np.testing.assert_allclose(res.path.p[0], res.path.p[1])
+
+
+def test_a_pose_within_the_task_tolerance_is_projected_onto_the_task():
+    """Robot 2's q1 -> q2 written to 6 decimals is about 3e-6 off the sphere: within the
+    default task_tolerance (1e-3) it plans from the projected poses; with a tighter
+    tolerance it is refused, naming the distance."""
+    from dataclasses import replace as _replace
+    from cdh_planner.planner import Pose, PlannerSettings
+    pr = load_problem(PROBLEMS / "robot2_q1_q2.yaml")
+    start, goal = (Pose(np.round(q.p, 6), np.round(q.tau, 6)) for q in (pr.start, pr.goal))
+    off = pr.task.residual(np.array([goal.p]), np.array([goal.tau]))[0]
+    assert 1e-7 < off < 1e-3
+    res = Planner(pr.robot, pr.task, pr.settings).plan(start, goal)
+    assert res.success and pr.task.residual(res.path.p, res.path.tau).max() < 1e-9
+    tight = Planner(pr.robot, pr.task, _replace(pr.settings, task_tolerance=1e-8)).plan(start, goal)
+    assert tight.reason == "invalid" and "beyond the tolerance 1e-08" in tight.message
+    assert not Planner(pr.robot, pr.task, PlannerSettings()).plan(start, goal, tolerance=1e-8).success

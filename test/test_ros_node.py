@@ -203,6 +203,22 @@ def test_pose_off_the_task_is_invalid(ros, q1_q2):
     _serves(ros)
 
 
+def test_poses_to_six_decimals_plan_within_the_tolerance(ros, q1_q2):
+    """The README's and `call --help`'s q1 -> q2, written to 6 decimals (3e-6 off the
+    sphere), plans: within task.tolerance (1 mm / 1 mrad) a pose is projected onto the task.
+    GetPlan's own tolerance overrides the parameter: 1e-7 refuses it, naming the distance."""
+    def rounded(coords):
+        msg = sphere_pose_msg(coords)
+        for obj, names in ((msg.pose.position, "xyz"), (msg.pose.orientation, "xyzw")):
+            for n in names:
+                setattr(obj, n, round(getattr(obj, n), 6))
+        return msg
+    assert ros.plan(rounded(Q1), rounded(Q2), timeout_s=60).success
+    answer = ros.plan(rounded(Q1), rounded(Q2), timeout_s=60, tolerance=1e-7)
+    assert not answer.success and "beyond the tolerance 1e-07" in answer.values["error_msg"]
+    _serves(ros)
+
+
 @pytest.mark.parametrize("param,value,code", [
     ("planner.max_charts", 3, M.NO_VALID_PATH),
     ("planner.timeout_s", 0.001, M.TIMEOUT),

@@ -339,7 +339,8 @@ class PlannerNode(Node):
 
         try:
             return planning.run_planner(planner, start, goal, progress,
-                                        logger=self.get_logger().error)
+                                        logger=self.get_logger().error,
+                                        tolerance=planning.request_tolerance(request))
         finally:
             self.planning = False
 

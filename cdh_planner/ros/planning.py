@@ -76,6 +76,13 @@ def request_poses(request, base_frame):
     return start, goal
 
 
+def request_tolerance(request):
+    """GetPlan's ``tolerance`` (m or rad) when it is a positive finite number, else None (the
+    node's ``task.tolerance``)."""
+    t = float(request.tolerance)
+    return t if math.isfinite(t) and 0.0 < t <= 0.1 else None
+
+
 def _singular(pose):
     return abs(math.sin(float(pose.tau[1]))) <= SINGULAR_SIN
 
@@ -180,13 +187,13 @@ def input_refusal(exc, strategy=""):
     return refusal(reason, f"invalid request: {exc}", strategy)
 
 
-def run_planner(planner, start, goal, progress=None, logger=None):
-    """``planner.plan(start, goal, progress)``, never raising: an InputError becomes
+def run_planner(planner, start, goal, progress=None, logger=None, tolerance=None):
+    """``planner.plan(start, goal, progress, tolerance=)``, never raising: an InputError becomes
     ``invalid``; any other exception ``internal_error`` (error code UNKNOWN) with its
     message, the traceback going to ``logger`` (a callable taking a string) if given."""
     strategy = getattr(getattr(planner, "settings", None), "strategy", "")
     try:
-        result = planner.plan(start, goal, progress=progress)
+        result = planner.plan(start, goal, progress=progress, tolerance=tolerance)
     except InputError as exc:
         return refusal("invalid", f"invalid request: {exc}", strategy)
     except Exception as exc:  # noqa: BLE001 - the node must keep serving

@@ -34,7 +34,7 @@ class FakePlanner:
                           charts=WAYPOINTS if ok else 0, time_s=time.perf_counter() - t0,
                           cost=path.length_m() if path is not None else float("nan"), path=path)
 
-    def plan(self, start, goal, progress=None):
+    def plan(self, start, goal, progress=None, cancel=None, tolerance=None):
         t0 = time.perf_counter()
         try:
             delay = float(open(self.delay_file).read()) if self.delay_file else 0.0
