@@ -220,7 +220,7 @@ def test_replay_republishes_with_recorded_timing(domain, client, sigterm_run):
                 for t in ("/cdh_planner/cable_command", "/cdh_planner/path")}
     times = [lt for t, _, _, lt in read_run(run_file) if t == "/cdh_planner/cable_command"]
     t0 = time.time()
-    proc = subprocess.Popen(cli("replay", str(run_file), "--rate", "2", "--topics",
+    proc = subprocess.Popen(cli("replay", str(run_file), "--commands", "--rate", "2", "--topics",
                                 "/cdh_planner/cable_command", "/cdh_planner/path",
                                 "--delay", "10"),
                             env=ros_env(domain), stdout=subprocess.PIPE, text=True)
@@ -326,3 +326,20 @@ def test_replay_caps_each_wait(domain, client, tmp_path):
     assert time.monotonic() - t0 < 15
     assert "1 wait between messages longer than --max-gap 0.5 s cut to 0.5 s" in r.stdout
     assert "republished 2 messages" in r.stdout
+
+
+def test_replay_leaves_command_topics_alone_unless_asked(tmp_path):
+    """On a live system a replayed command moves the robot: without --commands, replay
+    skips cable_command and cable_trajectory, and naming one in --topics is refused."""
+    from sensor_msgs.msg import JointState
+    from cdh_planner import cli as cli_module
+    from cdh_planner.io.mcap_log import RunRecorder
+    from cdh_planner.ros.replay import read_records, select_topics
+    path = tmp_path / "cmd.mcap"
+    with RunRecorder(path) as rec:
+        rec.write("/cdh_planner/cable_command", JointState(name=["w"], position=[0.0]), 10**9)
+        rec.write("/cdh_planner/joint_states_seen", JointState(name=["w"], position=[0.0]), 10**9)
+    records = read_records(path)
+    assert {r.topic for r in select_topics(records)} == {"/cdh_planner/joint_states_seen"}
+    assert len(select_topics(records, commands=True)) == 2
+    assert cli_module.main(["replay", str(path), "--topics", "/cdh_planner/cable_command"]) == 2

@@ -148,9 +148,10 @@ def test_parameters_are_recorded_and_given_to_replay(run):
     unset = Parameter("robot.contact_ellipsoid.matrix").to_parameter_msg()
     assert unset.value.type == ParameterType.PARAMETER_NOT_SET
     assert R.settable([unset, *INITIAL[:1]]) == ([INITIAL[0]], ["robot.contact_ellipsoid.matrix"])
-    # republished by default: not the parameters, not the calls
-    assert {r.topic for r in R.select_topics(records)} == {f"{NODE}/path",
-                                                          f"{NODE}/cable_command"}
+    # republished by default: not the parameters, not the calls, not the commands
+    assert {r.topic for r in R.select_topics(records)} == {f"{NODE}/path"}
+    assert {r.topic for r in R.select_topics(records, commands=True)} == {f"{NODE}/path",
+                                                                         f"{NODE}/cable_command"}
     assert {r.topic for r in R.select_topics(records, [PARAMETER_EVENTS])} == {PARAMETER_EVENTS}
 
 

@@ -6,8 +6,10 @@
                        [--tolerance M] [--keep-parameters]
 
 Without ``--requests``: republish the recorded topics with their original timing (scaled by
-``--rate``; no wait between two messages longer than ``--max-gap``), e.g. the streamed
-``/cdh_planner/cable_command`` to test a winch controller.
+``--rate``; no wait between two messages longer than ``--max-gap``). The command topics
+(``cable_command``, ``cable_trajectory``) move the robot: they are republished only with
+``--commands``, e.g. ``--commands --topics /cdh_planner/cable_command`` to test a winch
+controller on a bench.
 With ``--requests``: re-send the recorded plan requests to a running node and report, for
 each, whether the new answer matches the recorded one (pose by pose, within the tolerance),
 and for an answer that differs, why it may (parameters that differ, the node's history).
@@ -43,7 +45,7 @@ def add_parser(subparsers):
                     "the answers with the recorded ones.",
         epilog="examples:\n"
                "  cdh-planner replay runs/cdh_planner_20250101-120000_42.mcap --rate 2\n"
-               "  cdh-planner replay RUN.mcap --topics /cdh_planner/cable_command\n"
+               "  cdh-planner replay RUN.mcap --commands --topics /cdh_planner/cable_command\n"
                "  cdh-planner replay RUN.mcap --requests --tolerance 1e-4",
         formatter_class=argparse.RawDescriptionHelpFormatter)
     p.add_argument("run", nargs="+", metavar="RUN.mcap",
@@ -54,6 +56,9 @@ def add_parser(subparsers):
     p.add_argument("--topics", nargs="+", metavar="T",
                    help="only these topics (default: all but service events and "
                         "/parameter_events)")
+    p.add_argument("--commands", action="store_true",
+                   help="also republish the command topics (cable_command, cable_trajectory): "
+                        "they move the robot, so they are left alone unless asked for")
     p.add_argument("--delay", type=float, default=1.0, metavar="S",
                    help="wait up to S seconds for a subscriber on every replayed topic before "
                         "the first message (default: %(default)g)")
@@ -113,7 +118,7 @@ def replay_topics(args, records):
     from rclpy.node import Node
 
     from ..ros import replay as R
-    chosen = R.select_topics(records, args.topics)
+    chosen = R.select_topics(records, args.topics, args.commands)
     context = rclpy.Context()
     rclpy.init(args=["cdh-planner-replay", "--ros-args", *args.ros_args], context=context)
     try:

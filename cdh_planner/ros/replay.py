@@ -33,6 +33,7 @@ from ..io.mcap_log import REQUEST_RECEIVED, RESPONSE_SENT, SERVICE_EVENT_SUFFIX,
 from ..io.mcap_log import scan_records as scan_run  # raw records of a (possibly killed) run file
 from ..io.ros_schemas import rosidl_type
 from .messages import path_arrays
+from .node import CABLE_COMMAND, CABLE_TRAJECTORY
 from .recording import PARAMETER_EVENTS
 
 
@@ -105,18 +106,30 @@ def is_service_event(record):
     return record.topic.endswith(SERVICE_EVENT_SUFFIX)
 
 
-def select_topics(records, topics=None):
-    """The records to republish: no service events, and no ``/parameter_events`` unless
-    named; only ``topics`` if given (InputError naming a topic that is not in the file)."""
+def is_command_topic(topic):
+    """Does ``topic`` move the robot: the node's ``cable_command`` stream or its
+    ``cable_trajectory`` (a JointTrajectoryController executes it)?"""
+    return topic.rsplit("/", 1)[-1] in (CABLE_COMMAND, CABLE_TRAJECTORY)
+
+
+def select_topics(records, topics=None, commands=False):
+    """The records to republish: no service events, no ``/parameter_events`` unless named,
+    and no command topic (``is_command_topic``) unless ``commands``: on a live system a
+    replayed command would move the robot. Only ``topics`` if given (InputError naming a
+    topic that is not in the file, or a command topic without ``commands``)."""
     available = sorted({r.topic for r in records if not is_service_event(r)})
     if topics:
         missing = [t for t in topics if t not in available]
         if missing:
             raise InputError("--topics", missing[0],
                              f"not a recorded topic (recorded: {', '.join(available)})")
+        blocked = [t for t in topics if is_command_topic(t) and not commands]
+        if blocked:
+            raise InputError("--topics", blocked[0], "a command topic (it moves the robot): "
+                                                     "add --commands to republish it")
         wanted = set(topics)
     else:
-        wanted = set(available) - {PARAMETER_EVENTS}
+        wanted = {t for t in available if commands or not is_command_topic(t)} - {PARAMETER_EVENTS}
     return [r for r in records if r.topic in wanted]
 
 

@@ -205,7 +205,7 @@ def replay(demo):
     topic = client.topic(CABLE_COMMAND)
     recorded = [rec for rec in read_records(story.run_file) if rec.topic == topic]
     first = len(client.commands)
-    args = ["replay", story.run_file, "--rate", f"{REPLAY_RATE:g}", "--topics", topic,
+    args = ["replay", story.run_file, "--commands", "--rate", f"{REPLAY_RATE:g}", "--topics", topic,
             "--delay", "10"]
     print(f"$ cdh-planner {' '.join(args)}")
     proc = subprocess.Popen(_cli(*args), env=isolated_env(story.domain), stdout=subprocess.PIPE,
