@@ -171,7 +171,7 @@ def test_a_publishing_failure_midway_puts_the_previous_outputs_back(make_node, m
 class SlowTimedPlanner(FakePlanner):
     """The test double, its trajectory stretched: 10^8 times longer than it should be."""
 
-    def plan(self, start, goal, progress=None):
+    def plan(self, start, goal, progress=None, tolerance=None):
         result = super().plan(start, goal, progress)
         path = dataclasses.replace(result.path, t=result.path.t * 1e8)
         return dataclasses.replace(result, path=path)

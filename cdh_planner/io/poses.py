@@ -139,11 +139,7 @@ def parse_angle(text, where="angle"):
                 value = _plain_number(s)
     except (ValueError, ZeroDivisionError):
         raise InputError(where, text, "expected an angle: radians (0.75, -pi, 3pi/4) or degrees (34deg)") from None
-    if not np.isfinite(value):
-        raise InputError(where, text, "must be a finite angle")
-    if abs(value) > MAX_POSITION_M:
-        raise InputError(where, text, f"must be within +-{MAX_POSITION_M:g} rad")
-    return float(value)
+    return _bounded(where, text, value, "angle", "rad")
 
 
 def parse_length(text, where="length"):
@@ -158,10 +154,15 @@ def parse_length(text, where="length"):
         value = _plain_number(s) * scale
     except ValueError:
         raise InputError(where, text, "expected a length in m (0.35) or with a unit (350mm)") from None
+    return _bounded(where, text, value, "length", "m")
+
+
+def _bounded(where, text, value, what, unit):
+    """``value`` as a float if finite and within +-MAX_POSITION_M (in ``unit``)."""
     if not np.isfinite(value):
-        raise InputError(where, text, "must be a finite length")
+        raise InputError(where, text, f"must be a finite {what}")
     if abs(value) > MAX_POSITION_M:
-        raise InputError(where, text, f"must be within +-{MAX_POSITION_M:g} m")
+        raise InputError(where, text, f"must be within +-{MAX_POSITION_M:g} {unit}")
     return float(value)
 
 
