@@ -166,7 +166,9 @@ def test_markers_geometry_frames_and_colours():
     assert markers[0].action == Marker.DELETEALL
     assert all(m.header.frame_id == FRAME for m in markers)
     by = {(m.ns, m.id): m for m in markers[1:]}
-    assert set(by) == {("path", 0), ("platform", 0), ("platform", 1), ("cables", 0), ("cables", 1)}
+    drawn = MK.drawn_waypoints(len(PATH))
+    assert drawn[0] == 0 and drawn[-1] == len(PATH) - 1 and len(drawn) == min(MK.POSES_DRAWN, len(PATH))
+    assert set(by) == {("path", 0)} | {(ns_, i) for ns_ in ("platform", "cables") for i in range(len(drawn))}
     for m in markers[1:]:
         assert m.action == Marker.ADD and ns(m.header.stamp) == ns(START)
         assert m.pose.orientation.w == 1.0 and m.scale.x == MK.LINE_WIDTH_M
@@ -177,7 +179,10 @@ def test_markers_geometry_frames_and_colours():
     margins = MK.cable_margins(PATH, ROBOT)
     # the tension part of the feasibility margin: never below the overall margin
     assert np.all(margins.min(axis=1) >= PATH.margin - 1e-12)
-    for ident, k in ((0, 0), (1, len(PATH) - 1)):
+    assert len(line.colors) == len(line.points)
+    for c, m in zip(line.colors, margins.min(axis=1)):
+        assert (c.r, c.g) == (MK.margin_color(m).r, MK.margin_color(m).g)
+    for ident, k in enumerate(drawn):
         cables = by[("cables", ident)]
         assert cables.type == Marker.LINE_LIST and len(cables.points) == 12 == len(cables.colors)
         pts = np.array([[q.x, q.y, q.z] for q in cables.points])

@@ -16,7 +16,8 @@ from ..trajectory.sampling import check_timed_path
 LINE_WIDTH_M = 0.002
 MARGIN_FULL = 0.2  # normalised tension margin drawn fully green (0 or less: red)
 PATH_COLOR = (0.2, 0.5, 1.0, 1.0)
-PLATFORM_COLORS = ((0.3, 0.3, 0.3, 1.0), (0.0, 0.0, 0.0, 1.0))  # first, last pose
+PLATFORM_COLOR = (0.2, 0.2, 0.2, 1.0)
+POSES_DRAWN = 5  # platform and cables drawn at this many poses along the path, ends included
 
 
 def cable_margins(path, robot):
@@ -41,11 +42,12 @@ def margin_color(margin, full=MARGIN_FULL):
 def markers_msg(path, robot, frame_id, stamp, *, line_width=LINE_WIDTH_M, delete_all=True):
     """visualization_msgs/MarkerArray for RViz / Foxglove, all in ``frame_id`` (m):
 
-    - ns ``path`` id 0: LINE_STRIP through the platform positions p;
-    - ns ``platform`` ids 0, 1: the platform at the first / last pose, a closed LINE_STRIP
-      through its anchor points p + R b_i (distinct points, by angle around their centre);
-    - ns ``cables`` ids 0, 1: at the first / last pose, LINE_LIST of the six cables from the
-      base anchor a_i to p + R b_i, each coloured by its tension margin (``margin_color``).
+    - ns ``path`` id 0: LINE_STRIP through the platform positions p, each vertex coloured
+      by the least tension margin of its waypoint (``margin_color``);
+    - at ``drawn_waypoints`` (POSES_DRAWN evenly spaced, the ends included), ids 0, 1, ...:
+      ns ``platform``, a closed LINE_STRIP through the anchor points p + R b_i (distinct
+      points, by angle around their centre), and ns ``cables``, a LINE_LIST of the six
+      cables from the base anchor a_i to p + R b_i, each coloured by its tension margin.
 
     With ``delete_all`` a DELETEALL marker comes first, so a new plan replaces the old one.
     """
@@ -57,17 +59,24 @@ def markers_msg(path, robot, frame_id, stamp, *, line_width=LINE_WIDTH_M, delete
         out.markers.append(clear)
     if len(path) == 0:
         return out
+    margins = cable_margins(path, robot)
     line = _marker(frame_id, stamp, "path", 0, Marker.LINE_STRIP, line_width, PATH_COLOR)
     line.points = [_point(p) for p in path.p]
+    line.colors = [margin_color(m) for m in margins.min(axis=1)]
     out.markers.append(line)
-    margins = cable_margins(path, robot)
-    for ident, k in enumerate((0, len(path) - 1)):
+    for ident, k in enumerate(drawn_waypoints(len(path))):
         R = rotation_from_quaternion(path.quaternion[k])
         attach = path.p[k] + robot.platform_anchors @ R.T
         out.markers.append(_platform_marker(frame_id, stamp, ident, attach, robot, line_width))
         out.markers.append(_cables_marker(frame_id, stamp, ident, robot.base_anchors, attach,
                                           margins[k], line_width))
     return out
+
+
+def drawn_waypoints(n, count=POSES_DRAWN):
+    """Indexes of the waypoints (of n) where platform and cables are drawn: ``count``
+    evenly spaced, the first and the last included, none twice."""
+    return sorted(set(np.linspace(0, n - 1, min(count, n)).round().astype(int).tolist()))
 
 
 def _marker(frame_id, stamp, ns, ident, kind, line_width, color=(1.0, 1.0, 1.0, 1.0)):
@@ -96,7 +105,7 @@ def _platform_marker(frame_id, stamp, ident, attach, robot, line_width):
     angle = np.arctan2(local[idx, 1] - centre[1], local[idx, 0] - centre[0])
     ring = idx[np.argsort(angle)]
     m = _marker(frame_id, stamp, "platform", ident, Marker.LINE_STRIP, line_width,
-                PLATFORM_COLORS[ident])
+                PLATFORM_COLOR)
     m.points = [_point(attach[i]) for i in list(ring) + [ring[0]]]
     return m
 
