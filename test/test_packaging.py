@@ -156,3 +156,18 @@ def test_licences_ship():
     assert "Redistribution and use in source and binary forms" in (copy / "LICENSE").read_text()
     assert ET.parse(copy / "package.xml").getroot().findtext("license") == "BSD-3-Clause"
     assert "install(FILES LICENSE" in (copy / "CMakeLists.txt").read_text()
+
+
+def test_rviz_config_shows_the_nodes_latched_outputs(setup_kwargs):
+    """config/cdh_planner.rviz (installed with the config files): the fixed frame is the
+    node's default base_frame, and its displays subscribe to the node's ~/markers and
+    ~/path with the latched QoS they are published with."""
+    import yaml
+    from cdh_planner.ros.params import SPEC
+    cfg = yaml.safe_load((REPO / "config" / "cdh_planner.rviz").read_text())
+    manager = cfg["Visualization Manager"]
+    assert manager["Global Options"]["Fixed Frame"] == SPEC["base_frame"].default
+    topics = {d["Topic"]["Value"]: d for d in manager["Displays"] if "Topic" in d}
+    assert set(topics) == {"/cdh_planner/markers", "/cdh_planner/path"}
+    assert all(d["Topic"]["Durability Policy"] == "Transient Local" for d in topics.values())
+    assert "config/cdh_planner.rviz" in dict(setup_kwargs["data_files"])["share/cdh_planner/config"]
