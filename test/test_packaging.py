@@ -33,8 +33,8 @@ ROS = {"rclpy", "ament_index_python", "builtin_interfaces", "rcl_interfaces", "a
        "std_msgs", "std_srvs", "geometry_msgs", "nav_msgs", "trajectory_msgs", "sensor_msgs",
        "diagnostic_msgs", "visualization_msgs", "service_msgs", "cdh_planner_interfaces",
        "control_msgs"}
-# declared although no module imports them (yet): the node's action and its
-# ros2_control client use them (issue 9)
+# declared although no module imports them yet: the PlanPath action server and the
+# FollowJointTrajectory client that the node is to gain will use them
 DECLARED_AHEAD = {"action_msgs", "cdh_planner_interfaces", "control_msgs"}
 
 

@@ -17,7 +17,8 @@ from pathlib import Path
 import numpy as np
 
 from .. import files
-from ..errors import MAX_FORCE_N, MAX_POSITION_M, InputError, check_keys, check_numbers, is_number
+from ..errors import MAX_FORCE_N, MAX_POSITION_M, InputError, check_finite, check_keys, check_numbers, \
+    is_number
 
 N_CABLES = 6
 ELLIPSOID_FRAMES = ("load", "base")
@@ -173,17 +174,13 @@ def _mass_properties(load, force):
         if load.get("inertia") is not None:
             raise InputError("robot.load.inertia", load["inertia"], "needs robot.load.mass")
         return None, None
-    mass = float(_vector("robot.load.mass", load["mass"], 1, MAX_FORCE_N)[0])
-    if mass <= 0:
-        raise InputError("robot.load.mass", mass, "must be positive (kg)")
+    mass = check_finite("robot.load.mass", load["mass"], positive=True, limit=MAX_FORCE_N)
     weight = mass * GRAVITY
     if abs(float(np.linalg.norm(force)) - weight) > 0.02 * weight:
         raise InputError("robot.load.mass", mass, f"the load force ({np.linalg.norm(force):.4g} N) "
                          f"must be its weight, {weight:.4g} N (mass x {GRAVITY} m/s^2, 2 %)")
     value = load.get("inertia", [0.0, 0.0, 0.0])
-    n = len(value) if isinstance(value, (list, tuple)) else -1
-    I = np.diag(_vector("robot.load.inertia", value, 3, MAX_FORCE_N)) if n == 3 else \
-        _vector("robot.load.inertia", value, 9, MAX_FORCE_N).reshape(3, 3)
+    I = _square_matrix("robot.load.inertia", value, 3, MAX_FORCE_N)
     if not np.allclose(I, I.T, rtol=1e-9, atol=1e-15) or np.linalg.eigvalsh(I)[0] < -1e-12:
         raise InputError("robot.load.inertia", value, "must be symmetric positive semi-definite (kg m^2)")
     return mass, I
@@ -269,13 +266,16 @@ def _check_below(lo_name, lo, hi_name, hi):
                          f"must be below {hi_name}[{i}] = {float(hi[i])!r}")
 
 
+def _square_matrix(where, value, n, limit):
+    """An n x n matrix from n*n numbers (row-major) or n numbers (its diagonal)."""
+    if isinstance(value, (list, tuple)) and len(value) == n:
+        return np.diag(_vector(where, value, n, limit))
+    return _vector(where, value, n * n, limit).reshape(n, n)
+
+
 def _spd_matrix(where, value):
     """A 6x6 symmetric positive definite matrix from 36 numbers or a 6-number diagonal."""
-    n = len(value) if isinstance(value, (list, tuple)) else -1
-    if n == 6:
-        E = np.diag(_vector(where, value, 6, MAX_ELLIPSOID))
-    else:
-        E = _vector(where, value, 36, MAX_ELLIPSOID).reshape(6, 6)
+    E = _square_matrix(where, value, 6, MAX_ELLIPSOID)
     if not np.allclose(E, E.T, rtol=1e-9, atol=0.0):
         raise InputError(where, value, "must be symmetric")
     eig = np.linalg.eigvalsh(E)

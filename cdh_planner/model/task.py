@@ -23,7 +23,7 @@ from typing import ClassVar
 
 import numpy as np
 
-from ..errors import MAX_POSITION_M, InputError, check_finite, check_keys
+from ..errors import MAX_POSITION_M, InputError, check_finite, check_keys, check_numbers
 from .pose import rotation_angle_between, rotation_tt, rotation_tt_derivatives, wrap_angle
 
 POSE_NAMES = ("x", "y", "z", "phi", "theta", "sigma")
@@ -185,9 +185,7 @@ def _check_field(where, meta, value):
             raise InputError(where, value, "expected true or false")
         return value
     if meta.kind == "point":
-        if not isinstance(value, (list, tuple)) or len(value) != 3:
-            raise InputError(where, value, f"expected 3 numbers ({meta.unit})")
-        return tuple(check_finite(f"{where}[{i}]", v, limit=MAX_POSITION_M) for i, v in enumerate(value))
+        return tuple(check_numbers(where, value, 3, limit=MAX_POSITION_M))
     value = check_finite(where, value, limit=MAX_POSITION_M)
     if meta.positive and value <= 0:
         raise InputError(where, value, f"must be positive ({meta.unit})")
