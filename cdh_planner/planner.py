@@ -32,7 +32,7 @@ from .settings import COSTS, PlannerSettings  # noqa: F401  (PlannerSettings: pa
 from .status import Status
 from .trajectory import clearance
 from .trajectory.path import PlannedPath
-from .trajectory.dynamics import timed_path
+from .trajectory.dynamics import check_dynamics, timed_path
 from .trajectory.timing import time_path
 from .trajectory.verify import SlerpPath, TaskLinePath, check_motion, check_path
 
@@ -105,8 +105,7 @@ class Planner:
         self.strategy = (default_strategy(self.constraint.dim, self.clearance_weight)
                          if s.strategy == "auto" else s.strategy)
         self.atlas = Atlas(self.constraint, radius=self.radius)
-        if self.settings.dynamics == "dynamic" and robot.mass is None:
-            raise InputError("dynamics", "dynamic", "needs the load's mass (robot.load.mass)")
+        check_dynamics(robot, self.settings.dynamics)
         self.pose_cost = task_cost(robot, task, self.settings.cost)
         self.pose_costs = task_costs(robot, task, self.settings.cost)
         pose = self.constraint.pose

@@ -45,8 +45,7 @@ from scipy.interpolate import CubicSpline
 from scipy.spatial.transform import Rotation, RotationSpline
 
 from ..errors import InputError, check_finite
-from ..feasibility import cable_vectors, evaluate, inverse_ellipsoid_factor, load_point, \
-    nominal_wrench, screw_jacobian
+from ..feasibility import cable_vectors, inverse_ellipsoid_factor, nominal_wrench, screw_jacobian
 from .path import PlannedPath
 
 GRID_POINTS = 400       # toppra gridpoints along the path (at least one per waypoint)
@@ -110,7 +109,7 @@ class _Geometry:
 
 def _terms(robot, geo, s, mass, inertia):
     """Per s: cable lengths L (M,6), L_s, L_ss, static tensions f0 (M,6), spread v (M,6),
-    tension rates a_f, b_f (M,6) with f = f0 + a_f u + b_f x, and J singular flags."""
+    tension rates a_f, b_f (M,6) with f = f0 + a_f u + b_f x."""
     p, p_s, p_ss, R, w, w_s = geo.at(s)
     g = robot.load_point
     Rg = np.einsum("nij,j->ni", R, g)
@@ -127,27 +126,18 @@ def _terms(robot, geo, s, mass, inertia):
     u = d / L[..., None]
     J = screw_jacobian(robot, u)
     J_inv = np.linalg.inv(J)
-    f0 = np.einsum("nij,nj->ni", J_inv, nominal_wrench(robot, load_point(robot, p, R)))
+    f0 = np.einsum("nij,nj->ni", J_inv, nominal_wrench(robot, c))
     v = np.linalg.norm(J_inv @ inverse_ellipsoid_factor(robot, c), axis=-1)
-    # dL/ds = u . d(p + R b)/ds; second derivative by differences of the first (smooth spline)
-    L_s = _length_rate(robot, p_s, R, w, u)
-    h = 1e-6 * max(geo.length, 1e-9)
-    L_s_plus = _length_rate_at(robot, geo, s + h)
-    L_s_minus = _length_rate_at(robot, geo, s - h)
-    L_ss = (L_s_plus - L_s_minus) / (2 * h)
+    # the platform anchor q_i = p + R b_i: q_s = p_s + R (w x b), q_ss = p_ss + R (w_s x b +
+    # w x (w x b)); L = |q - a| gives L_s = u . q_s and L_ss = (|q_s|^2 - L_s^2) / L + u . q_ss
+    b = robot.platform_anchors[None]
+    wxb = np.cross(w[:, None, :], b)
+    q_s = p_s[:, None, :] + np.einsum("nij,nkj->nki", R, wxb)
+    q_ss = p_ss[:, None, :] + np.einsum("nij,nkj->nki", R, np.cross(w_s[:, None, :], b)
+                                        + np.cross(w[:, None, :], wxb))
+    L_s = np.einsum("nki,nki->nk", u, q_s)
+    L_ss = (np.einsum("nki,nki->nk", q_s, q_s) - L_s ** 2) / L + np.einsum("nki,nki->nk", u, q_ss)
     return L, L_s, L_ss, f0, v, -np.einsum("nij,nj->ni", J_inv, A), -np.einsum("nij,nj->ni", J_inv, B)
-
-
-def _length_rate(robot, p_s, R, w, u):
-    """dL_i/ds = u_i . (p_s + R (w x b_i))."""
-    vel = p_s[:, None, :] + np.einsum("nij,nkj->nki", R, np.cross(w[:, None, :], robot.platform_anchors))
-    return np.einsum("nki,nki->nk", u, vel)
-
-
-def _length_rate_at(robot, geo, s):
-    p, p_s, _, R, w, _ = geo.at(s)
-    d = cable_vectors(robot, p, R)
-    return _length_rate(robot, p_s, R, w, d / np.linalg.norm(d, axis=-1)[..., None])
 
 
 class _WrenchConstraint(toppra.constraint.LinearConstraint):
@@ -217,7 +207,7 @@ def dynamic_timing(robot, path, mass, inertia, max_cable_speed, max_cable_accel,
         t_grid = _grid_times(grid, sd / scale)
         if not np.all(np.isfinite(t_grid)):
             break
-        check = _dense_check(robot, geo, grid, sd / scale, t_grid, mass, inertia, vmax, amax, check_dt)
+        check = _dense_check(robot, geo, grid, sd / scale, mass, inertia, vmax, amax, check_dt)
         if check[0]:
             timed = _retimed(robot, path, geo, grid, sd / scale, t_grid, mass, inertia)
             return DynamicTiming(path=timed, feasible=True, reason="", duration=float(t_grid[-1]),
@@ -230,11 +220,33 @@ def dynamic_timing(robot, path, mass, inertia, max_cable_speed, max_cable_accel,
 def tensions_over_time(robot, timing, mass, inertia, dt=CHECK_DT):
     """(t (M,), dynamic f (M, 6), static f0 (M, 6), spread v (M, 6)) of a feasible timing,
     every dt s: what the cables carry with and without the motion's own accelerations (N)."""
-    t_grid = _grid_times(timing.s, timing.sd)
+    sample = _sampled(robot, timing.geometry, timing.s, timing.sd, mass, inertia, dt)
+    return sample.t, sample.f, sample.f0, sample.v
+
+
+@dataclass
+class _Sample:
+    """The timed motion every dt: times t, s' and s'' (M,), lengths L and their s-derivatives
+    L_s, L_ss, dynamic tensions f, static f0 and the ellipsoid's spread v (M, 6)."""
+
+    t: np.ndarray
+    sdot: np.ndarray
+    sddot: np.ndarray
+    L: np.ndarray
+    L_s: np.ndarray
+    L_ss: np.ndarray
+    f: np.ndarray
+    f0: np.ndarray
+    v: np.ndarray
+
+
+def _sampled(robot, geo, s, sd, mass, inertia, dt):
+    t_grid = _grid_times(s, sd)
     t = np.append(np.arange(0.0, t_grid[-1], dt), t_grid[-1])
-    ss, sdot, sddot = _state_at(t, timing.s, timing.sd, t_grid)
-    _, _, _, f0, v, a_f, b_f = _terms(robot, timing.geometry, ss, mass, inertia)
-    return t, f0 + a_f * sddot[:, None] + b_f * (sdot ** 2)[:, None], f0, v
+    _, sdot, sddot = state = _state_at(t, s, sd, t_grid)
+    L, L_s, L_ss, f0, v, a_f, b_f = _terms(robot, geo, state[0], mass, inertia)
+    f = f0 + a_f * sddot[:, None] + b_f * (sdot ** 2)[:, None]
+    return _Sample(t, sdot, sddot, L, L_s, L_ss, f, f0, v)
 
 
 def _grid(geo, n):
@@ -269,26 +281,23 @@ def _state_at(t, s, sd, t_grid):
     return s[k] + sd[k] * tau + 0.5 * u * tau ** 2, sd[k] + u * tau, u
 
 
-def _dense_check(robot, geo, s, sd, t_grid, mass, inertia, vmax, amax, dt):
+def _dense_check(robot, geo, s, sd, mass, inertia, vmax, amax, dt):
     """(ok, least tension margin N, samples, what failed) of the timing, every dt s."""
-    t = np.append(np.arange(0.0, t_grid[-1], dt), t_grid[-1])
-    ss, sdot, sddot = _state_at(t, s, sd, t_grid)
-    L, L_s, L_ss, f0, v, a_f, b_f = _terms(robot, geo, ss, mass, inertia)
-    f = f0 + a_f * sddot[:, None] + b_f * (sdot ** 2)[:, None]
-    margin = np.minimum(f - v - robot.tension_min, robot.tension_max - f - v)
-    speed = np.abs(L_s * sdot[:, None])
-    accel = np.abs(L_s * sddot[:, None] + L_ss * (sdot ** 2)[:, None])
+    m = _sampled(robot, geo, s, sd, mass, inertia, dt)
+    margin = np.minimum(m.f - m.v - robot.tension_min, robot.tension_max - m.f - m.v)
+    speed = np.abs(m.L_s * m.sdot[:, None])
+    accel = np.abs(m.L_s * m.sddot[:, None] + m.L_ss * (m.sdot ** 2)[:, None])
     least = float(np.min(margin))
     bad = []
     if least < -TOL:
         bad.append(f"tension margin {least:.3g} N")
-    if np.any(L < robot.length_min - TOL) or np.any(L > robot.length_max + TOL):
+    if np.any(m.L < robot.length_min - TOL) or np.any(m.L > robot.length_max + TOL):
         bad.append("cable length")
     if np.any(speed > vmax + TOL):
         bad.append(f"winch speed {np.max(speed / vmax):.4g} x the limit")
     if np.any(accel > amax + TOL):
         bad.append(f"winch acceleration {np.max(accel / amax):.4g} x the limit")
-    return not bad, least, len(t), ", ".join(bad)
+    return not bad, least, len(m.t), ", ".join(bad)
 
 
 def _retimed(robot, path, geo, s, sd, t_grid, mass, inertia):
@@ -304,15 +313,21 @@ def _retimed(robot, path, geo, s, sd, t_grid, mass, inertia):
                    tension_nominal=f, tension_min=f - v, tension_max=f + v)
 
 
+def check_dynamics(robot, dynamics):
+    """InputError (naming the setting ``dynamics``) when the dynamic timing is asked for
+    and the robot file gives no load mass."""
+    if dynamics == "dynamic" and robot.mass is None:
+        raise InputError("dynamics", dynamics, "needs the load's mass (robot.load.mass)")
+
+
 def timed_path(robot, path, dynamics, max_cable_speed, max_cable_accel):
     """(PlannedPath, note): ``path`` (quasi-statically timed) re-timed by ``dynamics``
     ("auto": dynamic when the robot has a load mass; "dynamic"; "quasi_static"). The note
     says what was done ("" for quasi-static); when no dynamically feasible timing exists
     the quasi-static one is kept and the note says so."""
+    check_dynamics(robot, dynamics)
     if dynamics == "quasi_static" or (dynamics == "auto" and robot.mass is None):
         return path, ""
-    if robot.mass is None:
-        raise InputError("trajectory.dynamics", dynamics, "needs robot.load.mass in the robot file")
     try:
         timing = dynamic_timing(robot, path, robot.mass, robot.inertia, max_cable_speed, max_cable_accel)
     except (np.linalg.LinAlgError, ValueError) as exc:  # e.g. J singular between waypoints
