@@ -59,6 +59,17 @@ def _mat3(out, a00, a01, a02, a10, a11, a12, a20, a21, a22):
 
 
 @njit(cache=True)
+def _matmul3(out, a, b):
+    """out = a b for 3 x 3 matrices."""
+    for i in range(3):
+        for j in range(3):
+            s = 0.0
+            for k in range(3):
+                s += a[i, k] * b[k, j]
+            out[i, j] = s
+
+
+@njit(cache=True)
 def _skew(v0, v1, v2, out):
     """out = [v]x."""
     _mat3(out, 0.0, -v2, v1, v2, 0.0, -v0, -v1, v0, 0.0)
@@ -77,34 +88,20 @@ def _rotation_and_derivatives(phi, theta, sigma, R, dR):
     _mat3(T[3], -st, 0.0, ct, 0.0, 0.0, 0.0, -ct, 0.0, -st)
     _mat3(T[4], cp, -sp, 0.0, sp, cp, 0.0, 0.0, 0.0, 1.0)
     _mat3(T[5], -sp, -cp, 0.0, cp, -sp, 0.0, 0.0, 0.0, 0.0)
-    A = np.empty((3, 3, 3))  # Rz Ry, dRz Ry, Rz dRy (then times Rz(psi) or dRz(psi))
+    A = np.empty((3, 3, 3))  # Rz Ry, dRz Ry, Rz dRy
+    _matmul3(A[0], T[0], T[2])
+    _matmul3(A[1], T[1], T[2])
+    _matmul3(A[2], T[0], T[3])
+    P = np.empty((3, 3, 3))  # d/dsigma, d/dphi (before the psi term), d/dtheta
+    _matmul3(R, A[0], T[4])
+    _matmul3(P[0], A[0], T[5])
+    _matmul3(P[1], A[1], T[4])
+    _matmul3(P[2], A[2], T[4])
     for i in range(3):
         for j in range(3):
-            s0 = 0.0
-            s1 = 0.0
-            s2 = 0.0
-            for k in range(3):
-                s0 += T[0, i, k] * T[2, k, j]
-                s1 += T[1, i, k] * T[2, k, j]
-                s2 += T[0, i, k] * T[3, k, j]
-            A[0, i, j] = s0
-            A[1, i, j] = s1
-            A[2, i, j] = s2
-    for i in range(3):
-        for j in range(3):
-            r = 0.0
-            d_sigma = 0.0
-            d_phi = 0.0
-            d_theta = 0.0
-            for k in range(3):
-                r += A[0, i, k] * T[4, k, j]
-                d_sigma += A[0, i, k] * T[5, k, j]
-                d_phi += A[1, i, k] * T[4, k, j]
-                d_theta += A[2, i, k] * T[4, k, j]
-            R[i, j] = r
-            dR[i, j, 0] = d_phi - d_sigma
-            dR[i, j, 1] = d_theta
-            dR[i, j, 2] = d_sigma
+            dR[i, j, 0] = P[1, i, j] - P[0, i, j]  # psi = sigma - phi
+            dR[i, j, 1] = P[2, i, j]
+            dR[i, j, 2] = P[0, i, j]
 
 
 @njit(cache=True)
