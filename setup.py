@@ -24,7 +24,8 @@ setup(
         ('share/ament_index/resource_index/packages', ['resource/' + package_name]),
         ('share/' + package_name, ['package.xml', 'LICENSE']),
         # glob so robot / problem files added later are picked up without editing here
-        ('share/' + package_name + '/config', sorted(glob('config/*.yaml') + glob('config/*.rviz'))),
+        ('share/' + package_name + '/config', sorted(glob('config/*.yaml') + glob('config/*.rviz')
+                                                      + glob('config/*.json'))),
         ('share/' + package_name + '/config/problems', sorted(glob('config/problems/*.yaml'))),
         ('share/' + package_name + '/launch', sorted(glob('launch/*.launch.py'))),
     ],
