@@ -1,0 +1,495 @@
+"""Executing a plan on a ros2_control JointTrajectoryController, and reading where the
+winches are (library code for the node: rclpy, no Node subclass).
+
+    goal = fjt_goal(cable_trajectory)                 # control_msgs FollowJointTrajectory goal
+    monitor = JointStateMonitor(node, "/joint_states", robot.winch_names)
+    lengths, why = monitor.lengths(max_age_s=0.5)     # (6,) m, or None and why not
+    problem = start_mismatch(lengths, planned_first, 0.005, robot.winch_names)
+    p, R = current_pose(robot, lengths, guess=(p_last, R_last))
+    executor = TrajectoryExecutor(node, "/cable_controller/follow_joint_trajectory")
+    executor.start(cable_trajectory, on_done)         # on_done(outcome, message), once
+    executor.cancel()                                 # -> on_done(STOPPED, ...)
+
+Units: cable lengths in m, times in s, tensions in N. A winch's joint position is its cable
+length (m), as in ``messages.cable_trajectory_msg``.
+
+The controller gets positions, velocities and accelerations only: a stock Jazzy
+JointTrajectoryController without an effort command interface rejects a trajectory with
+effort fields (its ``validate_trajectory_msg``), so the nominal tensions stay on the tension
+envelope topic.
+"""
+
+import threading
+import time
+
+import numpy as np
+from action_msgs.msg import GoalStatus
+from action_msgs.srv import CancelGoal
+from control_msgs.action import FollowJointTrajectory
+from rclpy.action import ActionClient
+from rclpy.qos import DurabilityPolicy, QoSProfile, ReliabilityPolicy
+from sensor_msgs.msg import JointState
+from trajectory_msgs.msg import JointTrajectory, JointTrajectoryPoint
+
+from ..errors import InputError, check_finite
+from ..feasibility import evaluate
+from ..model.kinematics import forward_kinematics, rotation_vector_exp
+from .messages import check_joint_names, duration_msg
+
+COMPLETED, STOPPED, FAILED = "completed", "stopped", "failed"
+OUTCOMES = (COMPLETED, STOPPED, FAILED)
+
+# s: how late the controller may reach the last point before it aborts the goal
+# (GOAL_TOLERANCE_VIOLATED; only checked for joints with a goal tolerance). 0 leaves it to
+# the controller's own constraints.goal_time.
+GOAL_TIME_TOLERANCE_S = 0.5
+# s: how long start() waits for the action server to appear (polled by a timer, so no
+# executor thread ever waits): long enough for DDS discovery of a server that is up,
+# short enough that "no controller" is answered at once.
+SERVER_WAIT_S = 1.0
+SERVER_POLL_S = 0.05
+# The joint state subscription: best effort matches both a reliable publisher
+# (ros2_control's joint_state_broadcaster: reliable, volatile, depth 10) and a best-effort
+# one (many drivers use the sensor data profile); a reliable subscription would not hear
+# the latter at all. Only the latest message is used, so a lost one does not matter.
+JOINT_STATE_QOS = QoSProfile(depth=10, reliability=ReliabilityPolicy.BEST_EFFORT,
+                             durability=DurabilityPolicy.VOLATILE)
+
+ERROR_NAMES = {getattr(FollowJointTrajectory.Result, name): name for name in (
+    "SUCCESSFUL", "INVALID_GOAL", "INVALID_JOINTS", "OLD_HEADER_TIMESTAMP",
+    "PATH_TOLERANCE_VIOLATED", "GOAL_TOLERANCE_VIOLATED")}
+STATUS_NAMES = {getattr(GoalStatus, name): name[len("STATUS_"):].lower() for name in (
+    "STATUS_UNKNOWN", "STATUS_ACCEPTED", "STATUS_EXECUTING", "STATUS_CANCELING",
+    "STATUS_SUCCEEDED", "STATUS_CANCELED", "STATUS_ABORTED")}
+
+
+# ----------------------------------------------------------------------------- messages
+
+def fjt_goal(trajectory_msg, goal_time_tolerance_s=GOAL_TIME_TOLERANCE_S):
+    """control_msgs/FollowJointTrajectory goal of a trajectory_msgs/JointTrajectory (one
+    joint per winch: positions m, velocities m/s, accelerations m/s^2, time_from_start s):
+    the same joint names and points WITHOUT effort, header stamp zero ("start on receipt":
+    a plan's stamp is when it was made, and a past start would be rejected or skipped),
+    ``goal_time_tolerance_s`` (s, >= 0; 0: the controller's default). No path or goal
+    tolerances: the controller's configured ones apply."""
+    if not isinstance(trajectory_msg, JointTrajectory):
+        raise InputError("trajectory", type(trajectory_msg).__name__,
+                         "expected a trajectory_msgs/JointTrajectory")
+    tolerance = check_finite("goal_time_tolerance_s", goal_time_tolerance_s)
+    if tolerance < 0:
+        raise InputError("goal_time_tolerance_s", tolerance, "must be >= 0 s")
+    goal = FollowJointTrajectory.Goal()
+    goal.goal_time_tolerance = duration_msg(tolerance)
+    trajectory = goal.trajectory
+    trajectory.header.frame_id = trajectory_msg.header.frame_id
+    trajectory.joint_names = list(trajectory_msg.joint_names)
+    # new points rather than copies: effort stays empty whatever the source holds
+    trajectory.points = [JointTrajectoryPoint(
+        positions=pt.positions, velocities=pt.velocities, accelerations=pt.accelerations,
+        time_from_start=pt.time_from_start) for pt in trajectory_msg.points]
+    return goal
+
+
+def measured_lengths(joint_state, winch_names):
+    """Cable lengths (6,) m of a sensor_msgs/JointState in the order of ``winch_names``;
+    the message's joints may come in any order, other joints are ignored. InputError naming
+    the winch that is missing (or has no position, or is named twice) or whose length is not
+    a finite number > 0."""
+    names = check_joint_names(winch_names, "winch_names")
+    index = {}
+    for k, name in enumerate(joint_state.name):
+        if name in index and name in names:
+            raise InputError("joint_states.name", name, "winch named twice in one message")
+        index.setdefault(name, k)
+    positions = joint_state.position
+    lengths = np.empty(len(names))
+    for i, name in enumerate(names):
+        k = index.get(name)
+        if k is None:
+            raise InputError("joint_states.name", name,
+                             "winch missing from the joint state message")
+        if k >= len(positions):
+            raise InputError(f"joint_states.position[{name}]", None,
+                             f"no position for this winch ({len(positions)} positions for "
+                             f"{len(joint_state.name)} names)")
+        value = float(positions[k])
+        if not np.isfinite(value) or value <= 0:
+            raise InputError(f"joint_states.position[{name}]", value,
+                             "cable length must be a finite number > 0 (m)")
+        lengths[i] = value
+    return lengths
+
+
+def start_mismatch(measured, planned_first, tolerance_m, winch_names):
+    """None when every measured cable length (m) is within ``tolerance_m`` (m) of the plan's
+    first point, else one line naming the largest distance (m), its winch and the
+    tolerance: the controller would jump there, or interpolate from where it is at a speed
+    the plan never checked."""
+    measured = np.asarray(measured, dtype=float).reshape(-1)
+    planned = np.asarray(planned_first, dtype=float).reshape(-1)
+    names = list(winch_names)
+    if not measured.shape == planned.shape == (len(names),):
+        raise InputError("measured", measured.tolist(),
+                         f"expected {len(names)} lengths like planned_first "
+                         f"({planned.size})")
+    tolerance = check_finite("tolerance_m", tolerance_m)
+    distance = np.abs(measured - planned)
+    if not np.all(np.isfinite(distance)):
+        raise InputError("measured", measured.tolist(), "cable lengths must be finite (m)")
+    i = int(np.argmax(distance))
+    if distance[i] <= tolerance:
+        return None
+    return (f"the winches are not at the plan's start: {names[i]} is {distance[i]:.4f} m "
+            f"from it (measured {measured[i]:.4f} m, planned {planned[i]:.4f} m; "
+            f"tolerance {tolerance:g} m)")
+
+
+# ----------------------------------------------------------------------------- pose
+
+# Seeds of a pose search without a guess: the platform level (R = I) first, then turned
+# about the base z axis and tilted, each with p from the lengths (``_position_seeds``).
+_SEED_TURNS = (0.0, np.pi / 2, -np.pi / 2, np.pi)
+_SEED_TILTS = (np.zeros(3), np.array([0.4, 0.0, 0.0]), np.array([-0.4, 0.0, 0.0]),
+               np.array([0.0, 0.4, 0.0]), np.array([0.0, -0.4, 0.0]))
+
+
+def current_pose(robot, lengths, guess=None):
+    """The platform pose (p (3,) m, R (3, 3)) whose cable lengths are ``lengths`` (6,) m,
+    by Newton (``forward_kinematics``) from ``guess`` = (p, R), the last known pose.
+
+    A hexapod's forward kinematics has several solutions (for planar anchor sets, at
+    least the mirror image through the base plane); Newton from the last known pose finds
+    the one the platform is on as long as it moved little since. Without a guess, Newton
+    runs from 20 orientations (level, turned about z, tilted by 0.4 rad), each with one or
+    two positions fitted to the lengths (``_position_seeds``), ~30 ms; of the solutions a
+    wrench-feasible one is preferred (the platform hangs in taut cables), then the least
+    tilted (z axis nearest the base's). Lengths alone cannot tell feasible solutions apart:
+    Robot 2's free-flight goal (config/problems) has a feasible twin with the same lengths
+    tilted 3.06 rad, nearly upside down. Pass a guess whenever a pose is known.
+
+    InputError (field ``joint_states``) naming why when no pose is found (singular cable
+    Jacobian, no convergence) or the lengths are not numbers > 0.
+    """
+    L = np.asarray(lengths, dtype=float)
+    if L.shape != (len(robot.winch_names),) or not np.all(np.isfinite(L)) or np.any(L <= 0):
+        raise InputError("joint_states", np.asarray(lengths).tolist(),
+                         "expected one finite cable length > 0 (m) per winch")
+    if guess is not None:
+        p0, R0 = guess
+        fk = forward_kinematics(robot, L, p0, R0)
+        if not fk.ok:
+            raise InputError("joint_states", L.tolist(),
+                             f"no pose near the last known one: {fk.message}")
+        return fk.p, fk.R
+    best, reasons = None, []
+    for R0 in _rotation_seeds():
+        for p0 in _position_seeds(robot, L, R0):
+            try:
+                fk = forward_kinematics(robot, L, p0, R0)
+            except InputError as exc:   # a seed beyond the position limits
+                reasons.append(str(exc))
+                continue
+            if not fk.ok:
+                reasons.append(fk.message)
+                continue
+            # every converged solution has a residual at rounding level, so the residual
+            # cannot choose: feasibility does, then the tilt (angle of the platform's z axis
+            # from the base's), since a platform hanging in cables is seldom upside down
+            feasible = bool(evaluate(robot, fk.p[None], R=fk.R[None]).feasible[0])
+            tilt = float(np.arccos(np.clip(fk.R[2, 2], -1.0, 1.0)))
+            key = (not feasible, round(tilt, 6), fk.residual)
+            if best is None or key < best[0]:
+                best = (key, fk)
+    if best is None:
+        raise InputError("joint_states", L.tolist(),
+                         f"no pose found from {len(reasons)} seeds: {reasons[0]}")
+    return best[1].p, best[1].R
+
+
+def _rotation_seeds():
+    for turn in _SEED_TURNS:
+        Rz = rotation_vector_exp([0.0, 0.0, turn])
+        for tilt in _SEED_TILTS:
+            yield rotation_vector_exp(tilt) @ Rz
+
+
+def _position_seeds(robot, L, R):
+    """Positions p with |p - c_i| = L_i in the least-squares sense, c_i = a_i - R b_i.
+    Differences of the squared equations are linear in p; when the c_i are (nearly)
+    coplanar one direction is left free and the mean equation gives it as a quadratic:
+    both roots (above and below the plane) are returned."""
+    c = robot.base_anchors - robot.platform_anchors @ R.T
+    c_mean = c.mean(axis=0)
+    sq = np.sum(c * c, axis=1)
+    A = -2.0 * (c - c_mean)
+    b = (L ** 2 - np.mean(L ** 2)) - (sq - sq.mean())
+    U, s, Vt = np.linalg.svd(A, full_matrices=False)
+    if s[2] > 1e-6 * s[0]:
+        return [np.linalg.lstsq(A, b, rcond=None)[0]]
+    p0 = Vt[:2].T @ ((U[:, :2].T @ b) / s[:2])       # the solution in the plane
+    n = Vt[2]
+    # |p0 + t n|^2 - 2 c_mean . (p0 + t n) + mean |c|^2 = mean L^2, a quadratic in t
+    half_b = float(n @ (p0 - c_mean))
+    const = float(p0 @ p0 - 2 * c_mean @ p0 + sq.mean() - np.mean(L ** 2))
+    disc = half_b ** 2 - const
+    root = np.sqrt(max(disc, 0.0))
+    return [p0 + (-half_b + root) * n, p0 + (-half_b - root) * n]
+
+
+# ----------------------------------------------------------------------------- joint states
+
+class JointStateMonitor:
+    """The latest sensor_msgs/JointState on ``topic`` and when it arrived (monotonic).
+
+    ``lengths(max_age_s)`` gives the winches' cable lengths (6,) m in the order of
+    ``winch_names``, or None and why not: nothing received yet, the last message older than
+    ``max_age_s`` (s), or a winch missing or not a length in it.
+    """
+
+    def __init__(self, node, topic, winch_names, callback_group=None):
+        self._node = node
+        self.winch_names = check_joint_names(winch_names, "winch_names")
+        self._lock = threading.Lock()
+        self._latest = None          # (JointState, time.monotonic() of arrival)
+        self.subscription = node.create_subscription(
+            JointState, topic, self._received, JOINT_STATE_QOS,
+            callback_group=callback_group)
+        self.topic = self.subscription.topic_name
+
+    def _received(self, msg):
+        with self._lock:
+            self._latest = (msg, time.monotonic())
+
+    @property
+    def latest(self):
+        """(the last JointState, its arrival time.monotonic() s), or None."""
+        with self._lock:
+            return self._latest
+
+    def lengths(self, max_age_s):
+        """(cable lengths (6,) m, "") or (None, the reason)."""
+        latest = self.latest
+        if latest is None:
+            return None, f"nothing received on {self.topic}"
+        msg, arrived = latest
+        age = time.monotonic() - arrived
+        if age > max_age_s:
+            return None, (f"the last joint state on {self.topic} is {age:.2f} s old "
+                          f"(at most {max_age_s:g} s)")
+        try:
+            return measured_lengths(msg, self.winch_names), ""
+        except InputError as exc:
+            return None, f"joint state on {self.topic}: {exc}"
+
+    def destroy(self):
+        self._node.destroy_subscription(self.subscription)
+
+
+# ----------------------------------------------------------------------------- execution
+
+class _Run:
+    """One start() call: its goal, where it is, and whether on_done has been called."""
+
+    def __init__(self, on_done):
+        self.on_done = on_done
+        self.goal = None
+        self.handle = None           # ClientGoalHandle once accepted
+        self.timer = None            # polls for the server before sending
+        self.deadline = 0.0
+        self.cancel_requested = False
+        self.sent = False            # send_goal_async called (once: timer callbacks may overlap)
+        self.done = False
+
+
+class TrajectoryExecutor:
+    """Runs a cable trajectory on a FollowJointTrajectory action server (a ros2_control
+    JointTrajectoryController) without ever blocking an executor thread: every step
+    continues in a future's done callback or a timer.
+
+    ``start(trajectory_msg, on_done)`` calls ``on_done(outcome, message)`` exactly once
+    (from an executor thread, or before start returns when it is refused at once):
+
+    - COMPLETED: the server succeeded with error_code SUCCESSFUL;
+    - STOPPED: ended by ``cancel()`` (before it was sent, or canceled by the server);
+    - FAILED: a bad trajectory, already busy, no server within ``server_wait_s`` (s),
+      the goal rejected (the controller logs why: joint names, effort fields, times, a
+      non-zero final velocity), aborted or failed with an error code (its name and
+      error_string: INVALID_GOAL, PATH_TOLERANCE_VIOLATED, ...), or canceled by someone else.
+
+    The node must be spun by an executor (timers and action responses).
+    """
+
+    def __init__(self, node, action_name, callback_group=None, server_wait_s=SERVER_WAIT_S,
+                 goal_time_tolerance_s=GOAL_TIME_TOLERANCE_S):
+        self._node = node
+        self._group = callback_group
+        self._client = ActionClient(node, FollowJointTrajectory, action_name,
+                                    callback_group=callback_group)
+        self.action_name = action_name
+        self.server_wait_s = float(server_wait_s)
+        self.goal_time_tolerance_s = goal_time_tolerance_s
+        self._lock = threading.Lock()
+        self._run = None
+
+    @property
+    def busy(self):
+        """True from start() until on_done has been called."""
+        with self._lock:
+            return self._run is not None
+
+    def start(self, trajectory_msg, on_done):
+        """Send ``trajectory_msg`` (trajectory_msgs/JointTrajectory) as a goal
+        (``fjt_goal``); ``on_done(outcome, message)`` is called exactly once."""
+        run = _Run(on_done)
+        with self._lock:
+            busy = self._run is not None
+            if not busy:
+                self._run = run
+        if busy:
+            _call(self._node, on_done, FAILED,
+                  f"refused: already executing a trajectory on {self.action_name}")
+            return
+        try:
+            run.goal = fjt_goal(trajectory_msg, self.goal_time_tolerance_s)
+        except InputError as exc:
+            self._finish(run, FAILED, f"not sent: {exc}")
+            return
+        if self._client.server_is_ready():
+            self._send(run)
+            return
+        # Not there yet (or not yet discovered): poll from a timer rather than wait here,
+        # since start() is typically called from a service callback on an executor thread.
+        run.deadline = time.monotonic() + self.server_wait_s
+        with self._lock:
+            if not run.done:
+                run.timer = self._node.create_timer(SERVER_POLL_S, lambda: self._poll(run),
+                                                    callback_group=self._group)
+
+    def cancel(self):
+        """Ask the server to cancel the running goal (on_done then gets STOPPED once the
+        server has canceled it). False when nothing is running."""
+        with self._lock:
+            run = self._run
+            if run is None:
+                return False
+            run.cancel_requested = True
+            handle = run.handle
+        if handle is not None:
+            self._request_cancel(run, handle)
+        # else: the server poll or the goal response sees cancel_requested
+        return True
+
+    def destroy(self):
+        """Destroy the action client (a running goal is not canceled)."""
+        self._client.destroy()
+
+    # -------------------------------------------------------------- steps
+
+    def _poll(self, run):
+        if run.done:
+            self._drop_timer(run)
+        elif run.cancel_requested:
+            self._finish(run, STOPPED, "stopped before the trajectory was sent")
+        elif self._client.server_is_ready():
+            self._drop_timer(run)
+            self._send(run)
+        elif time.monotonic() >= run.deadline:
+            self._finish(run, FAILED,
+                         f"no action server {self.action_name} within {self.server_wait_s:g} s "
+                         f"(is the trajectory controller loaded and active?)")
+
+    def _send(self, run):
+        with self._lock:
+            first, run.sent = not run.sent, True
+        if not first:
+            return
+        if run.cancel_requested:
+            self._finish(run, STOPPED, "stopped before the trajectory was sent")
+            return
+        try:
+            future = self._client.send_goal_async(run.goal)
+        except Exception as exc:  # noqa: BLE001 - e.g. the context shut down: tell the caller
+            self._finish(run, FAILED, f"sending the goal to {self.action_name} failed: "
+                                      f"{type(exc).__name__}: {exc}")
+            return
+        future.add_done_callback(lambda f: self._goal_response(run, f))
+
+    def _goal_response(self, run, future):
+        try:
+            handle = future.result()
+        except Exception as exc:  # noqa: BLE001
+            self._finish(run, FAILED, f"no goal response from {self.action_name}: "
+                                      f"{type(exc).__name__}: {exc}")
+            return
+        if handle is None or not handle.accepted:
+            self._finish(run, FAILED,
+                         f"rejected by {self.action_name} (the controller's log says why: "
+                         f"joint names, effort fields, times or a non-zero final velocity)")
+            return
+        with self._lock:
+            run.handle = handle
+            cancel = run.cancel_requested
+        handle.get_result_async().add_done_callback(lambda f: self._result(run, f))
+        if cancel:
+            self._request_cancel(run, handle)
+
+    def _request_cancel(self, run, handle):
+        def answered(future):
+            response = future.result() if future.exception() is None else None
+            if response is None or response.return_code not in (
+                    CancelGoal.Response.ERROR_NONE, CancelGoal.Response.ERROR_GOAL_TERMINATED):
+                code = "no answer" if response is None else f"code {response.return_code}"
+                self._node.get_logger().warning(
+                    f"cancel of the trajectory on {self.action_name} refused ({code}); "
+                    f"it runs on")
+        handle.cancel_goal_async().add_done_callback(answered)
+
+    def _result(self, run, future):
+        try:
+            response = future.result()
+        except Exception as exc:  # noqa: BLE001
+            self._finish(run, FAILED, f"no result from {self.action_name}: "
+                                      f"{type(exc).__name__}: {exc}")
+            return
+        status, result = response.status, response.result
+        code = result.error_code
+        code_text = f"{ERROR_NAMES.get(code, 'error_code')} ({code})"
+        detail = f": {result.error_string}" if result.error_string else ""
+        succeeded = code == FollowJointTrajectory.Result.SUCCESSFUL
+        if status == GoalStatus.STATUS_SUCCEEDED and succeeded:
+            self._finish(run, COMPLETED, f"completed on {self.action_name}{detail}")
+        elif status == GoalStatus.STATUS_CANCELED and run.cancel_requested:
+            self._finish(run, STOPPED, f"stopped on request: canceled by {self.action_name}")
+        elif status == GoalStatus.STATUS_CANCELED:
+            self._finish(run, FAILED, f"canceled by {self.action_name}, not by this node: "
+                                      f"{code_text}{detail}")
+        else:
+            self._finish(run, FAILED, f"{STATUS_NAMES.get(status, status)} by "
+                                      f"{self.action_name}: {code_text}{detail}")
+
+    def _finish(self, run, outcome, message):
+        """on_done, once per run; the executor is free for the next start() before it runs."""
+        with self._lock:
+            if run.done:
+                return
+            run.done = True
+            if self._run is run:
+                self._run = None
+        self._drop_timer(run)
+        _call(self._node, run.on_done, outcome, message)
+
+    def _drop_timer(self, run):
+        with self._lock:
+            timer, run.timer = run.timer, None
+        if timer is not None:
+            timer.cancel()
+            self._node.destroy_timer(timer)
+
+
+def _call(node, on_done, outcome, message):
+    """The caller's callback; what it raises is logged, never passed into the executor."""
+    try:
+        on_done(outcome, message)
+    except Exception as exc:  # noqa: BLE001
+        node.get_logger().error(f"trajectory on_done callback failed: "
+                                f"{type(exc).__name__}: {exc}")

@@ -1,0 +1,561 @@
+"""Executing a plan on a trajectory controller (cdh_planner/ros/execution.py).
+
+In process: the FollowJointTrajectory goal of a cable trajectory (no effort, stamp zero),
+measured cable lengths of a JointState, the start check, and the pose of measured lengths
+(forward kinematics against inverse kinematics on the problem files' poses). The test
+double's goal checks (test/doubles/follow_joint_trajectory_server.py) against the rules of
+the Jazzy JointTrajectoryController. Over real DDS, in a ROS domain of its own: the double
+in its own process, and TrajectoryExecutor / JointStateMonitor on a node spun by a
+MultiThreadedExecutor as the planner node spins its own.
+"""
+
+import functools
+import importlib.util
+import json
+import subprocess
+import sys
+import threading
+import time
+
+import numpy as np
+import pytest
+
+pytest.importorskip("control_msgs")
+
+from builtin_interfaces.msg import Duration, Time  # noqa: E402
+from sensor_msgs.msg import JointState  # noqa: E402
+from trajectory_msgs.msg import JointTrajectory, JointTrajectoryPoint  # noqa: E402
+
+from cdh_planner.errors import InputError  # noqa: E402
+from cdh_planner.feasibility import evaluate  # noqa: E402
+from cdh_planner.io.problem import load_problem  # noqa: E402
+from cdh_planner.model.kinematics import (cable_lengths, forward_kinematics,  # noqa: E402
+                                          rotation_vector_exp)
+from cdh_planner.model.pose import rotation_angle_between, rotation_tt  # noqa: E402
+from cdh_planner.model.robot import load_robot  # noqa: E402
+from cdh_planner.ros import execution as X  # noqa: E402
+from cdh_planner.ros.messages import cable_trajectory_msg, to_seconds  # noqa: E402
+
+from conftest import CONFIG, PROBLEMS, REPO  # noqa: E402
+from ros_harness import claimed_domain, isolated_env, stop_process  # noqa: E402
+
+DOUBLE = REPO / "test" / "doubles" / "follow_joint_trajectory_server.py"
+ACTION = "/cable_controller/follow_joint_trajectory"
+FRAME = "cdh_base"
+ROBOT2 = load_robot(CONFIG / "robot2.yaml")
+WINCHES = list(ROBOT2.winch_names)
+TIME_SCALE = 4.0          # the double runs trajectories this many times faster
+
+
+@functools.lru_cache(maxsize=None)
+def planned():
+    """A real plan: Robot 2, q1 -> q2 on the sphere (the direct motion, 49 waypoints,
+    2.18 s), planned by the library."""
+    from cdh_planner.planner import Planner
+    pr = load_problem(PROBLEMS / "robot2_q1_q2.yaml")
+    result = Planner(pr.robot, pr.task, pr.settings).plan(pr.start, pr.goal)
+    assert result.success, result.message
+    return result.path
+
+
+def trajectory(stamp=None):
+    """The plan's cable trajectory as the node publishes it."""
+    return cable_trajectory_msg(planned(), WINCHES, FRAME, stamp)
+
+
+def with_effort(msg):
+    """``msg`` with effort = the plan's nominal tensions (N) in every point, as a sender
+    that puts the tensions in the trajectory would send it."""
+    for pt, tension in zip(msg.points, planned().tension_nominal):
+        pt.effort = tension.astype(float)
+    return msg
+
+
+def ends():
+    msg = trajectory()
+    return np.array(msg.points[0].positions), np.array(msg.points[-1].positions)
+
+
+# ----------------------------------------------------------------------------- fjt_goal
+
+def test_goal_has_the_trajectory_without_effort_and_starts_on_receipt():
+    msg = with_effort(trajectory(stamp=Time(sec=1_700_000_000, nanosec=5)))
+    assert all(len(p.effort) == 6 for p in msg.points)
+    goal = X.fjt_goal(msg)
+    t = goal.trajectory
+    assert (t.header.stamp.sec, t.header.stamp.nanosec) == (0, 0)
+    assert t.header.frame_id == FRAME and list(t.joint_names) == WINCHES
+    assert len(t.points) == len(msg.points) == len(planned())
+    for a, b in zip(t.points, msg.points):
+        assert len(a.effort) == 0
+        assert list(a.positions) == list(b.positions)
+        assert list(a.velocities) == list(b.velocities)
+        assert list(a.accelerations) == list(b.accelerations)
+        assert (a.time_from_start.sec, a.time_from_start.nanosec) == (
+            b.time_from_start.sec, b.time_from_start.nanosec)
+    assert all(len(p.effort) == 6 for p in msg.points)          # the source is left alone
+    assert to_seconds(goal.goal_time_tolerance) == X.GOAL_TIME_TOLERANCE_S
+    assert not goal.path_tolerance and not goal.goal_tolerance  # the controller's own
+    assert to_seconds(X.fjt_goal(msg, 0).goal_time_tolerance) == 0.0
+
+
+@pytest.mark.parametrize("value", [-0.1, float("nan"), "1"])
+def test_goal_time_tolerance_must_be_a_number_ge_zero(value):
+    with pytest.raises(InputError) as err:
+        X.fjt_goal(trajectory(), value)
+    assert err.value.field == "goal_time_tolerance_s"
+
+
+def test_goal_of_something_else_is_refused():
+    with pytest.raises(InputError) as err:
+        X.fjt_goal(JointState())
+    assert err.value.field == "trajectory" and "JointTrajectory" in str(err.value)
+
+
+# ----------------------------------------------------------------------------- measured lengths
+
+def joint_state(names, positions):
+    return JointState(name=list(names), position=[float(v) for v in positions])
+
+
+def test_measured_lengths_follow_the_winch_order_and_ignore_other_joints():
+    lengths = {w: 0.3 + 0.01 * i for i, w in enumerate(WINCHES)}
+    names = ["gripper", *reversed(WINCHES), "camera_pan"]
+    msg = joint_state(names, [9.0] + [lengths[n] for n in reversed(WINCHES)] + [-1.0])
+    np.testing.assert_array_equal(X.measured_lengths(msg, WINCHES),
+                                  [lengths[w] for w in WINCHES])
+
+
+@pytest.mark.parametrize("case,field,words", [
+    ("missing", "joint_states.name", "winch_4"),
+    ("nan", "joint_states.position[winch_2]", "finite"),
+    ("negative", "joint_states.position[winch_2]", "> 0"),
+    ("short", "joint_states.position[winch_6]", "no position"),
+    ("twice", "joint_states.name", "twice"),
+])
+def test_measured_lengths_name_the_winch_at_fault(case, field, words):
+    names, values = list(WINCHES), [0.4] * 6
+    if case == "missing":
+        names[3] = "elbow"
+    elif case == "nan":
+        values[1] = float("nan")
+    elif case == "negative":
+        values[1] = -0.4
+    elif case == "short":
+        values = values[:5]
+    elif case == "twice":
+        names, values = names + ["winch_1"], values + [0.5]
+    with pytest.raises(InputError) as err:
+        X.measured_lengths(joint_state(names, values), WINCHES)
+    assert err.value.field == field and words in str(err.value)
+
+
+# ----------------------------------------------------------------------------- start check
+
+def test_start_mismatch_names_the_largest_distance_its_winch_and_the_tolerance():
+    first = np.full(6, 0.4)
+    assert X.start_mismatch(first + 0.004, first, 0.005, WINCHES) is None
+    measured = first + np.array([0.004, -0.003, 0.0, -0.0123, 0.006, 0.0])
+    text = X.start_mismatch(measured, first, 0.005, WINCHES)
+    assert "\n" not in text
+    assert "winch_4" in text and "0.0123 m" in text and "tolerance 0.005 m" in text
+    with pytest.raises(InputError):
+        X.start_mismatch(first[:5], first, 0.005, WINCHES)
+
+
+# ----------------------------------------------------------------------------- current pose
+
+def _problem_poses():
+    out = []
+    for path in sorted(PROBLEMS.glob("robot*.yaml")):
+        pr = load_problem(path)
+        for which, pose in (("start", pr.start), ("goal", pr.goal)):
+            out.append(pytest.param(pr.robot, pose.p, rotation_tt(pose.tau),
+                                    id=f"{path.stem}-{which}"))
+    return out
+
+
+POSES = _problem_poses()
+
+
+@pytest.mark.parametrize("robot,p,R", POSES)
+def test_current_pose_from_a_nearby_guess_recovers_the_pose(robot, p, R):
+    rng = np.random.default_rng(7)
+    L = cable_lengths(robot, p, R)
+    axis = rng.normal(size=3)
+    guess = (p + rng.normal(size=3) / np.sqrt(3) * 0.01,               # ~1 cm
+             rotation_vector_exp(axis / np.linalg.norm(axis) * 0.05) @ R)   # 0.05 rad
+    q, Q = X.current_pose(robot, L, guess)
+    assert np.max(np.abs(q - p)) < 1e-9 and rotation_angle_between(Q, R) < 1e-9
+
+
+@pytest.mark.parametrize("robot,p,R", POSES)
+def test_current_pose_without_a_guess_finds_the_problem_poses(robot, p, R):
+    q, Q = X.current_pose(robot, cable_lengths(robot, p, R))
+    assert np.max(np.abs(q - p)) < 1e-9 and rotation_angle_between(Q, R) < 1e-9
+
+
+def test_current_pose_without_a_guess_picks_the_level_one_of_two_feasible_solutions():
+    """Robot 2's free-flight goal has a feasible twin nearly upside down (same lengths):
+    without a guess the less tilted one is returned, with a guess the one near it."""
+    pr = load_problem(PROBLEMS / "robot2_q2_q3_free_flight.yaml")
+    p, R = pr.goal.p, rotation_tt(pr.goal.tau)
+    L = cable_lengths(pr.robot, p, R)
+    twin = forward_kinematics(pr.robot, L, [-0.018, 0.0097, 0.188],
+                              rotation_tt([-0.537, 3.059, -0.024]))
+    assert twin.ok and evaluate(pr.robot, twin.p[None], R=twin.R[None]).feasible[0]
+    assert rotation_angle_between(twin.R, R) > 2.0
+    q, Q = X.current_pose(pr.robot, L)
+    assert rotation_angle_between(Q, R) < 1e-9
+    q, Q = X.current_pose(pr.robot, L, guess=(twin.p + 0.005, twin.R))
+    assert rotation_angle_between(Q, twin.R) < 1e-9
+
+
+@pytest.mark.parametrize("guess", [False, True])
+def test_current_pose_of_unreachable_lengths_says_why(guess):
+    # cables 1 and 2 share a platform anchor; their base anchors are 0.46 m apart
+    L = np.array([0.1, 0.7, 0.4, 0.4, 0.4, 0.4])
+    start = (np.array([0.0, 0.0, 0.306]), np.eye(3)) if guess else None
+    with pytest.raises(InputError) as err:
+        X.current_pose(ROBOT2, L, start)
+    assert err.value.field == "joint_states" and "forward kinematics" in str(err.value)
+    with pytest.raises(InputError) as err:
+        X.current_pose(ROBOT2, [0.4] * 5 + [float("nan")])
+    assert err.value.field == "joint_states"
+
+
+# ----------------------------------------------------------------------------- the double's checks
+
+@functools.lru_cache(maxsize=None)
+def double_module():
+    spec = importlib.util.spec_from_file_location("fjt_double", DOUBLE)
+    module = importlib.util.module_from_spec(spec)
+    spec.loader.exec_module(module)
+    return module
+
+
+def _raw(change=None):
+    """A two-point trajectory on WINCHES that the controller accepts, then ``change``d."""
+    msg = JointTrajectory(joint_names=list(WINCHES))
+    msg.points = [JointTrajectoryPoint(positions=[0.4] * 6, velocities=[0.0] * 6,
+                                       time_from_start=Duration(sec=0)),
+                  JointTrajectoryPoint(positions=[0.41] * 6, velocities=[0.0] * 6,
+                                       time_from_start=Duration(sec=1))]
+    if change is not None:
+        change(msg)
+    return msg
+
+
+def _set(attr, value, point=None):
+    """A change of ``msg`` (or of its point ``point``): attribute ``attr`` = ``value``."""
+    return lambda msg: setattr(msg if point is None else msg.points[point], attr, value)
+
+
+END_VELOCITY = _set("velocities", [0.0] * 5 + [1e-3], point=-1)
+EFFORT = _set("effort", [1.0] * 6, point=0)
+# id, change, the double's options, the controller's log message (None: accepted)
+JTC_RULES = [
+    ("valid", None, {}, None),
+    ("too-few-joints", _set("joint_names", WINCHES[:5]), {}, "don't match the controller"),
+    ("no-joint-names", _set("joint_names", []), {}, "don't match the controller"),
+    ("no-points", _set("points", []), {}, "Empty trajectory received."),
+    ("unknown-joint", _set("joint_names", WINCHES[:5] + ["cable_6"]), {},
+     "Incoming joint cable_6 doesn't match the controller's joints."),
+    ("joint-twice", _set("joint_names", WINCHES[:5] + ["winch_1"]), {}, "more than once"),
+    ("moving-at-the-end", END_VELOCITY, {},
+     "Velocity of last trajectory point of joint winch_6 is not zero: 0.001000000000000"),
+    ("moving-at-the-end-allowed", END_VELOCITY, {"nonzero_end_velocity": True}, None),
+    ("end-velocity-below-float-eps", _set("velocities", [1e-9] * 6, point=-1), {}, None),
+    ("stamp-ends-in-the-past", lambda m: setattr(m.header, "stamp", Time(sec=100)), {},
+     "Received trajectory with non-zero start time (100.000000) that ends in the past"),
+    ("stamp-in-the-future", lambda m: setattr(m.header, "stamp", Time(sec=10_000)), {}, None),
+    ("time-not-increasing", _set("time_from_start", Duration(sec=0), point=1), {},
+     "Time between points 0 and 1 is not strictly increasing"),
+    ("positions-size", _set("positions", [0.4] * 5, point=1), {},
+     "Mismatch between joint_names size (6) and positions (5) at point #1."),
+    ("no-velocities", _set("velocities", [], point=0), {}, None),
+    ("accelerations-size", _set("accelerations", [0.0] * 7, point=0), {},
+     "Mismatch between joint_names size (6) and accelerations (7) at point #0."),
+    ("effort", EFFORT, {}, "Trajectories with effort fields are only supported for "
+                           "controllers using the 'effort' command interface."),
+    ("effort-with-effort-interface", EFFORT, {"effort_interface": True}, None),
+]
+
+
+@pytest.mark.parametrize("change,options,reason",
+                         [pytest.param(*case[1:], id=case[0]) for case in JTC_RULES])
+def test_double_rejects_what_the_jazzy_controller_rejects(change, options, reason):
+    got = double_module().rejection(_raw(change), WINCHES, now_s=1000.0, **options)
+    assert (got is None) if reason is None else (reason in got), got
+
+
+# ----------------------------------------------------------------------------- over DDS
+
+class DoubleProcess:
+    """The double in its own process; its JSON events collected from stdout."""
+
+    def __init__(self, domain, *args):
+        first, _ = ends()
+        cmd = [sys.executable, str(DOUBLE), *WINCHES, "--time-scale", str(TIME_SCALE),
+               "--initial", *map(repr, first.tolist()), *args]
+        self.proc = subprocess.Popen(cmd, env=isolated_env(domain), stdout=subprocess.PIPE,
+                                     stderr=subprocess.STDOUT, text=True, cwd=REPO)
+        self.lines, self.ready = [], threading.Event()
+        threading.Thread(target=self._read, daemon=True).start()
+
+    def _read(self):
+        for line in self.proc.stdout:
+            self.lines.append(line.rstrip("\n"))
+            if line.strip() == "ready":
+                self.ready.set()
+
+    def events(self, kind=None):
+        out = []
+        for line in list(self.lines):
+            if line.startswith("{"):
+                event = json.loads(line)
+                if kind is None or event["event"] == kind:
+                    out.append(event)
+        return out
+
+    def stop(self):
+        rc = stop_process(self.proc)
+        time.sleep(0.05)   # the reader thread takes the last lines
+        return rc, "\n".join(self.lines)
+
+
+class Side:
+    """Our side: a node in its own rclpy context, spun by a MultiThreadedExecutor on a
+    thread; a TrajectoryExecutor on ACTION and a JointStateMonitor on /joint_states."""
+
+    def __init__(self, domain):
+        import rclpy
+        from rclpy.action import ActionClient
+        from rclpy.callback_groups import ReentrantCallbackGroup
+        from rclpy.executors import MultiThreadedExecutor
+        from control_msgs.action import FollowJointTrajectory
+        self.context = rclpy.Context()
+        rclpy.init(context=self.context, domain_id=domain)
+        self.node = rclpy.create_node("execution_test", context=self.context)
+        self.group = ReentrantCallbackGroup()
+        self.executor = X.TrajectoryExecutor(self.node, ACTION, self.group)
+        self.monitor = X.JointStateMonitor(self.node, "/joint_states", WINCHES, self.group)
+        self.raw = ActionClient(self.node, FollowJointTrajectory, ACTION,
+                                callback_group=self.group)
+        self.spinner = MultiThreadedExecutor(num_threads=4, context=self.context)
+        self.spinner.add_node(self.node)
+        self.thread = threading.Thread(target=self.spinner.spin, daemon=True)
+        self.thread.start()
+
+    def close(self):
+        self.spinner.shutdown(timeout_sec=2.0)
+        self.thread.join(5.0)
+        self.node.destroy_node()
+        self.context.try_shutdown()
+
+
+def until(condition, timeout_s):
+    end = time.monotonic() + timeout_s
+    while not condition():
+        if time.monotonic() > end:
+            return False
+        time.sleep(0.01)
+    return True
+
+
+class Done:
+    """An on_done callback that keeps every call (there must be one) and its thread."""
+
+    def __init__(self):
+        self.calls, self.event = [], threading.Event()
+
+    def __call__(self, outcome, message):
+        self.calls.append((outcome, message, threading.current_thread().name, time.monotonic()))
+        self.event.set()
+
+    def wait(self, timeout_s=10.0):
+        assert self.event.wait(timeout_s), "on_done was not called"
+        time.sleep(0.05)   # a second call would come now
+        assert len(self.calls) == 1, self.calls
+        return self.calls[0][:2]
+
+
+@pytest.fixture(scope="module")
+def ros():
+    with claimed_domain() as domain:
+        double = DoubleProcess(domain)
+        side = None
+        try:
+            assert double.ready.wait(30.0), "the double did not start:\n" + "\n".join(double.lines)
+            side = Side(domain)
+            assert until(side.raw.server_is_ready, 20.0), "the action server was not discovered"
+            assert until(lambda: side.monitor.latest is not None, 10.0), "no joint states"
+            yield side, double
+        finally:
+            if side is not None:
+                side.close()
+            rc, log = double.stop()
+            assert rc == 0, f"double exit code {rc}:\n{log}"
+            assert "Traceback" not in log, log
+
+
+def latest_positions_after(monitor, t):
+    """The first joint state lengths that arrived after monotonic time ``t``."""
+    assert until(lambda: monitor.latest[1] > t, 2.0), "no joint state after the event"
+    lengths, why = monitor.lengths(1.0)
+    assert lengths is not None, why
+    return lengths
+
+
+def test_planned_trajectory_runs_to_completion_and_ends_at_its_last_point(ros):
+    side, double = ros
+    first, last = ends()
+    accepted = len(double.events("accepted"))
+    done = Done()
+    t0 = time.monotonic()
+    side.executor.start(trajectory(), done)
+    assert time.monotonic() - t0 < 0.1           # asynchronous
+    assert side.executor.busy
+    outcome, message = done.wait()
+    elapsed = time.monotonic() - t0
+    assert (outcome, message) == (X.COMPLETED, f"completed on {ACTION}: Goal successfully reached!")
+    assert not side.executor.busy
+    assert done.calls[0][2] != threading.current_thread().name   # from an executor thread
+    assert elapsed >= planned().t[-1] / TIME_SCALE * 0.95
+    event = double.events("accepted")[accepted]
+    assert event == {"event": "accepted", "joint_names": WINCHES, "points": len(planned()),
+                     "has_effort": False, "duration_s": pytest.approx(planned().t[-1], abs=1e-9)}
+    np.testing.assert_allclose(latest_positions_after(side.monitor, done.calls[0][3]), last,
+                               rtol=0, atol=1e-6)
+
+
+def test_trajectory_with_effort_is_rejected_by_the_controller_and_the_goal_is_not(ros):
+    from control_msgs.action import FollowJointTrajectory
+    side, double = ros
+    raw = FollowJointTrajectory.Goal(trajectory=with_effort(trajectory()))
+    future = side.raw.send_goal_async(raw)
+    assert until(future.done, 10.0)
+    assert not future.result().accepted
+    assert "effort fields are only supported" in double.events("rejected")[-1]["reason"]
+    done = Done()
+    side.executor.start(with_effort(trajectory()), done)
+    assert done.wait()[0] == X.COMPLETED
+
+
+@pytest.mark.parametrize("case,reason", [
+    ("joint names", "Incoming joint cable_1 doesn't match the controller's joints."),
+    ("times", "Time between points 1 and 2 is not strictly increasing"),
+])
+def test_a_goal_the_controller_rejects_fails_naming_the_rejection(ros, case, reason):
+    side, double = ros
+    msg = trajectory()
+    if case == "joint names":
+        msg.joint_names = [w.replace("winch", "cable") for w in WINCHES]
+    else:
+        msg.points[2].time_from_start = msg.points[1].time_from_start
+    rejected = len(double.events("rejected"))
+    done = Done()
+    side.executor.start(msg, done)
+    outcome, message = done.wait()
+    assert outcome == X.FAILED and message.startswith(f"rejected by {ACTION}")
+    assert reason in double.events("rejected")[rejected]["reason"]
+    assert not side.executor.busy
+
+
+def slow_trajectory(factor=5):
+    """The plan's trajectory ``factor`` times slower (~2.7 s at the double's time scale)."""
+    slow = trajectory()
+    for pt in slow.points:
+        ns = (pt.time_from_start.sec * 1_000_000_000 + pt.time_from_start.nanosec) * factor
+        pt.time_from_start = Duration(sec=ns // 1_000_000_000, nanosec=ns % 1_000_000_000)
+    return slow
+
+
+def start_moving(side, double, done, msg):
+    """Start ``msg`` and return once the double has accepted it and the joints moved."""
+    first, _ = ends()
+    accepted = len(double.events("accepted"))
+    side.executor.start(msg, done)
+    assert until(lambda: len(double.events("accepted")) > accepted
+                 and not np.allclose(side.monitor.lengths(1.0)[0], first, atol=1e-4), 5.0)
+
+
+def test_cancel_mid_way_stops_and_the_joints_hold(ros):
+    side, double = ros
+    first, last = ends()
+    slow = slow_trajectory()
+    assert side.executor.cancel() is False       # nothing running
+    done = Done()
+    start_moving(side, double, done, slow)
+    second = Done()
+    side.executor.start(slow, second)            # refused at once: one at a time
+    assert second.wait(1.0) == (X.FAILED, f"refused: already executing a trajectory on {ACTION}")
+    t_cancel = time.monotonic()
+    assert side.executor.cancel() is True
+    assert done.wait(5.0) == (X.STOPPED, f"stopped on request: canceled by {ACTION}")
+    assert time.monotonic() - t_cancel < 1.0
+    held = latest_positions_after(side.monitor, time.monotonic())
+    time.sleep(0.1)
+    np.testing.assert_array_equal(latest_positions_after(side.monitor, time.monotonic()), held)
+    assert not np.allclose(held, last, atol=1e-4) and not np.allclose(held, first, atol=1e-4)
+    assert double.events()[-1] == {"event": "canceled"}
+
+
+def test_a_goal_preempted_by_another_client_fails_with_the_controllers_error(ros):
+    side, double = ros
+    first, _ = ends()
+    done = Done()
+    start_moving(side, double, done, slow_trajectory())
+    back = JointTrajectory(joint_names=WINCHES, points=[JointTrajectoryPoint(
+        positions=first.tolist(), time_from_start=Duration(nanosec=100_000_000))])
+    other = side.raw.send_goal_async(X.fjt_goal(back))
+    outcome, message = done.wait(5.0)
+    assert outcome == X.FAILED
+    assert message == (f"aborted by {ACTION}: INVALID_GOAL (-1): Current goal preempted by "
+                       f"new incoming action.")
+    assert until(other.done, 5.0) and other.result().accepted
+    result = other.result().get_result_async()
+    assert until(result.done, 5.0) and result.result().result.error_code == 0
+
+
+def test_no_server_fails_quickly_naming_the_action_and_cancel_before_sending_stops(ros):
+    side, _ = ros
+    nobody = X.TrajectoryExecutor(side.node, "/nobody/follow_joint_trajectory", side.group)
+    done = Done()
+    t0 = time.monotonic()
+    nobody.start(trajectory(), done)
+    assert time.monotonic() - t0 < 0.1           # never waits in start()
+    outcome, message = done.wait(5.0)
+    assert time.monotonic() - t0 < 3.0
+    assert outcome == X.FAILED and "/nobody/follow_joint_trajectory" in message
+    assert "within 1 s" in message
+    done = Done()
+    nobody.start(trajectory(), done)
+    assert nobody.cancel()
+    assert done.wait(2.0) == (X.STOPPED, "stopped before the trajectory was sent")
+    assert not nobody.busy
+    nobody.destroy()
+
+
+def test_joint_state_monitor_reports_lengths_or_why_not(ros):
+    side, double = ros
+    lengths, why = side.monitor.lengths(1.0)
+    assert why == "" and lengths.shape == (6,) and np.all(lengths > 0)
+    assert side.monitor.lengths(1e-9)[0] is None
+    assert "s old (at most 1e-09 s)" in side.monitor.lengths(1e-9)[1]
+    shuffled = WINCHES[::-1]
+    other = X.JointStateMonitor(side.node, "/joint_states", shuffled, side.group)
+    nothing = X.JointStateMonitor(side.node, "/nobody/joint_states", WINCHES, side.group)
+    missing = X.JointStateMonitor(side.node, "/joint_states", WINCHES[:5] + ["winch_7"],
+                                  side.group)
+    assert until(lambda: other.latest is not None and missing.latest is not None, 5.0)
+    mine, _ = side.monitor.lengths(1.0)
+    theirs, _ = other.lengths(1.0)
+    assert theirs is not None
+    # the same message or the next one; the double holds still between goals
+    np.testing.assert_allclose(theirs[::-1], mine, rtol=0, atol=1e-12)
+    assert nothing.lengths(1.0) == (None, "nothing received on /nobody/joint_states")
+    lengths, why = missing.lengths(1.0)
+    assert lengths is None and "winch_7" in why and "missing" in why
+    for m in (other, nothing, missing):
+        m.destroy()
