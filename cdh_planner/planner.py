@@ -11,6 +11,7 @@ Malformed input (NaN, wrong shapes) raises InputError naming the field. The atla
 by one query is kept and reused by the next (multi-query) as long as robot and task stay.
 """
 
+import dataclasses
 import math
 import time
 from dataclasses import dataclass, field
@@ -28,7 +29,7 @@ from .model.pose import (Pose, quaternion_from_tau, rotation_angle_between, rota
                          tau_from_rotation, wrap_angle)
 from .model.task import COORDINATES
 from .search.search import MB, Stop, run
-from .settings import COSTS, PlannerSettings  # noqa: F401  (PlannerSettings: part of this API)
+from .settings import COSTS, PlannerSettings, check_setting  # noqa: F401  (PlannerSettings: API)
 from .status import Status
 from .trajectory import clearance
 from .trajectory.path import PlannedPath
@@ -102,38 +103,51 @@ class Planner:
         self.constraint = TaskConstraint(robot, task, margin_floor=s.margin_floor)
         self.radius = s.radius or default_radius(self.constraint.dim)
         self.clearance_weight = s.clearance_weight
-        self.strategy = (default_strategy(self.constraint.dim, self.clearance_weight)
-                         if s.strategy == "auto" else s.strategy)
         self.atlas = Atlas(self.constraint, radius=self.radius)
         check_dynamics(robot, self.settings.dynamics)
         self.pose_cost = task_cost(robot, task, self.settings.cost)
         self.pose_costs = task_costs(robot, task, self.settings.cost)
         pose = self.constraint.pose
         self.length = lambda xa, xb: self.pose_cost(*pose(xa), *pose(xb))
-        if self.clearance_weight == 0:  # the task metric: cost and heuristic
-            self.cost, self.heuristic = self.length, None
-        else:  # the clearance cost (trajectory.clearance); A* keeps the metric, a lower bound
-            self.cost = self._clearance_cost
-            self.heuristic = self.length if self.strategy == "astar" else self._greedy_heuristic
+        self.strategy, self.heuristic = self._search_strategy(s.strategy)  # the settings'
+        # the task metric, or the clearance cost (trajectory.clearance), whose A* heuristic
+        # is the metric (a lower bound): _search_strategy
+        self.cost = self.length if self.clearance_weight == 0 else self._clearance_cost
         self._edge_costs = {}  # (i, j), i < j -> cost between the chart centres
 
     # ----- the query -------------------------------------------------------------------
     def plan(self, start: Pose, goal: Pose, progress: Optional[ProgressCallback] = None,
-             cancel=None, tolerance: Optional[float] = None):
+             cancel=None, tolerance: Optional[float] = None, strategy: Optional[str] = None,
+             timeout_s: Optional[float] = None):
         """A PlanResult from ``start`` to ``goal``. ``cancel``: an object with ``is_set()``
         (threading.Event) that stops the search (answer ``canceled``). ``tolerance`` (m or
         rad, > 0; default the settings' ``task_tolerance``): how far start and goal may be off
-        the task; within it they are projected onto it."""
-        with threadpool_limits(limits=1, user_api="blas"):  # many small solves: threads only hurt
-            return self._plan(start, goal, progress, cancel, tolerance)
-
-    def _plan(self, start, goal, progress, cancel, tolerance=None):
-        t0 = time.perf_counter()
+        the task; within it they are projected onto it. ``strategy`` and ``timeout_s`` (s):
+        this call's, instead of the settings' (InputError naming them if invalid)."""
         s = self.settings
+        if strategy is not None or timeout_s is not None:
+            s = dataclasses.replace(s, strategy=s.strategy if strategy is None else strategy,
+                                    timeout_s=s.timeout_s if timeout_s is None else timeout_s)
+            check_setting("strategy", s.strategy, "strategy")
+            check_setting("timeout_s", s.timeout_s, "timeout_s")
+        with threadpool_limits(limits=1, user_api="blas"):  # many small solves: threads only hurt
+            return self._plan(start, goal, progress, cancel, tolerance, s)
+
+    def _search_strategy(self, strategy):
+        """(strategy, heuristic) of a call's ``strategy`` setting (auto, astar, gbf)."""
+        if strategy == "auto":
+            strategy = default_strategy(self.constraint.dim, self.clearance_weight)
+        if self.clearance_weight == 0:
+            return strategy, None
+        return strategy, self.length if strategy == "astar" else self._greedy_heuristic
+
+    def _plan(self, start, goal, progress, cancel, tolerance, s):
+        t0 = time.perf_counter()
         c = self.constraint
+        strategy, heuristic = self._search_strategy(s.strategy)
 
         def answer(ok, reason, message, cost=math.nan, path=None, **stats):
-            return PlanResult(ok, reason, message, self.strategy, c.dim, c.n_vars,
+            return PlanResult(ok, reason, message, strategy, c.dim, c.n_vars,
                               len(self.atlas.charts), time.perf_counter() - t0, cost, path, stats)
 
         points = {}
@@ -147,8 +161,8 @@ class Planner:
         if self._direct_ok(ys[0], ys[1]):
             y, charts, direct = self._direct_points(ys[0], ys[1]), 0, True
         else:
-            out = run(self.atlas, points["start"], points["goal"], self.cost, stop, self.strategy,
-                      self._direct_x, progress, self._edge_costs, self._link_ok, self.heuristic)
+            out = run(self.atlas, points["start"], points["goal"], self.cost, stop, strategy,
+                      self._direct_x, progress, self._edge_costs, self._link_ok, heuristic)
             if out.status != Status.OK:
                 return answer(False, out.status, _failure_message(out.status, len(self.atlas.charts),
                                                                   s, self.radius),

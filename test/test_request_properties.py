@@ -20,7 +20,7 @@ from conftest import PROBLEMS  # noqa: E402
 from cdh_planner.errors import MAX_MESSAGE_CHARS, InputError  # noqa: E402
 from cdh_planner.io.problem import load_problem  # noqa: E402
 from cdh_planner.planner import Planner  # noqa: E402
-from cdh_planner.ros.planning import request_poses, run_planner  # noqa: E402
+from cdh_planner.ros.planning import PlanCall, request_poses, run_planner  # noqa: E402
 from cdh_planner.status import Status  # noqa: E402
 
 FRAME = "cdh_base"
@@ -56,7 +56,7 @@ def test_any_getplan_request_is_answered_or_refused_in_one_line(f0, v0, f1, v1, 
         assert "\n" not in text and len(text) <= MAX_MESSAGE_CHARS
         assert exc.field.startswith(("start", "goal"))
         return
-    result = run_planner(PLANNER, start, goal)
+    result = run_planner(PLANNER, start, goal, PlanCall.of_get_plan(request))
     assert result.reason in KNOWN and result.reason != "internal_error", result.message
     assert "\n" not in result.message
 

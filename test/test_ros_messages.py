@@ -104,7 +104,7 @@ def test_cable_trajectory_field_by_field():
         assert list(pt.positions) == PATH.lengths[k].tolist()  # m
         assert list(pt.velocities) == PATH.velocities[k].tolist()  # m/s
         assert list(pt.accelerations) == PATH.accelerations[k].tolist()  # m/s^2
-        assert list(pt.effort) == PATH.tension_nominal[k].tolist()  # N
+        assert len(pt.effort) == 0  # a JTC without an effort interface refuses effort
         assert M.to_seconds(pt.time_from_start) == pytest.approx(PATH.t[k], abs=1e-9)
     times = [ns(Time(sec=p.time_from_start.sec, nanosec=p.time_from_start.nanosec)) for p in msg.points]
     assert times[0] == 0 and all(b > a for a, b in zip(times, times[1:]))
@@ -128,34 +128,29 @@ def test_joint_names_are_checked():
 
 # ----------------------------------------------------------------------------- tension envelope
 
-def test_tension_envelope_layout_and_strides():
-    msg = M.tension_envelope_msg(PATH)
-    n = len(PATH)
-    dims = msg.layout.dim
-    assert [d.label for d in dims] == ["waypoint", "cable", "bound"]
-    assert [d.size for d in dims] == [n, 6, 3]
-    # MultiArrayLayout: stride of a dimension = its size times the strides inside it
-    assert [d.stride for d in dims] == [n * 6 * 3, 6 * 3, 3]
-    assert dims[0].stride == len(msg.data)
-    assert msg.layout.data_offset == 0
-    data = np.asarray(msg.data)
-    bounds = (PATH.tension_min, PATH.tension_nominal, PATH.tension_max)
-    for k in (0, 7, n - 1):
-        for i in range(6):
-            for j, bound in enumerate(bounds):
-                # multiarray(k, i, j) = data[data_offset + dim[1].stride*k + dim[2].stride*i + j]
-                assert data[msg.layout.data_offset + dims[1].stride * k + dims[2].stride * i + j] == bound[k, i]
+def test_tension_envelope_field_by_field():
+    msg = M.tension_envelope_msg(PATH, ROBOT.winch_names, FRAME, START)
+    assert msg.header.frame_id == FRAME and ns(msg.header.stamp) == ns(START)
+    assert list(msg.winch_names) == list(ROBOT.winch_names)
+    assert len(msg.points) == len(PATH)
+    traj = M.cable_trajectory_msg(PATH, ROBOT.winch_names, FRAME)
+    for k, pt in enumerate(msg.points):
+        # the same times as the trajectory's waypoints
+        assert pt.time_from_start == traj.points[k].time_from_start
+        assert list(pt.tension_min) == PATH.tension_min[k].tolist()          # N
+        assert list(pt.tension_nominal) == PATH.tension_nominal[k].tolist()
+        assert list(pt.tension_max) == PATH.tension_max[k].tolist()
     env = M.envelope_from_msg(msg)
+    bounds = (PATH.tension_min, PATH.tension_nominal, PATH.tension_max)
     np.testing.assert_array_equal(env, np.stack(bounds, axis=-1))
     assert np.all(env[..., 0] < env[..., 1]) and np.all(env[..., 1] < env[..., 2])
     assert np.all(env[..., 0] > ROBOT.tension_min) and np.all(env[..., 2] < ROBOT.tension_max)
 
 
-def test_envelope_reader_honours_offset_and_strides():
-    msg = M.tension_envelope_msg(PATH)
-    msg.layout.data_offset = 5
-    msg.data = np.concatenate([np.full(5, np.nan), np.asarray(msg.data)])
-    np.testing.assert_array_equal(M.envelope_from_msg(msg)[..., 1], PATH.tension_nominal)
+def test_tension_envelope_names_are_checked():
+    with pytest.raises(InputError) as err:
+        M.tension_envelope_msg(PATH, ROBOT.winch_names[:5], FRAME)
+    assert err.value.field == "winch_names"
 
 
 # ----------------------------------------------------------------------------- markers

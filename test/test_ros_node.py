@@ -20,7 +20,7 @@ from diagnostic_msgs.msg import DiagnosticStatus  # noqa: E402
 from nav_msgs.msg import Path as PathMsg  # noqa: E402
 from nav_msgs.srv import GetPlan  # noqa: E402
 from rclpy.qos import DurabilityPolicy, QoSProfile, ReliabilityPolicy  # noqa: E402
-from std_msgs.msg import Float64MultiArray  # noqa: E402
+from cdh_planner_interfaces.msg import TensionEnvelope  # noqa: E402
 from trajectory_msgs.msg import JointTrajectory  # noqa: E402
 from visualization_msgs.msg import Marker, MarkerArray  # noqa: E402
 
@@ -41,8 +41,8 @@ CONFIG = node_config(file_parameters(ROBOT2))
 ROBOT, TASK = CONFIG.robot, CONFIG.task
 LATCHED = QoSProfile(depth=1, durability=DurabilityPolicy.TRANSIENT_LOCAL,
                      reliability=ReliabilityPolicy.RELIABLE)
-OUTPUTS = {"path": PathMsg, "cable_trajectory": JointTrajectory,
-           "tension_envelope": Float64MultiArray, "markers": MarkerArray,
+OUTPUTS = {"path": PathMsg, "planned_cable_trajectory": JointTrajectory,
+           "tension_envelope": TensionEnvelope, "markers": MarkerArray,
            "plan_result": DiagnosticStatus}
 
 
@@ -123,7 +123,7 @@ def test_path_topic_frames_stamps_and_task(q1_q2):
 
 def test_cable_trajectory_joint_names_units_and_limits(q1_q2):
     _, answer, out = q1_q2
-    traj = out["cable_trajectory"]
+    traj = out["planned_cable_trajectory"]
     assert list(traj.joint_names) == list(ROBOT.winch_names)
     assert traj.header.frame_id == "cdh_base" and M.time_ns(traj.header.stamp) == 0
     assert len(traj.points) == len(answer.path.poses)
@@ -132,8 +132,8 @@ def test_cable_trajectory_joint_names_units_and_limits(q1_q2):
     L = np.array([pt.positions for pt in traj.points])
     V = np.array([pt.velocities for pt in traj.points])
     A = np.array([pt.accelerations for pt in traj.points])
-    F = np.array([pt.effort for pt in traj.points])
-    assert L.shape == V.shape == A.shape == F.shape == (len(t), 6)
+    assert L.shape == V.shape == A.shape == (len(t), 6)
+    assert all(len(pt.effort) == 0 for pt in traj.points)   # tensions: the envelope
     # positions are cable lengths (m) of the path's poses: |a_i - (p + R b_i)|
     p, R = _positions(answer.path), rotation_from_quaternion(_quaternions(answer.path))
     attach = p[:, None, :] + np.einsum("kij,nj->kni", R, ROBOT.platform_anchors)
@@ -143,21 +143,20 @@ def test_cable_trajectory_joint_names_units_and_limits(q1_q2):
     assert np.all(np.abs(V) <= CONFIG.settings.max_cable_speed * (1 + 1e-9))
     assert np.all(np.abs(A) <= CONFIG.settings.max_cable_accel * (1 + 1e-9))
     assert np.all(V[0] == 0) and np.all(V[-1] == 0)
-    assert np.all((F >= ROBOT.tension_min) & (F <= ROBOT.tension_max))   # N
 
 
-def test_tension_envelope_layout_matches_waypoints(q1_q2):
+def test_tension_envelope_matches_waypoints(q1_q2):
     _, answer, out = q1_q2
     env_msg = out["tension_envelope"]
     n = len(answer.path.poses)
-    dims = [(d.label, d.size, d.stride) for d in env_msg.layout.dim]
-    assert dims == [("waypoint", n, 18 * n), ("cable", 6, 18), ("bound", 3, 3)]
+    assert list(env_msg.winch_names) == list(ROBOT.winch_names)
+    assert env_msg.header.frame_id == "cdh_base"
+    assert [p.time_from_start for p in env_msg.points] == [
+        p.time_from_start for p in out["planned_cable_trajectory"].points]
     env = M.envelope_from_msg(env_msg)
     assert env.shape == (n, 6, 3)
     assert np.all(env[..., 0] <= env[..., 1]) and np.all(env[..., 1] <= env[..., 2])
     assert np.all(env[..., 0] > ROBOT.tension_min) and np.all(env[..., 2] < ROBOT.tension_max)
-    effort = np.array([pt.effort for pt in out["cable_trajectory"].points])
-    np.testing.assert_array_equal(env[..., 1], effort)
 
 
 def test_markers_and_plan_result(q1_q2):
@@ -199,7 +198,7 @@ def test_infeasible_start_and_goal(ros, q1_q2):
 def test_pose_off_the_task_is_invalid(ros, q1_q2):
     off = sphere_pose_msg(Q1)
     off.pose.position.z = 0.1                           # not on the sphere
-    _refused(ros, off, Q2, M.UNKNOWN, ("task", "sphere", "invalid", "start"))
+    _refused(ros, off, Q2, M.INVALID_REQUEST, ("task", "sphere", "invalid", "start"))
     _serves(ros)
 
 

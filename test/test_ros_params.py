@@ -170,7 +170,7 @@ def test_refusal_reasons_and_codes():
 class Exploding:
     settings = type("S", (), {"strategy": "astar"})
 
-    def plan(self, start, goal, progress=None, tolerance=None):
+    def plan(self, start, goal, progress=None, **kwargs):
         raise ZeroDivisionError("boom")
 
 

@@ -54,7 +54,8 @@ def ros(tmp_path_factory):
                 client.progress = Collector(client.node, DiagnosticStatus,
                                             "/cdh_planner/plan_progress", 100)
                 client.trajectory = Collector(client.node, JointTrajectory,
-                                              "/cdh_planner/cable_trajectory", LATCHED)
+                                              "/cdh_planner/planned_cable_trajectory",
+                                              LATCHED)
                 client.spin(0.3)
                 yield client
         finally:
@@ -99,7 +100,7 @@ def test_bad_request_answered_with_reason_then_next_served(ros, label, mutate, e
     answer = ros.plan(_bad(mutate), sphere_pose_msg(Q2), timeout_s=10)
     assert not answer.success and answer.path.header.frame_id == "cdh_base"
     assert expected in answer.values["error_msg"], answer.values
-    code = "202" if "frame" in label else "200"       # nav2 TF_ERROR / UNKNOWN
+    code = str(M.TF_ERROR if "frame" in label else M.INVALID_REQUEST)
     assert answer.values["error_code"] == code
     assert answer.status.level == DiagnosticStatus.ERROR
     assert plan(ros).success                           # the node still serves

@@ -31,7 +31,7 @@ from nav_msgs.msg import Path as PathMsg  # noqa: E402
 from rclpy.qos import DurabilityPolicy, QoSProfile, ReliabilityPolicy  # noqa: E402
 from rosbags.highlevel import AnyReader, AnyReaderError  # noqa: E402
 from sensor_msgs.msg import JointState  # noqa: E402
-from std_msgs.msg import Float64MultiArray  # noqa: E402
+from cdh_planner_interfaces.msg import TensionEnvelope  # noqa: E402
 from trajectory_msgs.msg import JointTrajectory  # noqa: E402
 
 from cdh_planner.io.mcap_log import REQUEST_RECEIVED, RESPONSE_SENT, read_run  # noqa: E402
@@ -42,8 +42,8 @@ from ros_harness import (Q1, Q2, Collector, NodeProcess, claimed_domain, cli,  #
 LATCHED = QoSProfile(depth=1, durability=DurabilityPolicy.TRANSIENT_LOCAL,
                      reliability=ReliabilityPolicy.RELIABLE)
 TOPICS = {"/cdh_planner/path": (PathMsg, LATCHED),
-          "/cdh_planner/cable_trajectory": (JointTrajectory, LATCHED),
-          "/cdh_planner/tension_envelope": (Float64MultiArray, LATCHED),
+          "/cdh_planner/planned_cable_trajectory": (JointTrajectory, LATCHED),
+          "/cdh_planner/tension_envelope": (TensionEnvelope, LATCHED),
           "/cdh_planner/plan_result": (DiagnosticStatus, LATCHED),
           "/cdh_planner/cable_command": (JointState, 100)}
 
@@ -112,17 +112,20 @@ def test_sigterm_leaves_a_complete_file_with_what_subscribers_got(sigterm_run):
     rec = np.array([[p.pose.position.x, p.pose.position.y, p.pose.position.z]
                     for p in path.poses])
     np.testing.assert_array_equal(rec, got)
-    [traj] = recorded["/cdh_planner/cable_trajectory"]
-    live_traj = live["/cdh_planner/cable_trajectory"][-1]
+    [traj] = recorded["/cdh_planner/planned_cable_trajectory"]
+    live_traj = live["/cdh_planner/planned_cable_trajectory"][-1]
     assert list(traj.joint_names) == list(live_traj.joint_names)
     for a, b in zip(traj.points, live_traj.points):
         np.testing.assert_array_equal(a.positions, b.positions)
-        np.testing.assert_array_equal(a.effort, b.effort)
+        np.testing.assert_array_equal(a.velocities, b.velocities)
         assert (a.time_from_start.sec, a.time_from_start.nanosec) == \
             (b.time_from_start.sec, b.time_from_start.nanosec)
     [env] = recorded["/cdh_planner/tension_envelope"]
-    np.testing.assert_array_equal(env.data, live["/cdh_planner/tension_envelope"][-1].data)
-    assert [d.label for d in env.layout.dim] == ["waypoint", "cable", "bound"]
+    live_env = live["/cdh_planner/tension_envelope"][-1]
+    assert list(env.winch_names) == list(live_env.winch_names)
+    for a, b in zip(env.points, live_env.points, strict=True):
+        for bound in ("tension_min", "tension_nominal", "tension_max"):
+            np.testing.assert_array_equal(getattr(a, bound), getattr(b, bound))
     [status] = recorded["/cdh_planner/plan_result"]
     values = {kv.key: kv.value for kv in status.values}
     assert values == answer.values
@@ -178,8 +181,10 @@ def test_mcap_decoder_reads_the_same(sigterm_run):
     for topic, _, msg, _ in read_run(run_file):
         by_topic.setdefault(topic, []).append(msg)
     assert len(by_topic["/cdh_planner/cable_command"]) >= len(live["/cdh_planner/cable_command"])
-    np.testing.assert_array_equal(by_topic["/cdh_planner/tension_envelope"][0].data,
-                                  live["/cdh_planner/tension_envelope"][-1].data)
+    recorded_env = by_topic["/cdh_planner/tension_envelope"][0]
+    live_env = live["/cdh_planner/tension_envelope"][-1]
+    for a, b in zip(recorded_env.points, live_env.points, strict=True):
+        np.testing.assert_array_equal(a.tension_max, b.tension_max)
 
 
 def test_sigkill_loses_nothing_that_was_published(domain, client, tmp_path):
@@ -193,7 +198,7 @@ def test_sigkill_loses_nothing_that_was_published(domain, client, tmp_path):
     recorded = {}
     for topic, _, msg, _ in read_run(run_file):
         recorded.setdefault(topic, []).append(msg)
-    for topic in ("/cdh_planner/path", "/cdh_planner/cable_trajectory",
+    for topic in ("/cdh_planner/path", "/cdh_planner/planned_cable_trajectory",
                   "/cdh_planner/tension_envelope", "/cdh_planner/plan_result"):
         assert len(recorded[topic]) == 1
     stamps = {(c.header.stamp.sec, c.header.stamp.nanosec)

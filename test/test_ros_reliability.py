@@ -171,7 +171,7 @@ def test_a_publishing_failure_midway_puts_the_previous_outputs_back(make_node, m
 class SlowTimedPlanner(FakePlanner):
     """The test double, its trajectory stretched: 10^8 times longer than it should be."""
 
-    def plan(self, start, goal, progress=None, tolerance=None):
+    def plan(self, start, goal, progress=None, **kwargs):
         result = super().plan(start, goal, progress)
         path = dataclasses.replace(result.path, t=result.path.t * 1e8)
         return dataclasses.replace(result, path=path)
@@ -180,7 +180,7 @@ class SlowTimedPlanner(FakePlanner):
 def test_outputs_beyond_the_bounds_are_refused_with_the_reason(make_node):
     node = make_node(SlowTimedPlanner)
     path, values = plan(node)
-    assert not path.poses and values["error_code"] == "200"
+    assert not path.poses and values["error_code"] == str(M.OUTPUT_LIMIT)
     assert "longer than the node's bound of 86400 s" in values["error_msg"], values
     assert "trajectory.max_cable_speed" in values["error_msg"]
     ok, message = execute(node)

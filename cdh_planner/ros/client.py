@@ -3,7 +3,8 @@ call``, ``replay --requests``, the demo and the tests).
 
     with PlannerClient("/cdh_planner", args=ros_args) as client:
         client.wait_for_node(timeout_s=10)
-        answer = client.plan(start_msg, goal_msg, timeout_s=60)   # PlanAnswer
+        answer = client.plan(start_msg, goal_msg, timeout_s=60)   # PlanAnswer (~/plan)
+        done = client.plan_path(plan_path_goal(start_msg, goal_msg))  # GoalAnswer (~/plan_path)
         run = client.execute_and_follow(answer)                   # Execution
         client.stop()
 
@@ -28,14 +29,18 @@ from nav_msgs.srv import GetPlan
 from rclpy.executors import SingleThreadedExecutor
 from rclpy.node import Node
 from rclpy.qos import QoSProfile, ReliabilityPolicy
-from std_msgs.msg import Float64MultiArray
+from action_msgs.msg import GoalStatus
+from rclpy.action import ActionClient
 from std_srvs.srv import Trigger
 from trajectory_msgs.msg import JointTrajectory
 
+from cdh_planner_interfaces.action import PlanPath
+from cdh_planner_interfaces.msg import TensionEnvelope
+
 from ..errors import InputError
 from . import messages as M
-from .node import CABLE_COMMAND, CABLE_TRAJECTORY, EXECUTE, LATCHED, NODE_NAME, PLAN, \
-    PLAN_RESULT, SERVICE_QOS, STOP, TENSION_ENVELOPE
+from .node import CABLE_COMMAND, EXECUTE, EXECUTION_RESULT, LATCHED, NODE_NAME, PLAN, \
+    PLAN_PATH, PLAN_RESULT, PLANNED_TRAJECTORY, SERVICE_QOS, STOP, TENSION_ENVELOPE
 
 DEFAULT_NODE = "/" + NODE_NAME
 RESULT_WAIT_S = 2.0  # after the response, how long to wait for its ~/plan_result
@@ -107,6 +112,34 @@ class Execution:
         return float(np.max(np.abs(positions[-1] - self.goal)))
 
 
+@dataclass
+class GoalAnswer:
+    """How a ``~/plan_path`` goal ended: ``status`` (action_msgs/GoalStatus: SUCCEEDED,
+    CANCELED, ABORTED), the PlanPath ``result``, every ``feedback`` received, the round trip
+    ``seconds`` and, if the client cancelled it, the s from the cancel request to the result
+    (``cancel_s``)."""
+
+    status: int
+    result: object
+    feedback: list = field(default_factory=list)
+    seconds: float = 0.0
+    cancel_s: float = math.nan
+
+    @property
+    def success(self):
+        return self.status == GoalStatus.STATUS_SUCCEEDED and self.result.error_code == 0
+
+
+def plan_path_goal(start, goal, use_current_start=False, strategy="", timeout_s=0.0):
+    """A PlanPath goal (PoseStamped ``start``, ``goal``; ``start`` may be None with
+    ``use_current_start``; empty strategy and timeout_s 0: the node's parameters)."""
+    msg = PlanPath.Goal(goal=goal, use_current_start=bool(use_current_start),
+                        strategy=strategy, timeout_s=float(timeout_s))
+    if start is not None:
+        msg.start = start
+    return msg
+
+
 class ClientError(RuntimeError):
     """The node did not answer (not running, wrong name, timeout)."""
 
@@ -150,6 +183,7 @@ class PlannerClient:
         self.plan_client = create(GetPlan, self.topic(PLAN), qos_profile=SERVICE_QOS)
         self.execute_client = create(Trigger, self.topic(EXECUTE), qos_profile=SERVICE_QOS)
         self.stop_client = create(Trigger, self.topic(STOP), qos_profile=SERVICE_QOS)
+        self.plan_path_client = ActionClient(self.node, PlanPath, self.topic(PLAN_PATH))
         self.results = []
         self.node.create_subscription(
             DiagnosticStatus, self.topic(PLAN_RESULT), self.results.append,
@@ -229,6 +263,37 @@ class PlannerClient:
         self.spin_until(find, RESULT_WAIT_S)
         return answer
 
+    def plan_path(self, goal, timeout_s=120.0, cancel_after_s=None):
+        """Send a PlanPath goal (``plan_path_goal``) to ``~/plan_path`` and wait for its
+        result, spinning meanwhile; with ``cancel_after_s``, request a cancel once that long
+        has passed and a feedback has arrived (the plan is running). A GoalAnswer;
+        ClientError if the server is not there or the result does not come in time."""
+        if not self.plan_path_client.wait_for_server(timeout_sec=min(timeout_s, 10.0)):
+            raise ClientError(f"no action server {self.topic(PLAN_PATH)}")
+        feedback = []
+        t0 = time.monotonic()
+        sent = self.plan_path_client.send_goal_async(
+            goal, feedback_callback=lambda msg: feedback.append(msg.feedback))
+        if not self.spin_until(sent.done, timeout_s):
+            raise ClientError(f"{self.topic(PLAN_PATH)}: the goal was not answered")
+        handle = sent.result()
+        if not handle.accepted:
+            return GoalAnswer(GoalStatus.STATUS_UNKNOWN, PlanPath.Result(error_msg="rejected"),
+                              feedback, time.monotonic() - t0)
+        done = handle.get_result_async()
+        t_cancel = None
+        if cancel_after_s is not None:
+            self.spin_until(lambda: done.done() or (
+                feedback and time.monotonic() - t0 >= cancel_after_s), timeout_s)
+            if not done.done():
+                t_cancel = time.monotonic()
+                handle.cancel_goal_async()
+        if not self.spin_until(done.done, max(0.0, t0 + timeout_s - time.monotonic())):
+            raise ClientError(f"{self.topic(PLAN_PATH)}: no result within {timeout_s:g} s")
+        end = time.monotonic()
+        return GoalAnswer(done.result().status, done.result().result, feedback, end - t0,
+                          end - t_cancel if t_cancel is not None else math.nan)
+
     def _parameters(self):
         if self._param_client is None:
             from rclpy.parameter_client import AsyncParameterClient
@@ -268,19 +333,30 @@ class PlannerClient:
         return r.success, r.message
 
     def watch_execution(self):
-        """Subscribe (once) to ``~/cable_command``, ``~/cable_trajectory`` and
-        ``~/tension_envelope``: from now on ``commands``, ``trajectories`` and ``envelopes``
-        keep every message received. Call it early to miss none of the first commands."""
+        """Subscribe (once) to ``~/cable_command``, ``~/planned_cable_trajectory``,
+        ``~/tension_envelope`` and ``~/execution_result``: from now on ``commands``,
+        ``trajectories``, ``envelopes`` and ``execution_results`` keep every message
+        received. Call it early to miss none of the first commands."""
         if self.commands is not None:
             return
         self.commands, self.trajectories, self.envelopes = [], [], []
+        self.execution_results = []
         subscribe = self.node.create_subscription
         subscribe(M.WINCH_COMMAND_TYPE, self.topic(CABLE_COMMAND), self.commands.append,
                   COMMAND_DEPTH)
-        subscribe(JointTrajectory, self.topic(CABLE_TRAJECTORY), self.trajectories.append,
+        subscribe(JointTrajectory, self.topic(PLANNED_TRAJECTORY), self.trajectories.append,
                   LATCHED)
-        subscribe(Float64MultiArray, self.topic(TENSION_ENVELOPE), self.envelopes.append,
+        subscribe(TensionEnvelope, self.topic(TENSION_ENVELOPE), self.envelopes.append,
                   LATCHED)
+        subscribe(DiagnosticStatus, self.topic(EXECUTION_RESULT), self.execution_results.append,
+                  LATCHED)
+
+    def wait_execution_result(self, after=0, timeout_s=10.0):
+        """The first ``~/execution_result`` (DiagnosticStatus) beyond the first ``after``
+        received since ``watch_execution``, or None within ``timeout_s``."""
+        self.watch_execution()
+        self.spin_until(lambda: len(self.execution_results) > after, timeout_s)
+        return self.execution_results[after] if len(self.execution_results) > after else None
 
     def execute_and_follow(self, answer, margin_s=FOLLOW_MARGIN_S):
         """Call ``~/execute`` for the plan ``answer`` (a PlanAnswer) and follow

@@ -6,7 +6,7 @@ frame), quaternions (x, y, z, w), cable lengths in m, tensions in N, times in s.
 
     path_msg(path, frame_id, stamp)                      -> nav_msgs/Path
     cable_trajectory_msg(path, joint_names, frame_id)    -> trajectory_msgs/JointTrajectory
-    tension_envelope_msg(path)                           -> std_msgs/Float64MultiArray
+    tension_envelope_msg(path, names, frame_id, stamp)   -> cdh_planner_interfaces/TensionEnvelope
     plan_status(result, run_id, log_file)                -> diagnostic_msgs/DiagnosticStatus
     cable_command_msg(path, joint_names, t, stamp)       -> a winch command
     pose_from_msg(msg, base_frame, field) / pose_msg(pose, frame_id, stamp)
@@ -17,13 +17,16 @@ else builds one with ``winch_command`` and reads one with ``winch_command_values
 """
 
 import numpy as np
+from scipy.spatial.transform import Rotation
 from builtin_interfaces.msg import Duration, Time
 from diagnostic_msgs.msg import DiagnosticStatus, KeyValue
 from geometry_msgs.msg import PoseStamped
 from nav_msgs.msg import Path
 from sensor_msgs.msg import JointState
-from std_msgs.msg import Float64MultiArray, MultiArrayDimension
 from trajectory_msgs.msg import JointTrajectory, JointTrajectoryPoint
+
+from cdh_planner_interfaces.action import PlanPath
+from cdh_planner_interfaces.msg import TensionEnvelope, TensionEnvelopePoint
 
 from ..errors import InputError
 from ..model.pose import Pose, check_quaternion, quaternion_from_tau, tau_from_quaternion
@@ -115,6 +118,15 @@ def pose_msg(pose, frame_id, stamp=None):
     return msg
 
 
+def pose_stamped_msg(p, R, frame_id, stamp=None):
+    """geometry_msgs/PoseStamped of a position ``p`` (m) and rotation matrix ``R``."""
+    msg = PoseStamped()
+    msg.header.frame_id = frame_id
+    msg.header.stamp = stamp if stamp is not None else Time()
+    _fill_pose(msg.pose, np.asarray(p, dtype=float), Rotation.from_matrix(R).as_quat())
+    return msg
+
+
 def _fill_pose(pose, p, q):
     pose.position.x, pose.position.y, pose.position.z = (float(v) for v in p)
     o = pose.orientation
@@ -151,7 +163,8 @@ def path_msg(path, frame_id, stamp):
 def cable_trajectory_msg(path, joint_names, frame_id, stamp=None):
     """trajectory_msgs/JointTrajectory, one joint per winch (``joint_names`` = the robot's
     winch_names): positions = cable lengths (m), velocities (m/s), accelerations (m/s^2),
-    effort = nominal tensions (N), time_from_start = t (s).
+    time_from_start = t (s). No effort: a JointTrajectoryController without an effort
+    command interface refuses it; the tensions are on the tension envelope.
 
     ``stamp`` None (zero) means "start on receipt" to a ros2_control
     JointTrajectoryController; a non-zero stamp is an absolute start time.
@@ -166,7 +179,6 @@ def cable_trajectory_msg(path, joint_names, frame_id, stamp=None):
         pt.positions = path.lengths[k].astype(float)
         pt.velocities = path.velocities[k].astype(float)
         pt.accelerations = path.accelerations[k].astype(float)
-        pt.effort = path.tension_nominal[k].astype(float)
         pt.time_from_start = duration_msg(path.t[k])
         msg.points.append(pt)
     return msg
@@ -178,46 +190,42 @@ def trajectory_arrays(msg):
     return t, np.array([pt.positions for pt in msg.points], dtype=float).reshape(len(t), -1)
 
 
-ENVELOPE_DIMS = ("waypoint", "cable", "bound")
-
-
-def tension_envelope_msg(path):
-    """std_msgs/Float64MultiArray of the tension envelope (N): element (k, i, j) = bound j
-    (min, nominal, max) of cable i at waypoint k, at data[k*18 + i*3 + j]. Layout dims
-    ``waypoint`` (size N, stride 18 N), ``cable`` (6, 18), ``bound`` (3, 3), data_offset 0,
-    per std_msgs/MultiArrayLayout (stride = size of the dimension and all inner ones)."""
+def tension_envelope_msg(path, winch_names, frame_id, stamp=None):
+    """cdh_planner_interfaces/TensionEnvelope (N): per waypoint k of ``path`` its
+    time_from_start (= path.t[k], the cable trajectory's) and, per cable i (``winch_names``
+    order), tension_min, tension_nominal, tension_max. ``stamp``: when the plan was made."""
     check_timed_path(path)
-    env = np.stack([path.tension_min, path.tension_nominal, path.tension_max], axis=-1)
-    msg = Float64MultiArray()
-    sizes = env.shape
-    for d, label in enumerate(ENVELOPE_DIMS):
-        msg.layout.dim.append(MultiArrayDimension(label=label, size=int(sizes[d]),
-                                                  stride=int(np.prod(sizes[d:]))))
-    msg.layout.data_offset = 0
-    msg.data = env.astype(float).ravel()
+    msg = TensionEnvelope()
+    msg.header.frame_id = frame_id
+    msg.header.stamp = stamp if stamp is not None else Time()
+    msg.winch_names = check_joint_names(winch_names, "winch_names")
+    for k in range(len(path)):
+        msg.points.append(TensionEnvelopePoint(
+            time_from_start=duration_msg(path.t[k]),
+            tension_min=path.tension_min[k].astype(float),
+            tension_nominal=path.tension_nominal[k].astype(float),
+            tension_max=path.tension_max[k].astype(float)))
     return msg
 
 
 def envelope_from_msg(msg):
-    """(N, 6, 3) array back from a tension envelope message, read through its strides."""
-    dims = {d.label: d for d in msg.layout.dim}
-    if tuple(d.label for d in msg.layout.dim) != ENVELOPE_DIMS:
-        raise InputError("layout.dim", [d.label for d in msg.layout.dim],
-                         f"expected labels {ENVELOPE_DIMS}")
-    data = np.asarray(msg.data, dtype=float)
-    w, c, b = np.meshgrid(*(np.arange(dims[label].size) for label in ENVELOPE_DIMS),
-                          indexing="ij")
-    # multiarray(w, c, b) = data[data_offset + dim[1].stride * w + dim[2].stride * c + b]
-    index = msg.layout.data_offset + dims["cable"].stride * w + dims["bound"].stride * c + b
-    return data[index]
+    """(N, 6, 3) array back from a TensionEnvelope: [k, i] = (min, nominal, max) of cable i
+    at waypoint k (N)."""
+    return np.array([np.stack([p.tension_min, p.tension_nominal, p.tension_max], axis=-1)
+                     for p in msg.points], dtype=float).reshape(len(msg.points), -1, 3)
 
 
 # ----------------------------------------------------------------------------- plan result
 
-# nav2_msgs/action/ComputePathToPose (Jazzy) result error codes.
-NONE, UNKNOWN, INVALID_PLANNER, TF_ERROR = 0, 200, 201, 202
-START_OUTSIDE_MAP, GOAL_OUTSIDE_MAP, START_OCCUPIED, GOAL_OCCUPIED = 203, 204, 205, 206
-TIMEOUT, NO_VALID_PATH = 207, 208
+# Error codes: cdh_planner_interfaces/action/PlanPath's (nav2_msgs/action/ComputePathToPose's
+# where one fits, the planner's own from 290 on); ~/plan_result uses the same.
+_R = PlanPath.Result
+NONE, UNKNOWN, INVALID_PLANNER, TF_ERROR = _R.NONE, _R.UNKNOWN, _R.INVALID_PLANNER, _R.TF_ERROR
+START_OUTSIDE_MAP, GOAL_OUTSIDE_MAP = _R.START_OUTSIDE_MAP, _R.GOAL_OUTSIDE_MAP
+START_OCCUPIED, GOAL_OCCUPIED = _R.START_OCCUPIED, _R.GOAL_OCCUPIED
+TIMEOUT, NO_VALID_PATH, CANCELED, BUSY = _R.TIMEOUT, _R.NO_VALID_PATH, _R.CANCELED, _R.BUSY
+INVALID_REQUEST, NO_CURRENT_STATE, OUTPUT_LIMIT = (_R.INVALID_REQUEST, _R.NO_CURRENT_STATE,
+                                                    _R.OUTPUT_LIMIT)
 
 ERROR_CODES = {
     Status.OK: NONE,
@@ -227,11 +235,15 @@ ERROR_CODES = {
     Status.TIMEOUT: TIMEOUT,
     Status.CHART_LIMIT: NO_VALID_PATH,        # no path found within max_charts
     Status.RESOURCE_LIMIT: NO_VALID_PATH,     # no path found within max_memory_mb
-    Status.CANCELED: UNKNOWN,                 # the caller cancelled the plan
-    Status.INVALID: UNKNOWN,                  # request inconsistent with the task / malformed
-    # refusals by the node, before planning:
+    Status.CANCELED: CANCELED,                # the caller cancelled the plan
+    Status.INVALID: INVALID_REQUEST,          # request inconsistent with the task / malformed
+    # refusals by the node, before or after planning:
     "bad_frame": TF_ERROR,                # frame_id is not the base frame
-    "busy": UNKNOWN,                      # a plan is already running
+    "bad_strategy": INVALID_PLANNER,      # a strategy the planner does not have
+    "busy": BUSY,                         # too many plans queued
+    "no_current_state": NO_CURRENT_STATE,  # use_current_start without measured lengths
+    "output_limit": OUTPUT_LIMIT,         # the plan is beyond the node's output bounds
+    "internal_error": UNKNOWN,
 }
 
 STATUS_NAME = "cdh_planner: plan"
@@ -240,8 +252,8 @@ STATUS_KEYS = ("error_code", "error_msg", "planning_time_s", "charts", "cost", "
 
 
 def error_code(reason):
-    """nav2 ComputePathToPose error code of a planner reason (a Status) or of a node
-    refusal (``bad_frame``, ``busy``); UNKNOWN for anything else."""
+    """PlanPath error code of a planner reason (a Status) or of a node refusal
+    (``bad_frame``, ``busy``, ...); UNKNOWN for anything else."""
     return ERROR_CODES.get(reason, UNKNOWN)
 
 
@@ -268,6 +280,21 @@ def plan_status(result, run_id="", log_file="", name=STATUS_NAME, hardware_id=""
     msg.message = result.message or result.reason
     msg.values = [KeyValue(key=k, value=values[k]) for k in STATUS_KEYS]
     return msg
+
+
+EXECUTION_NAME = "cdh_planner: execution"
+EXECUTION_LEVELS = {"completed": DiagnosticStatus.OK, "stopped": DiagnosticStatus.WARN,
+                    "failed": DiagnosticStatus.ERROR}
+
+
+def execution_status(outcome, message, mode):
+    """diagnostic_msgs/DiagnosticStatus of how an execution ended: level OK (completed),
+    WARN (stopped) or ERROR (failed); values outcome and mode (stream or
+    follow_joint_trajectory)."""
+    return DiagnosticStatus(level=EXECUTION_LEVELS[outcome], name=EXECUTION_NAME,
+                            message=f"execution {outcome}: {message}",
+                            values=[KeyValue(key="outcome", value=outcome),
+                                    KeyValue(key="mode", value=mode)])
 
 
 def status_values(msg):

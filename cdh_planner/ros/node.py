@@ -4,27 +4,35 @@
 
 Interface (names relative to the node, all remappable; see docs/ros-node.md):
 
-- ``~/plan`` nav_msgs/srv/GetPlan: start, goal -> path (empty: no plan; reason on
-  ``~/plan_result``). Every call is answered. Taken at once on a thread of a
-  MultiThreadedExecutor (reentrant group); planned one at a time in arrival order, with at
-  most ``planning.PLAN_QUEUE_DEPTH`` requests waiting: beyond that, refused at once
-  (``busy``). ``tolerance`` is not used (the goal is reached exactly).
-- ``~/execute``, ``~/stop`` std_srvs/srv/Trigger: stream the last good plan on
-  ``~/cable_command`` at ``stream_rate_hz``; stop at once and hold the last setpoint.
-- latched (transient local, depth 1): ``~/path``, ``~/cable_trajectory``,
-  ``~/tension_envelope``, ``~/markers`` (the last good plan), ``~/plan_result``
-  (the last answer, diagnostic_msgs/DiagnosticStatus, key/values in ``planning.py``).
+- ``~/plan_path`` cdh_planner_interfaces/action/PlanPath: start (or the measured pose,
+  ``use_current_start``), goal, strategy, timeout_s -> feedback (charts, time_s, best_h) and
+  a result (error code, path, cable trajectory, tension envelope). Every goal is accepted
+  and ends with a result; a cancel stops the search within about 0.1 s (CANCELED).
+- ``~/plan`` nav_msgs/srv/GetPlan, the same for plain clients: start, goal, tolerance ->
+  path (empty: no plan; reason on ``~/plan_result``). Every call is answered.
+  Both are taken at once on a thread of a MultiThreadedExecutor (reentrant group) and
+  planned one at a time in arrival order, with at most ``planning.PLAN_QUEUE_DEPTH``
+  waiting: beyond that, refused at once (``busy``). Starts and goals within the tolerance
+  (``task.tolerance``, or GetPlan's) of the task are projected onto it.
+- ``~/execute``, ``~/stop`` std_srvs/srv/Trigger: execute the last good plan
+  (``execution.mode``: stream it on ``~/cable_command`` at ``stream_rate_hz``, or send it to
+  a ros2_control controller's FollowJointTrajectory action); stop (hold). ``~/execute``
+  refuses when the measured lengths (``execution.joint_states_topic``) are away from the
+  trajectory's start. How it ended: ``~/execution_result``.
+- latched (transient local, depth 1), for display and late joiners, never a command:
+  ``~/path``, ``~/planned_cable_trajectory``, ``~/tension_envelope``, ``~/markers`` (the
+  last good plan), ``~/plan_result`` (the last answer, diagnostic_msgs/DiagnosticStatus,
+  key/values in ``planning.py``), ``~/execution_result`` (the last execution's end).
 - ``~/plan_progress`` diagnostic_msgs/DiagnosticStatus while planning, at most 10 Hz
   (values charts, time_s, best_h, run_id).
 - ``~/cable_command`` the winch command (``messages.WINCH_COMMAND_TYPE``, sensor_msgs/JointState)
-  while executing.
+  while executing in stream mode; volatile, so a restarted controller gets nothing old.
 
 A plan becomes the last good plan (latched, executable) only once all its outputs are built
 (within ``planning.MAX_DURATION_S`` / ``MAX_WAYPOINTS``), recorded and published; anything
 failing before leaves the previous one and answers an error. A plan made while executing is
-answered at once, but published (and made executable) only when the execution ends: the
-latched ``~/cable_trajectory`` commands a controller. Recording never decides an answer: a
-failure is logged.
+answered at once, but published (and made executable) only when the execution ends.
+Recording never decides an answer: a failure is logged.
 
 Parameters: ``ros/params.py``. Changes go through the standard parameter services and are
 checked there (a bad value is refused with the reason); a change of robot.*, task.*,
@@ -36,6 +44,7 @@ plan call's request and response events, every message published for it (progres
 included), the execute / stop calls and every streamed command.
 """
 
+import math
 import os
 import signal
 import sys
@@ -50,18 +59,23 @@ from nav_msgs.msg import Path
 from nav_msgs.srv import GetPlan
 from rcl_interfaces.msg import FloatingPointRange, IntegerRange, ParameterDescriptor, \
     SetParametersResult
+from rclpy.action import ActionServer, CancelResponse, GoalResponse
 from rclpy.callback_groups import ReentrantCallbackGroup
 from rclpy.node import Node
 from rclpy.parameter import Parameter
 from rclpy.qos import DurabilityPolicy, QoSProfile, ReliabilityPolicy
-from std_msgs.msg import Float64MultiArray
 from std_srvs.srv import Trigger
 from trajectory_msgs.msg import JointTrajectory
 from visualization_msgs.msg import MarkerArray
 
+from cdh_planner_interfaces.action import PlanPath
+from cdh_planner_interfaces.msg import TensionEnvelope
+
 from ..errors import InputError
 from ..io.mcap_log import REQUEST_RECEIVED, RESPONSE_SENT
-from . import planning
+from ..status import Status
+from . import execution, planning
+from . import messages as M
 from .messages import WINCH_COMMAND_TYPE
 from .params import BOOL, DOUBLE, DOUBLES, INT, REQUIRED, SPECS, STRING, STRINGS, \
     PLANNER_PREFIXES, needs_new_planner, node_config, parameter_error
@@ -70,9 +84,10 @@ from .streaming import Stream
 
 NODE_NAME = "cdh_planner"
 # The interface, relative to the node (module docstring); clients use these names too.
-PLAN, EXECUTE, STOP = "plan", "execute", "stop"
-PATH, CABLE_TRAJECTORY, TENSION_ENVELOPE = "path", "cable_trajectory", "tension_envelope"
-MARKERS, PLAN_RESULT, PLAN_PROGRESS = "markers", "plan_result", "plan_progress"
+PLAN, PLAN_PATH, EXECUTE, STOP = "plan", "plan_path", "execute", "stop"
+PATH, PLANNED_TRAJECTORY = "path", "planned_cable_trajectory"
+TENSION_ENVELOPE, MARKERS = "tension_envelope", "markers"
+PLAN_RESULT, PLAN_PROGRESS, EXECUTION_RESULT = "plan_result", "plan_progress", "execution_result"
 CABLE_COMMAND = "cable_command"
 LATCHED = QoSProfile(depth=1, durability=DurabilityPolicy.TRANSIENT_LOCAL,
                      reliability=ReliabilityPolicy.RELIABLE)
@@ -97,8 +112,24 @@ def default_planner_factory(robot, task, settings):
     return Planner(robot, task, settings)
 
 
-class _Cancelled(Exception):
-    """Raised from the progress callback to end a plan when the node shuts down."""
+class _Cancel:
+    """A plan's stop signal (``is_set``): the node shutting down, or the caller's cancel."""
+
+    def __init__(self, node, caller=None):
+        self.node, self.caller = node, caller
+
+    def is_set(self):
+        return self.node._shutting_down or (self.caller is not None and self.caller.is_set())
+
+
+class _GoalCancel:
+    """``is_set``: a cancel of this PlanPath goal was requested."""
+
+    def __init__(self, goal_handle):
+        self.goal_handle = goal_handle
+
+    def is_set(self):
+        return self.goal_handle.is_cancel_requested
 
 
 class PlannerNode(Node):
@@ -121,12 +152,13 @@ class PlannerNode(Node):
 
         pub = self.create_publisher
         self.pub_path = pub(Path, f"~/{PATH}", LATCHED)
-        self.pub_trajectory = pub(JointTrajectory, f"~/{CABLE_TRAJECTORY}", LATCHED)
-        self.pub_envelope = pub(Float64MultiArray, f"~/{TENSION_ENVELOPE}", LATCHED)
+        self.pub_trajectory = pub(JointTrajectory, f"~/{PLANNED_TRAJECTORY}", LATCHED)
+        self.pub_envelope = pub(TensionEnvelope, f"~/{TENSION_ENVELOPE}", LATCHED)
         self.pub_markers = pub(MarkerArray, f"~/{MARKERS}", LATCHED)
         self.pub_result = pub(DiagnosticStatus, f"~/{PLAN_RESULT}", LATCHED)
         self.pub_progress = pub(DiagnosticStatus, f"~/{PLAN_PROGRESS}", 10)
-        self.pub_command = pub(WINCH_COMMAND_TYPE, f"~/{CABLE_COMMAND}", 10)
+        self.pub_execution = pub(DiagnosticStatus, f"~/{EXECUTION_RESULT}", LATCHED)
+        self.pub_command = pub(WINCH_COMMAND_TYPE, f"~/{CABLE_COMMAND}", 10)  # never latched
 
         self._queue = planning.PlanQueue(planning.PLAN_QUEUE_DEPTH)
         self._calls = 0
@@ -136,12 +168,25 @@ class PlannerNode(Node):
         self._lock = threading.RLock()
         self._last = None            # (PlannedPath, Robot, PlanOutputs) of the last good plan
         self._pending = None         # the same, of a plan made while executing
-        self._stream = None
+        self._stream = None          # the running execution in stream mode
+        self._following = False      # the running execution in follow_joint_trajectory mode
         self._timer = None
         self._timer_period = None
+        self._last_pose = None       # (p, R) of the last forward kinematics, its next guess
+        self._execution_message = ""
+        values = self.config.values
+        self._joints = execution.JointStateMonitor(
+            self, values["execution.joint_states_topic"], self.config.robot.winch_names)
+        self._controller = execution.TrajectoryExecutor(
+            self, values["execution.controller_action"], callback_group=ReentrantCallbackGroup())
         self.srv_plan = self.create_service(GetPlan, f"~/{PLAN}", self._plan,
                                             qos_profile=SERVICE_QOS,
                                             callback_group=ReentrantCallbackGroup())
+        self.plan_path_server = ActionServer(
+            self, PlanPath, f"~/{PLAN_PATH}", execute_callback=self._plan_path,
+            goal_callback=lambda goal: GoalResponse.ACCEPT,   # busy goals end with BUSY
+            cancel_callback=lambda handle: CancelResponse.ACCEPT,
+            callback_group=ReentrantCallbackGroup())
         self.srv_execute = self.create_service(Trigger, f"~/{EXECUTE}", self._execute,
                                                qos_profile=SERVICE_QOS)
         self.srv_stop = self.create_service(Trigger, f"~/{STOP}", self._stop,
@@ -197,6 +242,7 @@ class PlannerNode(Node):
             return SetParametersResult(successful=False, reason=str(exc))
         with self._config_lock:
             self._values, self.config, self._planner = values, config, planner
+        self._joints.winch_names = list(config.robot.winch_names)
         self._record(self.runlog.configure, config.log_dir, config.log_enabled,
                      **log_limits(config.values))
         self._record(self.runlog.parameters, [p.to_parameter_msg() for p in params],
@@ -216,60 +262,106 @@ class PlannerNode(Node):
     def _plan(self, request, response):
         """~/plan: every call is answered, and its request and response are recorded,
         whatever happens in between (an exception: ``internal_error``)."""
+        seq, run_id, log_file = self._new_call()
+        self._record_plan(REQUEST_RECEIVED, seq, request=request)
+        result, _, response.plan = self._answer(planning.PlanCall.of_get_plan(request),
+                                                run_id, log_file)
+        self._record_plan(RESPONSE_SENT, seq, response=response)
+        return response
+
+    def _plan_path(self, goal_handle):
+        """~/plan_path: every goal ends with a result (succeeded, canceled or aborted with
+        the error code and reason); feedback at most every PROGRESS_PERIOD_S."""
+        _, run_id, log_file = self._new_call()
+        goal = goal_handle.request
+        last = [0.0]
+
+        def feedback(info):
+            now = time.monotonic()
+            if now - last[0] >= PROGRESS_PERIOD_S:
+                last[0] = now
+                goal_handle.publish_feedback(PlanPath.Feedback(
+                    charts=int(info.get("charts", 0)), time_s=float(info.get("time_s", 0.0)),
+                    best_h=float(info.get("best_h", math.nan))))
+
+        start = self._current_start() if goal.use_current_start else None
+        if isinstance(start, str):   # no measured start: why
+            call = None
+            refused = planning.refusal("no_current_state", f"use_current_start: {start}")
+        else:
+            call = planning.PlanCall.of_plan_path(goal, start, _GoalCancel(goal_handle),
+                                                  feedback)
+            refused = None
+        result, out, _ = self._answer(call, run_id, log_file, refused)
+        if result.success:
+            goal_handle.succeed()
+        elif goal_handle.is_cancel_requested and result.reason == Status.CANCELED:
+            goal_handle.canceled()
+        else:
+            goal_handle.abort()
+        return planning.action_result(result, out)
+
+    def _new_call(self):
+        """(sequence number, run id, run file) of a new plan call."""
         with self._config_lock:
             self._calls += 1
             seq = self._calls
-            config = self.config
         log_file = self._record(self.runlog.open) or ""
-        run_id = f"{_stem(log_file)}#{seq}" if log_file else str(seq)
-        self._record_plan(REQUEST_RECEIVED, seq, request=request)
+        return seq, (f"{_stem(log_file)}#{seq}" if log_file else str(seq)), log_file
+
+    def _answer(self, call, run_id, log_file, refused=None):
+        """(PlanResult, PlanOutputs or None, the answer's nav_msgs/Path) of one PlanCall,
+        never raising (an exception: ``internal_error``, published on ~/plan_result);
+        ``refused``: a refusal made before planning, answered as it is."""
+        config = self.config
         try:
-            result, response.plan = self._serve(request, run_id, log_file)
+            result, out, path = self._serve(call, run_id, log_file, refused)
         except Exception as exc:  # noqa: BLE001 - never take the node down: answer no plan
             self.get_logger().error(f"[{run_id}] plan call failed: {traceback.format_exc()}")
             result = planning.refusal(
                 "internal_error", f"internal error: {_name(exc)}: {_one_line(exc)}",
                 config.settings.strategy)
-            response.plan = self._no_path(config)
-            self._publish_result(result, config, run_id, log_file, response.plan)
-        self._record_plan(RESPONSE_SENT, seq, response=response)
+            out, path = None, self._no_path(config)
+            self._publish_result(result, config, run_id, log_file, path)
         line = f"[{run_id}] {planning.result_line(result)}"
         if result.success:
             self.get_logger().info(line)
         else:
             self.get_logger().warning(line)
-        return response
+        return result, out, path
 
-    def _serve(self, request, run_id, log_file):
-        """(PlanResult, the answer's nav_msgs/Path) of one request: wait for its turn in
-        the queue (or be refused: busy, shutting down), plan, bound and build the outputs,
-        commit them (``_commit``); ``~/plan_result`` published."""
-        turn = self._queue.enter()
+    def _serve(self, call, run_id, log_file, refused=None):
+        """(PlanResult, PlanOutputs or None, path) of one call: wait for its turn in the
+        queue (or be refused: busy, shutting down, cancelled meanwhile), plan, bound and
+        build the outputs, commit them (``_commit``); ``~/plan_result`` published."""
         config = self.config
-        if turn is None:
+        turn = None if refused else self._queue.enter()
+        if refused:
+            result = refused
+        elif turn is None:
             result = planning.refusal(
                 "busy", f"busy: {len(self._queue)} plan requests are being computed or wait "
                         f"(at most 1 + {self._queue.depth}); call again when one is answered",
                 config.settings.strategy)
-        elif not self._queue.wait(turn):
-            result = planning.refusal("canceled", "canceled: the node is shutting down",
-                                      config.settings.strategy)
+        elif not self._queue.wait(turn, call.cancel):
+            why = "the node is shutting down" if self._shutting_down else "cancelled while queued"
+            result = planning.refusal(Status.CANCELED, f"canceled: {why}", config.settings.strategy)
         else:
             try:
                 with self._config_lock:
                     config, planner = self.config, self._planner
-                result = self._compute(request, planner, config, run_id)
+                result = self._compute(call, planner, config, run_id)
                 result = planning.output_refusal(result) or result
                 if result.success:
                     out = planning.plan_outputs(result, config.robot, config.base_frame,
                                                 self.get_clock().now().to_msg())
                     self._commit(result, config, out, run_id, log_file)
-                    return result, out.path
+                    return result, out, out.path
             finally:
                 self._queue.leave()
         path = self._no_path(config)
         self._publish_result(result, config, run_id, log_file, path)
-        return result, path
+        return result, None, path
 
     def _commit(self, result, config, out, run_id, log_file):
         """Make a successful plan the last good plan: its status built, its outputs recorded
@@ -277,7 +369,7 @@ class PlannerNode(Node):
         While executing, the outputs wait in ``_pending`` for the end of the stream. Raises
         (and leaves the previous last good plan) if building or publishing fails."""
         with self._lock:
-            deferred = self._stream is not None
+            deferred = self._stream is not None or self._following
             status = planning.result_status(
                 result, config.robot, run_id, log_file, out.path.header.stamp,
                 outputs=planning.DEFERRED if deferred else planning.PUBLISHED)
@@ -321,28 +413,42 @@ class PlannerNode(Node):
     def _no_path(self, config):
         return planning.empty_path(config.base_frame, self.get_clock().now().to_msg())
 
-    def _compute(self, request, planner, config, run_id):
+    def _compute(self, call, planner, config, run_id):
         try:
-            start, goal = planning.request_poses(request, config.base_frame)
+            start, goal = planning.request_poses(call, config.base_frame)
         except InputError as exc:
             return planning.input_refusal(exc, config.settings.strategy)
         self.planning = True
         last = [0.0]
+        call.cancel = _Cancel(self, call.cancel)
 
         def progress(info):
-            if self._shutting_down:
-                raise _Cancelled("the node is shutting down")
             now = time.monotonic()
             if now - last[0] >= PROGRESS_PERIOD_S:
                 last[0] = now
                 self._publish(self.pub_progress, planning.progress_status(info, run_id))
+            if call.feedback is not None:
+                call.feedback(info)
 
         try:
-            return planning.run_planner(planner, start, goal, progress,
-                                        logger=self.get_logger().error,
-                                        tolerance=planning.request_tolerance(request))
+            return planning.run_planner(planner, start, goal, call, progress,
+                                        logger=self.get_logger().error)
         finally:
             self.planning = False
+
+    def _current_start(self):
+        """The measured start pose (PoseStamped in the base frame) by forward kinematics
+        from the winches' lengths, Newton from the last pose known; or why not (a str)."""
+        config = self.config
+        lengths, why = self._joints.lengths(config.values["execution.joint_states_max_age_s"])
+        if lengths is None:
+            return why
+        try:
+            p, R = execution.current_pose(config.robot, lengths, self._last_pose)
+        except InputError as exc:
+            return str(exc)
+        self._last_pose = (p, R)
+        return M.pose_stamped_msg(p, R, config.base_frame, self.get_clock().now().to_msg())
 
     # ------------------------------------------------------------------ execute, stop
 
@@ -363,39 +469,55 @@ class PlannerNode(Node):
 
     def _answer_execute(self, request, response):
         self._record_trigger(self.srv_execute, request, None, REQUEST_RECEIVED)
-        response.success = False
         with self._lock:
-            stream, last = self._stream, self._last
-            if stream is None and last is not None:
-                path, robot, _ = last
-                config = self.config
-                stream = self._stream = Stream(path, robot.winch_names,
-                                               config.stream_interpolation,
-                                               start=time.monotonic())
-                started = True
-            else:
-                started = False
-        if not started and stream is not None:
-            response.message = (f"refused: already executing (at {stream.t:.2f} s of "
-                                f"{stream.duration:.2f} s); call ~/stop first")
-        elif not started:
-            response.message = "refused: no plan to execute; call ~/plan first"
-        else:
-            period = 1.0 / config.stream_rate_hz
-            if self._timer is None or self._timer_period != period:
-                if self._timer is not None:
-                    self.destroy_timer(self._timer)
-                self._timer = self.create_timer(period, self._tick)
-                self._timer_period = period
-            else:
-                self._timer.reset()
-            self._tick()
-            response.success = True
-            response.message = (f"executing: {len(path)} waypoints, {self._stream.duration:.3f} s "
-                                f"at {config.stream_rate_hz:g} Hz on {self.pub_command.topic_name}")
+            response.success, response.message = self._start_execution()
         self._record_trigger(self.srv_execute, None, response, RESPONSE_SENT)
         self.get_logger().info(f"execute: {response.message}")
         return response
+
+    def _start_execution(self):
+        """(started, message): the last good plan's execution started in the configured
+        ``execution.mode``, or why not (executing already, no plan, the winches away from
+        its start). Measured lengths are checked when there are any."""
+        config = self.config
+        values = config.values
+        if self._stream is not None or self._following:
+            where = (f" (at {self._stream.t:.2f} s of {self._stream.duration:.2f} s)"
+                     if self._stream is not None else "")
+            return False, f"refused: already executing{where}; call ~/stop first"
+        if self._last is None:
+            return False, "refused: no plan to execute; call ~/plan first"
+        path, robot, out = self._last
+        lengths, why = self._joints.lengths(values["execution.joint_states_max_age_s"])
+        if lengths is not None:
+            mismatch = execution.start_mismatch(lengths, path.lengths[0],
+                                                values["execution.start_tolerance"],
+                                                robot.winch_names)
+            if mismatch:
+                return False, f"refused: {mismatch}"
+        note = "" if lengths is not None else f" (start not checked: {why})"
+        what = f"{len(path)} waypoints, {float(path.t[-1]):.3f} s"
+        if values["execution.mode"] == "follow_joint_trajectory":
+            self._following = True
+            self._controller.start(out.cable_trajectory, self._end_execution)
+            if not self._following:   # ended at once (no controller): the reason is logged
+                return False, f"refused: {self._execution_message}"
+            return True, f"executing: {what} through {self._controller.action_name}{note}"
+        self._stream = Stream(path, robot.winch_names, config.stream_interpolation,
+                              start=time.monotonic())
+        self._start_timer(1.0 / config.stream_rate_hz)
+        return True, (f"executing: {what} at {config.stream_rate_hz:g} Hz on "
+                      f"{self.pub_command.topic_name}{note}")
+
+    def _start_timer(self, period):
+        if self._timer is None or self._timer_period != period:
+            if self._timer is not None:
+                self.destroy_timer(self._timer)
+            self._timer = self.create_timer(period, self._tick)
+            self._timer_period = period
+        else:
+            self._timer.reset()
+        self._tick()
 
     def _tick(self):
         stream = self._stream
@@ -403,37 +525,55 @@ class PlannerNode(Node):
             return
         try:
             msg, finished = stream.command(time.monotonic(), self.get_clock().now().to_msg())
-        except Exception:  # noqa: BLE001 - never take the node down
+        except Exception as exc:  # noqa: BLE001 - never take the node down
             self.get_logger().error(f"streaming failed: {traceback.format_exc()}")
-            self._end_stream("streaming stopped after an error")
+            self._end_execution(execution.FAILED, f"streaming stopped after an error: "
+                                                  f"{_name(exc)}: {_one_line(exc)}")
             return
         self._publish(self.pub_command, msg)
         if finished:
-            self._end_stream(f"execution finished: {stream.sent} commands over "
-                             f"{stream.duration:.3f} s")
+            self._end_execution(execution.COMPLETED, f"execution finished: {stream.sent} "
+                                                     f"commands over {stream.duration:.3f} s")
 
     def _answer_stop(self, request, response):
         self._record_trigger(self.srv_stop, request, None, REQUEST_RECEIVED)
         stream = self._stream
         response.success = True
-        if stream is None:
-            response.message = "not executing: nothing to stop"
-        else:
+        if stream is not None:
             self._publish(self.pub_command, stream.hold(self.get_clock().now().to_msg()))
             response.message = (f"stopped at {stream.t:.3f} s of {stream.duration:.3f} s; "
                                 f"holding the last setpoint")
-            self._end_stream(response.message)
+            self._end_execution(execution.STOPPED, response.message)
+        elif self._following:
+            self._controller.cancel()   # the controller holds; its result ends the execution
+            response.message = (f"stopping: cancel sent to {self._controller.action_name} "
+                                f"(the controller holds its position)")
+        else:
+            response.message = "not executing: nothing to stop"
         self._record_trigger(self.srv_stop, None, response, RESPONSE_SENT)
         return response
 
-    def _end_stream(self, message, publish_pending=True):
-        """The stream is over: a plan made meanwhile is published and becomes the last good
-        plan now (``_commit``)."""
-        if self._timer is not None:
-            self._timer.cancel()
-        self.get_logger().info(message)
+    def _end_execution(self, outcome, message, publish_pending=True):
+        """The execution is over (``execution.COMPLETED``, ``STOPPED`` or ``FAILED``, and
+        why): ``~/execution_result`` published; a plan made meanwhile is published and
+        becomes the last good plan now (``_commit``)."""
         with self._lock:
-            self._stream = None
+            if self._stream is None and not self._following:
+                return   # ended already (stop and the last tick, shutdown and the controller)
+            if self._timer is not None:
+                self._timer.cancel()
+            log = self.get_logger().error if outcome == execution.FAILED else \
+                self.get_logger().info
+            log(f"execution {outcome}: {message}")
+            mode = "stream" if self._stream is not None else "follow_joint_trajectory"
+            self._stream, self._following = None, False
+            self._execution_message = f"execution {outcome}: {message}"
+            try:
+                self._publish(self.pub_execution, M.execution_status(outcome, message, mode),
+                              latched=True)
+            except Exception:  # noqa: BLE001 - a diagnostic: the execution is over anyway
+                self.get_logger().error(f"publishing the execution result failed: "
+                                        f"{traceback.format_exc()}")
             pending, self._pending = self._pending, None
             if pending is None or not publish_pending:
                 return
@@ -490,14 +630,17 @@ class PlannerNode(Node):
         """Stop streaming (holding), end a running plan at its next progress report, and
         close the run file. Safe to call after the context has shut down."""
         self.begin_shutdown()
-        if self._stream is not None:
+        if self._stream is not None or self._following:
             try:
-                self._publish(self.pub_command, self._stream.hold(
-                    self.get_clock().now().to_msg()))
+                if self._stream is not None:
+                    self._publish(self.pub_command, self._stream.hold(
+                        self.get_clock().now().to_msg()))
+                else:
+                    self._controller.cancel()
             except Exception:  # noqa: BLE001 - context already gone: nothing to tell
                 pass
-            self._end_stream("shutting down while executing: held the last setpoint",
-                             publish_pending=False)
+            self._end_execution(execution.STOPPED, "shutting down while executing: held the "
+                                "last setpoint", publish_pending=False)
         self._record(self.runlog.close)
 
 

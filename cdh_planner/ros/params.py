@@ -37,6 +37,11 @@ trajectory.max_cable_speed      0.05       per-winch speed limit (m/s)
 trajectory.max_cable_accel      0.2        per-winch acceleration limit (m/s^2)
 stream_rate_hz                  50         rate of ~/cable_command while executing (Hz)
 stream_interpolation            linear     linear (never above the speed limit) or quintic
+execution.mode                  stream     stream or follow_joint_trajectory (ros2_control)
+execution.controller_action     /cable_controller/follow_joint_trajectory  (set at start)
+execution.joint_states_topic    /joint_states  measured cable lengths (set at start)
+execution.start_tolerance       0.005      ~/execute refuses beyond this start error (m)
+execution.joint_states_max_age_s  1.0      older measurements are not used (s)
 log_dir                         ~/.ros/cdh_planner  where run MCAP files go
 log_enabled                     true       record plan calls to MCAP
 log_max_file_mb                 100        next run file beyond this size (MiB); 0: none
@@ -63,6 +68,9 @@ REQUIRED = object()  # default of a parameter that must come from the robot file
 # the groups whose change means a new Planner (the others only affect the node)
 PLANNER_PREFIXES = ("robot.", "task.", "planner.", "trajectory.")
 INTERPOLATIONS = ("linear", "quintic")
+EXECUTION_MODES = ("stream", "follow_joint_trajectory")
+# read once at start: the subscription and action client they name are made then
+START_ONLY = ("execution.controller_action", "execution.joint_states_topic")
 
 
 @dataclass(frozen=True)
@@ -154,6 +162,22 @@ SPECS = (
             "between waypoints while streaming: linear (straight in cable space at the mean "
             "speed, never above the limit) or quintic (as a JointTrajectoryController "
             "interpolates the same points)", choices=INTERPOLATIONS),
+       Spec("execution.mode", STRING, "stream",
+            "how ~/execute moves the winches: stream (sensor_msgs/JointState setpoints on "
+            "~/cable_command at stream_rate_hz) or follow_joint_trajectory (the cable "
+            "trajectory, without effort, to a ros2_control controller's action)",
+            choices=EXECUTION_MODES),
+       Spec("execution.controller_action", STRING, "/cable_controller/follow_joint_trajectory",
+            "follow_joint_trajectory mode: the controller's control_msgs/FollowJointTrajectory "
+            "action (set at start)"),
+       Spec("execution.joint_states_topic", STRING, "/joint_states",
+            "sensor_msgs/JointState of the winches (cable lengths, m, by winch name): the "
+            "start state of ~/execute and of use_current_start (set at start)"),
+       Spec("execution.start_tolerance", DOUBLE, 0.005,
+            "~/execute refuses when a measured cable length is farther than this from the "
+            "trajectory's first point (m)", low=0.0, open_low=True),
+       Spec("execution.joint_states_max_age_s", DOUBLE, 1.0,
+            "measured lengths older than this (s) are not used", low=0.0, open_low=True),
        Spec("log_dir", STRING, "~/.ros/cdh_planner",
             "directory of the run MCAP files (one file per node run; created when needed)"),
        Spec("log_enabled", BOOL, True, "record plan calls, published messages and streamed "
@@ -198,7 +222,7 @@ def check_value(spec, value):
             raise InputError(name, value, "expected a string")
         if spec.choices and value not in spec.choices:
             raise InputError(name, value, f"expected one of {', '.join(spec.choices)}")
-        if name == "base_frame" and not value:
+        if name in ("base_frame",) + START_ONLY and not value:
             raise InputError(name, value, "must not be empty")
         return value
     if spec.kind == BOOL:

@@ -2,10 +2,11 @@
 
 The node (``ros/node.py``) only moves these values between ROS and this module:
 
+    call = PlanCall.of_get_plan(request)                      # or of_plan_path(goal, ...)
     turn = queue.enter()                                      # None: full, answer busy
-    queue.wait(turn)                                          # False: closed (shutdown)
-    start, goal = request_poses(request, base_frame)          # InputError: refuse
-    result = run_planner(planner, start, goal, progress)      # never raises
+    queue.wait(turn, call.cancel)                             # False: closed or cancelled
+    start, goal = request_poses(call, base_frame)             # InputError: refuse
+    result = run_planner(planner, start, goal, call, progress)  # never raises
     queue.leave()
     result = output_refusal(result) or result                 # too long / too many points
     outputs = plan_outputs(result, robot, base_frame, stamp)  # messages to publish
@@ -13,19 +14,23 @@ The node (``ros/node.py``) only moves these values between ROS and this module:
 
 Refusals before planning (bad frame, invalid pose, busy) and after it (outputs beyond the
 bounds, internal errors) are PlanResults too (``refusal``), so every answer has one
-``~/plan_result`` with a nav2 error code (``messages.ERROR_CODES``).
+``~/plan_result`` with an error code (``messages.ERROR_CODES``: PlanPath's, nav2's where
+one fits).
 """
 
 import collections
 import math
 import threading
+import time
 import traceback
 from dataclasses import dataclass
-from typing import Optional
+from typing import Callable, Optional
 
 import numpy as np
 from diagnostic_msgs.msg import DiagnosticStatus, KeyValue
 from nav_msgs.msg import Path
+
+from cdh_planner_interfaces.action import PlanPath
 
 from ..errors import InputError
 from ..planner import PlanResult
@@ -47,6 +52,7 @@ PUBLISHED, DEFERRED = "published", "deferred until the running execution ends"
 MAX_DURATION_S = 86_400.0   # one day of motion
 MAX_WAYPOINTS = 50_000      # ~25 MB of messages (path, trajectory, envelope)
 PLAN_QUEUE_DEPTH = 4        # requests waiting behind the one being planned; more: ``busy``
+CANCEL_POLL_S = 0.05        # a cancelled request waiting its turn leaves within this (s)
 
 
 @dataclass
@@ -54,9 +60,37 @@ class PlanOutputs:
     """The messages of a successful plan (all in the base frame, SI units)."""
 
     path: object               # nav_msgs/Path
-    cable_trajectory: object   # trajectory_msgs/JointTrajectory
-    tension_envelope: object   # std_msgs/Float64MultiArray
+    cable_trajectory: object   # trajectory_msgs/JointTrajectory (no effort)
+    tension_envelope: object   # cdh_planner_interfaces/TensionEnvelope
     markers: object            # visualization_msgs/MarkerArray
+
+
+@dataclass
+class PlanCall:
+    """One plan request, from ``~/plan`` (nav_msgs/GetPlan) or ``~/plan_path`` (the PlanPath
+    action): start and goal (geometry_msgs/PoseStamped) and this call's overrides of the
+    node's parameters (None: the parameter's)."""
+
+    start: object
+    goal: object
+    tolerance: Optional[float] = None   # m or rad
+    strategy: Optional[str] = None
+    timeout_s: Optional[float] = None   # s
+    cancel: object = None               # is_set(): stop the search (answer canceled)
+    feedback: Optional[Callable] = None  # called with each progress report (a dict)
+
+    @classmethod
+    def of_get_plan(cls, request):
+        return cls(request.start, request.goal, tolerance=request_tolerance(request))
+
+    @classmethod
+    def of_plan_path(cls, goal, start=None, cancel=None, feedback=None):
+        """A PlanPath goal; ``start``: the measured start (use_current_start) instead of
+        the goal's. Empty strategy and timeout_s 0 mean the node's parameters."""
+        return cls(goal.start if start is None else start, goal.goal,
+                   strategy=goal.strategy or None,
+                   timeout_s=None if goal.timeout_s == 0.0 else float(goal.timeout_s),
+                   cancel=cancel, feedback=feedback)
 
 
 def request_poses(request, base_frame):
@@ -153,14 +187,20 @@ class PlanQueue:
             self._waiting.append(self._turns)
             return self._turns
 
-    def wait(self, turn, timeout_s=None):
+    def wait(self, turn, cancel=None, timeout_s=None):
         """Block until ``turn`` is first and nothing is planned; then it is running: True.
-        False if the queue was closed (or ``timeout_s`` passed): the turn is given up."""
+        False if the queue was closed, ``cancel`` (anything with ``is_set()``, polled every
+        CANCEL_POLL_S) is set, or ``timeout_s`` passed: the turn is given up."""
+        deadline = None if timeout_s is None else time.monotonic() + timeout_s
+
+        def given_up():
+            return (self.closed or (cancel is not None and cancel.is_set())
+                    or (deadline is not None and time.monotonic() >= deadline))
+
         with self._cond:
-            ok = self._cond.wait_for(
-                lambda: self.closed or (not self._running and self._waiting[0] == turn),
-                timeout_s)
-            if ok and not self.closed:
+            while not given_up() and (self._running or self._waiting[0] != turn):
+                self._cond.wait(CANCEL_POLL_S)
+            if not self._running and self._waiting[0] == turn and not given_up():
                 self._waiting.popleft()
                 self._running = True
                 return True
@@ -187,15 +227,22 @@ def input_refusal(exc, strategy=""):
     return refusal(reason, f"invalid request: {exc}", strategy)
 
 
-def run_planner(planner, start, goal, progress=None, logger=None, tolerance=None):
-    """``planner.plan(start, goal, progress, tolerance=)``, never raising: an InputError becomes
-    ``invalid``; any other exception ``internal_error`` (error code UNKNOWN) with its
-    message, the traceback going to ``logger`` (a callable taking a string) if given."""
-    strategy = getattr(getattr(planner, "settings", None), "strategy", "")
+def run_planner(planner, start, goal, call=None, progress=None, logger=None):
+    """``planner.plan(start, goal, ...)`` with a PlanCall's overrides (None: none), never
+    raising: an
+    InputError becomes ``invalid`` (``bad_strategy`` if it names the strategy); any other
+    exception ``internal_error`` (error code UNKNOWN) with its message, the traceback going
+    to ``logger`` (a callable taking a string) if given."""
+    call = call or PlanCall(None, None)
+    strategy = call.strategy or getattr(getattr(planner, "settings", None), "strategy", "")
+    overrides = {k: v for k, v in (("strategy", call.strategy), ("timeout_s", call.timeout_s))
+                 if v is not None}
     try:
-        result = planner.plan(start, goal, progress=progress, tolerance=tolerance)
+        result = planner.plan(start, goal, progress=progress, cancel=call.cancel,
+                              tolerance=call.tolerance, **overrides)
     except InputError as exc:
-        return refusal("invalid", f"invalid request: {exc}", strategy)
+        reason = "bad_strategy" if exc.field == "strategy" else "invalid"
+        return refusal(reason, f"invalid request: {exc}", strategy)
     except Exception as exc:  # noqa: BLE001 - the node must keep serving
         if logger is not None:
             logger(traceback.format_exc())
@@ -209,13 +256,28 @@ def run_planner(planner, start, goal, progress=None, logger=None, tolerance=None
 
 def plan_outputs(result, robot, base_frame, stamp):
     """The messages of a successful PlanResult: path (stamp = ``stamp``, poses at stamp +
-    t), cable trajectory (header stamp 0: start on receipt), tension envelope, markers."""
+    t), cable trajectory (header stamp 0: start on receipt), tension envelope (stamp =
+    ``stamp``), markers."""
     path = result.path
     return PlanOutputs(
         path=M.path_msg(path, base_frame, stamp),
         cable_trajectory=M.cable_trajectory_msg(path, robot.winch_names, base_frame),
-        tension_envelope=M.tension_envelope_msg(path),
+        tension_envelope=M.tension_envelope_msg(path, robot.winch_names, base_frame, stamp),
         markers=markers_msg(path, robot, base_frame, stamp))
+
+
+def action_result(result, out=None):
+    """cdh_planner_interfaces/action/PlanPath's Result of a PlanResult and, on success, its
+    PlanOutputs (path, cable trajectory, tension envelope); min_margin: the least normalised
+    margin over the path and the motion between its waypoints (NaN without a path)."""
+    msg = PlanPath.Result(error_code=M.NONE if result.success else M.error_code(result.reason),
+                          error_msg="" if result.success else (result.message or result.reason),
+                          planning_time_s=float(result.time_s), charts=int(result.charts),
+                          min_margin=float(result.least_margin) if result.success else math.nan)
+    if out is not None:
+        msg.path, msg.cable_trajectory = out.path, out.cable_trajectory
+        msg.tension_envelope = out.tension_envelope
+    return msg
 
 
 def empty_path(base_frame, stamp):

@@ -33,7 +33,7 @@ from ..io.mcap_log import REQUEST_RECEIVED, RESPONSE_SENT, SERVICE_EVENT_SUFFIX,
 from ..io.mcap_log import scan_records as scan_run  # raw records of a (possibly killed) run file
 from ..io.ros_schemas import rosidl_type
 from .messages import path_arrays
-from .node import CABLE_COMMAND, CABLE_TRAJECTORY
+from .node import CABLE_COMMAND
 from .recording import PARAMETER_EVENTS
 
 
@@ -106,10 +106,14 @@ def is_service_event(record):
     return record.topic.endswith(SERVICE_EVENT_SUFFIX)
 
 
+# topics that move the robot: the node's winch stream, and the latched trajectory of
+# recordings made before it became display-only (a JointTrajectoryController executed it)
+COMMAND_TOPICS = (CABLE_COMMAND, "cable_trajectory")
+
+
 def is_command_topic(topic):
-    """Does ``topic`` move the robot: the node's ``cable_command`` stream or its
-    ``cable_trajectory`` (a JointTrajectoryController executes it)?"""
-    return topic.rsplit("/", 1)[-1] in (CABLE_COMMAND, CABLE_TRAJECTORY)
+    """Does ``topic`` move the robot (``COMMAND_TOPICS``)?"""
+    return topic.rsplit("/", 1)[-1] in COMMAND_TOPICS
 
 
 def select_topics(records, topics=None, commands=False):

@@ -4,8 +4,8 @@ checks it pointwise; it is NOT the planner. Tests that compare ROS answers with 
 planner use the real Planner.
 
 If the file named by ``FAKE_PLANNER_DELAY_FILE`` (environment) exists, every plan takes at
-least the number of seconds written in it, reporting progress every 10 ms, so that "busy"
-can be provoked deterministically.
+least the number of seconds written in it, reporting progress every 10 ms and honouring
+``cancel``, so that "busy" and cancels can be provoked deterministically.
 """
 
 import os
@@ -34,13 +34,16 @@ class FakePlanner:
                           charts=WAYPOINTS if ok else 0, time_s=time.perf_counter() - t0,
                           cost=path.length_m() if path is not None else float("nan"), path=path)
 
-    def plan(self, start, goal, progress=None, cancel=None, tolerance=None):
+    def plan(self, start, goal, progress=None, cancel=None, tolerance=None, strategy=None,
+             timeout_s=None):
         t0 = time.perf_counter()
         try:
             delay = float(open(self.delay_file).read()) if self.delay_file else 0.0
         except OSError:
             delay = 0.0
         while time.perf_counter() - t0 < delay:
+            if cancel is not None and cancel.is_set():
+                return self._result(False, "canceled", "canceled (test double)", t0=t0)
             if progress is not None:
                 progress({"charts": 1, "time_s": time.perf_counter() - t0, "best_h": 1.0})
             time.sleep(0.01)
