@@ -152,3 +152,50 @@ def file_parameters(path):
     """The flat ROS parameters of a parameters file's ``cdh_planner`` node."""
     import yaml
     return flat_parameters(yaml.safe_load(Path(path).read_text())["cdh_planner"]["ros__parameters"])
+
+
+CONTROLLER_DOUBLE = REPO / "test" / "doubles" / "follow_joint_trajectory_server.py"
+
+
+class ControllerDouble:
+    """The FollowJointTrajectory test double (test/doubles/follow_joint_trajectory_server.py)
+    in its own process in ``domain``; its JSON events collected from stdout. ``args``: its
+    command line after the script (joint names and options)."""
+
+    def __init__(self, domain, *args):
+        import json
+        import threading
+        self._json = json
+        self.proc = subprocess.Popen([sys.executable, str(CONTROLLER_DOUBLE), *map(str, args)],
+                                     env=ros_env(domain), stdout=subprocess.PIPE,
+                                     stderr=subprocess.STDOUT, text=True, cwd=REPO)
+        self.lines, self.ready = [], threading.Event()
+        threading.Thread(target=self._read, daemon=True).start()
+
+    def __enter__(self):
+        return self
+
+    def __exit__(self, *exc):
+        self.stop()
+
+    def _read(self):
+        for line in self.proc.stdout:
+            self.lines.append(line.rstrip("\n"))
+            if line.strip() == "ready":
+                self.ready.set()
+
+    def events(self, kind=None):
+        """The double's events ({"event": ..., ...}) so far, of ``kind`` if given."""
+        out = []
+        for line in list(self.lines):
+            if line.startswith("{"):
+                event = self._json.loads(line)
+                if kind is None or event["event"] == kind:
+                    out.append(event)
+        return out
+
+    def stop(self):
+        """(exit code, everything it printed)."""
+        rc = stop_process(self.proc)
+        time.sleep(0.05)   # the reader thread takes the last lines
+        return rc, "\n".join(self.lines)

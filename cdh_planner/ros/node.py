@@ -52,6 +52,7 @@ import threading
 import time
 import traceback
 
+import numpy as np
 import rclpy
 import rclpy.signals
 from diagnostic_msgs.msg import DiagnosticStatus
@@ -72,6 +73,8 @@ from cdh_planner_interfaces.action import PlanPath
 from cdh_planner_interfaces.msg import TensionEnvelope
 
 from ..errors import InputError
+from ..model.kinematics import cable_lengths
+from ..model.pose import rotation_from_quaternion
 from ..io.mcap_log import REQUEST_RECEIVED, RESPONSE_SENT
 from ..status import Status
 from . import execution, planning
@@ -444,11 +447,25 @@ class PlannerNode(Node):
         if lengths is None:
             return why
         try:
-            p, R = execution.current_pose(config.robot, lengths, self._last_pose)
+            p, R = execution.current_pose(config.robot, lengths, self._pose_guess(lengths))
         except InputError as exc:
             return str(exc)
         self._last_pose = (p, R)
         return M.pose_stamped_msg(p, R, config.base_frame, self.get_clock().now().to_msg())
+
+    def _pose_guess(self, lengths):
+        """Newton's start for the forward kinematics: of the poses known (the last forward
+        kinematics, the last plan's ends), the one whose cable lengths are nearest the
+        measured ``lengths`` (m): a hexapod has several poses for the same lengths."""
+        known = [self._last_pose] if self._last_pose is not None else []
+        if self._last is not None:
+            path = self._last[0]
+            known += [(path.p[k], rotation_from_quaternion(path.quaternion[k])) for k in (0, -1)]
+        if not known:
+            return None
+        robot = self.config.robot
+        return min(known, key=lambda pose: float(np.max(np.abs(cable_lengths(robot, *pose)
+                                                               - lengths))))
 
     # ------------------------------------------------------------------ execute, stop
 

@@ -1,0 +1,139 @@
+"""Execution through ros2_control, over real DDS: the node (real planner) in
+``execution.mode:=follow_joint_trajectory`` sends its plans to a FollowJointTrajectory test
+double that checks what the Jazzy JointTrajectoryController checks
+(test/doubles/follow_joint_trajectory_server.py) and publishes the winches' JointState. The
+node checks the measured start before executing, plans from the measured pose
+(``use_current_start``), and reports how each execution ended on ``~/execution_result``."""
+
+import numpy as np
+import pytest
+
+rclpy = pytest.importorskip("rclpy")
+
+from diagnostic_msgs.msg import DiagnosticStatus  # noqa: E402
+from nav_msgs.srv import GetPlan  # noqa: E402, F401 (the plan service's type)
+from sensor_msgs.msg import JointState  # noqa: E402
+
+from cdh_planner.model.kinematics import cable_lengths  # noqa: E402
+from cdh_planner.model.pose import rotation_from_quaternion  # noqa: E402
+from cdh_planner.ros import messages as M  # noqa: E402
+from cdh_planner.ros.client import PlannerClient, plan_path_goal  # noqa: E402
+from cdh_planner.ros.params import node_config  # noqa: E402
+from ros_harness import (Q1, Q2, Q3, ROBOT2, Collector, ControllerDouble,  # noqa: E402
+                         NodeProcess, claimed_domain, file_parameters, sphere_pose_msg)
+
+CONFIG = node_config(file_parameters(ROBOT2))
+ROBOT = CONFIG.robot
+ACTION = "/cable_controller/follow_joint_trajectory"
+JOINT_STATES = "/winches/joint_states"
+TIME_SCALE = 4.0   # the double runs 4x faster than real time
+
+
+def _lengths(coords):
+    msg = sphere_pose_msg(coords)
+    p, o = msg.pose.position, msg.pose.orientation
+    R = rotation_from_quaternion(np.array([o.x, o.y, o.z, o.w]))
+    return cable_lengths(ROBOT, np.array([p.x, p.y, p.z]), R)
+
+
+@pytest.fixture(scope="module")
+def ros(tmp_path_factory):
+    params = ["execution.mode:=follow_joint_trajectory",
+              f"execution.controller_action:={ACTION}",
+              f"execution.joint_states_topic:={JOINT_STATES}"]
+    with claimed_domain() as domain:
+        double = ControllerDouble(domain, *ROBOT.winch_names, "--action", ACTION,
+                                  "--joint-states", JOINT_STATES, "--time-scale", TIME_SCALE,
+                                  "--initial", *map(repr, _lengths(Q1).tolist()))
+        node = NodeProcess(domain, tmp_path_factory.mktemp("execution"), params=params)
+        try:
+            assert double.ready.wait(30.0), "\n".join(double.lines)
+            with PlannerClient(domain_id=domain) as client:
+                client.wait_for_node(30.0)
+                client.double, client.process = double, node
+                client.measured = Collector(client.node, JointState, JOINT_STATES, 10)
+                client.watch_execution()
+                assert client.spin_until(lambda: client.measured.items, 10.0)
+                client.spin(0.5)     # the node has joint states too
+                yield client
+        finally:
+            node.stop()
+            rc, log = double.stop()
+            assert rc == 0 and "Traceback" not in log, log
+
+
+def _measured(ros):
+    msg = ros.measured.messages[-1]
+    return np.array([msg.position[list(msg.name).index(n)] for n in ROBOT.winch_names])
+
+
+def _execute_to_the_end(ros, result):
+    """Execute the last plan; (execute's message, how it ended: DiagnosticStatus)."""
+    seen = len(ros.execution_results)
+    accepted = len(ros.double.events("accepted"))
+    ok, message = ros.execute()
+    assert ok, message
+    assert ACTION in message and "start not checked" not in message, message
+    status = ros.wait_execution_result(seen, timeout_s=30.0)
+    assert status is not None, ros.process.log()
+    [event] = ros.double.events("accepted")[accepted:]
+    assert event["joint_names"] == list(ROBOT.winch_names)
+    assert event["has_effort"] is False and event["points"] == len(result.cable_trajectory.points)
+    return message, status
+
+
+def test_a_plan_executes_through_the_controller_and_ends_completed(ros):
+    answer = ros.plan_path(plan_path_goal(sphere_pose_msg(Q1), sphere_pose_msg(Q2)),
+                           timeout_s=60)
+    assert answer.success, answer.result.error_msg
+    _, status = _execute_to_the_end(ros, answer.result)
+    assert status.level == DiagnosticStatus.OK, status.message
+    assert M.status_values(status) == {"outcome": "completed",
+                                       "mode": "follow_joint_trajectory"}
+    ros.spin(0.2)
+    last = answer.result.cable_trajectory.points[-1].positions
+    np.testing.assert_allclose(_measured(ros), last, atol=1e-6)     # the winches are at q2
+
+
+def test_execute_refuses_when_the_winches_are_not_at_the_start(ros):
+    """The winches are at q2 now; a plan from q1 is refused, naming the distance."""
+    answer = ros.plan(sphere_pose_msg(Q1), sphere_pose_msg(Q3), timeout_s=60)
+    assert answer.success
+    accepted = len(ros.double.events("accepted"))
+    ok, message = ros.execute()
+    assert not ok and message.startswith("refused:"), message
+    gap = float(np.max(np.abs(_measured(ros) - _lengths(Q1))))
+    assert f"{gap:.4g}" in message or f"{gap:.3g}" in message, (gap, message)
+    assert any(name in message for name in ROBOT.winch_names), message
+    ros.spin(0.3)
+    assert len(ros.double.events("accepted")) == accepted   # nothing was sent
+
+
+def test_use_current_start_plans_from_where_the_winches_are_and_executes(ros):
+    answer = ros.plan_path(plan_path_goal(None, sphere_pose_msg(Q3), use_current_start=True),
+                           timeout_s=60)
+    assert answer.success, answer.result.error_msg
+    np.testing.assert_allclose(answer.result.cable_trajectory.points[0].positions,
+                               _measured(ros), atol=1e-6)
+    first = answer.result.path.poses[0].pose.position
+    q2 = sphere_pose_msg(Q2).pose.position
+    np.testing.assert_allclose([first.x, first.y, first.z], [q2.x, q2.y, q2.z], atol=1e-6)
+    _, status = _execute_to_the_end(ros, answer.result)
+    assert M.status_values(status)["outcome"] == "completed"
+
+
+def test_stop_cancels_the_controller_goal_and_ends_stopped(ros):
+    answer = ros.plan_path(plan_path_goal(None, sphere_pose_msg(Q2), use_current_start=True),
+                           timeout_s=60)
+    assert answer.success, answer.result.error_msg
+    seen = len(ros.execution_results)
+    ok, message = ros.execute()
+    assert ok, message
+    ok, message = ros.stop()
+    assert ok and "cancel" in message, message
+    status = ros.wait_execution_result(seen, timeout_s=15.0)
+    assert status is not None and status.level == DiagnosticStatus.WARN, status
+    assert M.status_values(status)["outcome"] == "stopped"
+    assert ros.spin_until(lambda: ros.double.events("canceled"), 5.0)
+    ok, message = ros.stop()
+    assert ok and message.startswith("not executing"), message
