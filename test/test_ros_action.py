@@ -96,7 +96,7 @@ def test_goal_feedback_and_result_with_poses_to_six_decimals(ros):
     start, goal = rounded(Q2), rounded(Q3)
     answer = ros.plan_path(plan_path_goal(start, goal, strategy="gbf"), timeout_s=60)
     assert answer.success, answer.result.error_msg
-    assert answer.status == GoalStatus.STATUS_SUCCEEDED and answer.result.error_msg == ""
+    assert answer.goal_status == GoalStatus.STATUS_SUCCEEDED and answer.result.error_msg == ""
     _check_result(answer.result, start, goal)
     assert answer.result.charts > 0
     # feedback while planning: charts and time grow, the estimate is a distance
@@ -110,7 +110,7 @@ def test_goal_feedback_and_result_with_poses_to_six_decimals(ros):
 def test_cancel_during_a_long_plan_then_the_next_goal_plans(ros):
     answer = ros.plan_path(plan_path_goal(sphere_pose_msg(Q2), sphere_pose_msg(Q3)),
                            timeout_s=60, cancel_after_s=1.0)
-    assert answer.status == GoalStatus.STATUS_CANCELED, answer.result.error_msg
+    assert answer.goal_status == GoalStatus.STATUS_CANCELED, answer.result.error_msg
     assert answer.result.error_code == PlanPath.Result.CANCELED
     assert "cancel" in answer.result.error_msg
     assert answer.cancel_s < CANCEL_BOUND_S, answer.cancel_s
@@ -124,11 +124,11 @@ def test_cancel_during_a_long_plan_then_the_next_goal_plans(ros):
 def test_goal_overrides_and_refusals_end_with_a_reason(ros):
     q2, q3 = sphere_pose_msg(Q2), sphere_pose_msg(Q3)
     bad = ros.plan_path(plan_path_goal(q2, q3, strategy="dijkstra"), timeout_s=30)
-    assert bad.status == GoalStatus.STATUS_ABORTED
+    assert bad.goal_status == GoalStatus.STATUS_ABORTED
     assert bad.result.error_code == PlanPath.Result.INVALID_PLANNER
     assert "strategy" in bad.result.error_msg and "dijkstra" in bad.result.error_msg
     quick = ros.plan_path(plan_path_goal(q2, q3, timeout_s=0.3), timeout_s=30)  # A*: ~5 s
-    assert quick.status == GoalStatus.STATUS_ABORTED
+    assert quick.goal_status == GoalStatus.STATUS_ABORTED
     assert quick.result.error_code == PlanPath.Result.TIMEOUT
     assert quick.result.planning_time_s == pytest.approx(0.3, abs=0.25)
     negative = ros.plan_path(plan_path_goal(q2, q3, timeout_s=-1.0), timeout_s=30)
@@ -148,7 +148,7 @@ def test_goal_overrides_and_refusals_end_with_a_reason(ros):
 def test_use_current_start_without_measurements_is_refused(ros):
     answer = ros.plan_path(plan_path_goal(None, sphere_pose_msg(Q3), use_current_start=True),
                            timeout_s=30)
-    assert answer.status == GoalStatus.STATUS_ABORTED
+    assert answer.goal_status == GoalStatus.STATUS_ABORTED
     assert answer.result.error_code == PlanPath.Result.NO_CURRENT_STATE
     assert "/joint_states" in answer.result.error_msg
 

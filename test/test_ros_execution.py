@@ -20,7 +20,8 @@ from cdh_planner.ros import messages as M  # noqa: E402
 from cdh_planner.ros.client import PlannerClient, plan_path_goal  # noqa: E402
 from cdh_planner.ros.params import node_config  # noqa: E402
 from ros_harness import (Q1, Q2, Q3, ROBOT2, Collector, ControllerDouble,  # noqa: E402
-                         NodeProcess, claimed_domain, file_parameters, sphere_pose_msg)
+                         NodeProcess, claimed_domain, file_parameters, pose_text, run_cli,
+                         sphere_pose_msg)
 
 CONFIG = node_config(file_parameters(ROBOT2))
 ROBOT = CONFIG.robot
@@ -50,7 +51,7 @@ def ros(tmp_path_factory):
             assert double.ready.wait(30.0), "\n".join(double.lines)
             with PlannerClient(domain_id=domain) as client:
                 client.wait_for_node(30.0)
-                client.double, client.process = double, node
+                client.double, client.process, client.domain = double, node, domain
                 client.measured = Collector(client.node, JointState, JOINT_STATES, 10)
                 client.watch_execution()
                 assert client.spin_until(lambda: client.measured.items, 10.0)
@@ -137,3 +138,14 @@ def test_stop_cancels_the_controller_goal_and_ends_stopped(ros):
     assert ros.spin_until(lambda: ros.double.events("canceled"), 5.0)
     ok, message = ros.stop()
     assert ok and message.startswith("not executing"), message
+
+
+def test_call_from_where_the_winches_stopped_to_the_goal_and_execute(ros):
+    """The command line a task sequencer's script uses: plan from the measured pose (the
+    winches stopped part way, above) and execute through the controller to the end."""
+    r = run_cli(ros.domain, "call", "--current-start", "--goal", pose_text(Q3), "--execute")
+    assert r.returncode == 0, r.stdout + r.stderr
+    for line in ("outcome: planned", f"through {ACTION}", "execution completed"):
+        assert line in r.stdout, r.stdout
+    ros.spin(0.3)
+    np.testing.assert_allclose(_measured(ros), _lengths(Q3), atol=1e-6)

@@ -260,7 +260,8 @@ def test_replay_requests_and_call_against_a_live_node(domain, client, sigterm_ru
                     "--execute")
         assert r.returncode == 0, r.stdout + r.stderr
         for line in ("outcome: planned", "path length:", "duration:", "lowest tension margin:",
-                     "log file: " + str(tmp_path), "execute: executing", "streamed:"):
+                     "log file: " + str(tmp_path), "execute: executing", "streamed:",
+                     "execution completed: execution finished"):
             assert line in r.stdout, r.stdout
         r = run_cli(domain, "call", "--start", pose_text(Q1), "--goal", pose_text(Q2),
                     "--frame", "world")

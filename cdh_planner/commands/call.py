@@ -1,12 +1,15 @@
 """``cdh-planner call``: the task sequencer's view of a running node.
 
-    cdh-planner call --start "x y z qx qy qz qw" --goal "x y z qx qy qz qw" [--execute]
-                     [--node /cdh_planner] [--frame F] [--timeout S] [--ros-args ...]
+    cdh-planner call (--start "x y z qx qy qz qw" | --current-start) --goal "x y z qx qy qz qw"
+                     [--strategy S] [--execute] [--node /cdh_planner] [--frame F]
+                     [--timeout S] [--ros-args ...]
 
-Calls ``~/plan`` (positions in m in the base frame, quaternion x y z w) and prints the
-outcome, the path length, duration, lowest tension margin and the run's log file; with
-``--execute`` then calls ``~/execute`` and follows ``~/cable_command`` until the motion
-ends (Ctrl-C calls ``~/stop`` first). The frame defaults to the node's ``base_frame``.
+Sends a goal to the ``~/plan_path`` action (positions in m in the base frame, quaternion
+x y z w; ``--current-start``: from the pose of the measured cable lengths), shows its
+progress (charts) on stderr, and prints the outcome, the path length, duration, lowest
+tension margin and the run's log file; Ctrl-C cancels the plan. With ``--execute`` it then
+calls ``~/execute`` and waits for ``~/execution_result`` (Ctrl-C calls ``~/stop``). The frame
+defaults to the node's ``base_frame``.
 
 Exit codes: 0 planned (and executed to the last waypoint); 1 no plan, or execution refused
 or cut short; 2 bad input; 3 the node did not answer.
@@ -15,25 +18,34 @@ or cut short; 2 bad input; 3 the node did not answer.
 import argparse
 import sys
 
+from ..io.progress import chart_progress
+
 EXIT_OK, EXIT_NO_PLAN, EXIT_NO_NODE = 0, 1, 3
 
 
 def add_parser(subparsers):
     p = subparsers.add_parser(
         "call", help="call a running node's plan service (and execute)",
-        description="Call ~/plan of a running cdh_planner node with a start and a goal pose, "
-                    "print the outcome, path length, duration, lowest tension margin and "
-                    "the log file; --execute streams the plan. Exit 1 when there is no plan.",
+        description="Plan with a running cdh_planner node (its ~/plan_path action) from a "
+                    "start pose (or the measured one) to a goal pose, print the outcome, path "
+                    "length, duration, lowest tension margin and the log file; --execute then "
+                    "executes the plan. Ctrl-C cancels. Exit 1 when there is no plan.",
         epilog="example (Robot 2's sphere task, q1 -> q2):\n"
                "  cdh-planner call --start \"0 0 0.176 0 0 0 1\" \\\n"
                "      --goal \"0.081092 0.049718 0.217387 0.208539 -0.340136 0 0.916962\"\n"
                "values starting with '-': --start=\"-0.1 0 0.2 0 0 0 1\"",
         formatter_class=argparse.RawDescriptionHelpFormatter)
-    p.add_argument("--start", required=True, metavar='"X Y Z QX QY QZ QW"',
-                   help="start pose: position (m, base frame) and quaternion (x y z w)")
+    start = p.add_mutually_exclusive_group(required=True)
+    start.add_argument("--start", metavar='"X Y Z QX QY QZ QW"',
+                       help="start pose: position (m, base frame) and quaternion (x y z w)")
+    start.add_argument("--current-start", action="store_true",
+                       help="start from the pose of the measured cable lengths (the node's "
+                            "execution.joint_states_topic)")
     p.add_argument("--goal", required=True, metavar='"X Y Z QX QY QZ QW"', help="goal pose")
+    p.add_argument("--strategy", choices=("auto", "astar", "gbf"),
+                   help="search strategy (default: the node's planner.strategy)")
     p.add_argument("--execute", action="store_true",
-                   help="after a successful plan, stream it (~/execute) and wait for the end")
+                   help="after a successful plan, execute it (~/execute) and wait for the end")
     p.add_argument("--node", default="/cdh_planner", help="the planner node (default: "
                                                           "%(default)s)")
     p.add_argument("--frame", help="frame_id of the poses (default: the node's base_frame)")
@@ -47,18 +59,24 @@ def add_parser(subparsers):
 
 def run(args):
     from ..errors import InputError
-    from ..ros.client import ClientError, PlannerClient, pose_stamped
+    from ..ros.client import ClientError, PlannerClient, plan_path_goal, pose_stamped
     if not args.timeout > 0:
         raise InputError("--timeout", args.timeout, "must be a positive number of seconds")
-    pose_stamped(args.start, "", "--start")  # refuse malformed input before joining ROS
+    if args.start is not None:
+        pose_stamped(args.start, "", "--start")  # refuse malformed input before joining ROS
     pose_stamped(args.goal, "", "--goal")
     with PlannerClient(args.node, args=["cdh-planner-call", "--ros-args", *args.ros_args]) \
             as client:
         try:
             client.wait_for_node(min(args.timeout, 30.0))
             frame = args.frame or client.get_parameters(["base_frame"])["base_frame"]
-            answer = client.plan(pose_stamped(args.start, frame, "--start"),
-                                 pose_stamped(args.goal, frame, "--goal"), args.timeout)
+            start = None if args.start is None else pose_stamped(args.start, frame, "--start")
+            goal = plan_path_goal(start, pose_stamped(args.goal, frame, "--goal"),
+                                  use_current_start=args.current_start,
+                                  strategy=args.strategy or "")
+            with chart_progress() as update:
+                answer = client.plan_path(goal, args.timeout,
+                                          on_feedback=lambda f: update(f.charts, f.best_h))
             print_answer(answer)
             if not answer.success:
                 return EXIT_NO_PLAN
@@ -83,8 +101,10 @@ def print_answer(answer):
         print(f"lowest tension margin: {answer.number('min_tension_margin_n'):.4f} N "
               f"(normalised feasibility margin {answer.number('min_margin'):.4f})")
     else:
-        code = v.get("error_code", "?")
-        why = v.get("error_msg") or "(no ~/plan_result received)"
+        result = answer.result
+        code = v.get("error_code", result.error_code if result is not None else "?")
+        why = v.get("error_msg") or (result.error_msg if result is not None else "") \
+            or "(no ~/plan_result received)"
         print(f"outcome: NO PLAN (error code {code}): {why}")
     print(f"log file: {v.get('log_file') or '(not recorded)'}")
     if v.get("run_id"):
@@ -92,24 +112,23 @@ def print_answer(answer):
 
 
 def execute(client, answer):
-    """Call ~/execute and follow ~/cable_command until it reaches the trajectory's last
-    point (``PlannerClient.execute_and_follow``); Ctrl-C stops the motion. 0 when it got
-    there, 1 otherwise."""
+    """Call ~/execute and follow the execution until ``~/execution_result`` says it ended
+    (``PlannerClient.execute_and_follow``); Ctrl-C stops the motion. 0 when it completed
+    (streamed: the last command is the last waypoint), 1 otherwise."""
     run = client.execute_and_follow(answer)
     print(f"execute: {run.message}")
     if not run.accepted:
         return EXIT_NO_PLAN
     if run.stopped:
         print(f"stop: {run.stopped}")
-        return EXIT_NO_PLAN
-    if not run.commands:
-        print("streamed: no ~/cable_command received")
-        return EXIT_NO_PLAN
-    span, rate = run.rate()
-    _, positions = run.values()
-    print(f"streamed: {len(run.commands)} commands over {span:.3f} s ({rate:.1f} Hz); final "
-          f"cable lengths {' '.join(f'{x:.4f}' for x in positions[-1])} m")
+    if run.commands:
+        span, rate = run.rate()
+        _, positions = run.values()
+        print(f"streamed: {len(run.commands)} commands over {span:.3f} s ({rate:.1f} Hz); "
+              f"final cable lengths {' '.join(f'{x:.4f}' for x in positions[-1])} m")
+    print(run.end.message if run.end is not None else
+          "execution: no ~/execution_result received (the node went away?)")
     if not run.arrived:
-        print("execution did not reach the last waypoint (stopped, or the node went away)")
+        print("execution did not reach the last waypoint")
         return EXIT_NO_PLAN
     return EXIT_OK

@@ -21,10 +21,9 @@ import json
 import math
 from dataclasses import replace
 
-from tqdm import tqdm
-
 from ..io.outputs import check_output, write_text, writing
 from ..io.problem import load_problem
+from ..io.progress import chart_progress
 from ..planner import Planner
 from ..settings import SETTINGS, check_setting
 
@@ -86,12 +85,9 @@ def run(args):
 
 def plan_with_progress(planner, start, goal, quiet=False):
     """planner.plan with a tqdm bar counting charts (on stderr)."""
-    with tqdm(total=None, unit="chart", desc="atlas", disable=quiet, leave=False) as bar:
-        def progress(info):
-            bar.n = info["charts"]
-            bar.set_postfix(best_h=f"{info['best_h']:.3g}", refresh=False)
-            bar.refresh()
-        return planner.plan(start, goal, progress=progress)
+    with chart_progress(quiet) as update:
+        return planner.plan(start, goal,
+                            progress=lambda info: update(info["charts"], info["best_h"]))
 
 
 def print_result(result, problem):

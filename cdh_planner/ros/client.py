@@ -4,7 +4,7 @@ call``, ``replay --requests``, the demo and the tests).
     with PlannerClient("/cdh_planner", args=ros_args) as client:
         client.wait_for_node(timeout_s=10)
         answer = client.plan(start_msg, goal_msg, timeout_s=60)   # PlanAnswer (~/plan)
-        done = client.plan_path(plan_path_goal(start_msg, goal_msg))  # GoalAnswer (~/plan_path)
+        answer = client.plan_path(plan_path_goal(start_msg, goal_msg))  # the same, ~/plan_path
         run = client.execute_and_follow(answer)                   # Execution
         client.stop()
 
@@ -29,7 +29,6 @@ from nav_msgs.srv import GetPlan
 from rclpy.executors import SingleThreadedExecutor
 from rclpy.node import Node
 from rclpy.qos import QoSProfile, ReliabilityPolicy
-from action_msgs.msg import GoalStatus
 from rclpy.action import ActionClient
 from std_srvs.srv import Trigger
 from trajectory_msgs.msg import JointTrajectory
@@ -45,6 +44,7 @@ from .node import CABLE_COMMAND, EXECUTE, EXECUTION_RESULT, LATCHED, NODE_NAME, 
 DEFAULT_NODE = "/" + NODE_NAME
 RESULT_WAIT_S = 2.0  # after the response, how long to wait for its ~/plan_result
 LATCHED_WAIT_S = 5.0  # before executing, how long to wait for the plan's latched messages
+CANCEL_WAIT_S = 5.0  # after Ctrl-C, how long to wait for the cancelled goal's result
 FOLLOW_MARGIN_S = 5.0  # how long to follow the stream beyond the path's duration
 ARRIVAL_TOL_M = 1e-9  # the last command is the last waypoint within this (m)
 COMMAND_DEPTH = 1000  # ~/cable_command queue: no command is dropped while spinning late
@@ -56,13 +56,20 @@ DISCOVERY_SETTLE_S = 0.3
 
 @dataclass
 class PlanAnswer:
-    """A plan call's answer: the response path and the ``~/plan_result`` key/values (strings;
-    empty if the result did not arrive within RESULT_WAIT_S)."""
+    """A plan call's answer: the path (nav_msgs/Path, no poses: no plan) and the
+    ``~/plan_result`` key/values (strings; empty if the result did not arrive within
+    RESULT_WAIT_S); through ``~/plan_path`` also the PlanPath ``result``, its ``goal_status``
+    (action_msgs/GoalStatus: SUCCEEDED, CANCELED, ABORTED), every ``feedback`` received and,
+    if the client cancelled it, the s from the cancel request to the result (``cancel_s``)."""
 
     path: object                      # nav_msgs/Path
     status: Optional[object] = None   # diagnostic_msgs/DiagnosticStatus
     values: dict = field(default_factory=dict)
     seconds: float = 0.0              # round trip (s)
+    result: Optional[object] = None   # cdh_planner_interfaces/action/PlanPath.Result
+    goal_status: Optional[int] = None
+    feedback: list = field(default_factory=list)
+    cancel_s: float = math.nan
 
     @property
     def success(self):
@@ -78,10 +85,12 @@ class PlanAnswer:
 @dataclass
 class Execution:
     """What ``execute_and_follow`` saw: the ``~/execute`` answer (``accepted``, ``message``),
-    the plan's latched ``trajectory`` (JointTrajectory) and ``envelope`` (tension envelope
-    message; None if they did not arrive), the winch ``commands`` streamed after the call, in
-    arrival order, whether the last one is the last waypoint (``goal``, m) at rest
-    (``arrived``), and ``~/stop``'s answer when Ctrl-C ended the following (``stopped``)."""
+    the plan's latched ``trajectory`` (JointTrajectory) and ``envelope`` (TensionEnvelope;
+    None if they did not arrive), the winch ``commands`` streamed after the call (stream
+    mode), in arrival order, how the node says it ended (``end``: ``~/execution_result``,
+    None if it did not come), whether it completed (and, streamed, the last command is the
+    last waypoint (``goal``, m) at rest: ``arrived``), and ``~/stop``'s answer when Ctrl-C
+    ended the following (``stopped``)."""
 
     accepted: bool = False
     message: str = ""
@@ -89,8 +98,14 @@ class Execution:
     envelope: object = None
     goal: Optional[np.ndarray] = None
     commands: list = field(default_factory=list)
+    end: Optional[object] = None      # diagnostic_msgs/DiagnosticStatus
     arrived: bool = False
     stopped: str = ""
+
+    @property
+    def outcome(self):
+        """completed, stopped, failed, or "" (no ~/execution_result received)."""
+        return M.status_values(self.end).get("outcome", "") if self.end is not None else ""
 
     def values(self):
         """(stamps (M,) s, positions (M, joints) m) of the streamed commands."""
@@ -110,24 +125,6 @@ class Execution:
         if self.goal is None or not len(positions):
             return math.nan
         return float(np.max(np.abs(positions[-1] - self.goal)))
-
-
-@dataclass
-class GoalAnswer:
-    """How a ``~/plan_path`` goal ended: ``status`` (action_msgs/GoalStatus: SUCCEEDED,
-    CANCELED, ABORTED), the PlanPath ``result``, every ``feedback`` received, the round trip
-    ``seconds`` and, if the client cancelled it, the s from the cancel request to the result
-    (``cancel_s``)."""
-
-    status: int
-    result: object
-    feedback: list = field(default_factory=list)
-    seconds: float = 0.0
-    cancel_s: float = math.nan
-
-    @property
-    def success(self):
-        return self.status == GoalStatus.STATUS_SUCCEEDED and self.result.error_code == 0
 
 
 def plan_path_goal(start, goal, use_current_start=False, strategy="", timeout_s=0.0):
@@ -249,8 +246,12 @@ class PlannerClient:
         request = GetPlan.Request(start=start, goal=goal, tolerance=float(tolerance))
         t0 = time.monotonic()
         response = self.call(self.plan_client, request, timeout_s)
-        answer = PlanAnswer(path=response.plan, seconds=time.monotonic() - t0)
-        stamp = str(M.time_ns(response.plan.header.stamp))
+        return self._with_result(PlanAnswer(path=response.plan, seconds=time.monotonic() - t0))
+
+    def _with_result(self, answer):
+        """``answer`` with its ``~/plan_result`` (paired by the path's stamp), waiting at most
+        RESULT_WAIT_S for it."""
+        stamp = str(M.time_ns(answer.path.header.stamp))
 
         def find():
             for msg in reversed(self.results):
@@ -263,36 +264,49 @@ class PlannerClient:
         self.spin_until(find, RESULT_WAIT_S)
         return answer
 
-    def plan_path(self, goal, timeout_s=120.0, cancel_after_s=None):
+    def plan_path(self, goal, timeout_s=120.0, cancel_after_s=None, on_feedback=None):
         """Send a PlanPath goal (``plan_path_goal``) to ``~/plan_path`` and wait for its
-        result, spinning meanwhile; with ``cancel_after_s``, request a cancel once that long
-        has passed and a feedback has arrived (the plan is running). A GoalAnswer;
-        ClientError if the server is not there or the result does not come in time."""
+        result, spinning meanwhile (``on_feedback`` gets each feedback); with
+        ``cancel_after_s``, request a cancel once that long has passed and a feedback has
+        arrived (the plan is running); Ctrl-C requests one too. A PlanAnswer; ClientError if
+        the server is not there or the result does not come in time."""
         if not self.plan_path_client.wait_for_server(timeout_sec=min(timeout_s, 10.0)):
             raise ClientError(f"no action server {self.topic(PLAN_PATH)}")
         feedback = []
+
+        def received(msg):
+            feedback.append(msg.feedback)
+            if on_feedback is not None:
+                on_feedback(msg.feedback)
+
         t0 = time.monotonic()
-        sent = self.plan_path_client.send_goal_async(
-            goal, feedback_callback=lambda msg: feedback.append(msg.feedback))
+        sent = self.plan_path_client.send_goal_async(goal, feedback_callback=received)
         if not self.spin_until(sent.done, timeout_s):
             raise ClientError(f"{self.topic(PLAN_PATH)}: the goal was not answered")
         handle = sent.result()
-        if not handle.accepted:
-            return GoalAnswer(GoalStatus.STATUS_UNKNOWN, PlanPath.Result(error_msg="rejected"),
-                              feedback, time.monotonic() - t0)
+        if not handle.accepted:   # the node accepts every goal: not this node
+            raise ClientError(f"{self.topic(PLAN_PATH)} rejected the goal")
         done = handle.get_result_async()
         t_cancel = None
-        if cancel_after_s is not None:
-            self.spin_until(lambda: done.done() or (
-                feedback and time.monotonic() - t0 >= cancel_after_s), timeout_s)
-            if not done.done():
-                t_cancel = time.monotonic()
-                handle.cancel_goal_async()
-        if not self.spin_until(done.done, max(0.0, t0 + timeout_s - time.monotonic())):
+        try:
+            if cancel_after_s is not None:
+                self.spin_until(lambda: done.done() or (
+                    feedback and time.monotonic() - t0 >= cancel_after_s), timeout_s)
+                if not done.done():
+                    t_cancel = time.monotonic()
+                    handle.cancel_goal_async()
+            finished = self.spin_until(done.done, max(0.0, t0 + timeout_s - time.monotonic()))
+        except KeyboardInterrupt:
+            t_cancel = time.monotonic()
+            handle.cancel_goal_async()
+            finished = self.spin_until(done.done, CANCEL_WAIT_S)
+        if not finished:
             raise ClientError(f"{self.topic(PLAN_PATH)}: no result within {timeout_s:g} s")
         end = time.monotonic()
-        return GoalAnswer(done.result().status, done.result().result, feedback, end - t0,
-                          end - t_cancel if t_cancel is not None else math.nan)
+        result = done.result().result
+        return self._with_result(PlanAnswer(
+            path=result.path, seconds=end - t0, result=result, goal_status=done.result().status,
+            feedback=feedback, cancel_s=end - t_cancel if t_cancel is not None else math.nan))
 
     def _parameters(self):
         if self._param_client is None:
@@ -359,36 +373,44 @@ class PlannerClient:
         return self.execution_results[after] if len(self.execution_results) > after else None
 
     def execute_and_follow(self, answer, margin_s=FOLLOW_MARGIN_S):
-        """Call ``~/execute`` for the plan ``answer`` (a PlanAnswer) and follow
-        ``~/cable_command`` until the last command is the plan's last waypoint at rest, or
-        the path's duration + ``margin_s`` has passed; Ctrl-C calls ``~/stop``. An Execution."""
+        """Call ``~/execute`` for the plan ``answer`` (a PlanAnswer) and follow it (the
+        streamed ``~/cable_command``, if any) until ``~/execution_result`` says it ended, or
+        the path's duration + ``margin_s`` has passed; Ctrl-C calls ``~/stop``. An
+        Execution."""
         self.watch_execution()
         n = len(answer.path.poses)
         self.spin_until(lambda: self.trajectories and len(self.trajectories[-1].points) == n
                         and self.envelopes
-                        and self.node.count_publishers(self.topic(CABLE_COMMAND)) > 0,
+                        and self.node.count_publishers(self.topic(CABLE_COMMAND)) > 0
+                        and self.node.count_publishers(self.topic(EXECUTION_RESULT)) > 0,
                         LATCHED_WAIT_S)
+        self.spin(DISCOVERY_SETTLE_S)   # the latched last execution result, if any, arrives
         run = Execution()
         if self.trajectories and len(self.trajectories[-1].points) == n:
             run.trajectory = self.trajectories[-1]
             run.envelope = self.envelopes[-1] if self.envelopes else None
             run.goal = np.asarray(run.trajectory.points[-1].positions, dtype=float)
-        first = len(self.commands)
+        first, ends = len(self.commands), len(self.execution_results)
         run.accepted, run.message = self.execute()
 
-        def arrived():
-            if run.goal is None or len(self.commands) == first:
-                return False
+        def streamed_to_the_goal():
+            if len(self.commands) == first:
+                return True    # not streamed (follow_joint_trajectory): the controller's word
             _, positions, velocities = M.winch_command_values(self.commands[-1])
             return not np.any(velocities) and np.allclose(positions, run.goal, rtol=0,
                                                           atol=ARRIVAL_TOL_M)
 
         if run.accepted:
             try:
-                self.spin_until(arrived, path_duration(answer.path) + margin_s)
+                self.spin_until(lambda: len(self.execution_results) > ends,
+                                path_duration(answer.path) + margin_s)
             except KeyboardInterrupt:
                 run.stopped = self.stop()[1]
-            run.arrived = not run.stopped and arrived()
+                self.spin_until(lambda: len(self.execution_results) > ends, LATCHED_WAIT_S)
+            run.end = self.execution_results[ends] if len(self.execution_results) > ends \
+                else None
+            run.arrived = (run.outcome == "completed" and run.goal is not None
+                           and streamed_to_the_goal())
         run.commands = self.commands[first:]
         return run
 

@@ -275,8 +275,9 @@ class PlannerNode(Node):
     def _plan_path(self, goal_handle):
         """~/plan_path: every goal ends with a result (succeeded, canceled or aborted with
         the error code and reason); feedback at most every PROGRESS_PERIOD_S."""
-        _, run_id, log_file = self._new_call()
+        seq, run_id, log_file = self._new_call()
         goal = goal_handle.request
+        self._record_goal(REQUEST_RECEIVED, seq, goal=goal)
         last = [0.0]
 
         def feedback(info):
@@ -295,14 +296,16 @@ class PlannerNode(Node):
             call = planning.PlanCall.of_plan_path(goal, start, _GoalCancel(goal_handle),
                                                   feedback)
             refused = None
-        result, out, _ = self._answer(call, run_id, log_file, refused)
+        result, out, path = self._answer(call, run_id, log_file, refused)
         if result.success:
             goal_handle.succeed()
         elif goal_handle.is_cancel_requested and result.reason == Status.CANCELED:
             goal_handle.canceled()
         else:
             goal_handle.abort()
-        return planning.action_result(result, out)
+        answer = planning.action_result(result, out, path)
+        self._record_goal(RESPONSE_SENT, seq, result=answer)
+        return answer
 
     def _new_call(self):
         """(sequence number, run id, run file) of a new plan call."""
@@ -611,6 +614,16 @@ class PlannerNode(Node):
     def _record_plan(self, event, seq, request=None, response=None):
         self._record(self.runlog.service_event, self.resolve_service_name(self.srv_plan.srv_name),
                      "nav_msgs/srv/GetPlan", event, request=request, response=response,
+                     sequence_number=seq, log_time_ns=self._now())
+
+    def _record_goal(self, event, seq, goal=None, result=None):
+        """Record a ~/plan_path goal as it arrived (REQUEST_RECEIVED) or its result as sent
+        (RESPONSE_SENT), paired by ``seq``."""
+        if not hasattr(self.runlog, "action_event"):  # TEMPORARY until RunLog has it
+            return
+        self._record(self.runlog.action_event,
+                     self.get_fully_qualified_name() + "/" + PLAN_PATH,
+                     "cdh_planner_interfaces/action/PlanPath", event, goal=goal, result=result,
                      sequence_number=seq, log_time_ns=self._now())
 
     # ------------------------------------------------------------------ helpers

@@ -266,10 +266,12 @@ def plan_outputs(result, robot, base_frame, stamp):
         markers=markers_msg(path, robot, base_frame, stamp))
 
 
-def action_result(result, out=None):
+def action_result(result, out=None, path=None):
     """cdh_planner_interfaces/action/PlanPath's Result of a PlanResult and, on success, its
-    PlanOutputs (path, cable trajectory, tension envelope); min_margin: the least normalised
-    margin over the path and the motion between its waypoints (NaN without a path)."""
+    PlanOutputs (path, cable trajectory, tension envelope); without them ``path`` (the
+    empty answer: its stamp pairs the result with its ``~/plan_result``, as GetPlan's).
+    min_margin: the least normalised margin over the path and the motion between its
+    waypoints (NaN without a path)."""
     msg = PlanPath.Result(error_code=M.NONE if result.success else M.error_code(result.reason),
                           error_msg="" if result.success else (result.message or result.reason),
                           planning_time_s=float(result.time_s), charts=int(result.charts),
@@ -277,6 +279,8 @@ def action_result(result, out=None):
     if out is not None:
         msg.path, msg.cable_trajectory = out.path, out.cable_trajectory
         msg.tension_envelope = out.tension_envelope
+    elif path is not None:
+        msg.path = path
     return msg
 
 
