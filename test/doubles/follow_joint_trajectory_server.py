@@ -27,7 +27,7 @@ An accepted goal prints {"event": "accepted", "joint_names", "points", "has_effo
 "duration_s"} and preempts a running one (aborted, INVALID_GOAL, as the controller does). It
 runs in real time divided by ``--time-scale``: positions interpolated linearly in time from
 where the joints are to the first point, then between points (a non-zero stamp in the future
-delays the start), with FollowJointTrajectory feedback at 50 Hz, and succeeds with
+delays the start), with FollowJointTrajectory feedback at ~17 Hz, and succeeds with
 SUCCESSFUL exactly at the last point's positions ({"event": "succeeded"}). A cancel is
 accepted: the joints hold where they are and the result is canceled ({"event": "canceled"}).
 At SIGINT / SIGTERM a running goal is aborted (as when the controller is deactivated).
@@ -58,7 +58,9 @@ from sensor_msgs.msg import JointState
 from trajectory_msgs.msg import JointTrajectoryPoint
 
 NODE = "follow_joint_trajectory_double"
-PERIOD_S = 0.02          # 50 Hz: joint states, feedback and the interpolation step
+PERIOD_S = 0.02          # 50 Hz: joint states and the interpolation step
+FEEDBACK_EVERY = 3       # feedback every 3rd step, ~17 Hz (the controller's
+                         # action_monitor_rate defaults to 20 Hz)
 FLOAT_EPSILON = float(np.finfo(np.float32).eps)   # the controller's zero velocity
 JOINT_STATE_QOS = QoSProfile(depth=10, reliability=ReliabilityPolicy.RELIABLE,
                              durability=DurabilityPolicy.VOLATILE)
@@ -176,6 +178,7 @@ class Double:
         stamp_s = seconds(trajectory.header.stamp)
         t0 = time.monotonic() + (max(0.0, stamp_s - self.now_s()) if stamp_s else 0.0)
         scale = self.args.time_scale
+        step = 0
         while True:
             if getattr(handle, "preempted", False):
                 handle.abort()
@@ -200,12 +203,9 @@ class Double:
             with self.lock:
                 if self.active is handle:
                     self.positions = desired.copy()
-            feedback = FollowJointTrajectory.Feedback(joint_names=self.joints)
-            feedback.header.stamp = self.node.get_clock().now().to_msg()
-            feedback.desired = JointTrajectoryPoint(positions=desired.tolist())
-            feedback.actual = JointTrajectoryPoint(positions=desired.tolist())
-            feedback.error = JointTrajectoryPoint(positions=[0.0] * len(self.joints))
-            handle.publish_feedback(feedback)
+            if step % FEEDBACK_EVERY == 0:
+                self.feedback(handle, desired)
+            step += 1
             if finished:
                 handle.succeed()
                 self.release(handle)
@@ -213,6 +213,14 @@ class Double:
                 return Result(error_code=Result.SUCCESSFUL,
                               error_string="Goal successfully reached!")
             time.sleep(PERIOD_S)
+
+    def feedback(self, handle, desired):
+        msg = FollowJointTrajectory.Feedback(joint_names=self.joints)
+        msg.header.stamp = self.node.get_clock().now().to_msg()
+        msg.desired = JointTrajectoryPoint(positions=desired.tolist())
+        msg.actual = JointTrajectoryPoint(positions=desired.tolist())
+        msg.error = JointTrajectoryPoint(positions=[0.0] * len(self.joints))
+        handle.publish_feedback(msg)
 
     def release(self, handle):
         with self.lock:
