@@ -211,6 +211,30 @@ def test_current_pose_without_a_guess_picks_the_level_one_of_two_feasible_soluti
     assert rotation_angle_between(Q, twin.R) < 1e-9
 
 
+def test_current_pose_without_a_guess_may_return_a_feasible_twin():
+    """Lengths alone do not decide: a feasible Robot 2 pose whose twin (same lengths, 9 cm
+    higher, less tilted) is what the search finds; a guess near the pose gives it back."""
+    p, R = np.array([0.02, -0.01, 0.30]), rotation_tt([0.3, 0.4, 0.1])
+    L = cable_lengths(ROBOT2, p, R)
+    assert evaluate(ROBOT2, p[None], R=R[None]).feasible[0]
+    q, Q = X.current_pose(ROBOT2, L)
+    np.testing.assert_allclose(cable_lengths(ROBOT2, q, Q), L, rtol=0, atol=1e-12)
+    assert evaluate(ROBOT2, q[None], R=Q[None]).feasible[0]
+    assert np.linalg.norm(q - p) > 0.08
+    q, Q = X.current_pose(ROBOT2, L, guess=(p + 0.01, R))
+    assert np.max(np.abs(q - p)) < 1e-9 and rotation_angle_between(Q, R) < 1e-9
+
+
+def test_current_pose_searches_when_newton_fails_from_the_guess():
+    pr = load_problem(PROBLEMS / "robot2_q2_q3.yaml")
+    p, R = pr.goal.p, rotation_tt(pr.goal.tau)
+    L = cable_lengths(pr.robot, p, R)
+    singular = (np.zeros(3), np.eye(3))     # platform in the base plane: J singular
+    assert not forward_kinematics(pr.robot, L, *singular).ok
+    q, Q = X.current_pose(pr.robot, L, guess=singular)
+    assert np.max(np.abs(q - p)) < 1e-9 and rotation_angle_between(Q, R) < 1e-9
+
+
 @pytest.mark.parametrize("guess", [False, True])
 def test_current_pose_of_unreachable_lengths_says_why(guess):
     # cables 1 and 2 share a platform anchor; their base anchors are 0.46 m apart
@@ -219,6 +243,7 @@ def test_current_pose_of_unreachable_lengths_says_why(guess):
     with pytest.raises(InputError) as err:
         X.current_pose(ROBOT2, L, start)
     assert err.value.field == "joint_states" and "forward kinematics" in str(err.value)
+    assert ("no pose near the last known one nor from" in str(err.value)) == guess
     with pytest.raises(InputError) as err:
         X.current_pose(ROBOT2, [0.4] * 5 + [float("nan")])
     assert err.value.field == "joint_states"

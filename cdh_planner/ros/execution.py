@@ -165,7 +165,10 @@ def current_pose(robot, lengths, guess=None):
     wrench-feasible one is preferred (the platform hangs in taut cables), then the least
     tilted (z axis nearest the base's). Lengths alone cannot tell feasible solutions apart:
     Robot 2's free-flight goal (config/problems) has a feasible twin with the same lengths
-    tilted 3.06 rad, nearly upside down. Pass a guess whenever a pose is known.
+    tilted 3.06 rad, nearly upside down, and its pose p (0.02, -0.01, 0.30) m, tau (0.3,
+    0.4, 0.1) rad one 9 cm higher and less tilted, which is what the search returns. Pass a
+    guess whenever a pose is known; when Newton fails from it (the platform moved far
+    since), the seeds are searched as without one.
 
     InputError (field ``joint_states``) naming why when no pose is found (singular cable
     Jacobian, no convergence) or the lengths are not numbers > 0.
@@ -174,13 +177,15 @@ def current_pose(robot, lengths, guess=None):
     if L.shape != (len(robot.winch_names),) or not np.all(np.isfinite(L)) or np.any(L <= 0):
         raise InputError("joint_states", np.asarray(lengths).tolist(),
                          "expected one finite cable length > 0 (m) per winch")
+    near = None
     if guess is not None:
         p0, R0 = guess
         fk = forward_kinematics(robot, L, p0, R0)
-        if not fk.ok:
-            raise InputError("joint_states", L.tolist(),
-                             f"no pose near the last known one: {fk.message}")
-        return fk.p, fk.R
+        if fk.ok:
+            return fk.p, fk.R
+        # the platform is far from the last known pose (moved while not watched, a stale
+        # guess): search as without a guess rather than refuse
+        near = fk.message
     best, reasons = None, []
     for R0 in _rotation_seeds():
         for p0 in _position_seeds(robot, L, R0):
@@ -201,8 +206,9 @@ def current_pose(robot, lengths, guess=None):
             if best is None or key < best[0]:
                 best = (key, fk)
     if best is None:
-        raise InputError("joint_states", L.tolist(),
-                         f"no pose found from {len(reasons)} seeds: {reasons[0]}")
+        not_near = "near the last known one nor " if near else ""
+        raise InputError("joint_states", L.tolist(), f"no pose {not_near}from "
+                                                     f"{len(reasons)} seeds: {near or reasons[0]}")
     return best[1].p, best[1].R
 
 
