@@ -11,9 +11,6 @@ MultiThreadedExecutor as the planner node spins its own.
 
 import functools
 import importlib.util
-import json
-import subprocess
-import sys
 import threading
 import time
 
@@ -36,10 +33,10 @@ from cdh_planner.model.robot import load_robot  # noqa: E402
 from cdh_planner.ros import execution as X  # noqa: E402
 from cdh_planner.ros.messages import cable_trajectory_msg, to_seconds  # noqa: E402
 
-from conftest import CONFIG, PROBLEMS, REPO  # noqa: E402
-from ros_harness import claimed_domain, isolated_env, stop_process  # noqa: E402
+from conftest import CONFIG, PROBLEMS  # noqa: E402
+from ros_harness import CONTROLLER_DOUBLE, ControllerDouble, claimed_domain  # noqa: E402
 
-DOUBLE = REPO / "test" / "doubles" / "follow_joint_trajectory_server.py"
+DOUBLE = CONTROLLER_DOUBLE
 ACTION = "/cable_controller/follow_joint_trajectory"
 FRAME = "cdh_base"
 ROBOT2 = load_robot(CONFIG / "robot2.yaml")
@@ -316,43 +313,20 @@ def test_double_rejects_what_the_jazzy_controller_rejects(change, options, reaso
 
 # ----------------------------------------------------------------------------- over DDS
 
-class DoubleProcess:
-    """The double in its own process; its JSON events collected from stdout."""
+class DoubleProcess(ControllerDouble):
+    """The double in its own process on WINCHES, TIME_SCALE times real time, the joints at
+    the plan's first point; its JSON events collected from stdout."""
 
     def __init__(self, domain, *args):
         first, _ = ends()
-        cmd = [sys.executable, str(DOUBLE), *WINCHES, "--time-scale", str(TIME_SCALE),
-               "--initial", *map(repr, first.tolist()), *args]
-        self.proc = subprocess.Popen(cmd, env=isolated_env(domain), stdout=subprocess.PIPE,
-                                     stderr=subprocess.STDOUT, text=True, cwd=REPO)
-        self.lines, self.ready = [], threading.Event()
-        threading.Thread(target=self._read, daemon=True).start()
-
-    def _read(self):
-        for line in self.proc.stdout:
-            self.lines.append(line.rstrip("\n"))
-            if line.strip() == "ready":
-                self.ready.set()
+        super().__init__(domain, *WINCHES, "--time-scale", TIME_SCALE,
+                         "--initial", *map(repr, first.tolist()), *args)
 
     def event(self, kind, index, timeout_s=2.0):
         """The ``index``-th event of ``kind``, waiting for the reader thread to get it (a
         line printed before the double answers may be read after the answer arrives)."""
         assert until(lambda: len(self.events(kind)) > index, timeout_s), (kind, self.lines)
         return self.events(kind)[index]
-
-    def events(self, kind=None):
-        out = []
-        for line in list(self.lines):
-            if line.startswith("{"):
-                event = json.loads(line)
-                if kind is None or event["event"] == kind:
-                    out.append(event)
-        return out
-
-    def stop(self):
-        rc = stop_process(self.proc)
-        time.sleep(0.05)   # the reader thread takes the last lines
-        return rc, "\n".join(self.lines)
 
 
 class Side:
@@ -575,6 +549,40 @@ def test_no_server_fails_quickly_naming_the_action_and_cancel_before_sending_sto
     assert done.wait(2.0) == (X.STOPPED, "stopped before the trajectory was sent")
     assert not nobody.busy
     nobody.destroy()
+
+
+def test_a_server_that_never_answers_fails_after_the_duration_and_a_margin(ros):
+    """A controller that accepts and then goes silent (its process died): the execution
+    fails at the trajectory's duration + goal time tolerance + margin, and the executor is
+    free again."""
+    from control_msgs.action import FollowJointTrajectory
+    from rclpy.action import ActionServer, GoalResponse
+    side, _ = ros
+    release = threading.Event()
+
+    def silent(handle):
+        release.wait(30.0)
+        handle.abort()
+        return FollowJointTrajectory.Result()
+
+    server = ActionServer(side.node, FollowJointTrajectory, "/silent/follow_joint_trajectory",
+                          execute_callback=silent, goal_callback=lambda g: GoalResponse.ACCEPT,
+                          callback_group=side.group)
+    silent_executor = X.TrajectoryExecutor(side.node, "/silent/follow_joint_trajectory",
+                                           side.group, result_margin_s=0.2)
+    try:
+        done = Done()
+        t0 = time.monotonic()
+        silent_executor.start(trajectory(), done)
+        outcome, message = done.wait(planned().t[-1] + 10.0)
+        waited = done.calls[0][3] - t0
+        assert outcome == X.FAILED and "no result from /silent/follow_joint_trajectory" in message
+        assert waited >= planned().t[-1] + X.GOAL_TIME_TOLERANCE_S + 0.2 - 0.05, waited
+        assert not silent_executor.busy
+    finally:
+        release.set()
+        silent_executor.destroy()
+        server.destroy()
 
 
 def test_joint_state_monitor_reports_lengths_or_why_not(ros):

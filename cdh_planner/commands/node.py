@@ -13,11 +13,13 @@ import sys
 def add_parser(subparsers):
     p = subparsers.add_parser(
         "node", help="run the ROS 2 planner node",
-        description="Run the ROS 2 node cdh_planner: services ~/plan (nav_msgs/GetPlan), "
+        description="Run the ROS 2 node cdh_planner: action ~/plan_path "
+                    "(cdh_planner_interfaces/PlanPath); services ~/plan (nav_msgs/GetPlan), "
                     "~/execute and ~/stop (std_srvs/Trigger); topics ~/path, "
-                    "~/cable_trajectory, ~/tension_envelope, ~/markers, ~/plan_result, "
-                    "~/plan_progress, ~/cable_command. Parameters: the robot file and the "
-                    "names in cdh_planner/ros/params.py.",
+                    "~/planned_cable_trajectory, ~/tension_envelope, ~/markers, "
+                    "~/plan_result, ~/execution_result, ~/plan_progress, ~/cable_command; "
+                    "subscribes to /joint_states. Parameters: the robot file and the names in "
+                    "cdh_planner/ros/params.py (docs/ros-node.md).",
         epilog="example:\n  cdh-planner node --ros-args --params-file config/robot2.yaml "
                "-p log_dir:=/tmp/runs -p planner.strategy:=gbf",
         formatter_class=argparse.RawDescriptionHelpFormatter)

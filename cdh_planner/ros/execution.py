@@ -48,6 +48,9 @@ GOAL_TIME_TOLERANCE_S = 0.5
 # short enough that "no controller" is answered at once.
 SERVER_WAIT_S = 1.0
 SERVER_POLL_S = 0.05
+# beyond the trajectory's end and the goal time tolerance, how long (s) a result may take
+# before the execution is given up as failed
+RESULT_MARGIN_S = 5.0
 # The joint state subscription: best effort matches both a reliable publisher
 # (ros2_control's joint_state_broadcaster: reliable, volatile, depth 10) and a best-effort
 # one (many drivers use the sensor data profile); a reliable subscription would not hear
@@ -320,13 +323,15 @@ class TrajectoryExecutor:
     - FAILED: a bad trajectory, already busy, no server within ``server_wait_s`` (s),
       the goal rejected (the controller logs why: joint names, effort fields, times, a
       non-zero final velocity), aborted or failed with an error code (its name and
-      error_string: INVALID_GOAL, PATH_TOLERANCE_VIOLATED, ...), or canceled by someone else.
+      error_string: INVALID_GOAL, PATH_TOLERANCE_VIOLATED, ...), canceled by someone else,
+      or no result within the trajectory's duration + goal time tolerance +
+      ``result_margin_s`` (s) of acceptance (the goal is then cancelled).
 
     The node must be spun by an executor (timers and action responses).
     """
 
     def __init__(self, node, action_name, callback_group=None, server_wait_s=SERVER_WAIT_S,
-                 goal_time_tolerance_s=GOAL_TIME_TOLERANCE_S):
+                 goal_time_tolerance_s=GOAL_TIME_TOLERANCE_S, result_margin_s=RESULT_MARGIN_S):
         self._node = node
         self._group = callback_group
         self._client = ActionClient(node, FollowJointTrajectory, action_name,
@@ -334,6 +339,7 @@ class TrajectoryExecutor:
         self.action_name = action_name
         self.server_wait_s = float(server_wait_s)
         self.goal_time_tolerance_s = goal_time_tolerance_s
+        self.result_margin_s = float(result_margin_s)
         self._lock = threading.Lock()
         self._run = None
 
@@ -435,8 +441,26 @@ class TrajectoryExecutor:
         with self._lock:
             run.handle = handle
             cancel = run.cancel_requested
+            if not run.done:   # a server that dies mid-goal must not leave us busy forever
+                run.timer = self._node.create_timer(self._result_wait_s(run.goal),
+                                                    lambda: self._no_result(run),
+                                                    callback_group=self._group)
         handle.get_result_async().add_done_callback(lambda f: self._result(run, f))
         if cancel:
+            self._request_cancel(run, handle)
+
+    def _result_wait_s(self, goal):
+        """How long (s) after acceptance a result may take: the trajectory's duration, the
+        goal time tolerance and ``result_margin_s``."""
+        end = goal.trajectory.points[-1].time_from_start
+        return end.sec + end.nanosec * 1e-9 + self.goal_time_tolerance_s + self.result_margin_s
+
+    def _no_result(self, run):
+        handle = run.handle
+        self._finish(run, FAILED, f"no result from {self.action_name} within "
+                                  f"{self._result_wait_s(run.goal):.1f} s of acceptance (the "
+                                  f"controller went away?); its goal is cancelled")
+        if handle is not None:
             self._request_cancel(run, handle)
 
     def _request_cancel(self, run, handle):
