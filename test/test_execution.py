@@ -10,7 +10,6 @@ MultiThreadedExecutor as the planner node spins its own.
 """
 
 import functools
-import importlib.util
 import threading
 import time
 
@@ -34,9 +33,8 @@ from cdh_planner.ros import execution as X  # noqa: E402
 from cdh_planner.ros.messages import cable_trajectory_msg, to_seconds  # noqa: E402
 
 from conftest import CONFIG, PROBLEMS  # noqa: E402
-from ros_harness import CONTROLLER_DOUBLE, ControllerDouble, claimed_domain  # noqa: E402
+from ros_harness import ControllerDouble, claimed_domain  # noqa: E402
 
-DOUBLE = CONTROLLER_DOUBLE
 ACTION = "/cable_controller/follow_joint_trajectory"
 FRAME = "cdh_base"
 ROBOT2 = load_robot(CONFIG / "robot2.yaml")
@@ -250,10 +248,8 @@ def test_current_pose_of_unreachable_lengths_says_why(guess):
 
 @functools.lru_cache(maxsize=None)
 def double_module():
-    spec = importlib.util.spec_from_file_location("fjt_double", DOUBLE)
-    module = importlib.util.module_from_spec(spec)
-    spec.loader.exec_module(module)
-    return module
+    from cdh_planner.ros import sim_controller
+    return sim_controller
 
 
 def _raw(change=None):

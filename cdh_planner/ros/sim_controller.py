@@ -1,0 +1,290 @@
+"""A simulated cable controller: a FollowJointTrajectory action server standing in for a
+ros2_control JointTrajectoryController (ros2_controllers, jazzy branch), with the winches'
+JointState, to try the node's ``follow_joint_trajectory`` execution without hardware (the
+demo) and to test it (test/doubles). It is NOT a controller: no hardware, no PID, no
+tolerances; the joints move exactly as commanded.
+
+    python -m cdh_planner.ros.sim_controller JOINT [JOINT ...] [--action NAME]
+        [--joint-states TOPIC] [--initial X [X ...]] [--time-scale K]
+        [--effort-interface] [--allow-nonzero-velocity-at-end]
+
+Before accepting a goal it checks what the real controller's goal callback checks
+(``validate_trajectory_msg``, with the controller's defaults: no partial joint goals, no
+integration in goal trajectories) and rejects it (GoalResponse.REJECT) otherwise, printing
+one JSON line {"event": "rejected", "reason": ...} with the controller's own log message:
+
+- the joint names: as many as the configured JOINTs, non-empty, each one configured (and,
+  beyond the real controller, no name twice: there a duplicate leaves a joint uncommanded);
+- at least one point;
+- the last point's velocities zero (|v| <= float epsilon) unless
+  ``--allow-nonzero-velocity-at-end`` (the controller's allow_nonzero_velocity_at_trajectory_end,
+  default false);
+- a non-zero header stamp: the trajectory must not end in the past;
+- time_from_start strictly increasing (the first point's is not checked);
+- per point: positions one per joint name, velocities and accelerations empty or one per
+  joint name, effort empty unless ``--effort-interface`` (a controller with an effort
+  command interface).
+
+An accepted goal prints {"event": "accepted", "joint_names", "points", "has_effort",
+"duration_s"} and preempts a running one (aborted, INVALID_GOAL, as the controller does). It
+runs in real time divided by ``--time-scale``: positions interpolated linearly in time from
+where the joints are to the first point, then between points (a non-zero stamp in the future
+delays the start), with FollowJointTrajectory feedback at ~17 Hz, and succeeds with
+SUCCESSFUL exactly at the last point's positions ({"event": "succeeded"}). A cancel is
+accepted: the joints hold where they are and the result is canceled ({"event": "canceled"}).
+At SIGINT / SIGTERM a running goal is aborted (as when the controller is deactivated).
+
+sensor_msgs/JointState of the JOINTs' current positions is published at 50 Hz on
+``--joint-states`` (default /joint_states; reliable, volatile, depth 10 like
+joint_state_broadcaster) all the time, from ``--initial`` (one number per joint, default 0).
+Prints "ready" once the action server and the publisher exist; ends cleanly on SIGINT or
+SIGTERM.
+"""
+
+import argparse
+import json
+import signal
+import sys
+import threading
+import time
+
+import numpy as np
+import rclpy
+import rclpy.signals
+from control_msgs.action import FollowJointTrajectory
+from rclpy.action import ActionServer, CancelResponse, GoalResponse
+from rclpy.callback_groups import ReentrantCallbackGroup
+from rclpy.executors import ExternalShutdownException, MultiThreadedExecutor
+from rclpy.qos import DurabilityPolicy, QoSProfile, ReliabilityPolicy
+from sensor_msgs.msg import JointState
+from trajectory_msgs.msg import JointTrajectoryPoint
+
+NODE = "simulated_cable_controller"
+PERIOD_S = 0.02          # 50 Hz: joint states and the interpolation step
+FEEDBACK_EVERY = 3       # feedback every 3rd step, ~17 Hz (the controller's
+                         # action_monitor_rate defaults to 20 Hz)
+FLOAT_EPSILON = float(np.finfo(np.float32).eps)   # the controller's zero velocity
+JOINT_STATE_QOS = QoSProfile(depth=10, reliability=ReliabilityPolicy.RELIABLE,
+                             durability=DurabilityPolicy.VOLATILE)
+Result = FollowJointTrajectory.Result
+
+
+def say(event, **fields):
+    print(json.dumps({"event": event, **fields}), flush=True)
+
+
+def seconds(duration):
+    return duration.sec + duration.nanosec * 1e-9
+
+
+def rejection(trajectory, joints, now_s, effort_interface=False, nonzero_end_velocity=False):
+    """None if the real controller would accept ``trajectory``, else its log message."""
+    names = list(trajectory.joint_names)
+    if len(names) != len(joints):
+        return "Joints on incoming trajectory don't match the controller joints."
+    if not names:
+        return "Empty joint names on incoming trajectory."
+    if not trajectory.points:
+        return "Empty trajectory received."
+    for name in names:
+        if name not in joints:
+            return f"Incoming joint {name} doesn't match the controller's joints."
+    for name in names:
+        if names.count(name) > 1:
+            return f"Incoming joint {name} is named more than once."   # the double's own check
+    if not nonzero_end_velocity:
+        for name, v in zip(names, trajectory.points[-1].velocities):
+            if abs(v) > FLOAT_EPSILON:
+                return f"Velocity of last trajectory point of joint {name} is not zero: {v:.15f}"
+    start_s = seconds(trajectory.header.stamp)
+    if start_s != 0.0:
+        end_s = start_s + seconds(trajectory.points[-1].time_from_start)
+        if end_s < now_s:
+            return (f"Received trajectory with non-zero start time ({start_s:f}) that ends in "
+                    f"the past ({end_s:f})")
+    previous = 0.0
+    for i, point in enumerate(trajectory.points):
+        t = seconds(point.time_from_start)
+        if i > 0 and t <= previous:
+            return (f"Time between points {i - 1} and {i} is not strictly increasing, it is "
+                    f"{previous:f} and {t:f} respectively")
+        previous = t
+        for field, allow_empty in (("positions", False), ("velocities", True),
+                                   ("accelerations", True)):
+            values = getattr(point, field)
+            if not (allow_empty and len(values) == 0) and len(values) != len(names):
+                return (f"Mismatch between joint_names size ({len(names)}) and {field} "
+                        f"({len(values)}) at point #{i}.")
+        if not effort_interface and len(point.effort) > 0:
+            return ("Trajectories with effort fields are only supported for controllers "
+                    "using the 'effort' command interface.")
+    return None
+
+
+class SimulatedController:
+    def __init__(self, node, args):
+        self.node = node
+        self.joints = list(args.joints)
+        self.args = args
+        self.lock = threading.Lock()
+        self.positions = np.array(args.initial, dtype=float)
+        self.active = None           # the goal handle being executed
+        self.stopping = threading.Event()   # set at SIGINT / SIGTERM: running goals abort
+        group = ReentrantCallbackGroup()
+        self.publisher = node.create_publisher(JointState, args.joint_states, JOINT_STATE_QOS)
+        node.create_timer(PERIOD_S, self.publish_state, callback_group=group)
+        self.server = ActionServer(
+            node, FollowJointTrajectory, args.action, execute_callback=self.execute,
+            goal_callback=self.goal_received, handle_accepted_callback=self.goal_accepted,
+            cancel_callback=lambda handle: CancelResponse.ACCEPT, callback_group=group)
+
+    def now_s(self):
+        return self.node.get_clock().now().nanoseconds * 1e-9
+
+    def publish_state(self):
+        msg = JointState(name=self.joints)
+        msg.header.stamp = self.node.get_clock().now().to_msg()
+        with self.lock:
+            msg.position = self.positions.tolist()
+        self.publisher.publish(msg)
+
+    def goal_received(self, goal):
+        reason = rejection(goal.trajectory, self.joints, self.now_s(),
+                           self.args.effort_interface, self.args.allow_nonzero_velocity_at_end)
+        if reason is not None:
+            say("rejected", reason=reason)
+            return GoalResponse.REJECT
+        return GoalResponse.ACCEPT
+
+    def goal_accepted(self, handle):
+        trajectory = handle.request.trajectory
+        say("accepted", joint_names=list(trajectory.joint_names), points=len(trajectory.points),
+            has_effort=any(len(p.effort) > 0 for p in trajectory.points),
+            duration_s=seconds(trajectory.points[-1].time_from_start))
+        with self.lock:
+            previous, self.active = self.active, handle
+        if previous is not None:
+            previous.preempted = True    # its execute loop aborts it (INVALID_GOAL)
+        handle.execute()
+
+    def execute(self, handle):
+        trajectory = handle.request.trajectory
+        order = [list(trajectory.joint_names).index(j) for j in self.joints]
+        times = np.array([seconds(p.time_from_start) for p in trajectory.points])
+        points = np.array([[p.positions[k] for k in order] for p in trajectory.points])
+        with self.lock:
+            start = self.positions.copy()
+        # from where the joints are to the first point (at its time), then point to point
+        if times[0] > 0:
+            times, points = np.concatenate([[0.0], times]), np.vstack([start, points])
+        stamp_s = seconds(trajectory.header.stamp)
+        t0 = time.monotonic() + (max(0.0, stamp_s - self.now_s()) if stamp_s else 0.0)
+        scale = self.args.time_scale
+        step = 0
+        while True:
+            if getattr(handle, "preempted", False):
+                handle.abort()
+                say("aborted", reason="preempted")
+                return Result(error_code=Result.INVALID_GOAL,
+                              error_string="Current goal preempted by new incoming action.")
+            if self.stopping.is_set():
+                handle.abort()
+                self.release(handle)
+                say("aborted", reason="shutting down")
+                return Result(error_code=Result.INVALID_GOAL,
+                              error_string="Current goal cancelled during deactivate transition.")
+            if handle.is_cancel_requested:
+                handle.canceled()
+                self.release(handle)
+                say("canceled")
+                return Result()
+            t = max(0.0, (time.monotonic() - t0) * scale)
+            finished = t >= times[-1]
+            desired = points[-1] if finished else np.array(
+                [np.interp(t, times, points[:, j]) for j in range(len(self.joints))])
+            with self.lock:
+                if self.active is handle:
+                    self.positions = desired.copy()
+            if step % FEEDBACK_EVERY == 0:
+                self.feedback(handle, desired)
+            step += 1
+            if finished:
+                handle.succeed()
+                self.release(handle)
+                say("succeeded", positions=desired.tolist())
+                return Result(error_code=Result.SUCCESSFUL,
+                              error_string="Goal successfully reached!")
+            time.sleep(PERIOD_S)
+
+    def feedback(self, handle, desired):
+        msg = FollowJointTrajectory.Feedback(joint_names=self.joints)
+        msg.header.stamp = self.node.get_clock().now().to_msg()
+        msg.desired = JointTrajectoryPoint(positions=desired.tolist())
+        msg.actual = JointTrajectoryPoint(positions=desired.tolist())
+        msg.error = JointTrajectoryPoint(positions=[0.0] * len(self.joints))
+        handle.publish_feedback(msg)
+
+    def release(self, handle):
+        with self.lock:
+            if self.active is handle:
+                self.active = None
+
+
+def parse(argv):
+    parser = argparse.ArgumentParser(description=__doc__.split("\n\n")[0])
+    parser.add_argument("joints", nargs="+", help="the controller's joints")
+    parser.add_argument("--action", default="/cable_controller/follow_joint_trajectory")
+    parser.add_argument("--joint-states", default="/joint_states")
+    parser.add_argument("--initial", type=float, nargs="+", default=None,
+                        help="initial positions, one per joint (default 0)")
+    parser.add_argument("--time-scale", type=float, default=1.0,
+                        help="run trajectories this many times faster than real time")
+    parser.add_argument("--effort-interface", action="store_true")
+    parser.add_argument("--allow-nonzero-velocity-at-end", action="store_true")
+    args = parser.parse_args(argv)
+    if args.initial is None:
+        args.initial = [0.0] * len(args.joints)
+    if len(args.initial) != len(args.joints):
+        parser.error(f"--initial: {len(args.joints)} numbers expected")
+    if not args.time_scale > 0:
+        parser.error("--time-scale must be > 0")
+    return args
+
+
+def main(argv=None):
+    args = parse(sys.argv[1:] if argv is None else argv)
+    # our own handlers: rclpy's SIGTERM handler does not wake a waiting executor
+    rclpy.init(signal_handler_options=rclpy.signals.SignalHandlerOptions.NO)
+    node = rclpy.create_node(NODE)
+    double = SimulatedController(node, args)
+    executor = MultiThreadedExecutor(num_threads=4)
+    executor.add_node(node)
+    stop = threading.Event()
+    for signum in (signal.SIGINT, signal.SIGTERM):
+        signal.signal(signum, lambda *_: stop.set())
+    spinner = threading.Thread(target=_spin, args=(executor, stop), daemon=True)
+    spinner.start()
+    print("ready", flush=True)
+    while not stop.wait(0.5):
+        pass
+    double.stopping.set()
+    time.sleep(2 * PERIOD_S)          # running goals see it and abort
+    executor.shutdown(timeout_sec=2.0)
+    spinner.join(timeout=5.0)
+    double.server.destroy()
+    node.destroy_node()
+    rclpy.try_shutdown()
+    return 0
+
+
+def _spin(executor, stop):
+    try:
+        executor.spin()
+    except (KeyboardInterrupt, ExternalShutdownException):
+        pass
+    finally:
+        stop.set()
+
+
+if __name__ == "__main__":
+    sys.exit(main())
