@@ -3,9 +3,13 @@
 File layout (MCAP ``ros2`` profile, as rosbag2's MCAP storage writes it): one ``ros2msg``
 schema per type named ``pkg/msg/Type`` with the full definition (see ``ros_schemas``), one
 ``cdr`` channel per topic with ``offered_qos_profiles`` metadata, a statistics record. No
-``rosbag2`` metadata record (optional, and if present it must be complete). One departure:
-service events are recorded as ``pkg/msg/SEvent``, not rosbag2's ``pkg/srv/S_Event``, which
-neither mcap_ros2 nor rosbags (nor ``rosbags-convert``) decodes (``ros_schemas`` explains).
+``rosbag2`` metadata record (optional, and if present it must be complete). Service calls
+are recorded as rosbag2 records them (``<service>/_service_event``), and an action's goals
+and results as rosbag2 records actions: events of its send_goal and get_result services
+(``<action>/_action/send_goal/_service_event``, ``.../get_result/_service_event``). One
+departure: their types are named ``pkg/msg/SEvent`` (``pkg/msg/ASendGoalEvent``), not
+rosbag2's ``pkg/srv/S_Event`` (``pkg/action/A_SendGoal_Event``), which neither mcap_ros2
+nor rosbags (nor ``rosbags-convert``) decodes (``ros_schemas`` explains).
 Every record decodes with mcap_ros2's stock ``DecoderFactory`` and rosbags' ``AnyReader``,
 and ``rosbags-convert`` turns a file into a rosbag2 directory.
 
@@ -56,6 +60,11 @@ from .ros_schemas import encodable, full_definition, mcap_ros2_alias, recorded_t
 # service_msgs/msg/ServiceEventInfo event types
 REQUEST_SENT, REQUEST_RECEIVED, RESPONSE_SENT, RESPONSE_RECEIVED = 0, 1, 2, 3
 SERVICE_EVENT_SUFFIX = "/_service_event"
+# an action's services, as rosbag2 records them: <action>/_action/<service>/_service_event
+ACTION_INFIX = "/_action/"
+SEND_GOAL, GET_RESULT = "send_goal", "get_result"
+ACTION_SERVICES = {SEND_GOAL: "SendGoal", GET_RESULT: "GetResult"}   # topic -> type part
+STATUS_UNKNOWN = 0   # action_msgs/msg/GoalStatus
 LIBRARY = "cdh_planner mcap_log"
 MAGIC = b"\x89MCAP0\r\n"     # starts and ends every MCAP file
 
@@ -141,21 +150,55 @@ class RunRecorder:
         pkg, kind, name = split_type_name(srv_type)
         if kind != "srv":
             raise ValueError(f"not a service type: {srv_type!r} (expected pkg/srv/Name)")
-        if len(client_gid) != 16:
-            raise ValueError(f"client_gid must be 16 bytes, got {len(client_gid)}")
-        log_time_ns = time.time_ns() if log_time_ns is None else log_time_ns
-        stamp_ns = log_time_ns if stamp_ns is None else stamp_ns
         if request is not None and response is not None:
             raise ValueError("a service event holds a request or a response, not both")
-        event = {
-            "info": {"event_type": event_type,
-                     "stamp": {"sec": stamp_ns // 10**9, "nanosec": stamp_ns % 10**9},
-                     "client_gid": bytes(client_gid), "sequence_number": sequence_number},
-            "request": [] if request is None else [request],
-            "response": [] if response is None else [response],
-        }
+        log_time_ns = time.time_ns() if log_time_ns is None else log_time_ns
+        event = _service_event(event_type, request, response, sequence_number,
+                               log_time_ns if stamp_ns is None else stamp_ns, client_gid)
         self._write(service_name.rstrip("/") + SERVICE_EVENT_SUFFIX,
                     f"{pkg}/srv/{name}_Event", event, log_time_ns, False)
+
+    def write_action_event(self, action_name: str, action_type: str, event_type: int,
+                           goal=None, result=None, *, sequence_number: int = 0,
+                           goal_id: bytes = bytes(16), status: int = STATUS_UNKNOWN,
+                           stamp_ns: int | None = None, client_gid: bytes = bytes(16),
+                           log_time_ns: int | None = None) -> None:
+        """Record an action's goal or result the way rosbag2 records actions: as events of
+        the action's services (``ros_schemas`` explains). A ``goal`` (``pkg/action/A_Goal``,
+        with REQUEST_RECEIVED or REQUEST_SENT) is a ``pkg/action/A_SendGoal_Event`` whose
+        request holds ``goal_id`` and the goal, on ``<action>/_action/send_goal/
+        _service_event``; a ``result`` (with RESPONSE_SENT or RESPONSE_RECEIVED) is a
+        ``pkg/action/A_GetResult_Event`` whose response holds ``status``
+        (action_msgs/GoalStatus; default unknown) and the result, on
+        ``<action>/_action/get_result/_service_event``. A goal and its result share
+        ``sequence_number`` (and ``goal_id``, 16 bytes); ``stamp_ns`` defaults to the log
+        time.
+        """
+        pkg, kind, name = split_type_name(action_type)
+        if kind != "action":
+            raise ValueError(f"not an action type: {action_type!r} (expected pkg/action/Name)")
+        if (goal is None) == (result is None):
+            raise ValueError("an action event holds a goal or a result (one of them)")
+        requests = (REQUEST_SENT, REQUEST_RECEIVED)
+        if (goal is not None) != (event_type in requests):
+            raise ValueError(f"event type {event_type}: a goal goes with REQUEST_RECEIVED "
+                             f"or REQUEST_SENT, a result with RESPONSE_SENT or "
+                             f"RESPONSE_RECEIVED")
+        if len(goal_id) != 16:
+            raise ValueError(f"goal_id must be 16 bytes, got {len(goal_id)}")
+        log_time_ns = time.time_ns() if log_time_ns is None else log_time_ns
+        stamp_ns = log_time_ns if stamp_ns is None else stamp_ns
+        if goal is not None:
+            service, request, response = SEND_GOAL, {"goal_id": {"uuid": bytes(goal_id)},
+                                                     "goal": goal}, None
+        else:
+            service, request, response = GET_RESULT, None, {"status": int(status),
+                                                            "result": result}
+        event = _service_event(event_type, request, response, sequence_number, stamp_ns,
+                               client_gid)
+        self._write(f"{action_name.rstrip('/')}{ACTION_INFIX}{service}{SERVICE_EVENT_SUFFIX}",
+                    f"{pkg}/action/{name}_{ACTION_SERVICES[service]}_Event", event,
+                    log_time_ns, False)
 
     def close(self) -> None:
         """Write the summary and footer, fsync and close. Idempotent."""
@@ -201,6 +244,19 @@ class RunRecorder:
             metadata={"offered_qos_profiles": offered_qos_yaml(transient_local)})
         self._channels[topic] = (channel_id, type_name)
         return channel_id, encoder
+
+
+def _service_event(event_type, request, response, sequence_number, stamp_ns, client_gid):
+    """A service event (``pkg/srv/S_Event``, or an action's service's) as plain data."""
+    if len(client_gid) != 16:
+        raise ValueError(f"client_gid must be 16 bytes, got {len(client_gid)}")
+    return {
+        "info": {"event_type": event_type,
+                 "stamp": {"sec": stamp_ns // 10**9, "nanosec": stamp_ns % 10**9},
+                 "client_gid": bytes(client_gid), "sequence_number": sequence_number},
+        "request": [] if request is None else [request],
+        "response": [] if response is None else [response],
+    }
 
 
 class _DecoderFactory(DecoderFactory):
@@ -271,7 +327,8 @@ def _ends_with_magic(f) -> bool:
 def read_run(path) -> list[tuple[str, str, object, int]]:
     """All messages of a run file as (topic, type name, decoded message, log time ns), in
     log-time order (stable). Also reads files of killed runs (no summary, torn tail). Type
-    names are rosidl's (``nav_msgs/srv/GetPlan_Event``, whatever the file calls it).
+    names are rosidl's (``nav_msgs/srv/GetPlan_Event``,
+    ``pkg/action/A_SendGoal_Event``, whatever the file calls them).
 
     Messages are mcap_ros2's decoded objects (attributes named like the fields; nested
     messages as objects, arrays as lists; ``char`` decoded as int8 by mcap_ros2).

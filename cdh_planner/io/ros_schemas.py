@@ -1,8 +1,9 @@
 """ROS 2 message definitions (``ros2msg`` schemas) and plain-data views of messages.
 
-No rclpy here: definitions are read from the installed ``share/<pkg>/msg|srv`` files through
-the ament index, and messages are handled by duck typing (rosidl-generated Python classes have
-``get_fields_and_field_types``), so the io layer stays importable without a ROS graph.
+No rclpy here: definitions are read from the installed ``share/<pkg>/msg|srv|action`` files
+through the ament index, and messages are handled by duck typing (rosidl-generated Python
+classes have ``get_fields_and_field_types``), so the io layer stays importable without a ROS
+graph.
 
 Schema text layout (rosbag2's ``LocalMessageDefinitionSource``, MCAP ``ros2msg``): the type's
 own text, then for each nested type, sorted by name, depth first, each once::
@@ -35,6 +36,38 @@ Foxglove). The cost: tools that go by the type name alone (``ros2 bag play``) do
 ``pkg/msg/SEvent`` type and skip those topics. ``rosidl_type`` maps the recorded name back;
 files recorded before (``pkg/srv/S_Event``, halves ``pkg/S_Request``) are still read
 (``mcap_ros2_alias``), and ``io.mcap_log.recover_run`` rewrites them to the new names.
+
+Actions have no .msg files either. rosidl splits ``pkg/action/A.action`` at its ``---``
+lines into ``A_Goal``, ``A_Result`` and ``A_Feedback``, and derives the two services an
+action runs on (``rosidl_parser.definition.Action``)::
+
+    A_SendGoal_Request    unique_identifier_msgs/UUID goal_id, A_Goal goal
+    A_SendGoal_Response   bool accepted, builtin_interfaces/Time stamp
+    A_GetResult_Request   unique_identifier_msgs/UUID goal_id
+    A_GetResult_Response  int8 status, A_Result result
+    A_SendGoal_Event, A_GetResult_Event   (info, request[<=1], response[<=1], as any service)
+    A_FeedbackMessage     unique_identifier_msgs/UUID goal_id, A_Feedback feedback
+
+All of them are generated classes rclpy (de)serializes (``pkg.action.A.Impl.SendGoalService
+.Event`` ...). A goal and its result are recorded as rosbag2 records actions (its action
+recording design, ``rosbag2_record_replay_action.md``): service events of the two services,
+on ``<action>/_action/send_goal/_service_event`` (the goal: a ``REQUEST_RECEIVED`` event
+whose request carries goal_id and goal) and ``<action>/_action/get_result/_service_event``
+(the result: a ``RESPONSE_SENT`` event whose response carries status and result). So each
+goal and each result is one record of a real generated message, and a reader that knows
+rosbag2's action topics finds them where it looks. Only those two of the four events
+rosbag2 would hold: the node accepts every goal (send_goal's response says nothing), and
+get_result's request holds only the goal_id. A goal and its result share the
+``sequence_number`` (the node's call number), which pairs them; ``goal_id`` and ``status``
+are recorded when the caller gives them, else zeros and STATUS_UNKNOWN. Their types are renamed as the services'
+are, without underscores: ``pkg/msg/ASendGoalEvent`` (nesting ``pkg/ASendGoalRequest``,
+``pkg/AGoal`` ...) and ``pkg/msg/AGetResultEvent`` (``pkg/AGetResultResponse``,
+``pkg/AResult`` ...), with the same cost and the same way back (``rosidl_type``:
+``pkg/action/A_SendGoal_Event``).
+
+Not a single made-up ``pkg/msg/AGoalEvent`` holding ``AGoal[<=1] goal`` and
+``AResult[<=1] result``: it would decode in the stock readers too, but rclpy has no class
+for it, and rosbag2 does not record actions that way.
 """
 
 import array
@@ -51,6 +84,10 @@ PRIMITIVES = frozenset({
     "bool", "byte", "char", "float32", "float64", "int8", "uint8", "int16", "uint16",
     "int32", "uint32", "int64", "uint64", "string", "wstring"})
 SERVICE_PARTS = ("Request", "Response", "Event")
+# the types rosidl generates for an action A, named A_<part> (module docstring)
+ACTION_PARTS = ("SendGoal_Request", "SendGoal_Response", "SendGoal_Event",
+                "GetResult_Request", "GetResult_Response", "GetResult_Event",
+                "FeedbackMessage", "Feedback", "Result", "Goal")
 
 
 def type_name_of(msg) -> str:
@@ -128,26 +165,60 @@ def _service_part(pkg: str, name: str) -> tuple[str, str] | None:
     return None
 
 
+@lru_cache(maxsize=None)
+def _action_part(pkg: str, name: str) -> tuple[str, str] | None:
+    """(A, part) if ``name`` is one of the types rosidl generates for an installed action
+    ``pkg/action/A`` (``A_Goal``, ``A_SendGoal_Event`` ...: ``ACTION_PARTS``; also spelled
+    without underscores), else None."""
+    for part in ACTION_PARTS:
+        for spelled in (part, part.replace("_", "")):
+            if not name.endswith(spelled):
+                continue
+            action = name[: -len(spelled)]
+            action = action[:-1] if action.endswith("_") else action
+            if action and (_share_dir(pkg) / "action" / f"{action}.action").is_file():
+                return action, part
+    return None
+
+
 def _is_msg(pkg: str, name: str) -> bool:
     return (_share_dir(pkg) / "msg" / f"{name}.msg").is_file()
 
 
+def _generated_part(pkg: str, name: str) -> tuple[str, str, str] | None:
+    """("srv" or "action", interface, part) if ``name`` is a type rosidl generates for an
+    installed service or action of ``pkg`` (not a .msg of its own), else None."""
+    if _is_msg(pkg, name):
+        return None
+    if (found := _service_part(pkg, name)) is not None:
+        return ("srv", *found)
+    if (found := _action_part(pkg, name)) is not None:
+        return ("action", *found)
+    return None
+
+
 def recorded_type(type_name: str) -> str:
-    """The name ``type_name`` is recorded under: itself, except the parts of a service
-    (``nav_msgs/srv/GetPlan_Event`` -> ``nav_msgs/msg/GetPlanEvent``; module docstring)."""
+    """The name ``type_name`` is recorded under: itself, except the parts of a service or an
+    action (``nav_msgs/srv/GetPlan_Event`` -> ``nav_msgs/msg/GetPlanEvent``,
+    ``pkg/action/A_SendGoal_Event`` -> ``pkg/msg/ASendGoalEvent``; module docstring)."""
     pkg, ns, name = split_type_name(type_name)
-    part = None if ns == "msg" and _is_msg(pkg, name) else _service_part(pkg, name)
-    return type_name if part is None else f"{pkg}/msg/{part[0]}{part[1]}"
+    found = _generated_part(pkg, name)
+    if found is None:
+        return type_name
+    _, interface, part = found
+    return f"{pkg}/msg/{interface}{part.replace('_', '')}"
 
 
 def rosidl_type(recorded: str) -> str:
     """The rosidl name of a recorded type name (``nav_msgs/msg/GetPlanEvent`` ->
-    ``nav_msgs/srv/GetPlan_Event``; ``pkg/srv/S_Event`` of older files stays). Names of
+    ``nav_msgs/srv/GetPlan_Event``, ``pkg/msg/ASendGoalEvent`` ->
+    ``pkg/action/A_SendGoal_Event``; ``pkg/srv/S_Event`` of older files stays). Names of
     packages not installed here stay as they are."""
     pkg, ns, name = split_type_name(recorded)
-    if ns != "msg" or _is_msg(pkg, name) or (part := _service_part(pkg, name)) is None:
+    if ns != "msg" or (found := _generated_part(pkg, name)) is None:
         return recorded
-    return f"{pkg}/srv/{part[0]}_{part[1]}"
+    kind, interface, part = found
+    return f"{pkg}/{kind}/{interface}_{part}"
 
 
 def _service_text(pkg: str, name: str) -> str | None:
@@ -165,17 +236,53 @@ def _service_text(pkg: str, name: str) -> str | None:
     return _srv_halves(pkg, service)[0 if part == "Request" else 1]
 
 
+def _action_thirds(pkg: str, action: str) -> list[str]:
+    """Goal, result and feedback texts of ``pkg/action/action.action`` (split on the ``---``
+    lines, as rosidl does)."""
+    text = (_share_dir(pkg) / "action" / f"{action}.action").read_text()
+    thirds = re.split(r"^---[ \t]*\r?\n?", text, maxsplit=2, flags=re.MULTILINE)
+    if len(thirds) != 3:
+        raise ValueError(f"{pkg}/action/{action}.action has not two '---' separators")
+    return thirds
+
+
+def _action_text(pkg: str, name: str) -> str | None:
+    """Text of ``name`` if it is a type generated for an installed action ``pkg/action/A``
+    (``_action_part``; the members rosidl_parser's ``Action`` gives them), else None. Nested
+    generated types are named without underscores (``pkg/ASendGoalRequest``)."""
+    found = _action_part(pkg, name)
+    if found is None:
+        return None
+    action, part = found
+    own = f"{pkg}/{action}"
+    uuid = "unique_identifier_msgs/UUID goal_id\n"
+    if part in ("Goal", "Result", "Feedback"):
+        return _action_thirds(pkg, action)[("Goal", "Result", "Feedback").index(part)]
+    if part.endswith("_Event"):
+        service = own + part[: -len("_Event")]
+        return (f"service_msgs/ServiceEventInfo info\n"
+                f"{service}Request[<=1] request\n"
+                f"{service}Response[<=1] response\n")
+    return {"SendGoal_Request": f"{uuid}{own}Goal goal\n",
+            "SendGoal_Response": "bool accepted\nbuiltin_interfaces/Time stamp\n",
+            "GetResult_Request": uuid,
+            "GetResult_Response": f"int8 status\n{own}Result result\n",
+            "FeedbackMessage": f"{uuid}{own}Feedback feedback\n"}[part]
+
+
 @lru_cache(maxsize=None)
 def own_definition(type_name: str) -> tuple[str, tuple[str, ...]]:
     """(text, sorted nested type names) of one type, without its dependencies' texts.
 
     Nested names are as they appear in ``MSG:`` headers (``pkg/Type``). A name may be a
-    service part in either spelling (``nav_msgs/GetPlanRequest``, ``nav_msgs/srv/GetPlan_Event``).
+    service or action part in either spelling (``nav_msgs/GetPlanRequest``,
+    ``nav_msgs/srv/GetPlan_Event``, ``pkg/action/A_SendGoal_Event``, ``pkg/AGoal``).
     """
     pkg, ns, name = split_type_name(type_name)
     if ns == "msg" and _is_msg(pkg, name):
         text = (_share_dir(pkg) / "msg" / f"{name}.msg").read_text()
-    elif (text := _service_text(pkg, name)) is None:
+    elif (text := _service_text(pkg, name)) is None and \
+            (text := _action_text(pkg, name)) is None:
         raise LookupError(f"no definition of {type_name} under {_share_dir(pkg)}")
     return text, tuple(sorted(_field_types(text, pkg)))
 

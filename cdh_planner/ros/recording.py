@@ -13,11 +13,18 @@ node's parameters as ``new_parameters``, and each accepted change is recorded as
 ``changed_parameters``. So any one file says which parameters were in effect at each of its
 requests (``replay --requests`` applies them).
 
+Plan calls: a GetPlan call's request and response as service events
+(``<service>/_service_event``), a PlanPath goal and its result as rosbag2 records actions
+(``<action>/_action/send_goal/_service_event``, ``.../get_result/_service_event``;
+``io.mcap_log``). Both are numbered by the node's one call counter (``sequence_number``),
+which pairs a goal with its result (the node gives ``action_event`` neither the goal's UUID
+nor its final status: they are recorded as zeros and STATUS_UNKNOWN).
+
 Rotation: with ``max_bytes`` or ``max_s`` (> 0), a file that has reached either limit is
 closed before the next record and the record starts the next file. A plan call's request
-and response stay in one file: a response never starts a file, and while a call is open
-the other records wait for rotation up to twice the limits. A file thus holds at least
-one record after its parameter snapshot.
+and response (a goal and its result) stay in one file: an answer never starts a file, and
+while a call is open the other records wait for rotation up to twice the limits. A file
+thus holds at least one record after its parameter snapshot.
 
 Recording never raises into the node. A failure of the file (disk full, directory gone) is
 reported once through ``warn`` and recording stops until the configuration changes; a
@@ -119,6 +126,21 @@ class RunLog:
                    log_time_ns=log_time_ns, at=log_time_ns, opens=opens,
                    closes=call if answer else None,
                    rotate=not answer)   # an answer joins its request
+
+    def action_event(self, action, action_type, event_type, goal=None, result=None,
+                     sequence_number=0, log_time_ns=None, **kwargs):
+        """An action's goal (REQUEST_RECEIVED / REQUEST_SENT, ``goal``) or result
+        (RESPONSE_SENT / RESPONSE_RECEIVED, ``result``), paired by ``sequence_number``
+        (``RunRecorder.write_action_event``; ``kwargs``: its ``goal_id``, ``status``). Kept
+        together as a service call's request and response are: the result joins its goal's
+        file."""
+        call = (action, sequence_number)
+        answer = event_type in (RESPONSE_SENT, RESPONSE_RECEIVED)
+        opens = call if event_type in (REQUEST_RECEIVED, REQUEST_SENT) else None
+        self._call("write_action_event", action, action_type, event_type, goal=goal,
+                   result=result, sequence_number=sequence_number, log_time_ns=log_time_ns,
+                   at=log_time_ns, opens=opens, closes=call if answer else None,
+                   rotate=not answer, **kwargs)
 
     def close(self):
         """Close the file (summary, footer, fsync); later records are dropped."""
