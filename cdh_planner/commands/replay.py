@@ -10,9 +10,15 @@ Without ``--requests``: republish the recorded topics with their original timing
 (``cable_command``, ``cable_trajectory``) move the robot: they are republished only with
 ``--commands``, e.g. ``--commands --topics /cdh_planner/cable_command`` to test a winch
 controller on a bench.
-With ``--requests``: re-send the recorded plan requests to a running node and report, for
-each, whether the new answer matches the recorded one (pose by pose, within the tolerance),
-and for an answer that differs, why it may (parameters that differ, the node's history).
+With ``--requests``: re-send the recorded plan requests to a running node, in recorded
+order: GetPlan calls to ``~/plan`` ("request N") and PlanPath goals to ``~/plan_path``
+("goal N", e.g. those of ``cdh-planner call``; N is the node's call number). Report, for
+each, whether the new answer matches the recorded one (pose by pose, within the tolerance;
+for a goal also the error code), and for an answer that differs, why it may (parameters
+that differ, the node's history). A goal recorded with ``use_current_start`` was planned
+from the pose the node measured, which the goal does not hold: it is sent with the recorded
+path's first pose as its start instead (its line says so); without a recorded path, as
+recorded.
 Before each request the parameters recorded since the previous one (the file's snapshot,
 then each change) are set on the node, those that decide answers (``base_frame``,
 ``robot.*``, ``task.*``, ``planner.*``, ``trajectory.*``), each recorded change in one atomic
@@ -66,10 +72,10 @@ def add_parser(subparsers):
                    help="never wait more than S seconds between two messages: longer "
                         "recorded gaps (after --rate) are cut to S (default: %(default)g)")
     p.add_argument("--requests", action="store_true",
-                   help="re-send the recorded plan requests to a running node, after setting "
-                        "the parameters recorded before each, and compare (to reproduce the "
-                        "recorded answers: a freshly started node, since the planner keeps its "
-                        "atlas between requests)")
+                   help="re-send the recorded plan requests (GetPlan calls, PlanPath goals) "
+                        "to a running node, after setting the parameters recorded before "
+                        "each, and compare (to reproduce the recorded answers: a freshly "
+                        "started node, since the planner keeps its atlas between requests)")
     p.add_argument("--node", help="node for --requests (default: the recorded one)")
     p.add_argument("--keep-parameters", dest="keep_parameters", action="store_true",
                    help="--requests: do not set the recorded parameters on the node")
@@ -159,22 +165,34 @@ def replay_requests(args, records):
             setter = R.ParameterSetter(client, min(args.timeout, 30.0))
             for plan in plans:
                 problems = [] if args.keep_parameters else _apply(setter, plan)
-                answer = client.plan(plan.request.start, plan.request.goal, args.timeout,
-                                     tolerance=plan.request.tolerance)
+                note = ""
+                if plan.action:
+                    goal, note = R.goal_to_replay(plan)
+                    answer = client.plan_path(goal, args.timeout)
+                    error_msg = answer.result.error_msg
+                else:
+                    answer = client.plan(plan.request.start, plan.request.goal, args.timeout,
+                                         tolerance=plan.request.tolerance)
+                    error_msg = answer.values.get("error_msg", "")
+                note = f" ({note})" if note else ""
                 call = R.call_number(answer.values)
                 first_call = call if first_call is None else first_call
                 if plan.response is None:
-                    print(f"request {plan.sequence}: no recorded response (run ended); now "
+                    print(f"{plan.label}{note}: no recorded response (run ended); now "
                           f"{len(answer.path.poses)} poses")
                     continue
-                ok, text = R.compare_paths(plan.response.plan, answer.path, args.tolerance,
-                                           args.tolerance)
-                why = "" if answer.success else f" ({answer.values.get('error_msg', '')})"
+                if plan.action:
+                    ok, text = R.compare_results(plan.response, answer.result, args.tolerance,
+                                                 args.tolerance)
+                else:
+                    ok, text = R.compare_paths(plan.response.plan, answer.path, args.tolerance,
+                                               args.tolerance)
+                why = "" if answer.success else f" ({error_msg})"
                 if not ok:
                     differs += 1
                     why += "; why: " + "; ".join(
                         _reasons(args, setter, plan, plans[0], problems, first_call))
-                print(f"request {plan.sequence}: {'MATCHES' if ok else 'DIFFERS'}: {text}{why}")
+                print(f"{plan.label}{note}: {'MATCHES' if ok else 'DIFFERS'}: {text}{why}")
         except ClientError as exc:
             print(f"cdh-planner replay: error: {exc}", file=sys.stderr)
             return EXIT_NO_NODE
@@ -189,10 +207,10 @@ def _apply(setter, plan):
         names, problem = setter.set(params)
         if names:
             shown = ", ".join(names) if len(names) <= 4 else f"{len(names)} parameters"
-            print(f"request {plan.sequence}: set as recorded: {shown}")
+            print(f"{plan.label}: set as recorded: {shown}")
         if problem:
             problems.append(problem)
-            print(f"request {plan.sequence}: parameters not applied: {problem}")
+            print(f"{plan.label}: parameters not applied: {problem}")
     return problems
 
 
@@ -201,6 +219,15 @@ def _reasons(args, setter, plan, first, problems, first_call):
     from ..ros import replay as R
     from ..ros.client import ClientError
     out = []
+    if plan.action and plan.response is not None and \
+            plan.response.error_code in (R.CANCELED, R.BUSY):
+        out.append(f"the recorded goal ended {R.error_code_name(plan.response.error_code)} "
+                   f"(a cancel, the node shutting down or a full queue), which a replay does "
+                   f"not repeat")
+    if plan.action and plan.request.use_current_start and \
+            (plan.response is None or not plan.response.path.poses):
+        out.append("use_current_start: planned from the pose the recording's node measured, "
+                   "which is not recorded")
     if problems:
         out.append("recorded parameters not applied (" + "; ".join(problems) + ")")
     if not plan.parameters:

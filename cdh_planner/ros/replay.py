@@ -4,17 +4,22 @@
   ``rate``; no wait longer than ``max_gap_s``), each topic with its recorded type and QoS
   (latched topics stay latched). The CDR bytes are published as recorded
   (``Publisher.publish(bytes)``), so nothing is decoded and re-encoded on the way. Service
-  event topics (``.../_service_event``) are not republished: they are the recorded calls,
-  which ``--requests`` re-sends; nor is ``/parameter_events`` unless asked for (it would tell
-  every listener that the node's parameters changed).
-- ``recorded_plans`` + ``ParameterReplay`` + ``compare_paths``: the recorded GetPlan
-  requests and responses with the parameters in effect at each, to re-send to a live node
-  (after applying the recorded parameter changes) and compare the answers pose by pose.
+  event topics (``.../_service_event``, an action's ``.../_action/send_goal/_service_event``
+  and ``.../get_result/_service_event`` included) are not republished: they are the
+  recorded calls, which ``--requests`` re-sends; nor is ``/parameter_events`` unless asked
+  for (it would tell every listener that the node's parameters changed).
+- ``recorded_plans`` + ``ParameterSetter`` + ``compare_paths`` / ``compare_results``: the
+  recorded GetPlan requests and responses and PlanPath goals and results, in recorded
+  order, with the parameters in effect at each, to re-send to a live node (after applying
+  the recorded parameter changes) and compare the answers pose by pose (and, for goals,
+  by error code). ``goal_to_replay``: what is sent for a recorded goal (one with
+  ``use_current_start`` starts from the recorded path's first pose).
 
 Killed runs (no summary, torn tail) are read too (``io.mcap_log``'s linear scan); what is
 not a recording is refused (InputError, with the reason).
 """
 
+import copy
 import importlib
 import math
 import time
@@ -26,10 +31,12 @@ from rclpy.duration import Duration
 from rclpy.qos import DurabilityPolicy, QoSProfile, ReliabilityPolicy
 from rclpy.serialization import deserialize_message
 
+from cdh_planner_interfaces.action import PlanPath
+
 from ..errors import InputError
 from ..model.pose import rotation_angle_between, rotation_from_quaternion
-from ..io.mcap_log import REQUEST_RECEIVED, RESPONSE_SENT, SERVICE_EVENT_SUFFIX, \
-    NotARecording, check_recording
+from ..io.mcap_log import ACTION_INFIX, GET_RESULT, REQUEST_RECEIVED, RESPONSE_SENT, \
+    SEND_GOAL, SERVICE_EVENT_SUFFIX, NotARecording, check_recording
 from ..io.mcap_log import scan_records as scan_run  # raw records of a (possibly killed) run file
 from ..io.ros_schemas import rosidl_type
 from .messages import path_arrays
@@ -44,10 +51,19 @@ ANSWER_PREFIXES = ("robot.", "task.", "planner.", "trajectory.")
 ANSWER_PARAMETERS = ("base_frame",)
 
 
+# the recorded PlanPath goals and results (io.mcap_log.RunRecorder.write_action_event)
+PLAN_PATH_TYPE = "cdh_planner_interfaces/action/PlanPath"
+GOAL_SUFFIX = f"{ACTION_INFIX}{SEND_GOAL}{SERVICE_EVENT_SUFFIX}"
+RESULT_SUFFIX = f"{ACTION_INFIX}{GET_RESULT}{SERVICE_EVENT_SUFFIX}"
+ERROR_CODE_NAMES = {getattr(PlanPath.Result, n): n for n in dir(PlanPath.Result)
+                    if n.isupper() and isinstance(getattr(PlanPath.Result, n), int)}
+CANCELED, BUSY = PlanPath.Result.CANCELED, PlanPath.Result.BUSY
+
+
 @dataclass(frozen=True)
 class Record:
     topic: str
-    type_name: str     # pkg/msg/Type (pkg/srv/S_Event for service events)
+    type_name: str     # pkg/msg/Type (pkg/srv/S_Event, pkg/action/A_SendGoal_Event for events)
     data: bytes        # CDR, as recorded
     log_time_ns: int
     transient_local: bool
@@ -87,8 +103,9 @@ def read_records(path):
 
 
 def message_class(type_name):
-    """The rosidl Python class of ``pkg/msg/Type`` or ``pkg/srv/S_Event`` (InputError if the
-    package is not installed)."""
+    """The rosidl Python class of ``pkg/msg/Type``, ``pkg/srv/S_Event`` or one of the types
+    of an action (``pkg/action/A_Goal``, ``pkg/action/A_SendGoal_Event`` ...) (InputError if
+    the package is not installed)."""
     parts = type_name.split("/")
     if len(parts) != 3:
         raise InputError("type", type_name, "expected pkg/msg/Type")
@@ -97,8 +114,17 @@ def message_class(type_name):
         module = importlib.import_module(f"{pkg}.{kind}")
         if kind == "srv" and name.endswith("_Event"):
             return getattr(module, name[: -len("_Event")]).Event
+        if kind == "action" and not hasattr(module, name) and "_" in name:
+            action, part = name.split("_", 1)
+            cls = getattr(module, action)
+            if part in ("Goal", "Result", "Feedback"):
+                return getattr(cls, part)
+            if part == "FeedbackMessage":
+                return cls.Impl.FeedbackMessage
+            service, member = part.split("_", 1)
+            return getattr(getattr(cls.Impl, f"{service}Service"), member)
         return getattr(module, name)
-    except (ImportError, AttributeError):
+    except (ImportError, AttributeError, ValueError):
         raise InputError("type", type_name, "message type not installed here") from None
 
 
@@ -223,16 +249,25 @@ def decides_answers(name):
 
 @dataclass
 class RecordedPlan:
-    sequence: int
-    service: str
-    request: object             # nav_msgs/srv/GetPlan.Request
-    response: Optional[object]  # GetPlan.Response, None if the run ended before it
+    """A recorded plan call: a GetPlan request and its response, or (``action``) a PlanPath
+    goal and its result."""
+
+    sequence: int               # the node's call number (GetPlan and PlanPath alike)
+    service: str                # the GetPlan service, or the PlanPath action
+    request: object             # nav_msgs/srv/GetPlan.Request, or PlanPath.Goal
+    response: Optional[object]  # GetPlan.Response or PlanPath.Result; None: the run ended
     # the recorded parameter sets (each a list of rcl_interfaces/msg/Parameter, one per
     # accepted set call; the first may be the file's snapshot) since the previous request,
     # only those that decide answers
     parameter_sets: list = field(default_factory=list)
     # name -> rcl_interfaces/msg/Parameter in effect at this request (answer-deciding ones)
     parameters: dict = field(default_factory=dict)
+    action: bool = False        # a PlanPath goal (through the action), not a GetPlan call
+
+    @property
+    def label(self):
+        """"request 3" (GetPlan) or "goal 4" (PlanPath), as replay prints it."""
+        return f"{'goal' if self.action else 'request'} {self.sequence}"
 
 
 def node_of(service):
@@ -241,9 +276,10 @@ def node_of(service):
 
 
 def recorded_plans(records):
-    """The recorded GetPlan calls (request, response) in order, paired by sequence number,
-    each with the parameters recorded for its node since the previous call (``/parameter_
-    events``: the snapshot a file begins with, then each accepted change)."""
+    """The recorded plan calls in recorded order: GetPlan calls (request, response) and
+    PlanPath goals (goal, result), each paired by its sequence number (the node's call
+    number), each with the parameters recorded for its node since the previous call
+    (``/parameter_events``: the snapshot a file begins with, then each accepted change)."""
     from nav_msgs.srv import GetPlan
     from rcl_interfaces.msg import ParameterEvent
     calls = {}
@@ -258,20 +294,70 @@ def recorded_plans(records):
                 pending.setdefault(event.node, []).append(params)
                 state.setdefault(event.node, {}).update({p.name: p for p in params})
             continue
-        if not (is_service_event(r) and r.type_name == "nav_msgs/srv/GetPlan_Event"):
+        if not is_service_event(r):
             continue
-        event = deserialize_message(r.data, GetPlan.Event)
+        if r.type_name == "nav_msgs/srv/GetPlan_Event":
+            event = deserialize_message(r.data, GetPlan.Event)
+            service, action = r.topic[: -len(SERVICE_EVENT_SUFFIX)], False
+            request, response = event.request, event.response
+        elif r.type_name == f"{PLAN_PATH_TYPE}_SendGoal_Event" and r.topic.endswith(GOAL_SUFFIX):
+            event = deserialize_message(r.data, PlanPath.Impl.SendGoalService.Event)
+            service, action = r.topic[: -len(GOAL_SUFFIX)], True
+            request, response = [q.goal for q in event.request], []
+        elif r.type_name == f"{PLAN_PATH_TYPE}_GetResult_Event" and \
+                r.topic.endswith(RESULT_SUFFIX):
+            event = deserialize_message(r.data, PlanPath.Impl.GetResultService.Event)
+            service, action = r.topic[: -len(RESULT_SUFFIX)], True
+            request, response = [], [a.result for a in event.response]
+        else:
+            continue
         seq = int(event.info.sequence_number)
-        service = r.topic[: -len(SERVICE_EVENT_SUFFIX)]
-        if event.info.event_type == REQUEST_RECEIVED and event.request:
+        key = (service, action, seq)
+        if event.info.event_type == REQUEST_RECEIVED and request:
             node = node_of(service)
-            calls[(service, seq)] = RecordedPlan(seq, service, event.request[0], None,
-                                                 pending.pop(node, []),
-                                                 dict(state.get(node, {})))
-        elif event.info.event_type == RESPONSE_SENT and event.response \
-                and (service, seq) in calls:
-            calls[(service, seq)].response = event.response[0]
+            calls[key] = RecordedPlan(seq, service, request[0], None, pending.pop(node, []),
+                                      dict(state.get(node, {})), action=action)
+        elif event.info.event_type == RESPONSE_SENT and response and key in calls:
+            calls[key].response = response[0]
     return list(calls.values())
+
+
+def goal_to_replay(plan):
+    """(PlanPath.Goal to send, note) for the recorded goal ``plan``: the goal as recorded,
+    except that one with ``use_current_start`` (planned from the pose the recording's node
+    measured, which the goal does not hold) starts from the recorded path's first pose, with
+    use_current_start off: the start the recording's node planned from. Without a recorded
+    path it is sent as recorded (the node then plans from its own measured lengths, if any).
+    ``note`` says which, for the output line ("" for an ordinary goal)."""
+    goal = plan.request
+    if not goal.use_current_start:
+        return goal, ""
+    path = plan.response.path if plan.response is not None else None
+    if path is None or not path.poses:
+        return goal, ("use_current_start, sent as recorded: the measured start is not "
+                      "recorded, and no recorded path to take it from")
+    start = copy.deepcopy(path.poses[0])
+    start.header.frame_id = path.header.frame_id or start.header.frame_id
+    return (PlanPath.Goal(start=start, goal=goal.goal, use_current_start=False,
+                          strategy=goal.strategy, timeout_s=goal.timeout_s),
+            "use_current_start: replayed from the recorded path's first pose (the measured "
+            "start is not recorded)")
+
+
+def error_code_name(code):
+    """``TF_ERROR`` for 202 (PlanPath.Result's constants), or the number."""
+    return ERROR_CODE_NAMES.get(int(code), str(code))
+
+
+def compare_results(recorded, new, tolerance_m=1e-6, tolerance_rad=1e-6):
+    """(match, text): do two PlanPath results agree: the same error code, and paths pose by
+    pose (``compare_paths``)?"""
+    same_code = int(recorded.error_code) == int(new.error_code)
+    ok, text = compare_paths(recorded.path, new.path, tolerance_m, tolerance_rad)
+    code = (f"error code {error_code_name(new.error_code)} as recorded" if same_code else
+            f"error code {error_code_name(recorded.error_code)} recorded, "
+            f"{error_code_name(new.error_code)} now")
+    return same_code and ok, f"{code}; {text}"
 
 
 def parameter_value(msg):
