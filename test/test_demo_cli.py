@@ -96,42 +96,61 @@ def test_demo_writes_the_two_slice_pictures(full_run):
 
 
 def test_demo_ros_story(full_run):
-    """The node plans q_1 -> q_2 -> q_3 over ROS, each motion is dense-safe and streamed to
-    its last waypoint at the stream rate; the recording replays (commands identical, requests
-    answered the same by a fresh node); both nodes stop with exit 0; the run file is a
-    complete MCAP; the summary table and the two pictures."""
+    """The node plans q_1 -> q_2 -> q_3 through its action, each motion dense-safe: the first
+    streamed to its last waypoint at the stream rate; then the simulated ros2_control
+    controller takes over and the second, planned from the measured pose, runs through it
+    to its last waypoint; the recording replays (commands identical, goals answered the same
+    by a fresh node); both nodes stop with exit 0; the run file is a complete MCAP; the
+    summary table and the two pictures."""
     rc, text, out = full_run
     assert rc == 0, text[-3000:]
     assert "DIFFERS" not in text and "FAILED" not in text and "skipped" not in text
     ros = text[text.index("== 5. The ROS 2 node"):]
     assert re.search(r"node /cdh_planner ready in [\d.]+ s: base_frame cdh_base, task.type "
                      r"sphere, planner.strategy auto", ros)
+    parts = {}
     for leg in ("q_1 -> q_2", "q_2 -> q_3"):
-        part = ros[ros.index(f"call ~/plan: {leg}"):]
+        start, goal = leg.split(" -> ")
+        head = re.search(rf"goal ~/plan_path: .*{start}.* -> {goal} ", ros)
+        assert head, ros[:600]
+        part = parts[leg] = ros[head.start():]
         planned = re.search(r"planned in ([\d.]+) s \((\d+) charts, astar\): (\d+) waypoints, "
                             r"path ([\d.]+) m, duration ([\d.]+) s, lowest tension margin "
                             r"([\d.]+) N", part)
         assert planned, part[:400]
         assert float(planned.group(1)) < 30 and float(planned.group(6)) > 0
-        assert "checked densely: safe, worst margin +" in part.splitlines()[2]
-        streamed = re.search(r"streamed (\d+) cable commands over ([\d.]+) s \(([\d.]+) Hz\); "
-                             r"last = the final waypoint's cable lengths within 0.0e\+00 m", part)
-        assert streamed, part[:800]
-        assert 45.0 <= float(streamed.group(3)) <= 55.0                 # stream_rate_hz 50
-        assert abs(float(streamed.group(2)) - float(planned.group(5))) < 0.1
+        assert "checked densely: safe, worst margin +" in part
+        assert "execution completed" in part.split("\n== ")[0], part[:1500]
+        parts[leg] = (part.split("\n== ")[0], planned)
+    part, planned = parts["q_1 -> q_2"]
+    streamed = re.search(r"streamed (\d+) cable commands over ([\d.]+) s \(([\d.]+) Hz\); "
+                         r"last = the final waypoint's cable lengths within 0.0e\+00 m", part)
+    assert streamed, part[:800]
+    assert 45.0 <= float(streamed.group(3)) <= 55.0                 # stream_rate_hz 50
+    assert abs(float(streamed.group(2)) - float(planned.group(5))) < 0.1
+    assert "set execution.mode follow_joint_trajectory: done" in ros
+    part, _ = parts["q_2 -> q_3"]
+    assert re.search(r"start from the forward kinematics of the measured lengths: [\d.e+-]+ m "
+                     r"from q_2", part), part[:800]
+    assert "through /cable_controller/follow_joint_trajectory" in part
+    assert "start not checked" not in part                           # the winches are measured
+    assert re.search(r"the controller moved the winches: \d+ joint states; the last = the "
+                     r"final waypoint's cable lengths within 0.0e\+00 m", part), part[:1500]
     assert re.search(r"received (\d+) republished commands \(recorded \1 over [\d.]+ s\): "
                      r"identical to the ones streamed live", ros)
-    assert "request 1: MATCHES" in ros and "request 2: MATCHES" in ros
+    assert "goal 1: MATCHES" in ros and "goal 2 (use_current_start" in ros
     assert "2 of 2 answers match the recording" in ros
     assert "fresh node stopped by SIGINT, exit code 0" in ros
     assert re.search(r"node stopped by SIGINT in [\d.]+ s, exit code 0", ros)
     assert "complete MCAP (rosbags reads it)" in ros
-    assert re.search(r"/cdh_planner/plan/_service_event: 4\n", ros)     # 2 requests, 2 answers
+    assert re.search(r"/cdh_planner/plan_path/_action/send_goal/_service_event: 2\n", ros)
+    assert re.search(r"/cdh_planner/plan_path/_action/get_result/_service_event: 2\n", ros)
     [run_file] = (out / "runs").glob("*.mcap")
     assert str(run_file) in ros
     rows = [line.split() for line in ros.splitlines() if line.startswith("q_")]
     assert [r[:3] for r in rows] == [["q_1", "->", "q_2"], ["q_2", "->", "q_3"]]
     assert all(r[-2] == "safe" for r in rows)
+    assert rows[0][-1].endswith("_commands:completed") and rows[1][-1] == "controller:completed"
     for name, size in (("robot2_plans.png", (1000, 600)), ("robot2_execution.png", (1000, 700))):
         assert (out / name).stat().st_size > 20_000 and png_size(out / name) == size
         assert f"wrote {out / name}" in ros

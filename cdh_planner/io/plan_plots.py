@@ -389,20 +389,22 @@ def plot_paths(robot, view, paths, out, markers=(), segment=None, periodic=(Fals
 @dataclass(frozen=True)
 class ExecutedMotion:
     """A motion as executed: its waypoints' times ``t`` (N,) s, cable ``lengths`` (N, 6) m
-    and tension ``envelope`` (N, 6, 3) N (min, nominal, max); the streamed commands' times
-    ``command_t`` (M,) s (from the first) and cable lengths ``commands`` (M, 6) m."""
+    and tension ``envelope`` (N, 6, 3) N (min, nominal, max); the executed cable lengths
+    ``executed`` (M, 6) m (the streamed commands, or the winches' measured joint states) at
+    ``executed_t`` (M,) s from the first, and which of the two they are (``how``)."""
 
     t: np.ndarray
     lengths: np.ndarray
     envelope: np.ndarray
-    command_t: np.ndarray
-    commands: np.ndarray
+    executed_t: np.ndarray
+    executed: np.ndarray
+    how: str = "streamed"
 
 
 def plot_execution(robot, motions, out, size=EXECUTION_SIZE):
-    """Motions (label -> ExecutedMotion) one after the other: above, per cable, the streamed
-    commands (lines) through the waypoints' lengths (dots); below, the tension envelopes
-    (bands, nominal as a line); dashed: the robot's limits."""
+    """Motions (label -> ExecutedMotion) one after the other: above, per cable, the executed
+    lengths (lines: streamed commands, or measured) through the waypoints' lengths (dots);
+    below, the tension envelopes (bands, nominal as a line); dashed: the robot's limits."""
     fig = plt.figure(figsize=(size[0] / DPI, size[1] / DPI), dpi=DPI, layout="constrained")
     try:
         top, bottom = fig.subplots(2, 1, sharex=True)
@@ -410,13 +412,13 @@ def plot_execution(robot, motions, out, size=EXECUTION_SIZE):
         offset = 0.0
         for k, (label, m) in enumerate(motions.items()):
             for i in range(m.lengths.shape[1]):
-                top.plot(offset + m.command_t, m.commands[:, i], color=colors(i), lw=1.2,
+                top.plot(offset + m.executed_t, m.executed[:, i], color=colors(i), lw=1.2,
                          label=robot.winch_names[i] if k == 0 else None)
                 top.plot(offset + m.t, m.lengths[:, i], ".", color=colors(i), ms=3)
                 _draw_envelope(bottom, offset + m.t, *m.envelope[:, i].T, color=colors(i),
                                nominal_color=colors(i))
             top.axvline(offset, color="grey", lw=0.8, ls=":")
-            top.annotate(label, (offset, 1), xycoords=("data", "axes fraction"),
+            top.annotate(f"{label} ({m.how})", (offset, 1), xycoords=("data", "axes fraction"),
                          xytext=(4, -14), textcoords="offset points")
             offset += m.t[-1] + 0.5
         for ax, low, high in ((top, robot.length_min, robot.length_max),
@@ -424,7 +426,7 @@ def plot_execution(robot, motions, out, size=EXECUTION_SIZE):
             ax.axhline(np.min(low), color="black", ls="--", lw=0.8)
             ax.axhline(np.max(high), color="black", ls="--", lw=0.8)
         top.set_ylabel("cable length (m)")
-        top.set_title("streamed cable commands (lines) through the trajectory's waypoints "
+        top.set_title("executed cable lengths (lines) through the trajectory's waypoints "
                       "(dots); dashed: limits")
         top.legend(ncol=6, fontsize="small", loc="lower right")
         bottom.set_ylabel("tension (N)")

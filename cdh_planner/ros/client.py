@@ -99,6 +99,7 @@ class Execution:
     goal: Optional[np.ndarray] = None
     commands: list = field(default_factory=list)
     end: Optional[object] = None      # diagnostic_msgs/DiagnosticStatus
+    called_at: float = math.nan       # time.monotonic() of the ~/execute call
     arrived: bool = False
     stopped: str = ""
 
@@ -391,6 +392,7 @@ class PlannerClient:
             run.envelope = self.envelopes[-1] if self.envelopes else None
             run.goal = np.asarray(run.trajectory.points[-1].positions, dtype=float)
         first, ends = len(self.commands), len(self.execution_results)
+        run.called_at = time.monotonic()
         run.accepted, run.message = self.execute()
 
         def streamed_to_the_goal():

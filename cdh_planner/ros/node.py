@@ -277,7 +277,7 @@ class PlannerNode(Node):
         the error code and reason); feedback at most every PROGRESS_PERIOD_S."""
         seq, run_id, log_file = self._new_call()
         goal = goal_handle.request
-        self._record_goal(REQUEST_RECEIVED, seq, goal=goal)
+        self._record_goal(REQUEST_RECEIVED, seq, goal_handle, goal=goal)
         last = [0.0]
 
         def feedback(info):
@@ -304,7 +304,7 @@ class PlannerNode(Node):
         else:
             goal_handle.abort()
         answer = planning.action_result(result, out, path)
-        self._record_goal(RESPONSE_SENT, seq, result=answer)
+        self._record_goal(RESPONSE_SENT, seq, goal_handle, result=answer)
         return answer
 
     def _new_call(self):
@@ -453,6 +453,9 @@ class PlannerNode(Node):
             p, R = execution.current_pose(config.robot, lengths, self._pose_guess(lengths))
         except InputError as exc:
             return str(exc)
+        except Exception as exc:  # noqa: BLE001 - the goal still gets a result, with why
+            self.get_logger().error(f"forward kinematics failed: {traceback.format_exc()}")
+            return f"forward kinematics failed: {_name(exc)}: {_one_line(exc)}"
         self._last_pose = (p, R)
         return M.pose_stamped_msg(p, R, config.base_frame, self.get_clock().now().to_msg())
 
@@ -616,15 +619,14 @@ class PlannerNode(Node):
                      "nav_msgs/srv/GetPlan", event, request=request, response=response,
                      sequence_number=seq, log_time_ns=self._now())
 
-    def _record_goal(self, event, seq, goal=None, result=None):
+    def _record_goal(self, event, seq, goal_handle, goal=None, result=None):
         """Record a ~/plan_path goal as it arrived (REQUEST_RECEIVED) or its result as sent
-        (RESPONSE_SENT), paired by ``seq``."""
-        if not hasattr(self.runlog, "action_event"):  # TEMPORARY until RunLog has it
-            return
+        (RESPONSE_SENT, with the goal's final status), paired by ``seq``."""
         self._record(self.runlog.action_event,
                      self.get_fully_qualified_name() + "/" + PLAN_PATH,
                      "cdh_planner_interfaces/action/PlanPath", event, goal=goal, result=result,
-                     sequence_number=seq, log_time_ns=self._now())
+                     sequence_number=seq, log_time_ns=self._now(),
+                     goal_id=bytes(goal_handle.goal_id.uuid), status=goal_handle.status)
 
     # ------------------------------------------------------------------ helpers
 

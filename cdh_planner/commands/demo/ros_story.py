@@ -1,12 +1,17 @@
 """The ROS story (``STEPS``, after the paper's): 5. start ``cdh-planner node`` on Robot 2
-in a ROS domain of its own, recording to ``<out>/runs``; 6., 7. a task sequencer plans
-q_1 -> q_2 and q_2 -> q_3 over ROS, checks each motion densely and executes it
-(``PlannerClient.execute_and_follow``); 8. replay: the recorded commands are republished and
-compared, the recorded requests re-sent to a fresh node (the planner keeps its atlas between
-requests, so only a node in its starting state answers the same); 9. SIGINT, the run file
-read back; 10. pictures (``io.plan_plots``) and a summary. The steps share ``demo.ros`` (a
-``NodeStory``); the nodes are stopped at exit whatever happens. rclpy is imported inside
-the steps only, so the paper's story runs without ROS.
+in a ROS domain of its own, recording to ``<out>/runs``; 6. a task sequencer plans
+q_1 -> q_2 through the ``~/plan_path`` action, checks the motion densely and streams it
+(``PlannerClient.execute_and_follow``); 7. ros2_control takes over: the simulated cable
+controller (``ros/sim_controller.py``, a FollowJointTrajectory server with the winches'
+JointState) starts where the winches are and the node switches to
+``execution.mode: follow_joint_trajectory``; 8. q_2 -> q_3 planned from the pose of the
+measured cable lengths (``use_current_start``) and executed through the controller;
+9. replay: the recorded commands are republished and compared, the recorded goals re-sent
+to a fresh node (the planner keeps its atlas between requests, so only a node in its
+starting state answers the same); 10. SIGINT, the run file read back; 11. pictures
+(``io.plan_plots``) and a summary. The steps share ``demo.ros`` (a ``NodeStory``); the
+processes are stopped at exit whatever happens. rclpy is imported inside the steps only,
+so the paper's story runs without ROS.
 """
 
 import atexit
@@ -33,7 +38,9 @@ NODE_TIMEOUT_S = 60.0
 PLAN_TIMEOUT_S = 120.0
 TOLERANCE = 1e-9   # m and rad: a re-sent request must get the same path
 PARAMETERS = ("base_frame", "task.type", "planner.strategy", "trajectory.max_cable_speed",
-              "trajectory.max_cable_accel", "stream_rate_hz")
+              "trajectory.max_cable_accel", "stream_rate_hz", "execution.mode",
+              "execution.controller_action", "execution.joint_states_topic")
+CONTROLLER_READY_S = 30.0
 
 
 class NodeFailed(RuntimeError):
@@ -44,8 +51,10 @@ class NodeFailed(RuntimeError):
 class Leg:
     start: str
     goal: str
+    current_start: bool = False           # from the measured pose (use_current_start)
     answer: object = None                 # client.PlanAnswer
     run: object = None                    # client.Execution
+    measured: list = field(default_factory=list)  # (s, lengths) from the winches' JointState
     coords: Optional[np.ndarray] = None   # task coordinates of the waypoints
     safe: Optional[bool] = None
     worst_margin: float = math.nan
@@ -59,6 +68,8 @@ class NodeStory:
     client: object                        # client.PlannerClient
     node_log: Path
     frame: str = ""                       # the node's base_frame
+    parameters: dict = field(default_factory=dict)  # PARAMETERS as the node has them
+    joint_states: list = field(default_factory=list)  # (time.monotonic(), JointState)
     legs: list = field(default_factory=list)
     run_file: str = ""
     failed: bool = False                  # a step failed: the others are skipped
@@ -114,39 +125,50 @@ def start_node(demo):
         tail = node_log.read_text().strip().splitlines()[-3:]
         raise NodeFailed(f"the node exited with {process.returncode}: " + " | ".join(tail))
     client.wait_for_node(max(1.0, end - time.monotonic()))
-    params = client.get_parameters(PARAMETERS)
+    story.parameters = params = client.get_parameters(PARAMETERS)
     story.frame = params["base_frame"]
     print(f"node {client.target} ready in {time.perf_counter() - t0:.1f} s: "
           + ", ".join(f"{k} {v}" for k, v in params.items()))
 
 
-def _leg(demo, start, goal):
-    """Plan start -> goal over ROS, check the motion densely, execute it."""
+def _leg(demo, start, goal, current_start=False):
+    """Plan start -> goal through ~/plan_path, check the motion densely, execute it."""
     from ...model.pose import quaternion_from_tau, tau_from_quaternion
     from ...ros import messages as M
-    from ...ros.client import path_duration, path_length, pose_stamped
+    from ...ros.client import path_duration, path_length, plan_path_goal, pose_stamped
     from ...trajectory.verify import check_motion
 
     story, robot, task = demo.ros, demo.robots["robot2"], demo.tasks["robot2"]
-    leg = Leg(start, goal)
+    leg = Leg(start, goal, current_start)
     story.legs.append(leg)
     poses = [pose_stamped([*p, *quaternion_from_tau(tau)], story.frame)
              for p, tau in (demo.pose("robot2", label) for label in (start, goal))]
-    print(f"call ~/plan: {start} -> {goal} (poses of the sphere task, m and quaternion in "
-          f"{story.frame})")
-    leg.answer = answer = story.client.plan(*poses, PLAN_TIMEOUT_S)
+    where = (f"the pose of the measured cable lengths (use_current_start; {start} expected)"
+             if current_start else start)
+    print(f"goal ~/plan_path: {where} -> {goal} (poses of the sphere task, m and quaternion "
+          f"in {story.frame})")
+    leg.answer = answer = story.client.plan_path(
+        plan_path_goal(None if current_start else poses[0], poses[1],
+                       use_current_start=current_start), PLAN_TIMEOUT_S)
     v = answer.values
     if not answer.success:
-        print(f"  NO PLAN (error code {v.get('error_code')}): {v.get('error_msg')}")
+        print(f"  NO PLAN (error code {answer.result.error_code}): {answer.result.error_msg}")
         demo.differs.append(f"robot2 {start} -> {goal} over ROS: no plan "
-                            f"({v.get('error_msg')}), expected a path (the paper's Sec. 5.2)")
+                            f"({answer.result.error_msg}), expected a path (the paper's Sec. 5.2)")
         return
     p, quat = M.path_arrays(answer.path)
+    if current_start:
+        off = float(np.linalg.norm(p[0] - _position(poses[0])))
+        print(f"  start from the forward kinematics of the measured lengths: {off:.1e} m from "
+              f"{start}")
     leg.coords = task.coords(p, tau_from_quaternion(quat))
     checks = check_motion(robot, p, quat)
     leg.safe = all(c.feasible for c in checks)
     leg.worst_margin = min(c.worst.margin for c in checks)
-    print(f"  planned in {answer.number('planning_time_s'):.2f} s ({v['charts']} charts, "
+    charts = [f.charts for f in answer.feedback]
+    print(f"  {len(charts)} feedback messages while planning"
+          + (f" (charts {charts[0]} .. {charts[-1]})" if charts else ""))
+    print(f"  planned in {answer.result.planning_time_s:.2f} s ({answer.result.charts} charts, "
           f"{v['strategy']}): {len(p)} waypoints, path {path_length(answer.path):.4f} m, "
           f"duration {path_duration(answer.path):.2f} s, lowest tension margin "
           f"{answer.number('min_tension_margin_n'):.3f} N")
@@ -156,21 +178,49 @@ def _leg(demo, start, goal):
     if not leg.safe:
         demo.differs.append(f"robot2 {start} -> {goal}: the planned motion leaves C between "
                             f"waypoints")
+    measured_from = len(story.joint_states)
     leg.run = run = story.client.execute_and_follow(answer)
     print(f"call ~/execute: {run.message}")
+    print(f"  {run.end.message if run.end is not None else 'no ~/execution_result received'}")
+    story.client.spin(0.1)   # the joint state at the end
+    leg.measured = _from_first_motion(story.joint_states[measured_from:])
+    if leg.measured:
+        print(f"  the winches began to move {leg.measured[1][0] - run.called_at:.3f} s after "
+              f"the ~/execute call (joint states at 50 Hz)")
     if not run.accepted:
         demo.differs.append(f"robot2 {start} -> {goal}: execute refused: {run.message}")
-    elif not run.commands:
-        print("  no ~/cable_command received")
-        demo.differs.append(f"robot2 {start} -> {goal}: nothing streamed")
-    else:
+    elif run.commands:
         (span, rate), err = run.rate(), run.error_m()
         print(f"  streamed {len(run.commands)} cable commands over {span:.2f} s ({rate:.1f} "
               f"Hz); last = the final waypoint's cable lengths within {err:.1e} m: "
               + " ".join(f"{x:.4f}" for x in run.values()[1][-1]) + " m")
-        if not run.arrived:
-            demo.differs.append(f"robot2 {start} -> {goal}: streaming ended {err:.3g} m from "
-                                f"the last waypoint")
+    elif leg.measured:
+        last = _measured_lengths(leg.measured[-1][1], robot.winch_names)
+        err = float(np.max(np.abs(last - run.goal))) if run.goal is not None else math.nan
+        print(f"  the controller moved the winches: {len(leg.measured)} joint states; the last "
+              f"= the final waypoint's cable lengths within {err:.1e} m")
+    if run.accepted and not run.arrived:
+        demo.differs.append(f"robot2 {start} -> {goal}: the execution did not reach the last "
+                            f"waypoint ({run.outcome or 'no result'})")
+
+
+def _from_first_motion(states, tol_m=1e-9):
+    """The (arrival time, JointState) list from the last state before the joints moved."""
+    if not states:
+        return []
+    first = np.asarray(states[0][1].position)
+    moved = [k for k, (_, m) in enumerate(states)
+             if np.max(np.abs(np.asarray(m.position) - first)) > tol_m]
+    return states[max(moved[0] - 1, 0):] if moved else []
+
+
+def _position(pose_stamped):
+    p = pose_stamped.pose.position
+    return np.array([p.x, p.y, p.z])
+
+
+def _measured_lengths(joint_state, names):
+    return np.array([joint_state.position[list(joint_state.name).index(n)] for n in names])
 
 
 def leg_q1_q2(demo):
@@ -178,9 +228,48 @@ def leg_q1_q2(demo):
     _leg(demo, *LEGS[0])
 
 
+def start_controller(demo):
+    """Start the simulated cable controller where the winches are; execution through it."""
+    from sensor_msgs.msg import JointState
+    story, client = demo.ros, demo.ros.client
+    robot = demo.robots["robot2"]
+    first = story.legs[0] if story.legs else None
+    if first is None or first.run is None or first.run.goal is None:
+        raise NodeFailed("no executed first leg: the winches' lengths are unknown")
+    params = story.parameters
+    args = ["-m", "cdh_planner.ros.sim_controller", *robot.winch_names,
+            "--action", params["execution.controller_action"],
+            "--joint-states", params["execution.joint_states_topic"],
+            "--initial", *(repr(float(x)) for x in first.run.goal)]
+    log = demo.out_dir / "controller.log"
+    out = story.stack.enter_context(open(log, "w"))
+    process = subprocess.Popen([sys.executable, *args], env=isolated_env(story.domain),
+                               stdout=out, stderr=subprocess.STDOUT)
+    story.stack.callback(stop_process, process)
+    print(f"$ python {' '.join(args)}")
+    print(f"  (a simulated ros2_control JointTrajectoryController: it checks goals as the "
+          f"Jazzy controller does and publishes the winches' JointState; log {log})")
+    client.node.create_subscription(JointState, params["execution.joint_states_topic"],
+                                    lambda msg: story.joint_states.append(
+                                        (time.monotonic(), msg)), 10)
+    if not client.spin_until(lambda: story.joint_states or process.poll() is not None,
+                             CONTROLLER_READY_S) or process.poll() is not None:
+        raise NodeFailed(f"the simulated controller did not start (see {log})")
+    client.spin(0.5)   # the node hears the joint states too
+    print(f"  joint states on {params['execution.joint_states_topic']}: "
+          + " ".join(f"{x:.4f}" for x in _measured_lengths(story.joint_states[-1][1],
+                                                            robot.winch_names)) + " m")
+    change = {"execution.mode": "follow_joint_trajectory"}
+    results = client.set_parameters(change)
+    print(f"set execution.mode follow_joint_trajectory: "
+          + ("done" if results == [(True, "")] else f"REFUSED {results}"))
+    if results != [(True, "")]:
+        raise NodeFailed(f"the node refused {change}: {results}")
+
+
 def leg_q2_q3(demo):
-    """Plan q_2 -> q_3 over ROS and execute it."""
-    _leg(demo, *LEGS[1])
+    """Plan q_2 -> q_3 from the measured pose; execute through the controller."""
+    _leg(demo, *LEGS[1], current_start=True)
 
 
 def replay(demo):
@@ -238,7 +327,7 @@ def replay(demo):
     r = subprocess.run(_cli(*args), env=isolated_env(fresh_domain), capture_output=True,
                        text=True, timeout=300)
     for line in r.stdout.splitlines():
-        if line.startswith("request") or "answers match" in line:
+        if line.startswith(("request", "goal")) or "answers match" in line:
             print(f"  {line.strip()}")
     if r.returncode != 0:
         demo.differs.append(f"replay --requests: exit {r.returncode}: "
@@ -297,21 +386,39 @@ def ros_pictures(demo):
     for leg in legs:
         if leg.run is not None and leg.run.envelope is not None:
             t, lengths = M.trajectory_arrays(leg.run.trajectory)
-            stamps, commands = leg.run.values()
+            if leg.run.commands:
+                stamps, done = leg.run.values()
+                how = "streamed commands"
+            elif leg.measured:
+                stamps = np.array([arrived for arrived, _ in leg.measured])
+                done = np.array([_measured_lengths(m, robot.winch_names)
+                                 for _, m in leg.measured])
+                how = "measured joint states, from the first motion"
+            else:
+                continue
             executed[f"{_plain(leg.start)} -> {_plain(leg.goal)}"] = ExecutedMotion(
-                t, lengths, M.envelope_from_msg(leg.run.envelope), stamps - stamps[:1], commands)
+                t, lengths, M.envelope_from_msg(leg.run.envelope), stamps - stamps[:1], done,
+                how)
     path = demo.out_dir / "robot2_execution.png"
     plot_execution(robot, executed, path)
     demo.files.append(path)
     print(f"wrote {path}")
     print()
     table(["motion", "waypoints", "planning (s)", "charts", "path (m)", "duration (s)",
-           "least tension margin (N)", "between waypoints", "commands streamed"],
+           "least tension margin (N)", "between waypoints", "executed"],
           [[f"{leg.start} -> {leg.goal}", str(len(leg.coords)),
             f"{leg.answer.number('planning_time_s'):.2f}", leg.answer.values["charts"],
             f"{leg.answer.number('path_length_m'):.4f}", f"{leg.answer.number('duration_s'):.2f}",
             f"{leg.answer.number('min_tension_margin_n'):.3f}", "safe" if leg.safe else "UNSAFE",
-            str(len(leg.run.commands) if leg.run else 0)] for leg in legs])
+            _executed(leg)] for leg in legs])
+
+
+def _executed(leg):
+    """How a leg was executed, for the summary: streamed, or by the controller."""
+    if leg.run is None or not leg.run.accepted:
+        return "no"
+    how = f"{len(leg.run.commands)}_commands" if leg.run.commands else "controller"
+    return f"{how}:{leg.run.outcome or 'no_result'}"
 
 
 def _plain(label):
@@ -352,8 +459,12 @@ def _guarded(step, needs_node=True):
 
 STEPS = [
     Step("node", "The ROS 2 node (Robot 2, sphere task)", _guarded(start_node, False)),
-    Step("q1-q2", "Task sequencer: plan q_1 -> q_2 over ROS, execute", _guarded(leg_q1_q2)),
-    Step("q2-q3", "Task sequencer: plan q_2 -> q_3 over ROS, execute", _guarded(leg_q2_q3)),
+    Step("q1-q2", "Task sequencer: plan q_1 -> q_2 through the action, stream it",
+         _guarded(leg_q1_q2)),
+    Step("controller", "ros2_control takes over: the simulated cable controller",
+         _guarded(start_controller)),
+    Step("q2-q3", "Plan q_2 -> q_3 from the measured pose, execute through the controller",
+         _guarded(leg_q2_q3)),
     Step("replay", "Replay the recorded run", _guarded(replay)),
     Step("shutdown", "Shut the node down; the run file", _guarded(shutdown)),
     Step("ros-pictures", "Pictures of the plans and the execution; summary",
