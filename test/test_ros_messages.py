@@ -215,7 +215,9 @@ def _result(reason, success=False, message="what happened"):
 
 @pytest.mark.parametrize("reason, code", [
     ("start_infeasible", 205), ("goal_infeasible", 206), ("no_path", 208), ("timeout", 207),
-    ("chart_limit", 208), ("invalid", 200)])
+    ("chart_limit", 208), ("invalid", 292), ("canceled", 290), ("busy", 291),
+    ("output_limit", 294), ("no_current_state", 293), ("bad_strategy", 201),
+    ("internal_error", 200)])
 def test_plan_status_failure_codes(reason, code):
     msg = M.plan_status(_result(reason), run_id="run-7", log_file="/tmp/run-7.mcap")
     assert msg.level == DiagnosticStatus.ERROR

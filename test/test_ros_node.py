@@ -218,6 +218,17 @@ def test_poses_to_six_decimals_plan_within_the_tolerance(ros, q1_q2):
     _serves(ros)
 
 
+def test_the_call_help_example_plans_as_printed(ros, q1_q2):
+    """`cdh-planner call --help`'s example, copied from the help text, plans (exit 0)."""
+    import re
+    help_text = run_cli(ros.domain, "call", "--help").stdout
+    example = help_text[help_text.index("example"):]
+    start = re.search(r'--start "([^"]+)"', example).group(1)
+    goal = re.search(r'--goal "([^"]+)"', example).group(1)
+    r = run_cli(ros.domain, "call", "--start", start, "--goal", goal)
+    assert r.returncode == 0 and "outcome: planned" in r.stdout, r.stdout + r.stderr
+
+
 @pytest.mark.parametrize("param,value,code", [
     ("planner.max_charts", 3, M.NO_VALID_PATH),
     ("planner.timeout_s", 0.001, M.TIMEOUT),

@@ -253,7 +253,7 @@ def test_execute_and_follow_reaches_the_last_waypoint(ros, monkeypatch):
         real = client.spin_until
 
         def interrupted(condition, timeout_s):
-            if condition.__name__ == "arrived":   # following the stream
+            if condition.__name__ == "ended":     # following the execution
                 raise KeyboardInterrupt
             return real(condition, timeout_s)
 

@@ -402,13 +402,15 @@ class PlannerClient:
             return not np.any(velocities) and np.allclose(positions, run.goal, rtol=0,
                                                           atol=ARRIVAL_TOL_M)
 
+        def ended():
+            return len(self.execution_results) > ends
+
         if run.accepted:
             try:
-                self.spin_until(lambda: len(self.execution_results) > ends,
-                                path_duration(answer.path) + margin_s)
+                self.spin_until(ended, path_duration(answer.path) + margin_s)
             except KeyboardInterrupt:
                 run.stopped = self.stop()[1]
-                self.spin_until(lambda: len(self.execution_results) > ends, LATCHED_WAIT_S)
+                self.spin_until(ended, LATCHED_WAIT_S)
             run.end = self.execution_results[ends] if len(self.execution_results) > ends \
                 else None
             run.arrived = (run.outcome == "completed" and run.goal is not None
