@@ -170,7 +170,7 @@ class Planner:
             y, charts, direct = self._route_coords(out), len(out.charts), False
         if s.complete:
             self.atlas.chart_at(points["start"])
-            self.grow_complete(stop.deadline)
+            self.grow_complete(stop.deadline, cancel)
         smooth = self._smooth if self.clearance_weight == 0 else self._smooth_clearance
         for y in (smooth(y), y):  # smoothing can cut a corner through a thin gap of C
             y, verified = self._densify(y)
@@ -190,12 +190,13 @@ class Planner:
         out.least_margin, out.least_tension_margin = least
         return out
 
-    def grow_complete(self, deadline=None):
+    def grow_complete(self, deadline=None, cancel=None):
         """Grow every open chart until the atlas covers the start's component (or the
-        deadline / chart limit): the search's "complete" mode."""
+        deadline / chart limit / ``cancel``): the search's "complete" mode."""
         i = 0
         while i < len(self.atlas.charts) and len(self.atlas.charts) < self.settings.max_charts:
-            if deadline is not None and time.perf_counter() > deadline:
+            if (deadline is not None and time.perf_counter() > deadline) or \
+                    (cancel is not None and cancel.is_set()):
                 return False
             if self.atlas.charts[i].closed:
                 i += 1

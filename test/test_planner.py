@@ -237,6 +237,41 @@ def test_complete_atlas_closes_every_chart(tmp_path):
     assert 0.8 * island < exhausted.charts < 2.4 * island
 
 
+def test_a_call_may_override_the_strategy_and_the_time_limit():
+    """PlanPath's per-goal strategy and timeout_s: the call's own, checked, the settings
+    untouched."""
+    from cdh_planner.errors import InputError
+    pr = load_problem(PROBLEMS / "robot2_q2_q3.yaml")
+    planner = Planner(pr.robot, pr.task, PlannerSettings(strategy="astar"))
+    assert planner.plan(pr.start, pr.goal, strategy="gbf").strategy == "gbf"
+    late = planner.plan(pr.start, pr.goal, strategy="astar", timeout_s=1e-9)
+    assert late.reason == "timeout" and "1e-09 s" in late.message
+    assert planner.settings.strategy == "astar" and planner.settings.timeout_s == 60.0
+    for field, kwargs in (("strategy", {"strategy": "bfs"}), ("timeout_s", {"timeout_s": -1.0}),
+                          ("timeout_s", {"timeout_s": float("nan")})):
+        with pytest.raises(InputError) as err:
+            planner.plan(pr.start, pr.goal, **kwargs)
+        assert err.value.field == field
+
+
+def test_a_cancel_stops_the_complete_atlas_growth_too():
+    """A cancel during --complete's growth (after the path is found) ends it at once: the
+    node's cancel bound holds in every phase."""
+    import threading
+    pr = load_problem(PROBLEMS / "robot2_q1_q2.yaml")
+    planner = Planner(pr.robot, pr.task, PlannerSettings(complete=True, radius=0.02))
+    cancel = threading.Event()
+    timer = threading.Timer(0.3, cancel.set)
+    timer.start()
+    t0 = time.perf_counter()
+    res = planner.plan(pr.start, pr.goal, cancel=cancel)
+    elapsed = time.perf_counter() - t0
+    timer.cancel()
+    assert res.success                       # the path was found before the cancel
+    assert elapsed < 0.3 + 0.5, elapsed
+    assert not all(ch.closed for ch in planner.atlas.charts)   # growth cut short
+
+
 def test_start_equal_to_goal_gives_a_path_that_stays(tmp_path):
     problem = robot1_problem(tmp_path, "same", (-2.3, 1.6), (-2.3, 1.6))
     _, pr, res = plan(problem)
