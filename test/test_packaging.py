@@ -120,8 +120,12 @@ def test_launch_file_declares_the_robot_argument_and_starts_the_node():
     assert {("launch.actions", "DeclareLaunchArgument"), ("launch_ros.actions", "Node"),
             ("launch.substitutions", "LaunchConfiguration")} <= imported
 
-    (declare,) = _calls(tree, "DeclareLaunchArgument")
+    declare, mode = _calls(tree, "DeclareLaunchArgument")
     assert ast.literal_eval(declare.args[0]) == "robot"
+    assert ast.literal_eval(mode.args[0]) == "execution_mode"
+    from cdh_planner.ros.params import EXECUTION_MODES, SPEC
+    assert ast.literal_eval(_kwargs(mode)["choices"]) == list(EXECUTION_MODES)
+    assert ast.literal_eval(_kwargs(mode)["default_value"]) == SPEC["execution.mode"].default
     default = _kwargs(declare)["default_value"]
     parts = [ast.literal_eval(a) for a in default.elts[1:]] if isinstance(default, ast.List) \
         else [ast.literal_eval(a) for a in default.args[0].elts[1:]]
@@ -132,8 +136,11 @@ def test_launch_file_declares_the_robot_argument_and_starts_the_node():
     assert ast.literal_eval(kw["package"]) == "cdh_planner"
     assert ast.literal_eval(kw["executable"]) == "cdh-planner"
     assert ast.literal_eval(kw["arguments"]) == ["node"]
-    (param,) = kw["parameters"].elts
+    param, overrides = kw["parameters"].elts
     assert param.func.id == "LaunchConfiguration" and ast.literal_eval(param.args[0]) == "robot"
+    (key,), (value,) = overrides.keys, overrides.values
+    assert ast.literal_eval(key) == "execution.mode" and value.func.id == "LaunchConfiguration"
+    assert ast.literal_eval(value.args[0]) == "execution_mode"
 
 
 def test_the_launch_files_command_exists_and_knows_node():
