@@ -341,6 +341,29 @@ def test_plan_queue_close_answers_the_waiting():
     assert got == [False] and queue.enter() is None
 
 
+def test_plan_queue_drop_and_cancel_give_a_waiting_turn_up():
+    """A request refused before planning drops its turn, one cancelled while it waits
+    leaves within CANCEL_POLL_S: the next one runs, and their places are free."""
+    queue = planning.PlanQueue(depth=2)
+    assert queue.wait(queue.enter(), timeout_s=0.1)
+    dropped, cancelled = queue.enter(), queue.enter()
+    assert queue.enter() is None
+    queue.drop(dropped)
+    queue.drop(dropped)                                # idempotent
+    cancel = threading.Event()
+    got = []
+    thread = threading.Thread(target=lambda: got.append(queue.wait(cancelled, cancel)))
+    thread.start()
+    t0 = time.monotonic()
+    cancel.set()
+    thread.join(2.0)
+    assert got == [False] and time.monotonic() - t0 < 2 * planning.CANCEL_POLL_S + 0.1
+    assert len(queue) == 1                             # only the running one
+    nxt = queue.enter()
+    queue.leave()
+    assert queue.wait(nxt, timeout_s=0.1)
+
+
 def test_depth_zero_is_one_plan_at_a_time():
     queue = planning.PlanQueue(depth=0)
     assert queue.wait(queue.enter(), timeout_s=0.1)

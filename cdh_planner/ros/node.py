@@ -265,16 +265,18 @@ class PlannerNode(Node):
     def _plan(self, request, response):
         """~/plan: every call is answered, and its request and response are recorded,
         whatever happens in between (an exception: ``internal_error``)."""
+        turn = self._queue.enter()   # first: the queue's order is the order calls are taken
         seq, run_id, log_file = self._new_call()
         self._record_plan(REQUEST_RECEIVED, seq, request=request)
         result, _, response.plan = self._answer(planning.PlanCall.of_get_plan(request),
-                                                run_id, log_file)
+                                                run_id, log_file, turn)
         self._record_plan(RESPONSE_SENT, seq, response=response)
         return response
 
     def _plan_path(self, goal_handle):
         """~/plan_path: every goal ends with a result (succeeded, canceled or aborted with
         the error code and reason); feedback at most every PROGRESS_PERIOD_S."""
+        turn = self._queue.enter()
         seq, run_id, log_file = self._new_call()
         goal = goal_handle.request
         self._record_goal(REQUEST_RECEIVED, seq, goal_handle, goal=goal)
@@ -296,7 +298,7 @@ class PlannerNode(Node):
             call = planning.PlanCall.of_plan_path(goal, start, _GoalCancel(goal_handle),
                                                   feedback)
             refused = None
-        result, out, path = self._answer(call, run_id, log_file, refused)
+        result, out, path = self._answer(call, run_id, log_file, turn, refused)
         if result.success:
             goal_handle.succeed()
         elif goal_handle.is_cancel_requested and result.reason == Status.CANCELED:
@@ -315,14 +317,16 @@ class PlannerNode(Node):
         log_file = self._record(self.runlog.open) or ""
         return seq, (f"{_stem(log_file)}#{seq}" if log_file else str(seq)), log_file
 
-    def _answer(self, call, run_id, log_file, refused=None):
-        """(PlanResult, PlanOutputs or None, the answer's nav_msgs/Path) of one PlanCall,
-        never raising (an exception: ``internal_error``, published on ~/plan_result);
-        ``refused``: a refusal made before planning, answered as it is."""
+    def _answer(self, call, run_id, log_file, turn, refused=None):
+        """(PlanResult, PlanOutputs or None, the answer's nav_msgs/Path) of one PlanCall
+        holding ``turn`` in the queue (None: the queue was full), never raising (an
+        exception: ``internal_error``, published on ~/plan_result); ``refused``: a refusal
+        made before planning, answered as it is."""
         config = self.config
         try:
-            result, out, path = self._serve(call, run_id, log_file, refused)
+            result, out, path = self._serve(call, run_id, log_file, turn, refused)
         except Exception as exc:  # noqa: BLE001 - never take the node down: answer no plan
+            self._queue.drop(turn)
             self.get_logger().error(f"[{run_id}] plan call failed: {traceback.format_exc()}")
             result = planning.refusal(
                 "internal_error", f"internal error: {_name(exc)}: {_one_line(exc)}",
@@ -336,13 +340,13 @@ class PlannerNode(Node):
             self.get_logger().warning(line)
         return result, out, path
 
-    def _serve(self, call, run_id, log_file, refused=None):
-        """(PlanResult, PlanOutputs or None, path) of one call: wait for its turn in the
-        queue (or be refused: busy, shutting down, cancelled meanwhile), plan, bound and
+    def _serve(self, call, run_id, log_file, turn, refused=None):
+        """(PlanResult, PlanOutputs or None, path) of one call: wait for its ``turn`` in
+        the queue (or be refused: busy, shutting down, cancelled meanwhile), plan, bound and
         build the outputs, commit them (``_commit``); ``~/plan_result`` published."""
         config = self.config
-        turn = None if refused else self._queue.enter()
         if refused:
+            self._queue.drop(turn)
             result = refused
         elif turn is None:
             result = planning.refusal(

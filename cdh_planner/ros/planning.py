@@ -208,6 +208,14 @@ class PlanQueue:
             self._cond.notify_all()
             return False
 
+    def drop(self, turn):
+        """Give up ``turn`` while it waits (a request refused before planning); nothing if it
+        is not waiting (None, running, or gone)."""
+        with self._cond:
+            if turn in self._waiting:
+                self._waiting.remove(turn)
+                self._cond.notify_all()
+
     def leave(self):
         """The running request is answered: the next one's turn."""
         with self._cond:
