@@ -1,8 +1,9 @@
 """The node's PlanPath action (``~/plan_path``) over real DDS, in a ROS domain of its own:
 goal, feedback, result and cancel with the real planner; the goal's overrides (strategy,
 timeout_s) and refusals (bad strategy, bad frame); ``use_current_start`` from measured cable
-lengths (forward kinematics); and every goal ending with a result when more arrive than the
-node queues (with the test double planner)."""
+lengths (forward kinematics); every goal ending with a result when more arrive than the
+node queues (with the test double planner); and, in follow_joint_trajectory mode with no
+controller, an execution that fails naming the action instead of hanging."""
 
 import math
 import time
@@ -13,6 +14,7 @@ import pytest
 rclpy = pytest.importorskip("rclpy")
 
 from action_msgs.msg import GoalStatus  # noqa: E402
+from diagnostic_msgs.msg import DiagnosticStatus  # noqa: E402
 from rclpy.action import ActionClient  # noqa: E402
 from sensor_msgs.msg import JointState  # noqa: E402
 
@@ -207,3 +209,25 @@ def test_every_goal_gets_a_result_when_more_arrive_than_are_queued(tmp_path):
         assert all(b.status == GoalStatus.STATUS_ABORTED and "busy" in b.result.error_msg
                    for b in busy)
         action.destroy()
+
+
+def test_execution_without_a_controller_fails_naming_the_action(ros):
+    """follow_joint_trajectory mode with no controller running: ~/execute starts, and
+    ~/execution_result says within about a second that there is no action server."""
+    assert ros.set_parameters({"execution.mode": "follow_joint_trajectory"}) == [(True, "")]
+    try:
+        assert ros.plan_path(plan_path_goal(sphere_pose_msg(Q1), sphere_pose_msg(Q2)),
+                             timeout_s=30).success
+        ros.watch_execution()
+        seen = len(ros.execution_results)
+        ok, message = ros.execute()
+        assert ok and "/cable_controller/follow_joint_trajectory" in message, message
+        status = ros.wait_execution_result(seen, timeout_s=10.0)
+        assert status is not None and status.level == DiagnosticStatus.ERROR
+        assert M.status_values(status)["outcome"] == "failed"
+        assert "no action server /cable_controller/follow_joint_trajectory" in status.message
+        ok, message = ros.execute()                     # not stuck executing: tried again
+        assert ok, message
+        assert ros.wait_execution_result(seen + 1, timeout_s=10.0) is not None
+    finally:
+        assert ros.set_parameters({"execution.mode": "stream"}) == [(True, "")]
