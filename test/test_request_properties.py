@@ -2,7 +2,8 @@
 holds (any frame, NaN, inf or huge coordinates, zero or unnormalised quaternions, any
 tolerance), the node's request check either gives two poses or an InputError naming a
 field in one short line, and planning them answers a PlanResult with a known reason: it
-never raises. Bounded: few examples, a deadline, derandomized."""
+never raises. The same for a PlanPath goal's own fields (strategy, timeout_s). Bounded: few
+examples, a deadline, derandomized."""
 
 import math
 from dataclasses import replace
@@ -68,3 +69,38 @@ def test_the_paper_request_still_plans():
         _pose(msg, FRAME, [*pose.p, *quaternion_from_tau(pose.tau)])
     start, goal = request_poses(request, FRAME)
     assert run_planner(PLANNER, start, goal).success
+
+
+@settings(max_examples=40, deadline=timedelta(seconds=10), derandomize=True, database=None,
+          suppress_health_check=[HealthCheck.too_slow])
+@given(st.one_of(st.sampled_from(["", "auto", "astar", "gbf"]), st.text(max_size=20)),
+       numbers)
+def test_any_plan_path_goal_strategy_and_timeout_is_planned_or_refused_in_one_line(
+        strategy, timeout_s):
+    """PlanPath's own fields (any strategy text, any timeout_s: NaN, inf, negative, huge)
+    on the paper's q1 -> q2: planned, or refused naming the field, never raised."""
+    from cdh_planner.model.pose import quaternion_from_tau
+    from cdh_planner_interfaces.action import PlanPath
+    goal = PlanPath.Goal(strategy=strategy, timeout_s=timeout_s)
+    for msg, pose in ((goal.start, PROBLEM.start), (goal.goal, PROBLEM.goal)):
+        _pose(msg, FRAME, [*pose.p, *quaternion_from_tau(pose.tau)])
+    call = PlanCall.of_plan_path(goal)
+    start, goal_pose = request_poses(call, FRAME)
+    result = run_planner(PLANNER, start, goal_pose, call)
+    assert "\n" not in result.message and len(result.message) <= 2 * MAX_MESSAGE_CHARS
+    valid_strategy = strategy in ("", "auto", "astar", "gbf")
+    valid_timeout = timeout_s == 0.0 or _valid_setting("timeout_s", timeout_s)
+    if valid_strategy and valid_timeout:
+        assert result.reason in (Status.OK, Status.TIMEOUT), result.message
+    else:
+        assert result.reason in ("bad_strategy", "invalid"), result.message
+        assert ("strategy" if not valid_strategy else "timeout_s") in result.message
+
+
+def _valid_setting(name, value):
+    from cdh_planner.settings import check_setting
+    try:
+        check_setting(name, value)
+        return True
+    except InputError:
+        return False
