@@ -231,3 +231,15 @@ def test_execution_without_a_controller_fails_naming_the_action(ros):
         assert ros.wait_execution_result(seen + 1, timeout_s=10.0) is not None
     finally:
         assert ros.set_parameters({"execution.mode": "stream"}) == [(True, "")]
+
+
+def test_names_read_at_start_are_read_only_afterwards(ros):
+    """execution.controller_action and execution.joint_states_topic name the action client
+    and the subscription made at start: a later change is refused with the reason, not
+    accepted and ignored."""
+    for name, value in (("execution.controller_action", "/other/follow_joint_trajectory"),
+                        ("execution.joint_states_topic", "/other/joint_states")):
+        before = ros.get_parameters([name])[name]
+        [(ok, reason)] = ros.set_parameters({name: value})
+        assert not ok and "read-only" in reason and name in reason, reason
+        assert ros.get_parameters([name])[name] == before

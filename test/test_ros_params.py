@@ -100,6 +100,14 @@ def test_integers_are_accepted_for_numbers():
     ("planner.margin_floor", 0.0, "planner.margin_floor = 0.0: must be > 0"),
     ("planner.margin_floor", 1.0, "planner.margin_floor = 1.0: must be < 1"),
     ("planner.max_charts", 1, "planner.max_charts = 1: must be >= 2"),
+    ("execution.mode", "topic", "execution.mode = 'topic': expected one of stream, "
+                                "follow_joint_trajectory"),
+    ("execution.joint_states_topic", "bad name", "execution.joint_states_topic = 'bad name': "
+                                                 "not a ROS name"),
+    ("execution.controller_action", "/1abc/follow", "execution.controller_action = "
+                                                    "'/1abc/follow': not a ROS name"),
+    ("execution.controller_action", "", "execution.controller_action = '': must not be empty"),
+    ("execution.start_tolerance", 0.0, "execution.start_tolerance = 0.0: must be > 0"),
 ])
 def test_bad_values_name_parameter_and_value(name, value, message):
     with pytest.raises(InputError) as err:

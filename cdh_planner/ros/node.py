@@ -80,8 +80,8 @@ from ..status import Status
 from . import execution, planning
 from . import messages as M
 from .messages import WINCH_COMMAND_TYPE
-from .params import BOOL, DOUBLE, DOUBLES, INT, REQUIRED, SPECS, STRING, STRINGS, \
-    PLANNER_PREFIXES, needs_new_planner, node_config, parameter_error
+from .params import BOOL, DOUBLE, DOUBLES, INT, REQUIRED, SPECS, START_ONLY, STRING, \
+    STRINGS, PLANNER_PREFIXES, needs_new_planner, node_config, parameter_error
 from .recording import RunLog, log_limits
 from .streaming import Stream
 
@@ -212,7 +212,8 @@ class PlannerNode(Node):
                              "unknown parameter (see cdh_planner/ros/params.py)")
         values = {}
         for spec in SPECS:
-            descriptor = ParameterDescriptor(description=spec.description)
+            descriptor = ParameterDescriptor(description=spec.description,
+                                             read_only=spec.name in START_ONLY)
             if spec.choices:
                 descriptor.additional_constraints = f"one of: {', '.join(spec.choices)}"
             if spec.kind in STATIC_TYPES:

@@ -38,8 +38,8 @@ trajectory.max_cable_accel      0.2        per-winch acceleration limit (m/s^2)
 stream_rate_hz                  50         rate of ~/cable_command while executing (Hz)
 stream_interpolation            linear     linear (never above the speed limit) or quintic
 execution.mode                  stream     stream or follow_joint_trajectory (ros2_control)
-execution.controller_action     /cable_controller/follow_joint_trajectory  (set at start)
-execution.joint_states_topic    /joint_states  measured cable lengths (set at start)
+execution.controller_action     /cable_controller/follow_joint_trajectory  (read-only)
+execution.joint_states_topic    /joint_states  measured cable lengths (read-only)
 execution.start_tolerance       0.005      ~/execute refuses beyond this start error (m)
 execution.joint_states_max_age_s  1.0      older measurements are not used (s)
 log_dir                         ~/.ros/cdh_planner  where run MCAP files go
@@ -51,6 +51,7 @@ log_max_file_s                  0          next run file after this long (s); 0:
 
 import math
 import os
+import re
 from dataclasses import dataclass, field
 
 import numpy as np
@@ -69,8 +70,12 @@ REQUIRED = object()  # default of a parameter that must come from the robot file
 PLANNER_PREFIXES = ("robot.", "task.", "planner.", "trajectory.")
 INTERPOLATIONS = ("linear", "quintic")
 EXECUTION_MODES = ("stream", "follow_joint_trajectory")
-# read once at start: the subscription and action client they name are made then
+# read once at start, read-only afterwards: the subscription and action client they name
+# are made then
 START_ONLY = ("execution.controller_action", "execution.joint_states_topic")
+# a ROS 2 topic or action name: tokens of letters, digits and _ (not starting with a digit)
+# between slashes, absolute or relative, or private (~/)
+ROS_NAME = re.compile(r"(~/|/)?[A-Za-z_][A-Za-z0-9_]*(/[A-Za-z_][A-Za-z0-9_]*)*")
 
 
 @dataclass(frozen=True)
@@ -224,6 +229,9 @@ def check_value(spec, value):
             raise InputError(name, value, f"expected one of {', '.join(spec.choices)}")
         if name in ("base_frame",) + START_ONLY and not value:
             raise InputError(name, value, "must not be empty")
+        if name in START_ONLY and not ROS_NAME.fullmatch(value):
+            raise InputError(name, value, "not a ROS name: letters, digits and _ between "
+                                          "slashes, no token starting with a digit")
         return value
     if spec.kind == BOOL:
         if not isinstance(value, bool):
