@@ -206,6 +206,26 @@ def test_current_pose_without_a_guess_picks_the_level_one_of_two_feasible_soluti
     assert rotation_angle_between(Q, twin.R) < 1e-9
 
 
+def test_nearest_known_pose_chooses_newtons_start_between_twins():
+    """Of the poses the node knows, the one whose cable lengths are nearest the measured:
+    from it Newton lands on that pose, not on its twin of the same lengths."""
+    pr = load_problem(PROBLEMS / "robot2_q2_q3_free_flight.yaml")
+    p, R = pr.goal.p, rotation_tt(pr.goal.tau)
+    L = cable_lengths(pr.robot, p, R)
+    twin = forward_kinematics(pr.robot, L, [-0.018, 0.0097, 0.188],
+                              rotation_tt([-0.537, 3.059, -0.024]))
+    near_twin = (twin.p + 0.005, twin.R)
+    near_goal = (p + 0.01, R)
+    far = (pr.start.p, rotation_tt(pr.start.tau))
+    assert X.nearest_pose(pr.robot, L, []) is None
+    for known, nearest, expected in (([far, near_goal], near_goal, R),
+                                     ([near_twin, far], near_twin, twin.R)):
+        guess = X.nearest_pose(pr.robot, L, known)
+        assert guess is nearest
+        _, Q = X.current_pose(pr.robot, L, guess)
+        assert rotation_angle_between(Q, expected) < 1e-9
+
+
 def test_current_pose_without_a_guess_may_return_a_feasible_twin():
     """Lengths alone do not decide: a feasible Robot 2 pose whose twin (same lengths, 9 cm
     higher, less tilted) is what the search finds; a guess near the pose gives it back."""

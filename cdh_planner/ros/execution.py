@@ -33,7 +33,7 @@ from trajectory_msgs.msg import JointTrajectory, JointTrajectoryPoint
 
 from ..errors import InputError, check_finite
 from ..feasibility import evaluate
-from ..model.kinematics import forward_kinematics, rotation_vector_exp
+from ..model.kinematics import cable_lengths, forward_kinematics, rotation_vector_exp
 from .messages import check_joint_names, duration_msg
 
 COMPLETED, STOPPED, FAILED = "completed", "stopped", "failed"
@@ -154,6 +154,15 @@ def start_mismatch(measured, planned_first, tolerance_m, winch_names):
 _SEED_TURNS = (0.0, np.pi / 2, -np.pi / 2, np.pi)
 _SEED_TILTS = (np.zeros(3), np.array([0.4, 0.0, 0.0]), np.array([-0.4, 0.0, 0.0]),
                np.array([0.0, 0.4, 0.0]), np.array([0.0, -0.4, 0.0]))
+
+
+def nearest_pose(robot, lengths, poses):
+    """Of the poses (p (3,) m, R (3, 3)) in ``poses``, the one whose cable lengths are
+    nearest ``lengths`` (m, largest difference): the best start for ``current_pose``'s
+    Newton, since a hexapod has several poses for the same lengths. None if there are none."""
+    L = np.asarray(lengths, dtype=float)
+    return min(poses, key=lambda pose: float(np.max(np.abs(cable_lengths(robot, *pose) - L))),
+               default=None)
 
 
 def current_pose(robot, lengths, guess=None):
@@ -303,7 +312,8 @@ class _Run:
         self.on_done = on_done
         self.goal = None
         self.handle = None           # ClientGoalHandle once accepted
-        self.timer = None            # polls for the server before sending
+        self.timer = None            # polls for the server before sending; then bounds the
+                                     # wait for the result
         self.deadline = 0.0
         self.cancel_requested = False
         self.sent = False            # send_goal_async called (once: timer callbacks may overlap)

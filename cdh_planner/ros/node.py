@@ -52,7 +52,6 @@ import threading
 import time
 import traceback
 
-import numpy as np
 import rclpy
 import rclpy.signals
 from diagnostic_msgs.msg import DiagnosticStatus
@@ -73,7 +72,6 @@ from cdh_planner_interfaces.action import PlanPath
 from cdh_planner_interfaces.msg import TensionEnvelope
 
 from ..errors import InputError
-from ..model.kinematics import cable_lengths
 from ..model.pose import rotation_from_quaternion
 from ..io.mcap_log import REQUEST_RECEIVED, RESPONSE_SENT
 from ..status import Status
@@ -455,7 +453,8 @@ class PlannerNode(Node):
         if lengths is None:
             return why
         try:
-            p, R = execution.current_pose(config.robot, lengths, self._pose_guess(lengths))
+            guess = execution.nearest_pose(config.robot, lengths, self._known_poses())
+            p, R = execution.current_pose(config.robot, lengths, guess)
         except InputError as exc:
             return str(exc)
         except Exception as exc:  # noqa: BLE001 - the goal still gets a result, with why
@@ -464,19 +463,14 @@ class PlannerNode(Node):
         self._last_pose = (p, R)
         return M.pose_stamped_msg(p, R, config.base_frame, self.get_clock().now().to_msg())
 
-    def _pose_guess(self, lengths):
-        """Newton's start for the forward kinematics: of the poses known (the last forward
-        kinematics, the last plan's ends), the one whose cable lengths are nearest the
-        measured ``lengths`` (m): a hexapod has several poses for the same lengths."""
+    def _known_poses(self):
+        """The platform poses (p, R) known to the node: the last forward kinematics and the
+        ends of the last plan."""
         known = [self._last_pose] if self._last_pose is not None else []
         if self._last is not None:
             path = self._last[0]
             known += [(path.p[k], rotation_from_quaternion(path.quaternion[k])) for k in (0, -1)]
-        if not known:
-            return None
-        robot = self.config.robot
-        return min(known, key=lambda pose: float(np.max(np.abs(cable_lengths(robot, *pose)
-                                                               - lengths))))
+        return known
 
     # ------------------------------------------------------------------ execute, stop
 
