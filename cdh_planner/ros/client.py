@@ -188,6 +188,7 @@ class PlannerClient:
             QoSProfile(depth=50, reliability=ReliabilityPolicy.RELIABLE))
         # every message received since watch_execution(), in arrival order
         self.commands, self.trajectories, self.envelopes = None, None, None
+        self._results_settled = False   # the latched ~/execution_result has had its time
         self._param_client = None
 
     def topic(self, name):
@@ -385,7 +386,9 @@ class PlannerClient:
                         and self.node.count_publishers(self.topic(CABLE_COMMAND)) > 0
                         and self.node.count_publishers(self.topic(EXECUTION_RESULT)) > 0,
                         LATCHED_WAIT_S)
-        self.spin(DISCOVERY_SETTLE_S)   # the latched last execution result, if any, arrives
+        if not self._results_settled:   # once: the latched last execution result arrives,
+            self.spin(DISCOVERY_SETTLE_S)  # and is not taken for this execution's end
+            self._results_settled = True
         run = Execution()
         if self.trajectories and len(self.trajectories[-1].points) == n:
             run.trajectory = self.trajectories[-1]
