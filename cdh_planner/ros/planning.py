@@ -2,9 +2,10 @@
 
 The node (``ros/node.py``) only moves these values between ROS and this module:
 
-    call = PlanCall.of_get_plan(request)                      # or of_plan_path(goal, ...)
     turn = queue.enter()                                      # None: full, answer busy
+    call = PlanCall.of_get_plan(request)                      # or of_plan_path(goal, ...)
     queue.wait(turn, call.cancel)                             # False: closed or cancelled
+                                                              # (refused before: drop(turn))
     start, goal = request_poses(call, base_frame)             # InputError: refuse
     result = run_planner(planner, start, goal, call, progress)  # never raises
     queue.leave()
@@ -197,9 +198,15 @@ class PlanQueue:
             return (self.closed or (cancel is not None and cancel.is_set())
                     or (deadline is not None and time.monotonic() >= deadline))
 
+        def wake_in():   # s until given_up() may change without a notify (None: never)
+            waits = [CANCEL_POLL_S] if cancel is not None else []
+            if deadline is not None:
+                waits.append(max(deadline - time.monotonic(), 0.0))
+            return min(waits, default=None)
+
         with self._cond:
             while not given_up() and (self._running or self._waiting[0] != turn):
-                self._cond.wait(CANCEL_POLL_S)
+                self._cond.wait(wake_in())
             if not self._running and self._waiting[0] == turn and not given_up():
                 self._waiting.popleft()
                 self._running = True
@@ -237,10 +244,9 @@ def input_refusal(exc, strategy=""):
 
 def run_planner(planner, start, goal, call=None, progress=None, logger=None):
     """``planner.plan(start, goal, ...)`` with a PlanCall's overrides (None: none), never
-    raising: an
-    InputError becomes ``invalid`` (``bad_strategy`` if it names the strategy); any other
-    exception ``internal_error`` (error code UNKNOWN) with its message, the traceback going
-    to ``logger`` (a callable taking a string) if given."""
+    raising: an InputError becomes ``invalid`` (``bad_strategy`` if it names the strategy);
+    any other exception ``internal_error`` (error code UNKNOWN) with its message, the
+    traceback going to ``logger`` (a callable taking a string) if given."""
     call = call or PlanCall(None, None)
     strategy = call.strategy or getattr(getattr(planner, "settings", None), "strategy", "")
     overrides = {k: v for k, v in (("strategy", call.strategy), ("timeout_s", call.timeout_s))
