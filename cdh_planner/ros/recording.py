@@ -118,14 +118,8 @@ class RunLog:
 
     def service_event(self, service, srv_type, event_type, request=None, response=None,
                       sequence_number=0, log_time_ns=None):
-        call = (service, sequence_number)
-        answer = event_type in (RESPONSE_SENT, RESPONSE_RECEIVED)
-        opens = call if event_type in (REQUEST_RECEIVED, REQUEST_SENT) else None
-        self._call("write_service_event", service, srv_type, event_type, request=request,
-                   response=response, sequence_number=sequence_number,
-                   log_time_ns=log_time_ns, at=log_time_ns, opens=opens,
-                   closes=call if answer else None,
-                   rotate=not answer)   # an answer joins its request
+        self._call_event("write_service_event", service, srv_type, event_type,
+                         sequence_number, log_time_ns, request=request, response=response)
 
     def action_event(self, action, action_type, event_type, goal=None, result=None,
                      sequence_number=0, log_time_ns=None, **kwargs):
@@ -134,13 +128,20 @@ class RunLog:
         (``RunRecorder.write_action_event``; ``kwargs``: its ``goal_id``, ``status``). Kept
         together as a service call's request and response are: the result joins its goal's
         file."""
-        call = (action, sequence_number)
+        self._call_event("write_action_event", action, action_type, event_type,
+                         sequence_number, log_time_ns, goal=goal, result=result, **kwargs)
+
+    def _call_event(self, method, name, type_name, event_type, sequence_number, log_time_ns,
+                    **kwargs):
+        """A call's request (it opens the call) or answer (it closes it, in the request's
+        file: no rotation in between), by the recorder's ``method``."""
+        call = (name, sequence_number)
         answer = event_type in (RESPONSE_SENT, RESPONSE_RECEIVED)
         opens = call if event_type in (REQUEST_RECEIVED, REQUEST_SENT) else None
-        self._call("write_action_event", action, action_type, event_type, goal=goal,
-                   result=result, sequence_number=sequence_number, log_time_ns=log_time_ns,
-                   at=log_time_ns, opens=opens, closes=call if answer else None,
-                   rotate=not answer, **kwargs)
+        self._call(method, name, type_name, event_type, sequence_number=sequence_number,
+                   log_time_ns=log_time_ns, at=log_time_ns, opens=opens,
+                   closes=call if answer else None,
+                   rotate=not answer, **kwargs)   # an answer joins its request
 
     def close(self):
         """Close the file (summary, footer, fsync); later records are dropped."""
