@@ -199,3 +199,20 @@ class ControllerDouble:
         rc = stop_process(self.proc)
         time.sleep(0.05)   # the reader thread takes the last lines
         return rc, "\n".join(self.lines)
+
+
+def wait_node_measures(client, goal_msg, timeout_s=20.0):
+    """Wait until the node has the winches' joint states: a ``use_current_start`` goal to
+    ``goal_msg`` (a PoseStamped where the winches are) ends other than NO_CURRENT_STATE.
+    Processes started together may take a DDS announcement period (about 3 s) to find each
+    other, even when a third process already sees both. The last answer (PlanAnswer)."""
+    from cdh_planner_interfaces.action import PlanPath
+    from cdh_planner.ros.client import plan_path_goal
+    end = time.monotonic() + timeout_s
+    while True:
+        answer = client.plan_path(plan_path_goal(None, goal_msg, use_current_start=True),
+                                  timeout_s=60)
+        code = answer.result.error_code
+        if code != PlanPath.Result.NO_CURRENT_STATE or time.monotonic() > end:
+            return answer
+        client.spin(0.2)

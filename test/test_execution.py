@@ -618,7 +618,13 @@ def test_joint_state_monitor_reports_lengths_or_why_not(ros):
     assert theirs is not None
     # the same message or the next one; the double holds still between goals
     np.testing.assert_allclose(theirs[::-1], mine, rtol=0, atol=1e-12)
-    assert nothing.lengths(1.0) == (None, "nothing received on /nobody/joint_states")
+    assert nothing.lengths(1.0) == (None, "nothing received on /nobody/joint_states "
+                                          "(no publishers seen)")
+    silent = side.node.create_publisher(X.JointState, "/nobody/joint_states", 10)
+    assert until(lambda: side.node.count_publishers("/nobody/joint_states") == 1, 5.0)
+    assert nothing.lengths(1.0) == (None, "nothing received on /nobody/joint_states "
+                                          "(1 publisher seen)")
+    side.node.destroy_publisher(silent)
     lengths, why = missing.lengths(1.0)
     assert lengths is None and "winch_7" in why and "missing" in why
     for m in (other, nothing, missing):

@@ -21,7 +21,7 @@ from cdh_planner.ros.client import PlannerClient, plan_path_goal  # noqa: E402
 from cdh_planner.ros.params import node_config  # noqa: E402
 from ros_harness import (Q1, Q2, Q3, ROBOT2, Collector, ControllerDouble,  # noqa: E402
                          NodeProcess, claimed_domain, file_parameters, pose_text, run_cli,
-                         sphere_pose_msg)
+                         sphere_pose_msg, wait_node_measures)
 
 CONFIG = node_config(file_parameters(ROBOT2))
 ROBOT = CONFIG.robot
@@ -55,7 +55,8 @@ def ros(tmp_path_factory):
                 client.measured = Collector(client.node, JointState, JOINT_STATES, 10)
                 client.watch_execution()
                 assert client.spin_until(lambda: client.measured.items, 10.0)
-                client.spin(0.5)     # the node has joint states too
+                answer = wait_node_measures(client, sphere_pose_msg(Q1))
+                assert answer.success, answer.result.error_msg
                 yield client
         finally:
             node.stop()

@@ -288,7 +288,10 @@ class JointStateMonitor:
         """(cable lengths (6,) m, "") or (None, the reason)."""
         latest = self.latest
         if latest is None:
-            return None, f"nothing received on {self.topic}"
+            # Which of the two: a name or discovery problem, or a publisher that is silent.
+            seen = self._node.count_publishers(self.topic)
+            return None, (f"nothing received on {self.topic} "
+                          f"({'no' if seen == 0 else seen} publisher{'s' * (seen != 1)} seen)")
         msg, arrived = latest
         age = time.monotonic() - arrived
         if age > max_age_s:
