@@ -28,6 +28,14 @@ def clip(text, limit):
     return text if len(text) <= limit else text[: limit - 3] + "..."
 
 
+def exception_line(exc, limit=400):
+    """``ZeroDivisionError: division by zero``, ``struct.error: ...``: an exception's type
+    (qualified unless built in) and message on one line, cut to ``limit`` characters."""
+    kind = type(exc)
+    name = kind.__name__ if kind.__module__ == "builtins" else f"{kind.__module__}.{kind.__name__}"
+    return f"{name}: {clip(exc, limit)}"
+
+
 def short_repr(value, limit=MAX_VALUE_CHARS):
     """repr(value) on one line and at most ``limit`` characters, in time bounded by the
     limit whatever the value (deep, long or self-referencing lists included)."""

@@ -18,7 +18,7 @@ Interface (names relative to the node, all remappable; see docs/ros-node.md):
   (``execution.mode``: stream it on ``~/cable_command`` at ``stream_rate_hz``, or send it to
   a ros2_control controller's FollowJointTrajectory action); stop (hold). ``~/execute``
   refuses when the measured lengths (``execution.joint_states_topic``) are away from the
-  trajectory's start. How it ended: ``~/execution_result``.
+  trajectory's start. How it ended: ``~/execution_result``. (``ros/plan_execution.py``)
 - latched (transient local, depth 1), for display and late joiners, never a command:
   ``~/path``, ``~/planned_cable_trajectory``, ``~/tension_envelope``, ``~/markers`` (the
   last good plan), ``~/plan_result`` (the last answer, diagnostic_msgs/DiagnosticStatus,
@@ -71,17 +71,15 @@ from visualization_msgs.msg import MarkerArray
 from cdh_planner_interfaces.action import PlanPath
 from cdh_planner_interfaces.msg import TensionEnvelope
 
-from ..errors import InputError
-from ..model.pose import rotation_from_quaternion
+from ..errors import InputError, clip, exception_line
 from ..io.mcap_log import REQUEST_RECEIVED, RESPONSE_SENT
 from ..status import Status
-from . import execution, planning
-from . import messages as M
+from . import planning
 from .messages import WINCH_COMMAND_TYPE
 from .params import BOOL, DOUBLE, DOUBLES, INT, REQUIRED, SPECS, START_ONLY, STRING, \
     STRINGS, PLANNER_PREFIXES, needs_new_planner, node_config, parameter_error
+from .plan_execution import PlanExecution
 from .recording import RunLog, log_limits
-from .streaming import Stream
 
 NODE_NAME = "cdh_planner"
 # The interface, relative to the node (module docstring); clients use these names too.
@@ -165,21 +163,13 @@ class PlannerNode(Node):
         self._calls = 0
         self._shutting_down = False
         self.planning = False
-        # _lock guards _stream, _last, _pending and the latched plan outputs
+        # _lock guards the execution's state, _last, _pending and the latched plan outputs
         self._lock = threading.RLock()
         self._last = None            # (PlannedPath, Robot, PlanOutputs) of the last good plan
         self._pending = None         # the same, of a plan made while executing
-        self._stream = None          # the running execution in stream mode
-        self._following = False      # the running execution in follow_joint_trajectory mode
-        self._timer = None
-        self._timer_period = None
-        self._last_pose = None       # (p, R) of the last forward kinematics, its next guess
-        self._execution_message = ""
-        values = self.config.values
-        self._joints = execution.JointStateMonitor(
-            self, values["execution.joint_states_topic"], self.config.robot.winch_names)
-        self._controller = execution.TrajectoryExecutor(
-            self, values["execution.controller_action"], callback_group=ReentrantCallbackGroup())
+        self._execution = PlanExecution(self, self.config, self.pub_command, self.pub_execution,
+                                        self._publish, self._lock, self._execution_ended,
+                                        callback_group=ReentrantCallbackGroup())
         self.srv_plan = self.create_service(GetPlan, f"~/{PLAN}", self._plan,
                                             qos_profile=SERVICE_QOS,
                                             callback_group=ReentrantCallbackGroup())
@@ -244,7 +234,7 @@ class PlannerNode(Node):
             return SetParametersResult(successful=False, reason=str(exc))
         with self._config_lock:
             self._values, self.config, self._planner = values, config, planner
-        self._joints.winch_names = list(config.robot.winch_names)
+        self._execution.configure(config)
         self._record(self.runlog.configure, config.log_dir, config.log_enabled,
                      **log_limits(config.values))
         self._record(self.runlog.parameters, [p.to_parameter_msg() for p in params],
@@ -289,7 +279,8 @@ class PlannerNode(Node):
                     charts=int(info.get("charts", 0)), time_s=float(info.get("time_s", 0.0)),
                     best_h=float(info.get("best_h", math.nan))))
 
-        start = self._current_start() if goal.use_current_start else None
+        start = (self._execution.current_start(self.config, self._last)
+                 if goal.use_current_start else None)
         if isinstance(start, str):   # no measured start: why
             call = None
             refused = planning.refusal("no_current_state", f"use_current_start: {start}")
@@ -328,7 +319,7 @@ class PlannerNode(Node):
             self._queue.drop(turn)
             self.get_logger().error(f"[{run_id}] plan call failed: {traceback.format_exc()}")
             result = planning.refusal(
-                "internal_error", f"internal error: {_name(exc)}: {_one_line(exc)}",
+                "internal_error", f"internal error: {exception_line(exc)}",
                 config.settings.strategy)
             out, path = None, self._no_path(config)
             self._publish_result(result, config, run_id, log_file, path)
@@ -378,7 +369,7 @@ class PlannerNode(Node):
         While executing, the outputs wait in ``_pending`` for the end of the stream. Raises
         (and leaves the previous last good plan) if building or publishing fails."""
         with self._lock:
-            deferred = self._stream is not None or self._following
+            deferred = self._execution.running
             status = planning.result_status(
                 result, config.robot, run_id, log_file, out.path.header.stamp,
                 outputs=planning.DEFERRED if deferred else planning.PUBLISHED)
@@ -445,33 +436,6 @@ class PlannerNode(Node):
         finally:
             self.planning = False
 
-    def _current_start(self):
-        """The measured start pose (PoseStamped in the base frame) by forward kinematics
-        from the winches' lengths, Newton from the last pose known; or why not (a str)."""
-        config = self.config
-        lengths, why = self._joints.lengths(config.values["execution.joint_states_max_age_s"])
-        if lengths is None:
-            return why
-        try:
-            guess = execution.nearest_pose(config.robot, lengths, self._known_poses())
-            p, R = execution.current_pose(config.robot, lengths, guess)
-        except InputError as exc:
-            return str(exc)
-        except Exception as exc:  # noqa: BLE001 - the goal still gets a result, with why
-            self.get_logger().error(f"forward kinematics failed: {traceback.format_exc()}")
-            return f"forward kinematics failed: {_name(exc)}: {_one_line(exc)}"
-        self._last_pose = (p, R)
-        return M.pose_stamped_msg(p, R, config.base_frame, self.get_clock().now().to_msg())
-
-    def _known_poses(self):
-        """The platform poses (p, R) known to the node: the last forward kinematics and the
-        ends of the last plan."""
-        known = [self._last_pose] if self._last_pose is not None else []
-        if self._last is not None:
-            path = self._last[0]
-            known += [(path.p[k], rotation_from_quaternion(path.quaternion[k])) for k in (0, -1)]
-        return known
-
     # ------------------------------------------------------------------ execute, stop
 
     def _execute(self, request, response):
@@ -492,120 +456,32 @@ class PlannerNode(Node):
     def _answer_execute(self, request, response):
         self._record_trigger(self.srv_execute, request, None, REQUEST_RECEIVED)
         with self._lock:
-            response.success, response.message = self._start_execution()
+            response.success, response.message = self._execution.start(self._last,
+                                                                        self.config)
         self._record_trigger(self.srv_execute, None, response, RESPONSE_SENT)
         self.get_logger().info(f"execute: {response.message}")
         return response
 
-    def _start_execution(self):
-        """(started, message): the last good plan's execution started in the configured
-        ``execution.mode``, or why not (executing already, no plan, the winches away from
-        its start). Measured lengths are checked when there are any."""
-        config = self.config
-        values = config.values
-        if self._stream is not None or self._following:
-            where = (f" (at {self._stream.t:.2f} s of {self._stream.duration:.2f} s)"
-                     if self._stream is not None else "")
-            return False, f"refused: already executing{where}; call ~/stop first"
-        if self._last is None:
-            return False, "refused: no plan to execute; call ~/plan first"
-        path, robot, out = self._last
-        lengths, why = self._joints.lengths(values["execution.joint_states_max_age_s"])
-        if lengths is not None:
-            mismatch = execution.start_mismatch(lengths, path.lengths[0],
-                                                values["execution.start_tolerance"],
-                                                robot.winch_names)
-            if mismatch:
-                return False, f"refused: {mismatch}"
-        note = "" if lengths is not None else f" (start not checked: {why})"
-        what = f"{len(path)} waypoints, {float(path.t[-1]):.3f} s"
-        if values["execution.mode"] == "follow_joint_trajectory":
-            self._following = True
-            self._controller.start(out.cable_trajectory, self._end_execution)
-            if not self._following:   # ended at once (no controller): the reason is logged
-                return False, f"refused: {self._execution_message}"
-            return True, f"executing: {what} through {self._controller.action_name}{note}"
-        self._stream = Stream(path, robot.winch_names, config.stream_interpolation,
-                              start=time.monotonic())
-        self._start_timer(1.0 / config.stream_rate_hz)
-        return True, (f"executing: {what} at {config.stream_rate_hz:g} Hz on "
-                      f"{self.pub_command.topic_name}{note}")
-
-    def _start_timer(self, period):
-        if self._timer is None or self._timer_period != period:
-            if self._timer is not None:
-                self.destroy_timer(self._timer)
-            self._timer = self.create_timer(period, self._tick)
-            self._timer_period = period
-        else:
-            self._timer.reset()
-        self._tick()
-
-    def _tick(self):
-        stream = self._stream
-        if stream is None:
-            return
-        try:
-            msg, finished = stream.command(time.monotonic(), self.get_clock().now().to_msg())
-        except Exception as exc:  # noqa: BLE001 - never take the node down
-            self.get_logger().error(f"streaming failed: {traceback.format_exc()}")
-            self._end_execution(execution.FAILED, f"streaming stopped after an error: "
-                                                  f"{_name(exc)}: {_one_line(exc)}")
-            return
-        self._publish(self.pub_command, msg)
-        if finished:
-            self._end_execution(execution.COMPLETED, f"execution finished: {stream.sent} "
-                                                     f"commands over {stream.duration:.3f} s")
-
     def _answer_stop(self, request, response):
         self._record_trigger(self.srv_stop, request, None, REQUEST_RECEIVED)
-        stream = self._stream
         response.success = True
-        if stream is not None:
-            self._publish(self.pub_command, stream.hold(self.get_clock().now().to_msg()))
-            response.message = (f"stopped at {stream.t:.3f} s of {stream.duration:.3f} s; "
-                                f"holding the last setpoint")
-            self._end_execution(execution.STOPPED, response.message)
-        elif self._following:
-            self._controller.cancel()   # the controller holds; its result ends the execution
-            response.message = (f"stopping: cancel sent to {self._controller.action_name} "
-                                f"(the controller holds its position)")
-        else:
-            response.message = "not executing: nothing to stop"
+        response.message = self._execution.stop()
         self._record_trigger(self.srv_stop, None, response, RESPONSE_SENT)
         return response
 
-    def _end_execution(self, outcome, message, publish_pending=True):
-        """The execution is over (``execution.COMPLETED``, ``STOPPED`` or ``FAILED``, and
-        why): ``~/execution_result`` published; a plan made meanwhile is published and
-        becomes the last good plan now (``_commit``)."""
-        with self._lock:
-            if self._stream is None and not self._following:
-                return   # ended already (stop and the last tick, shutdown and the controller)
-            if self._timer is not None:
-                self._timer.cancel()
-            log = self.get_logger().error if outcome == execution.FAILED else \
-                self.get_logger().info
-            log(f"execution {outcome}: {message}")
-            mode = "stream" if self._stream is not None else "follow_joint_trajectory"
-            self._stream, self._following = None, False
-            self._execution_message = f"execution {outcome}: {message}"
-            try:
-                self._publish(self.pub_execution, M.execution_status(outcome, message, mode),
-                              latched=True)
-            except Exception:  # noqa: BLE001 - a diagnostic: the execution is over anyway
-                self.get_logger().error(f"publishing the execution result failed: "
-                                        f"{traceback.format_exc()}")
-            pending, self._pending = self._pending, None
-            if pending is None or not publish_pending:
-                return
-            try:
-                self._publish_outputs(pending[2])
-            except Exception:  # noqa: BLE001 - the previous last good plan stays
-                self.get_logger().error(f"publishing the plan made while executing failed "
-                                        f"(it cannot be executed): {traceback.format_exc()}")
-                return
-            self._last = pending
+    def _execution_ended(self, publish_pending):
+        """(under ``_lock``, once per execution) A plan made while executing is published
+        and becomes the last good plan now, unless shutting down."""
+        pending, self._pending = self._pending, None
+        if pending is None or not publish_pending:
+            return
+        try:
+            self._publish_outputs(pending[2])
+        except Exception:  # noqa: BLE001 - the previous last good plan stays
+            self.get_logger().error(f"publishing the plan made while executing failed "
+                                    f"(it cannot be executed): {traceback.format_exc()}")
+            return
+        self._last = pending
         self.get_logger().info("published the plan made while executing: ~/execute runs it")
 
     def _record_trigger(self, srv, request, response, event):
@@ -637,7 +513,7 @@ class PlannerNode(Node):
         except Exception as exc:  # noqa: BLE001
             self.get_logger().error(
                 f"recording failed ({getattr(method, '__name__', method)}): "
-                f"{type(exc).__name__}: {_one_line(exc)}",
+                f"{type(exc).__name__}: {clip(exc, 400)}",
                 throttle_duration_sec=RECORD_ERROR_PERIOD_S)
             return None
 
@@ -661,17 +537,7 @@ class PlannerNode(Node):
         """Stop streaming (holding), end a running plan at its next progress report, and
         close the run file. Safe to call after the context has shut down."""
         self.begin_shutdown()
-        if self._stream is not None or self._following:
-            try:
-                if self._stream is not None:
-                    self._publish(self.pub_command, self._stream.hold(
-                        self.get_clock().now().to_msg()))
-                else:
-                    self._controller.cancel()
-            except Exception:  # noqa: BLE001 - context already gone: nothing to tell
-                pass
-            self._end_execution(execution.STOPPED, "shutting down while executing: held the "
-                                "last setpoint", publish_pending=False)
+        self._execution.close()
         self._record(self.runlog.close)
 
 
@@ -698,12 +564,12 @@ def main(ros_args=(), planner_factory=default_planner_factory, log=print):
         rclpy.init(args=["cdh-planner", "--ros-args", *ros_args], context=context,
                    signal_handler_options=rclpy.signals.SignalHandlerOptions.NO)
     except Exception as exc:  # noqa: BLE001 - rcl's argument errors
-        log(f"cdh-planner node: error: bad --ros-args: {_one_line(exc)}")
+        log(f"cdh-planner node: error: bad --ros-args: {clip(exc, 400)}")
         return 2
     try:
         node = PlannerNode(planner_factory, context=context)
     except Exception as exc:  # noqa: BLE001 - InputError, or a parameter of the wrong type
-        log(f"cdh-planner node: error: {exc if isinstance(exc, InputError) else _one_line(exc)}")
+        log(f"cdh-planner node: error: {exc if isinstance(exc, InputError) else clip(exc, 400)}")
         rclpy.try_shutdown(context=context)
         return 2
     executor = MultiThreadedExecutor(num_threads=EXECUTOR_THREADS, context=context)
@@ -714,7 +580,7 @@ def main(ros_args=(), planner_factory=default_planner_factory, log=print):
             executor.spin()
         except Exception as exc:  # noqa: BLE001 - e.g. the context shut down under it
             if not stop.is_set():
-                log(f"cdh-planner node: executor stopped: {_one_line(exc)}")
+                log(f"cdh-planner node: executor stopped: {clip(exc, 400)}")
         finally:
             stop.set()
 
@@ -741,14 +607,3 @@ def main(ros_args=(), planner_factory=default_planner_factory, log=print):
         sys.stderr.flush()
         os._exit(0)
     return 0
-
-
-def _name(exc):
-    """``ZeroDivisionError``, ``struct.error``: the exception's type, named so one knows it."""
-    kind = type(exc)
-    return kind.__name__ if kind.__module__ == "builtins" else f"{kind.__module__}.{kind.__name__}"
-
-
-def _one_line(exc):
-    text = " ".join(str(exc).split())
-    return text if len(text) < 400 else text[:400] + " ..."
