@@ -36,7 +36,8 @@ At SIGINT / SIGTERM a running goal is aborted (as when the controller is deactiv
 
 sensor_msgs/JointState of the JOINTs' current positions is published at 50 Hz on
 ``--joint-states`` (default /joint_states; reliable, volatile, depth 10 like
-joint_state_broadcaster) all the time, from ``--initial`` (one number per joint, default 0).
+joint_state_broadcaster) all the time, from ``--initial`` (one number per joint, default 0),
+and once more as a goal ends, just before its result.
 Prints "ready" once the action server and the publisher exist; ends cleanly on SIGINT or
 SIGTERM.
 """
@@ -183,17 +184,20 @@ class SimulatedController:
         step = 0
         while True:
             if getattr(handle, "preempted", False):
+                self.publish_state()
                 handle.abort()
                 say("aborted", reason="preempted")
                 return Result(error_code=Result.INVALID_GOAL,
                               error_string="Current goal preempted by new incoming action.")
             if self.stopping.is_set():
+                self.publish_state()
                 handle.abort()
                 self.release(handle)
                 say("aborted", reason="shutting down")
                 return Result(error_code=Result.INVALID_GOAL,
                               error_string="Current goal cancelled during deactivate transition.")
             if handle.is_cancel_requested:
+                self.publish_state()
                 handle.canceled()
                 self.release(handle)
                 say("canceled")
@@ -209,6 +213,10 @@ class SimulatedController:
                 self.feedback(handle, desired)
             step += 1
             if finished:
+                # the state where the goal ended goes out before the result, as a real
+                # controller's state is at the goal when it reports success: a client
+                # that reads the joint states on the result then sees where it ended
+                self.publish_state()
                 handle.succeed()
                 self.release(handle)
                 say("succeeded", positions=desired.tolist())
