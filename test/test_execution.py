@@ -629,3 +629,44 @@ def test_joint_state_monitor_reports_lengths_or_why_not(ros):
     assert lengths is None and "winch_7" in why and "missing" in why
     for m in (other, nothing, missing):
         m.destroy()
+
+
+def test_joint_state_monitor_waits_a_bounded_time_for_a_message(ros):
+    """wait_lengths: at once when a recent message is there, or when the message names the
+    winches wrongly; until the first message of a publisher that starts later; the whole
+    wait (then why not) when none comes; and no longer once cancelled."""
+    side, double = ros
+    t0 = time.monotonic()
+    lengths, why = side.monitor.wait_lengths(1.0, 5.0)
+    assert why == "" and lengths.shape == (6,) and time.monotonic() - t0 < 0.5
+    missing = X.JointStateMonitor(side.node, "/joint_states", WINCHES[:5] + ["winch_7"],
+                                  side.group)
+    assert until(lambda: missing.latest is not None, 5.0)
+    t0 = time.monotonic()
+    lengths, why = missing.wait_lengths(1.0, 5.0)
+    assert lengths is None and "winch_7" in why and time.monotonic() - t0 < 0.5
+
+    late = X.JointStateMonitor(side.node, "/late/joint_states", WINCHES, side.group)
+    publisher = side.node.create_publisher(X.JointState, "/late/joint_states", 10)
+    msg = X.JointState(name=WINCHES, position=[0.3] * 6)
+    timer = threading.Timer(0.5, lambda: publisher.publish(msg))
+    assert until(lambda: publisher.get_subscription_count() == 1, 5.0)
+    t0 = time.monotonic()
+    timer.start()
+    lengths, why = late.wait_lengths(1.0, 5.0)
+    took = time.monotonic() - t0
+    assert why == "" and np.all(lengths == 0.3) and 0.4 < took < 2.0, (why, took)
+
+    time.sleep(0.01)
+    t0 = time.monotonic()
+    lengths, why = late.wait_lengths(1e-3, 0.3)      # that one is now too old
+    took = time.monotonic() - t0
+    assert lengths is None and "s old" in why and 0.3 <= took < 0.6, (why, took)
+    t0 = time.monotonic()
+    stop_at = t0 + 0.2
+    lengths, why = late.wait_lengths(1e-3, 5.0, cancelled=lambda: time.monotonic() > stop_at)
+    took = time.monotonic() - t0
+    assert lengths is None and 0.2 <= took < 0.5, (why, took)
+    side.node.destroy_publisher(publisher)
+    for m in (missing, late):
+        m.destroy()

@@ -147,12 +147,52 @@ def test_goal_overrides_and_refusals_end_with_a_reason(ros):
     assert ros.plan_path(plan_path_goal(sphere_pose_msg(Q1), q2), timeout_s=30).success
 
 
-def test_use_current_start_without_measurements_is_refused(ros):
-    answer = ros.plan_path(plan_path_goal(None, sphere_pose_msg(Q3), use_current_start=True),
-                           timeout_s=30)
+def test_use_current_start_without_measurements_is_refused_after_the_wait(ros):
+    wait_s = 1.0
+    assert ros.set_parameters({"execution.joint_states_wait_s": wait_s}) == [(True, "")]
+    try:
+        t0 = time.monotonic()
+        answer = ros.plan_path(plan_path_goal(None, sphere_pose_msg(Q3),
+                                              use_current_start=True), timeout_s=30)
+        took = time.monotonic() - t0
+    finally:
+        assert ros.set_parameters({"execution.joint_states_wait_s": 5.0}) == [(True, "")]
     assert answer.goal_status == GoalStatus.STATUS_ABORTED
     assert answer.result.error_code == PlanPath.Result.NO_CURRENT_STATE
-    assert "/joint_states" in answer.result.error_msg
+    assert ("use_current_start: nothing received on /joint_states (no publishers seen)"
+            == answer.result.error_msg)
+    assert wait_s <= took < wait_s + 2.0, took
+
+
+def test_use_current_start_waits_for_winches_that_appear_after_the_goal(ros):
+    """The goal is sent before anything publishes joint states; a publisher that starts
+    1 s later (a controller coming up) is waited for, and the plan starts at its pose."""
+    q2 = sphere_pose_msg(Q2)
+    lengths = cable_lengths(ROBOT, _position(q2), rotation_from_quaternion(_quaternion(q2)))
+    msg = JointState(name=list(ROBOT.winch_names), position=[float(v) for v in lengths])
+    made = {}
+
+    def come_up():
+        made["pub"] = ros.node.create_publisher(JointState, "/joint_states", 10)
+        made["timer"] = ros.node.create_timer(0.02, lambda: made["pub"].publish(msg))
+        ros.node.destroy_timer(made.pop("once"))
+
+    made["once"] = ros.node.create_timer(1.0, come_up)
+    t0 = time.monotonic()
+    try:
+        answer = ros.plan_path(plan_path_goal(None, sphere_pose_msg(Q3), use_current_start=True,
+                                              strategy="gbf"), timeout_s=60)
+    finally:
+        for timer in ("once", "timer"):
+            if timer in made:
+                ros.node.destroy_timer(made[timer])
+        if "pub" in made:
+            ros.node.destroy_publisher(made["pub"])
+    assert answer.success, answer.result.error_msg
+    assert time.monotonic() - t0 >= 1.0
+    np.testing.assert_allclose(_position(answer.result.path.poses[0]), _position(q2), atol=1e-6)
+    np.testing.assert_allclose(answer.result.cable_trajectory.points[0].positions, lengths,
+                               atol=1e-6)
 
 
 def test_use_current_start_plans_from_the_forward_kinematics_pose(ros):

@@ -48,6 +48,8 @@ GOAL_TIME_TOLERANCE_S = 0.5
 # short enough that "no controller" is answered at once.
 SERVER_WAIT_S = 1.0
 SERVER_POLL_S = 0.05
+# s: how often a wait for joint states looks whether it was cancelled
+CANCEL_POLL_S = 0.05
 # beyond the trajectory's end and the goal time tolerance, how long (s) a result may take
 # before the execution is given up as failed
 RESULT_MARGIN_S = 5.0
@@ -261,13 +263,14 @@ class JointStateMonitor:
 
     ``lengths(max_age_s)`` gives the winches' cable lengths (6,) m in the order of
     ``winch_names``, or None and why not: nothing received yet, the last message older than
-    ``max_age_s`` (s), or a winch missing or not a length in it.
+    ``max_age_s`` (s), or a winch missing or not a length in it. ``wait_lengths`` also
+    waits, a bounded time, for a message when there is none recent enough.
     """
 
     def __init__(self, node, topic, winch_names, callback_group=None):
         self._node = node
         self.winch_names = check_joint_names(winch_names, "winch_names")
-        self._lock = threading.Lock()
+        self._arrived = threading.Condition()   # guards _latest; notified on each message
         self._latest = None          # (JointState, time.monotonic() of arrival)
         self.subscription = node.create_subscription(
             JointState, topic, self._received, JOINT_STATE_QOS,
@@ -275,14 +278,31 @@ class JointStateMonitor:
         self.topic = self.subscription.topic_name
 
     def _received(self, msg):
-        with self._lock:
+        with self._arrived:
             self._latest = (msg, time.monotonic())
+            self._arrived.notify_all()
 
     @property
     def latest(self):
         """(the last JointState, its arrival time.monotonic() s), or None."""
-        with self._lock:
+        with self._arrived:
             return self._latest
+
+    def wait_lengths(self, max_age_s, wait_s, cancelled=lambda: False):
+        """``lengths(max_age_s)``, waiting up to ``wait_s`` (s) for a message while none is
+        recent enough (processes started together can take a DDS announcement period,
+        about 3 s, to find each other), and no longer once ``cancelled()`` is true.
+        A message that names the winches wrongly is answered at once."""
+        end = time.monotonic() + wait_s
+        while True:
+            latest = self.latest
+            recent = latest is not None and time.monotonic() - latest[1] <= max_age_s
+            left = end - time.monotonic()
+            if recent or left <= 0 or cancelled():
+                return self.lengths(max_age_s)
+            with self._arrived:
+                if self._latest is latest:
+                    self._arrived.wait(min(left, CANCEL_POLL_S))
 
     def lengths(self, max_age_s):
         """(cable lengths (6,) m, "") or (None, the reason)."""

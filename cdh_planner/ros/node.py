@@ -279,14 +279,19 @@ class PlannerNode(Node):
                     charts=int(info.get("charts", 0)), time_s=float(info.get("time_s", 0.0)),
                     best_h=float(info.get("best_h", math.nan))))
 
-        start = (self._execution.current_start(self.config, self._last)
-                 if goal.use_current_start else None)
-        if isinstance(start, str):   # no measured start: why
+        cancel = _GoalCancel(goal_handle)
+        start = (self._execution.current_start(
+            self.config, self._last, lambda: cancel.is_set() or self._shutting_down)
+            if goal.use_current_start else None)
+        if isinstance(start, str) and cancel.is_set():
+            call = None
+            refused = planning.refusal(Status.CANCELED, "canceled while waiting for the "
+                                                        "winches' joint states")
+        elif isinstance(start, str):   # no measured start: why
             call = None
             refused = planning.refusal("no_current_state", f"use_current_start: {start}")
         else:
-            call = planning.PlanCall.of_plan_path(goal, start, _GoalCancel(goal_handle),
-                                                  feedback)
+            call = planning.PlanCall.of_plan_path(goal, start, cancel, feedback)
             refused = None
         result, out, path = self._answer(call, run_id, log_file, turn, refused)
         if result.success:

@@ -42,6 +42,7 @@ execution.controller_action     /cable_controller/follow_joint_trajectory  (read
 execution.joint_states_topic    /joint_states  measured cable lengths (read-only)
 execution.start_tolerance       0.005      ~/execute refuses beyond this start error (m)
 execution.joint_states_max_age_s  1.0      older measurements are not used (s)
+execution.joint_states_wait_s   5.0        use_current_start waits this long for one (s)
 log_dir                         ~/.ros/cdh_planner  where run MCAP files go
 log_enabled                     true       record plan calls to MCAP
 log_max_file_mb                 100        next run file beyond this size (MiB); 0: none
@@ -183,6 +184,11 @@ SPECS = (
             "trajectory's first point (m)", low=0.0, open_low=True),
        Spec("execution.joint_states_max_age_s", DOUBLE, 1.0,
             "measured lengths older than this (s) are not used", low=0.0, open_low=True),
+       Spec("execution.joint_states_wait_s", DOUBLE, 5.0,
+            "use_current_start with no measured lengths recent enough waits this long (s) "
+            "for a joint state before answering NO_CURRENT_STATE (DDS discovery of a "
+            "controller started at the same time can take about 3 s); 0: no wait",
+            low=0.0, high=60.0),
        Spec("log_dir", STRING, "~/.ros/cdh_planner",
             "directory of the run MCAP files (one file per node run; created when needed)"),
        Spec("log_enabled", BOOL, True, "record plan calls, published messages and streamed "

@@ -6,7 +6,8 @@ how it ended (the node's part behind ``~/execute``, ``~/stop`` and ``use_current
     ok, message = run.start(plan, config)     # plan: (PlannedPath, Robot, PlanOutputs)
     message = run.stop()                      # hold where the winches are
     run.running                               # executing now (either mode)
-    start = run.current_start(config, plan)   # PoseStamped of the measured lengths, or why
+    start = run.current_start(config, plan, cancelled)  # PoseStamped of the measured
+                                                         # lengths, or why not
     run.close()                               # shutting down: hold, end as stopped
 
 - ``stream``: the plan's cable lengths sampled in real time (``streaming.Stream``) and sent
@@ -183,11 +184,15 @@ class PlanExecution:
 
     # ------------------------------------------------------------------ where it is
 
-    def current_start(self, config, plan=None):
+    def current_start(self, config, plan=None, cancelled=lambda: False):
         """The measured start pose (PoseStamped in the base frame) by forward kinematics
         from the winches' lengths, Newton from the nearest known pose (the last forward
-        kinematics, the ends of ``plan``); or why not (a str)."""
-        lengths, why = self.joints.lengths(config.values["execution.joint_states_max_age_s"])
+        kinematics, the ends of ``plan``); or why not (a str). Without recent lengths it
+        waits up to ``execution.joint_states_wait_s`` for them, or until ``cancelled()``."""
+        values = config.values
+        lengths, why = self.joints.wait_lengths(values["execution.joint_states_max_age_s"],
+                                                values["execution.joint_states_wait_s"],
+                                                cancelled)
         if lengths is None:
             return why
         try:
