@@ -31,7 +31,7 @@ from rclpy.qos import DurabilityPolicy, QoSProfile, ReliabilityPolicy
 from sensor_msgs.msg import JointState
 from trajectory_msgs.msg import JointTrajectory, JointTrajectoryPoint
 
-from ..errors import InputError, check_finite
+from ..errors import InputError, check_finite, exception_line
 from ..feasibility import evaluate
 from ..model.kinematics import cable_lengths, forward_kinematics, rotation_vector_exp
 from .messages import check_joint_names, duration_msg
@@ -455,16 +455,23 @@ class TrajectoryExecutor:
             future = self._client.send_goal_async(run.goal)
         except Exception as exc:  # noqa: BLE001 - e.g. the context shut down: tell the caller
             self._finish(run, FAILED, f"sending the goal to {self.action_name} failed: "
-                                      f"{type(exc).__name__}: {exc}")
+                                      f"{exception_line(exc)}")
             return
         future.add_done_callback(lambda f: self._goal_response(run, f))
 
-    def _goal_response(self, run, future):
+    def _answer(self, run, future, what):
+        """(True, the future's value), or (False, None) once the run has ended as failed:
+        no ``what`` from the action server, and why."""
         try:
-            handle = future.result()
+            return True, future.result()
         except Exception as exc:  # noqa: BLE001
-            self._finish(run, FAILED, f"no goal response from {self.action_name}: "
-                                      f"{type(exc).__name__}: {exc}")
+            self._finish(run, FAILED, f"no {what} from {self.action_name}: "
+                                      f"{exception_line(exc)}")
+            return False, None
+
+    def _goal_response(self, run, future):
+        answered, handle = self._answer(run, future, "goal response")
+        if not answered:
             return
         if handle is None or not handle.accepted:
             self._finish(run, FAILED,
@@ -508,11 +515,8 @@ class TrajectoryExecutor:
         handle.cancel_goal_async().add_done_callback(answered)
 
     def _result(self, run, future):
-        try:
-            response = future.result()
-        except Exception as exc:  # noqa: BLE001
-            self._finish(run, FAILED, f"no result from {self.action_name}: "
-                                      f"{type(exc).__name__}: {exc}")
+        answered, response = self._answer(run, future, "result")
+        if not answered:
             return
         status, result = response.status, response.result
         code = result.error_code
@@ -554,5 +558,4 @@ def _call(node, on_done, outcome, message):
     try:
         on_done(outcome, message)
     except Exception as exc:  # noqa: BLE001
-        node.get_logger().error(f"trajectory on_done callback failed: "
-                                f"{type(exc).__name__}: {exc}")
+        node.get_logger().error(f"trajectory on_done callback failed: {exception_line(exc)}")

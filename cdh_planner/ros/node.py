@@ -280,9 +280,9 @@ class PlannerNode(Node):
                     best_h=float(info.get("best_h", math.nan))))
 
         cancel = _GoalCancel(goal_handle)
-        start = (self._execution.current_start(
-            self.config, self._last, lambda: cancel.is_set() or self._shutting_down)
-            if goal.use_current_start else None)
+        start = (self._execution.current_start(self.config, self._last,
+                                               _Cancel(self, cancel).is_set)
+                 if goal.use_current_start else None)
         if isinstance(start, str) and cancel.is_set():
             call = None
             refused = planning.refusal(Status.CANCELED, "canceled while waiting for the "
@@ -455,7 +455,7 @@ class PlannerNode(Node):
         except Exception as exc:  # noqa: BLE001 - never take the node down
             self.get_logger().error(f"{method.__name__} failed: {traceback.format_exc()}")
             response.success = False
-            response.message = f"internal error: {type(exc).__name__}: {exc}"
+            response.message = f"internal error: {exception_line(exc)}"
             return response
 
     def _answer_execute(self, request, response):
@@ -518,7 +518,7 @@ class PlannerNode(Node):
         except Exception as exc:  # noqa: BLE001
             self.get_logger().error(
                 f"recording failed ({getattr(method, '__name__', method)}): "
-                f"{type(exc).__name__}: {clip(exc, 400)}",
+                f"{exception_line(exc)}",
                 throttle_duration_sec=RECORD_ERROR_PERIOD_S)
             return None
 

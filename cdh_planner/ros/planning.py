@@ -33,7 +33,7 @@ from nav_msgs.msg import Path
 
 from cdh_planner_interfaces.action import PlanPath
 
-from ..errors import InputError
+from ..errors import InputError, exception_line
 from ..planner import PlanResult
 from . import messages as M
 from .markers import markers_msg
@@ -260,7 +260,7 @@ def run_planner(planner, start, goal, call=None, progress=None, logger=None):
     except Exception as exc:  # noqa: BLE001 - the node must keep serving
         if logger is not None:
             logger(traceback.format_exc())
-        return refusal("internal_error", f"internal error: {type(exc).__name__}: {exc}",
+        return refusal("internal_error", f"internal error: {exception_line(exc)}",
                        strategy)
     if result.success and (result.path is None or len(result.path) == 0):
         return refusal("internal_error", "internal error: the planner reported success "

@@ -39,6 +39,7 @@ from pathlib import Path
 
 from rcl_interfaces.msg import ParameterEvent
 
+from ..errors import exception_line
 from ..io.mcap_log import REQUEST_RECEIVED, REQUEST_SENT, RESPONSE_RECEIVED, RESPONSE_SENT, \
     RunRecorder
 
@@ -171,7 +172,7 @@ class RunLog:
                 if topic not in self._dropped:
                     self._dropped.add(topic)
                     self._warn(f"not recorded: a message on {topic} that cannot be encoded "
-                               f"({type(exc).__name__}: {exc}); later ones on this topic "
+                               f"({exception_line(exc)}); later ones on this topic "
                                f"that fail are dropped silently")
 
     def _rotate_locked(self):
@@ -209,7 +210,7 @@ class RunLog:
                 return ""
             except Exception as exc:  # noqa: BLE001 - never into the node
                 self._warn(f"the parameters could not be recorded in {path}: "
-                           f"{type(exc).__name__}: {exc}")
+                           f"{exception_line(exc)}")
             self._written = 0
             rotated, self._rotated = self._rotated, ""
             if announce:

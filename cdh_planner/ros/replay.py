@@ -33,7 +33,7 @@ from rclpy.serialization import deserialize_message
 
 from cdh_planner_interfaces.action import PlanPath
 
-from ..errors import InputError
+from ..errors import InputError, exception_line
 from ..model.pose import rotation_angle_between, rotation_from_quaternion
 from ..io.mcap_log import ACTION_INFIX, GET_RESULT, REQUEST_RECEIVED, RESPONSE_SENT, \
     SEND_GOAL, SERVICE_EVENT_SUFFIX, NotARecording, check_recording
@@ -88,7 +88,7 @@ def read_records(path):
         raise InputError("RUN", str(path), str(exc)) from None
     except Exception as exc:  # noqa: BLE001 - mcap's many error types
         raise InputError("RUN", str(path), f"not a readable MCAP run file: "
-                                           f"{type(exc).__name__}: {exc}") from None
+                                           f"{exception_line(exc)}") from None
     if not out:
         raise InputError("RUN", str(path), "no complete message (an MCAP file cut off before "
                                            "its first message, or an empty recording)")
