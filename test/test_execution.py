@@ -363,10 +363,18 @@ class Side:
         self.monitor = X.JointStateMonitor(self.node, "/joint_states", WINCHES, self.group)
         self.raw = ActionClient(self.node, FollowJointTrajectory, ACTION,
                                 callback_group=self.group)
+        self._retired = []
         self.spinner = MultiThreadedExecutor(num_threads=4, context=self.context)
         self.spinner.add_node(self.node)
         self.thread = threading.Thread(target=self.spinner.spin, daemon=True)
         self.thread.start()
+
+    def retire(self, *entities):
+        """Entities a test is done with (anything with ``destroy()``), destroyed by close()
+        once nothing spins: destroying a subscription or publisher while the executor
+        builds its wait set can end the executor's thread (rclpy 7.1: InvalidHandle in
+        the event handler), and every later test in the module would hear nothing."""
+        self._retired.extend(entities)
 
     def close(self):
         # rclpy 7.1's MultiThreadedExecutor.shutdown does not wait for callbacks in flight
@@ -376,6 +384,8 @@ class Side:
         time.sleep(0.2)
         self.spinner.shutdown(timeout_sec=2.0)
         self.thread.join(5.0)
+        for entity in self._retired:
+            entity.destroy()
         self.node.destroy_node()
         self.context.try_shutdown()
 
@@ -564,7 +574,7 @@ def test_no_server_fails_quickly_naming_the_action_and_cancel_before_sending_sto
     assert nobody.cancel()
     assert done.wait(2.0) == (X.STOPPED, "stopped before the trajectory was sent")
     assert not nobody.busy
-    nobody.destroy()
+    side.retire(nobody)
 
 
 def test_a_server_that_never_answers_fails_after_the_duration_and_a_margin(ros):
@@ -597,8 +607,7 @@ def test_a_server_that_never_answers_fails_after_the_duration_and_a_margin(ros):
         assert not silent_executor.busy
     finally:
         release.set()
-        silent_executor.destroy()
-        server.destroy()
+        side.retire(silent_executor, server)
 
 
 def test_joint_state_monitor_reports_lengths_or_why_not(ros):
@@ -624,11 +633,10 @@ def test_joint_state_monitor_reports_lengths_or_why_not(ros):
     assert until(lambda: side.node.count_publishers("/nobody/joint_states") == 1, 5.0)
     assert nothing.lengths(1.0) == (None, "nothing received on /nobody/joint_states "
                                           "(1 publisher seen)")
-    side.node.destroy_publisher(silent)
+    side.retire(silent)
     lengths, why = missing.lengths(1.0)
     assert lengths is None and "winch_7" in why and "missing" in why
-    for m in (other, nothing, missing):
-        m.destroy()
+    side.retire(other, nothing, missing)
 
 
 def test_joint_state_monitor_waits_a_bounded_time_for_a_message(ros):
@@ -667,6 +675,4 @@ def test_joint_state_monitor_waits_a_bounded_time_for_a_message(ros):
     lengths, why = late.wait_lengths(1e-3, 5.0, cancelled=lambda: time.monotonic() > stop_at)
     took = time.monotonic() - t0
     assert lengths is None and 0.2 <= took < 0.5, (why, took)
-    side.node.destroy_publisher(publisher)
-    for m in (missing, late):
-        m.destroy()
+    side.retire(publisher, missing, late)
