@@ -10,7 +10,6 @@ DDS), so that failures can be injected. The concurrency test runs the real node 
 """
 
 import dataclasses
-import importlib.util
 import struct
 import threading
 import time
@@ -30,14 +29,10 @@ from cdh_planner.io.mcap_log import REQUEST_RECEIVED, RESPONSE_SENT, read_run  #
 from cdh_planner.ros import messages as M  # noqa: E402
 from cdh_planner.ros import planning  # noqa: E402
 from cdh_planner.ros.client import PlannerClient, path_duration  # noqa: E402
-from cdh_planner.ros.node import PlannerNode  # noqa: E402
-from ros_harness import (FAKE_NODE, Q1, Q2, ROBOT2, NodeProcess, claimed_domain,  # noqa: E402
-                         sphere_pose_msg)
+from ros_harness import (Q1, Q2, ROBOT2, NodeProcess, claimed_domain, fake_planner_class,  # noqa: E402
+                         in_process_nodes, sphere_pose_msg)
 
-_spec = importlib.util.spec_from_file_location("fake_planner", FAKE_NODE)
-fake_planner = importlib.util.module_from_spec(_spec)
-_spec.loader.exec_module(fake_planner)
-FakePlanner = fake_planner.FakePlanner
+FakePlanner = fake_planner_class()
 PLAN_EVENTS = "/cdh_planner/plan/_service_event"
 
 
@@ -45,25 +40,10 @@ PLAN_EVENTS = "/cdh_planner/plan/_service_event"
 
 @pytest.fixture
 def make_node(tmp_path):
-    """make_node(factory=FakePlanner, params=()) -> a PlannerNode in this process, in a ROS
-    domain of its own, recording to tmp_path/runs; closed and destroyed at the end."""
-    made = []
-    with claimed_domain() as domain:
-        def make(factory=FakePlanner, params=()):
-            context = rclpy.Context()
-            rclpy.init(context=context, domain_id=domain)
-            args = ["--ros-args", "--params-file", str(ROBOT2),
-                    "-p", f"log_dir:={tmp_path / 'runs'}"]
-            for p in params:
-                args += ["-p", p]
-            node = PlannerNode(factory, context=context, cli_args=args)
-            made.append((node, context))
-            return node
+    """make_node(factory=FakePlanner, params=()) -> a PlannerNode in this process
+    (ros_harness.in_process_nodes)."""
+    with in_process_nodes(tmp_path / "runs") as make:
         yield make
-        for node, context in made:
-            node.close()
-            node.destroy_node()
-            rclpy.try_shutdown(context=context)
 
 
 def plan(node, start=Q1, goal=Q2):
