@@ -13,7 +13,7 @@ call after call in rclpy 7.1 as installed from PyPI). Its subscription to ``~/pl
 volatile, so only answers published after it joined arrive; an answer is paired with its
 result by the ``path_stamp`` key (= the response path's header stamp). ``execute_and_follow``
 calls ``~/execute`` and follows the streamed ``~/cable_command`` to the last waypoint (used by
-``cdh-planner call --execute`` and the demo). Names of services and topics: ``node.py``.
+``cdh-planner call --execute`` and the demo). Names of services and topics: ``interface.py``.
 """
 
 import math
@@ -38,8 +38,9 @@ from cdh_planner_interfaces.msg import TensionEnvelope
 
 from ..errors import InputError
 from . import messages as M
-from .node import CABLE_COMMAND, EXECUTE, EXECUTION_RESULT, LATCHED, NODE_NAME, PLAN, \
-    PLAN_PATH, PLAN_RESULT, PLANNED_TRAJECTORY, SERVICE_QOS, STOP, TENSION_ENVELOPE
+from .interface import ACTION_QOS, CABLE_COMMAND, EXECUTE, EXECUTION_RESULT, LATCHED, \
+    NODE_NAME, PLAN, PLAN_PATH, PLAN_RESULT, PLANNED_TRAJECTORY, SERVICE_QOS, STOP, \
+    TENSION_ENVELOPE
 
 DEFAULT_NODE = "/" + NODE_NAME
 RESULT_WAIT_S = 2.0  # after the response, how long to wait for its ~/plan_result
@@ -181,7 +182,8 @@ class PlannerClient:
         self.plan_client = create(GetPlan, self.topic(PLAN), qos_profile=SERVICE_QOS)
         self.execute_client = create(Trigger, self.topic(EXECUTE), qos_profile=SERVICE_QOS)
         self.stop_client = create(Trigger, self.topic(STOP), qos_profile=SERVICE_QOS)
-        self.plan_path_client = ActionClient(self.node, PlanPath, self.topic(PLAN_PATH))
+        self.plan_path_client = ActionClient(self.node, PlanPath, self.topic(PLAN_PATH),
+                                             **ACTION_QOS)
         self.results = []
         self.node.create_subscription(
             DiagnosticStatus, self.topic(PLAN_RESULT), self.results.append,
@@ -192,7 +194,7 @@ class PlannerClient:
         self._param_client = None
 
     def topic(self, name):
-        """The absolute name of the node's topic or service ``name`` (node.py's names)."""
+        """The absolute name of the node's topic or service ``name`` (interface.py's names)."""
         return f"{self.target}/{name}"
 
     def __enter__(self):
@@ -313,7 +315,8 @@ class PlannerClient:
     def _parameters(self):
         if self._param_client is None:
             from rclpy.parameter_client import AsyncParameterClient
-            self._param_client = AsyncParameterClient(self.node, self.target)
+            self._param_client = AsyncParameterClient(self.node, self.target,
+                                                      qos_profile=SERVICE_QOS)
         return self._param_client
 
     def get_parameters(self, names, timeout_s=5.0):

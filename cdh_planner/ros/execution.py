@@ -34,6 +34,7 @@ from trajectory_msgs.msg import JointTrajectory, JointTrajectoryPoint
 from ..errors import InputError, check_finite, exception_line
 from ..feasibility import evaluate
 from ..model.kinematics import cable_lengths, forward_kinematics, rotation_vector_exp
+from .interface import ACTION_QOS
 from .messages import check_joint_names, duration_msg
 
 COMPLETED, STOPPED, FAILED = "completed", "stopped", "failed"
@@ -369,7 +370,7 @@ class TrajectoryExecutor:
         self._node = node
         self._group = callback_group
         self._client = ActionClient(node, FollowJointTrajectory, action_name,
-                                    callback_group=callback_group)
+                                    callback_group=callback_group, **ACTION_QOS)
         self.action_name = action_name
         self.server_wait_s = float(server_wait_s)
         self.goal_time_tolerance_s = goal_time_tolerance_s

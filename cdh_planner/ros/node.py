@@ -63,7 +63,6 @@ from rclpy.action import ActionServer, CancelResponse, GoalResponse
 from rclpy.callback_groups import ReentrantCallbackGroup
 from rclpy.node import Node
 from rclpy.parameter import Parameter
-from rclpy.qos import DurabilityPolicy, QoSProfile, ReliabilityPolicy
 from std_srvs.srv import Trigger
 from trajectory_msgs.msg import JointTrajectory
 from visualization_msgs.msg import MarkerArray
@@ -75,27 +74,15 @@ from ..errors import InputError, clip, exception_line
 from ..io.mcap_log import REQUEST_RECEIVED, RESPONSE_SENT
 from ..status import Status
 from . import planning
+from .interface import ACTION_QOS, CABLE_COMMAND, EXECUTE, EXECUTION_RESULT, LATCHED, MARKERS, \
+    NODE_NAME, PATH, PLAN, PLAN_PATH, PLAN_PROGRESS, PLAN_RESULT, PLANNED_TRAJECTORY, \
+    SERVICE_QOS, STOP, TENSION_ENVELOPE
 from .messages import WINCH_COMMAND_TYPE
 from .params import BOOL, DOUBLE, DOUBLES, INT, REQUIRED, SPECS, START_ONLY, STRING, \
     STRINGS, PLANNER_PREFIXES, needs_new_planner, node_config, parameter_error
 from .plan_execution import PlanExecution
 from .recording import RunLog, log_limits
 
-NODE_NAME = "cdh_planner"
-# The interface, relative to the node (module docstring); clients use these names too.
-PLAN, PLAN_PATH, EXECUTE, STOP = "plan", "plan_path", "execute", "stop"
-PATH, PLANNED_TRAJECTORY = "path", "planned_cable_trajectory"
-TENSION_ENVELOPE, MARKERS = "tension_envelope", "markers"
-PLAN_RESULT, PLAN_PROGRESS, EXECUTION_RESULT = "plan_result", "plan_progress", "execution_result"
-CABLE_COMMAND = "cable_command"
-LATCHED = QoSProfile(depth=1, durability=DurabilityPolicy.TRANSIENT_LOCAL,
-                     reliability=ReliabilityPolicy.RELIABLE)
-# The services' DDS queues (requests not yet taken by the executor; rclpy's default keeps
-# 10 and drops older ones silently). The executor takes a plan request at once (busy beyond
-# the node's own queue), so this only holds what arrives in one burst.
-SERVICE_DEPTH = 1000
-SERVICE_QOS = QoSProfile(depth=SERVICE_DEPTH, reliability=ReliabilityPolicy.RELIABLE,
-                         durability=DurabilityPolicy.VOLATILE)
 # executor threads: the plan being computed, the requests waiting their turn, and spare ones
 # (busy answers, execute / stop, the stream timer, parameters) that are never all blocked
 EXECUTOR_THREADS = 1 + planning.PLAN_QUEUE_DEPTH + 3
@@ -177,7 +164,7 @@ class PlannerNode(Node):
             self, PlanPath, f"~/{PLAN_PATH}", execute_callback=self._plan_path,
             goal_callback=lambda goal: GoalResponse.ACCEPT,   # busy goals end with BUSY
             cancel_callback=lambda handle: CancelResponse.ACCEPT,
-            callback_group=ReentrantCallbackGroup())
+            callback_group=ReentrantCallbackGroup(), **ACTION_QOS)
         self.srv_execute = self.create_service(Trigger, f"~/{EXECUTE}", self._execute,
                                                qos_profile=SERVICE_QOS)
         self.srv_stop = self.create_service(Trigger, f"~/{STOP}", self._stop,

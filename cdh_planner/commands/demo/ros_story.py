@@ -275,7 +275,7 @@ def leg_q2_q3(demo):
 def replay(demo):
     """Republish the recorded cable commands; re-send the recorded requests to a fresh node."""
     from ...ros import messages as M
-    from ...ros.node import CABLE_COMMAND
+    from ...ros.interface import CABLE_COMMAND
     from ...ros.replay import read_records
     story, client = demo.ros, demo.ros.client
     planned = [leg for leg in story.legs if leg.answer is not None]
