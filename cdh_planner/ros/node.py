@@ -267,10 +267,15 @@ class PlannerNode(Node):
                     best_h=float(info.get("best_h", math.nan))))
 
         cancel = _GoalCancel(goal_handle)
+        refused = (planning.goal_refusal(goal, self.config.base_frame,
+                                         self.config.settings.strategy)
+                   if goal.use_current_start else None)   # not worth waiting for a start
         start = (self._execution.current_start(self.config, self._last,
                                                _Cancel(self, cancel).is_set)
-                 if goal.use_current_start else None)
-        if isinstance(start, str) and cancel.is_set():
+                 if goal.use_current_start and refused is None else None)
+        if refused is not None:
+            call = None
+        elif isinstance(start, str) and cancel.is_set():
             call = None
             refused = planning.refusal(Status.CANCELED, "canceled while waiting for the "
                                                         "winches' joint states")

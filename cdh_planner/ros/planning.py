@@ -35,6 +35,7 @@ from cdh_planner_interfaces.action import PlanPath
 
 from ..errors import InputError, exception_line
 from ..planner import PlanResult
+from ..settings import check_setting
 from . import messages as M
 from .markers import markers_msg
 
@@ -240,6 +241,24 @@ def input_refusal(exc, strategy=""):
     frame is ``bad_frame`` (nav2 TF_ERROR), anything else ``invalid``."""
     reason = "bad_frame" if exc.field.endswith("frame_id") else "invalid"
     return refusal(reason, f"invalid request: {exc}", strategy)
+
+
+def goal_refusal(goal, base_frame, strategy=""):
+    """The refusal of a PlanPath goal for what is wrong with the goal itself (its goal pose:
+    frame, NaN, quaternion; its strategy or timeout_s), checked before anything is waited
+    for (``use_current_start`` waits for the winches' joint states); None when it is fine."""
+    try:
+        M.pose_from_msg(goal.goal, base_frame, "goal")
+        if goal.strategy:
+            check_setting("strategy", goal.strategy, "strategy")
+        if goal.timeout_s != 0.0:
+            check_setting("timeout_s", float(goal.timeout_s), "timeout_s")
+    except InputError as exc:
+        if exc.field in ("strategy", "timeout_s"):
+            reason = "bad_strategy" if exc.field == "strategy" else "invalid"
+            return refusal(reason, f"invalid request: {exc}", strategy)
+        return input_refusal(exc, strategy)
+    return None
 
 
 def run_planner(planner, start, goal, call=None, progress=None, logger=None):
