@@ -403,3 +403,14 @@ def test_every_concurrent_request_is_answered(tmp_path):
         for path in node.run_files():
             events += [m.info.event_type for t, _, m, _ in read_run(path) if t == PLAN_EVENTS]
         assert events.count(REQUEST_RECEIVED) == events.count(RESPONSE_SENT) == CLIENTS * CALLS
+
+
+def test_an_undeclared_parameter_is_refused_naming_it(make_node):
+    """Through the parameter service's own path (set_parameters_atomically), as
+    ``ros2 param set`` reaches it: the name and value, not rclpy's empty list."""
+    node = make_node()
+    result = node.set_parameters_atomically([Parameter("planner.radius_typo", value=0.25)])
+    assert not result.successful
+    assert "planner.radius_typo" in result.reason and "0.25" in result.reason, result.reason
+    assert node.set_parameters_atomically(
+        [Parameter("planner.radius", value=0.25)]).successful

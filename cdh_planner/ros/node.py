@@ -209,6 +209,16 @@ class PlannerNode(Node):
             values[spec.name] = param.value
         return values
 
+    def set_parameters_atomically(self, parameter_list):
+        """rclpy's, but a parameter this node does not have is refused naming it (rclpy 7.1
+        names none: "Invalid access to undeclared parameter(s): []")."""
+        unknown = [p for p in parameter_list if not self.has_parameter(p.name)]
+        if unknown:
+            return SetParametersResult(successful=False, reason=str(InputError(
+                unknown[0].name, unknown[0].value,
+                "not a parameter of this node (ros2 param list shows them)")))
+        return super().set_parameters_atomically(parameter_list)
+
     def _on_set_parameters(self, params):
         values = dict(self._values)
         values.update({p.name: p.value for p in params})
