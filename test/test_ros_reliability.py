@@ -20,7 +20,6 @@ import pytest
 
 pytest.importorskip("rclpy")
 
-import rclpy  # noqa: E402
 from nav_msgs.srv import GetPlan  # noqa: E402
 from rclpy.parameter import Parameter  # noqa: E402
 from std_srvs.srv import Trigger  # noqa: E402
@@ -115,7 +114,7 @@ def test_failed_outputs_keep_the_previous_plan(make_node, monkeypatch):
     assert good.poses
     trajectories = spy(monkeypatch, node.pub_trajectory)
     node.set_parameters([Parameter("trajectory.max_cable_speed", value=0.1)])
-    monkeypatch.setattr(node, "_publish_outputs", lambda *a, **k: 1 / 0)
+    monkeypatch.setattr(node.plans, "_publish_outputs", lambda *a, **k: 1 / 0)
     path, values = plan(node)
     assert not path.poses and "ZeroDivisionError" in values["error_msg"]
     assert not trajectories
@@ -141,7 +140,7 @@ def test_a_publishing_failure_midway_puts_the_previous_outputs_back(make_node, m
     node.set_parameters([Parameter("trajectory.max_cable_speed", value=0.1)])
     path, values = plan(node)
     assert not path.poses and "publisher gone" in values["error_msg"]
-    assert len(paths) == 2 and paths[-1] is node._last[2].path    # the previous path again
+    assert len(paths) == 2 and paths[-1] is node.plans.with_last(lambda p: p)[2].path    # the previous path again
     assert M.time_ns(paths[-1].header.stamp) == M.time_ns(good.header.stamp)
     ok, message = execute(node)
     assert ok and executing_s(message) == pytest.approx(path_duration(good), abs=1e-3)
@@ -270,7 +269,7 @@ def test_an_internal_error_still_records_the_response(make_node, monkeypatch):
     def crash(*args, **kwargs):
         raise RuntimeError("the planner thread fell over")
 
-    monkeypatch.setattr(node, "_compute", crash)
+    monkeypatch.setattr(node.plans, "compute", crash)
     path, values = plan(node)
     assert not path.poses and "fell over" in values["error_msg"]
     monkeypatch.undo()

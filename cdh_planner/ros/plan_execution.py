@@ -1,13 +1,12 @@
 """Executing the node's last good plan, in the configured ``execution.mode``, and saying
 how it ended (the node's part behind ``~/execute``, ``~/stop`` and ``use_current_start``).
 
-    run = PlanExecution(node, config, command_publisher, result_publisher, publish, lock,
-                        on_end)
+    run = PlanExecution(node, config, command_publisher, result_publisher, publish, on_end)
     ok, message = run.start(plan, config)     # plan: (PlannedPath, Robot, PlanOutputs)
     message = run.stop()                      # hold where the winches are
     run.running                               # executing now (either mode)
-    start = run.current_start(config, plan, cancelled)  # PoseStamped of the measured
-                                                         # lengths, or why not
+    start = run.current_start(config, plan, cancelled)  # MeasuredStart: the pose of the
+                                                         # measured lengths, or why not
     run.close()                               # shutting down: hold, end as stopped
 
 - ``stream``: the plan's cable lengths sampled in real time (``streaming.Stream``) and sent
@@ -20,12 +19,12 @@ with the plan's first point. Each run is a token of the state machine ``runs``
 (``execution_runs.ExecutionRuns``: starting, running, stopping, idle) and ends exactly once,
 whatever fails inside: the transition to idle first, then the result published latched
 (diagnostic_msgs/DiagnosticStatus: completed, stopped or failed, and why) and ``on_end``.
-``publish(publisher, msg, latched)`` is the node's (it records what it publishes); ``lock``
-is the node's too, so that "executing" and the node's plan hand-over change together.
+``publish(publisher, msg, latched)`` is the node's (it records what it publishes).
 """
 
 import time
 import traceback
+from dataclasses import dataclass
 
 from ..errors import InputError, exception_line
 from ..model.pose import rotation_from_quaternion
@@ -37,16 +36,24 @@ from .streaming import Stream
 STREAM, FOLLOW = "stream", "follow_joint_trajectory"
 
 
+@dataclass
+class MeasuredStart:
+    """``use_current_start``'s start: the pose (geometry_msgs/PoseStamped, base frame) of
+    the measured cable lengths, or why there is none."""
+
+    pose: object = None
+    why: str = ""
+
+
 class PlanExecution:
 
-    def __init__(self, node, config, command_publisher, result_publisher, publish, lock,
-                 on_end, callback_group=None):
+    def __init__(self, node, config, command_publisher, result_publisher, publish, on_end,
+                 callback_group=None):
         self._node = node
         self._commands = command_publisher
         self._results = result_publisher
         self._publish = publish
-        self._lock = lock
-        self._on_end = on_end          # on_end(publish_pending), under lock, once per run
+        self._on_end = on_end          # on_end(publish_pending), once per run
         self.runs = ExecutionRuns()    # the state machine: one run at a time, one end each
         self._stream = None            # the Stream of the current run in stream mode
         self._timer = None
@@ -72,8 +79,7 @@ class PlanExecution:
         """(started, message): ``plan`` (PlannedPath, Robot, PlanOutputs) executed in
         ``execution.mode``, or why not (executing already, no plan, the winches away from
         its start). Measured lengths are checked when there are any. A refusal here is
-        only in the answer: ``~/execution_result`` reports runs that started. Call under
-        ``lock``."""
+        only in the answer: ``~/execution_result`` reports runs that started."""
         values = config.values
         if self.running:
             return False, f"refused: already executing{self._where()}; call ~/stop first"
@@ -197,18 +203,17 @@ class PlanExecution:
         state machine's one terminal transition first, then, each on its own so that no
         failure can undo it, the stream's timer cancelled, a log line, the result published
         latched and ``on_end(publish_pending)``. Later calls for the same run do nothing."""
-        with self._lock:
-            if not self.runs.end(run, outcome, message):
-                return   # ended already (stop and the last tick, shutdown and the controller)
-            self._stream = None
-            self._quietly("cancelling the stream timer",
-                          lambda: self._timer is not None and self._timer.cancel())
-            self._quietly("logging the end", lambda: self._log_end(outcome, message))
-            self._quietly("publishing the execution result",
-                          lambda: self._publish(self._results, M.execution_status(
-                              outcome, message, run.mode), latched=True))
-            self._quietly("handing over the plan made while executing",
-                          lambda: self._on_end(publish_pending))
+        if not self.runs.end(run, outcome, message):
+            return   # ended already (stop and the last tick, shutdown and the controller)
+        self._stream = None
+        self._quietly("cancelling the stream timer",
+                      lambda: self._timer is not None and self._timer.cancel())
+        self._quietly("logging the end", lambda: self._log_end(outcome, message))
+        self._quietly("publishing the execution result",
+                      lambda: self._publish(self._results, M.execution_status(
+                          outcome, message, run.mode), latched=True))
+        self._quietly("handing over the plan made while executing",
+                      lambda: self._on_end(publish_pending))
 
     def _log_end(self, outcome, message):
         # one call site per severity: rclpy refuses a call site whose severity changes
@@ -232,26 +237,26 @@ class PlanExecution:
     # ------------------------------------------------------------------ where it is
 
     def current_start(self, config, plan=None, cancelled=lambda: False):
-        """The measured start pose (PoseStamped in the base frame) by forward kinematics
-        from the winches' lengths, Newton from the nearest known pose (the last forward
-        kinematics, the ends of ``plan``); or why not (a str). Without recent lengths it
-        waits up to ``execution.joint_states_wait_s`` for them, or until ``cancelled()``."""
+        """The MeasuredStart: the pose by forward kinematics from the winches' lengths,
+        Newton from the nearest known pose (the last forward kinematics, the ends of
+        ``plan``), or why not. Without recent lengths it waits up to
+        ``execution.joint_states_wait_s`` for them, or until ``cancelled()``."""
         values = config.values
         lengths, why = self.joints.wait_lengths(values["execution.joint_states_max_age_s"],
                                                 values["execution.joint_states_wait_s"],
                                                 cancelled)
         if lengths is None:
-            return why
+            return MeasuredStart(why=why)
         try:
             guess = execution.nearest_pose(config.robot, lengths, self._known_poses(plan))
             p, R = execution.current_pose(config.robot, lengths, guess)
         except InputError as exc:
-            return str(exc)
+            return MeasuredStart(why=str(exc))
         except Exception as exc:  # noqa: BLE001 - the goal still gets a result, with why
             self._node.get_logger().error(f"forward kinematics failed: {traceback.format_exc()}")
-            return f"forward kinematics failed: {exception_line(exc)}"
+            return MeasuredStart(why=f"forward kinematics failed: {exception_line(exc)}")
         self._last_pose = (p, R)
-        return M.pose_stamped_msg(p, R, config.base_frame, self._stamp())
+        return MeasuredStart(pose=M.pose_stamped_msg(p, R, config.base_frame, self._stamp()))
 
     def _known_poses(self, plan):
         """Platform poses (p, R): the last forward kinematics and the ends of ``plan``."""

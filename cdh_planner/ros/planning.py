@@ -243,6 +243,21 @@ def input_refusal(exc, strategy=""):
     return refusal(reason, f"invalid request: {exc}", strategy)
 
 
+def feedback_sender(goal_handle, period_s=0.1):
+    """A progress callback sending PlanPath feedback (charts, time_s, best_h) on
+    ``goal_handle`` at most every ``period_s``."""
+    last = [0.0]
+
+    def feedback(info):
+        now = time.monotonic()
+        if now - last[0] >= period_s:
+            last[0] = now
+            goal_handle.publish_feedback(PlanPath.Feedback(
+                charts=int(info.get("charts", 0)), time_s=float(info.get("time_s", 0.0)),
+                best_h=float(info.get("best_h", math.nan))))
+    return feedback
+
+
 def goal_refusal(goal, base_frame, strategy=""):
     """The refusal of a PlanPath goal for what is wrong with the goal itself (its goal pose:
     frame, NaN, quaternion; its strategy or timeout_s), checked before anything is waited
