@@ -58,14 +58,15 @@ from dataclasses import dataclass, field
 import numpy as np
 
 from ..errors import InputError
-from ..model.robot import robot_from_dict
+from ..model import robot_schema as rs
+from ..model.robot import FIELDS as ROBOT_FIELDS, OPTIONAL_GROUPS, robot_from_dict
 from ..model.task import TASKS, task_from_dict
 from ..planner import task_cost
 from ..settings import SETTINGS, Bounds, PlannerSettings, check_range
 
 STRING, BOOL, INT, DOUBLE, DOUBLES, STRINGS = "string", "bool", "int", "double", "doubles", \
     "strings"
-REQUIRED = object()  # default of a parameter that must come from the robot file
+REQUIRED = rs.REQUIRED  # default of a parameter that must come from the robot file
 
 # the groups whose change means a new Planner (the others only affect the node)
 PLANNER_PREFIXES = ("robot.", "task.", "planner.", "trajectory.")
@@ -102,43 +103,24 @@ def _setting_spec(name):
                 open_low=s.open_low, open_high=s.open_high, choices=s.choices)
 
 
-def _robot_specs():
-    r = "robot."
-    six = "6 numbers, one per cable (or a single number for all)"
-    return [
-        Spec(r + "name", STRING, "", "robot name (for messages)"),
-        Spec(r + "winch_names", STRINGS, [f"winch_{i + 1}" for i in range(6)],
-             "6 distinct joint names, one per winch (JointState / JointTrajectory names)"),
-        Spec(r + "base_anchors", DOUBLES, REQUIRED,
-             "A_1..A_6 in the base frame: 18 numbers (m), x y z per anchor"),
-        Spec(r + "platform_anchors", DOUBLES, REQUIRED,
-             "B_1..B_6 in the platform frame: 18 numbers (m), x y z per anchor"),
-        Spec(r + "length_min", DOUBLES, REQUIRED, f"least cable length (m): {six}"),
-        Spec(r + "length_max", DOUBLES, REQUIRED, f"greatest cable length (m): {six}"),
-        Spec(r + "tension_min", DOUBLES, REQUIRED, f"least cable tension (N): {six}"),
-        Spec(r + "tension_max", DOUBLES, REQUIRED, f"greatest cable tension (N): {six}"),
-        Spec(r + "load.force", DOUBLES, REQUIRED, "load force, base frame (N): 3 numbers"),
-        Spec(r + "load.point", DOUBLES, [0.0, 0.0, 0.0],
-             "where the load force acts, platform frame (m): 3 numbers"),
-        Spec(r + "load.moment", DOUBLES, [0.0, 0.0, 0.0], "load moment, base frame (N m)"),
-        Spec(r + "load.mass", DOUBLE, None, "load mass (kg; optional: enables the dynamic "
-             "timing; load.force must then be its weight)", low=0.0, high=1e7, open_low=True),
-        Spec(r + "load.inertia", DOUBLES, None, "load inertia about its centre of mass, "
-             "platform frame (kg m^2): 9 numbers row-major or 3 for a diagonal; empty: 0"),
-        Spec(r + "wrench_ellipsoid.frame", STRING, "load",
-             "frame of the wrench ellipsoid: load (F3, parallel to base at the load point) "
-             "or base", choices=("load", "base")),
-        Spec(r + "wrench_ellipsoid.matrix", DOUBLES, REQUIRED,
-             "ellipsoid shape E (SPD): 36 numbers row-major or 6 for a diagonal "
-             "(force rows 1/N^2, moment rows 1/(N m)^2)"),
-        Spec(r + "wrench_ellipsoid.offset", DOUBLES, [0.0] * 6,
-             "ellipsoid centre offset from the load wrench: 6 numbers (N, N m)"),
-        Spec(r + "contact_ellipsoid.matrix", DOUBLES, None,
-             "optional contact wrench ellipsoid (paper Eqs. 22-23): 36 or 6 numbers; empty "
-             "for none"),
-        Spec(r + "contact_ellipsoid.center", DOUBLES, [0.0] * 6,
-             "contact ellipsoid centre: 6 numbers (N, N m)"),
-    ]
+_ROBOT_KINDS = {rs.NAME: STRING, rs.NAMES: STRINGS, rs.CHOICE: STRING, rs.NUMBER: DOUBLE,
+                rs.NUMBERS: DOUBLES, rs.MATRIX: DOUBLES}
+
+
+def _robot_spec(f):
+    """The node parameter robot.<key> of a robot file field, from its declaration
+    (model/robot.py, ``Robot``): a required field of an optional group (the contact
+    ellipsoid's matrix) is an optional parameter, empty for none."""
+    default = f.default
+    if default is rs.REQUIRED:
+        default = None if f.group in OPTIONAL_GROUPS else REQUIRED
+    elif isinstance(default, tuple):
+        default = list(default)
+    bounds = {}
+    if f.kind == rs.NUMBER:
+        bounds = dict(low=0.0 if f.sign else None, open_low=f.sign == "positive", high=f.limit)
+    return Spec("robot." + f.key, _ROBOT_KINDS[f.kind], default, rs.describe(f),
+                choices=f.choices, **bounds)
 
 
 def _task_specs():
@@ -159,7 +141,7 @@ def _task_specs():
 SPECS = (
     [Spec("base_frame", STRING, "cdh_base",
           "frame_id that plan requests must use and every output carries (REP 103, m)")]
-    + _robot_specs()
+    + [_robot_spec(f) for f in ROBOT_FIELDS]
     + _task_specs()
     + [_setting_spec(name) for name in SETTINGS]
     + [Spec("stream_rate_hz", DOUBLE, 50.0,
@@ -316,9 +298,9 @@ def _robot_dict(checked):
         for key in keys[:-1]:
             node = node.setdefault(key, {})
         node[keys[-1]] = value
-    contact = out.get("contact_ellipsoid", {})
-    if "matrix" not in contact:
-        out.pop("contact_ellipsoid", None)
+    for f in ROBOT_FIELDS:  # an optional group without its required fields is not given
+        if f.group in OPTIONAL_GROUPS and f.default is rs.REQUIRED and f.name not in out.get(f.group, {}):
+            out.pop(f.group, None)
     return out
 
 
