@@ -60,7 +60,7 @@ import numpy as np
 from ..errors import InputError
 from ..model import robot_schema as rs
 from ..model.robot import FIELDS as ROBOT_FIELDS, OPTIONAL_GROUPS, robot_from_dict
-from ..model.task import TASKS, task_from_dict
+from ..model.task import TASKS, task_from_dict, task_parameters
 from ..planner import task_cost
 from ..settings import SETTINGS, Bounds, PlannerSettings, check_range
 
@@ -124,18 +124,17 @@ def _robot_spec(f):
 
 
 def _task_specs():
-    """task.type and every registered task's parameters (model/task.py); a parameter that
-    two tasks share (task.center) is declared once."""
+    """task.type and every registered task's parameters (model/task.py: ``register`` has
+    checked that tasks sharing a parameter, task.center, declare it alike)."""
     kinds = {"double": DOUBLE, "point": DOUBLES, "bool": BOOL}
-    specs = {"task.type": Spec("task.type", STRING, "free", "task constraint: "
-                               + ", ".join(TASKS), choices=tuple(TASKS))}
-    for task in TASKS.values():
-        for name, meta, default in task.parameters():
-            unit = f" ({meta.unit})" if meta.unit else ""
-            specs.setdefault(name, Spec(name, kinds[meta.kind], list(default) if meta.kind == "point"
-                                        else default, meta.description + unit,
-                                        low=0.0 if meta.positive else None, open_low=meta.positive))
-    return list(specs.values())
+    specs = [Spec("task.type", STRING, "free", "task constraint: " + ", ".join(TASKS),
+                  choices=tuple(TASKS))]
+    for name, (meta, default, _) in task_parameters().items():
+        unit = f" ({meta.unit})" if meta.unit else ""
+        specs.append(Spec(name, kinds[meta.kind], list(default) if meta.kind == "point" else default,
+                          meta.description + unit, low=0.0 if meta.positive else None,
+                          open_low=meta.positive))
+    return specs
 
 
 SPECS = (
