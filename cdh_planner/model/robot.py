@@ -50,7 +50,7 @@ class Robot:
     """
 
     name: str = robot_field(
-        key="name", kind=NAME, unit="", default="",
+        key="name", kind=NAME, unit="", default=None,
         description="robot name, for messages (absent: the file's name)")
     winch_names: tuple = robot_field(
         key="winch_names", kind=NAMES, unit="", default=WINCH_NAMES,

@@ -12,42 +12,12 @@ No rclpy here: ``declare`` in ``ros/node.py`` turns ``SPECS`` into declarations.
 parameters are dynamically typed in ROS so that ``-p planner.timeout_s:=5`` (an integer) and
 YAML integer lists work; ``node_config`` checks their types and ranges itself.
 
-Parameters (SI units):
-
-==============================  =========  ================================================
-name                            default    meaning
-==============================  =========  ================================================
-base_frame                      cdh_base   frame_id requests must use and outputs carry
-robot.*                         (file)     the robot (model/robot.py; from the robot file)
-task.type                       free       free, slice, sphere or pivot
-task.fixed.x .. task.fixed.sigma  NaN      slice: fixed coordinate (m, rad); NaN = free
-task.center, task.radius        0 0 0, 0.1 sphere (paper Eq. 17), m; pivot: the point c
-task.free_torsion               false      sphere: sigma free as well
-task.tool                       0 0 0      pivot: tool point t, platform frame (m)
-planner.strategy                auto       auto (astar up to 3-D, gbf above), astar or gbf
-planner.cost                    auto       auto, so3, great_circle or se3
-planner.timeout_s               60         give up after this long (answer TIMEOUT)
-planner.radius                  0          chart radius (scaled units, about rad); 0: by
-                                           the task's dimension (0.1 to 3-D, 0.5 in 6-D)
-planner.max_charts              100000     give up after this many charts
-planner.max_memory_mb           1024       give up when the atlas holds this much (MiB)
-planner.complete                false      grow the whole atlas component
-planner.margin_floor            0.001      least normalised feasibility margin kept
-trajectory.max_cable_speed      0.05       per-winch speed limit (m/s)
-trajectory.max_cable_accel      0.2        per-winch acceleration limit (m/s^2)
-stream_rate_hz                  50         rate of ~/cable_command while executing (Hz)
-stream_interpolation            linear     linear (never above the speed limit) or quintic
-execution.mode                  stream     stream or follow_joint_trajectory (ros2_control)
-execution.controller_action     /cable_controller/follow_joint_trajectory  (read-only)
-execution.joint_states_topic    /joint_states  measured cable lengths (read-only)
-execution.start_tolerance       0.005      ~/execute refuses beyond this start error (m)
-execution.joint_states_max_age_s  1.0      older measurements are not used (s)
-execution.joint_states_wait_s   5.0        use_current_start waits this long for one (s)
-log_dir                         ~/.ros/cdh_planner  where run MCAP files go
-log_enabled                     true       record plan calls to MCAP
-log_max_file_mb                 100        next run file beyond this size (MiB); 0: none
-log_max_file_s                  0          next run file after this long (s); 0: no limit
-==============================  =========  ================================================
+The parameters are ``SPECS``: the robot file's fields (``robot.*``, declared on
+``model.robot.Robot``), the registered tasks' fields (``task.*``, ``model/task.py``), the
+planner settings (``settings.py``) and the node's own (below). Their table, with units,
+defaults and ranges, is docs/parameters.md, generated from ``SPECS`` by
+``python -m cdh_planner.ros.params > docs/parameters.md`` (test_ros_params checks it is
+current).
 """
 
 import math
@@ -112,7 +82,9 @@ def _robot_spec(f):
     (model/robot.py, ``Robot``): a required field of an optional group (the contact
     ellipsoid's matrix) is an optional parameter, empty for none."""
     default = f.default
-    if default is rs.REQUIRED:
+    if default is None and _ROBOT_KINDS[f.kind] == STRING:
+        default = ""  # a string parameter is typed: empty is "not set" (_robot_dict)
+    elif default is rs.REQUIRED:
         default = None if f.group in OPTIONAL_GROUPS else REQUIRED
     elif isinstance(default, tuple):
         default = list(default)
@@ -290,8 +262,8 @@ def _robot_dict(checked):
     for name, value in checked.items():
         if not name.startswith("robot.") or value is None:
             continue
-        if name == "robot.name" and not value:
-            continue
+        if SPEC[name].kind == STRING and not value:
+            continue  # not set
         keys = name.split(".")[1:]
         node = out
         for key in keys[:-1]:
@@ -337,3 +309,58 @@ def parameter_error(exc):
     the PlannerSettings field (``margin_floor`` -> ``planner.margin_floor``)."""
     name = SETTING_PARAMETERS.get(exc.field)
     return exc if name is None else InputError(name, exc.value, exc.reason)
+
+
+DOCS_HEADER = """# The node's parameters
+
+Generated from `cdh_planner/ros/params.py` (`SPECS`) by
+`python -m cdh_planner.ros.params > docs/parameters.md`; `test/test_ros_params.py` checks
+that it is current. The `robot.*` parameters are the robot file's `robot:` block (keys
+nested in the file: `load: {force: ...}` is `robot.load.force`), declared on
+`cdh_planner/model/robot.py`'s `Robot`; `task.*` are the registered tasks' fields (the
+problem file's `task:` keys); `planner.*` and `trajectory.*` the planner settings
+(`cdh_planner/settings.py`). SI units. Default "required": the robot file must give it;
+"empty": not set.
+"""
+
+
+def parameters_markdown():
+    """docs/parameters.md: a Markdown table of every parameter of ``SPECS``."""
+    rows = ["| parameter | type | default | range | description |", "|---|---|---|---|---|"]
+    for spec in SPECS:
+        cells = (f"`{spec.name}`", spec.kind, _default_text(spec.default), _range_text(spec),
+                 spec.description)
+        rows.append("| " + " | ".join(c.replace("|", "\\|") for c in cells) + " |")
+    return DOCS_HEADER + "\n" + "\n".join(rows) + "\n"
+
+
+def _default_text(value):
+    if value is REQUIRED:
+        return "required"
+    if value is None:
+        return "empty"
+    if isinstance(value, bool):
+        return str(value).lower()
+    if isinstance(value, (int, float)):
+        return "NaN" if math.isnan(value) else f"{value:g}"
+    if isinstance(value, (list, tuple)):
+        return "[" + ", ".join(str(v) if isinstance(v, str) else _default_text(v) for v in value) + "]"
+    return f"`{value}`" if value != "" else '""'
+
+
+def _range_text(spec):
+    if spec.choices:
+        return ", ".join(spec.choices)
+    lo = None if spec.low is None else f"{spec.low:g}"
+    hi = None if spec.high is None else f"{spec.high:g}"
+    if lo is not None and hi is not None:
+        return f"{'(' if spec.open_low else '['}{lo}, {hi}{')' if spec.open_high else ']'}"
+    if lo is not None:
+        return f"{'>' if spec.open_low else '>='} {lo}"
+    if hi is not None:
+        return f"{'<' if spec.open_high else '<='} {hi}"
+    return ""
+
+
+if __name__ == "__main__":
+    print(parameters_markdown(), end="")
