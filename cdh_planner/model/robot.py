@@ -171,9 +171,8 @@ def robot_from_dict(d, source=""):
     if v["contact_ellipsoid.matrix"] is None:
         v["contact_ellipsoid.center"] = None
     check_not_degenerate(v["base_anchors"], v["platform_anchors"], v["length_min"], v["length_max"])
-    robot = Robot(**{f.name: v[meta.key] for f in fields(Robot) if (meta := f.metadata.get("robot"))},
-                  source=source)
-    return _with_contact(robot)
+    declared = {f.name: v[f.metadata["robot"].key] for f in fields(Robot) if "robot" in f.metadata}
+    return _with_contact(Robot(**declared, source=source))
 
 
 def _with_contact(robot):
@@ -213,7 +212,7 @@ def check_not_degenerate(A, B, length_min, length_max):
         spread = _distance_from_best_line(P)
         if spread < MIN_SPREAD_M:
             kind = "coincident" if np.ptp(P, axis=0).max() < MIN_SPREAD_M else "collinear"
-            raise InputError(where, P.ravel().tolist(), f"the 6 anchors are {kind}: J is singular "
+            raise InputError(where, P.ravel().tolist(), f"the {len(P)} anchors are {kind}: J is singular "
                              "at every pose (need 3 anchors not on one line)")
     rng = np.random.default_rng(0)
     centre = A.mean(axis=0)
