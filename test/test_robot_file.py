@@ -269,3 +269,21 @@ def test_every_declared_field_has_a_unit_or_kind_that_needs_none_and_a_descripti
     for f in FIELDS:  # a default is a valid value of its own field
         if f.default not in (None, robot_schema.REQUIRED):
             robot_schema.read_value(f, f.key, f.default, 6)
+
+
+@pytest.mark.parametrize("f", FIELDS, ids=[f.key for f in FIELDS])
+def test_a_null_value_is_refused_naming_the_field_unless_the_field_is_optional(f):
+    """``key: null`` (YAML) is "not set" for an optional field (default None) and refused,
+    naming the field, for every other one (a field with a default included)."""
+    doc = _robot_block()
+    doc.setdefault("contact_ellipsoid", {"matrix": [1e4] * 3 + [1e10] * 3})
+    group = doc[f.group] if f.group else doc
+    group[f.name] = None
+    if f.key == "load.mass":
+        doc["load"].pop("inertia", None)
+    if f.default is None:
+        robot_from_dict(doc)
+        return
+    with pytest.raises(InputError) as exc:
+        robot_from_dict(doc)
+    assert exc.value.field == f"robot.{f.key}" and exc.value.value is None

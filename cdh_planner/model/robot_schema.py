@@ -95,19 +95,21 @@ def check_groups(d, schema, optional_groups=()):
     """``d`` (the ``robot:`` mapping) with only declared keys and every required one, at the
     top and in each group; a group in ``optional_groups`` may be absent, but when given
     needs its own required keys. InputError naming the first offending key."""
-    groups = {}
+    groups = {"": ([], set())}  # group -> (its keys in declaration order, required ones)
     for f in schema:
-        allowed, required = groups.setdefault(f.group, (set(), set()))
-        allowed.add(f.name)
+        allowed, required = groups.setdefault(f.group, ([], set()))
+        allowed.append(f.name)
         if f.default is REQUIRED:
             required.add(f.name)
-    top_allowed, top_required = groups.pop("", (set(), set()))
-    top_allowed |= set(groups)
-    top_required |= {g for g, (_, req) in groups.items() if req and g not in optional_groups}
-    check_keys("robot", d, sorted(top_allowed), required=top_required)
+    top_allowed, top_required = groups.pop("")
+    for g, (_, required) in groups.items():
+        top_allowed.append(g)
+        if required and g not in optional_groups:
+            top_required.add(g)
+    check_keys("robot", d, top_allowed, required=top_required)
     for g, (allowed, required) in groups.items():
         if g in d:
-            check_keys(f"robot.{g}", d[g], sorted(allowed), required=required)
+            check_keys(f"robot.{g}", d[g], allowed, required=required)
 
 
 def read_fields(d, schema, defaults=None):
@@ -119,12 +121,11 @@ def read_fields(d, schema, defaults=None):
     out, m = {}, N_CABLES
     for f in schema:
         group = d.get(f.group, {}) if f.group else d
-        value = group.get(f.name, defaults.get(f.key, f.default))
-        where = f"robot.{f.key}"
-        if value is None or value is REQUIRED:
-            out[f.key] = None
+        value = group[f.name] if f.name in group else defaults.get(f.key, f.default)
+        if value is REQUIRED or (value is None and f.default is None):
+            out[f.key] = None  # not given: an optional field, or a field of an absent group
             continue
-        out[f.key] = read_value(f, where, value, m)
+        out[f.key] = read_value(f, f"robot.{f.key}", value, m)
         if f.kind == NAMES:
             m = cable_count(out[f.key])
     return out
