@@ -197,7 +197,8 @@ def check_value(spec, value):
             raise InputError(name, value, "expected true or false")
         return value
     if spec.kind == STRINGS:
-        if isinstance(value, str) or not all(isinstance(v, str) for v in value):
+        if isinstance(value, str) or not hasattr(value, "__iter__") \
+                or not all(isinstance(v, str) for v in value):
             raise InputError(name, value, "expected a list of strings")
         return list(value)
     if spec.kind == DOUBLES:
