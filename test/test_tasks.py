@@ -212,7 +212,11 @@ def test_a_task_declaring_a_shared_parameter_otherwise_is_refused_at_registratio
         T.register(RingTask)
     with pytest.raises(ValueError, match="task type 'pivot' is already registered"):
         T.register(dataclass(frozen=True)(type("OtherPivot", (T.PivotTask,), {})))
-    assert T.TASKS == before
+    alpha = T.Coordinate("alpha1", "m")  # the sphere's alpha1 is an angle
+    with pytest.raises(ValueError, match="task 'arc': coordinate alpha1 \\(m\\) is declared otherwise"):
+        T.register(dataclass(frozen=True)(type("ArcTask", (PlaneTask,), {
+            "type": "arc", "coordinates": (alpha,), "__annotations__": {}})))
+    assert T.TASKS == before and T.COORDINATES["alpha1"].unit == "rad"
     assert T.register(T.PivotTask) is T.PivotTask  # the same class again: nothing changes
     # declared alike (sphere and pivot share task.center) is one parameter
     params = T.task_parameters()

@@ -86,9 +86,10 @@ def register(cls):
     """Class decorator: make ``cls`` a task of problem files, node parameters and slice.
 
     Tasks share one ``task.<field>`` namespace of node parameters: a parameter that two
-    tasks declare (task.center) must be declared alike (same TaskField and default), and a
-    type is registered once; a conflict is refused here (ValueError naming both tasks)
-    rather than giving one task the other's parameter."""
+    tasks declare (task.center) must be declared alike (same TaskField and default), as
+    must a coordinate two tasks introduce, and a type is registered once; a conflict is
+    refused here (ValueError naming the task) rather than giving one task the other's
+    parameter or coordinate."""
     if cls.type in TASKS and TASKS[cls.type] is not cls:
         raise ValueError(f"task type {cls.type!r} is already registered ({TASKS[cls.type].__name__})")
     shared = task_parameters()
@@ -97,6 +98,10 @@ def register(cls):
             raise ValueError(f"task {cls.type!r}: parameter {name} ({meta.kind}, default "
                              f"{default!r}) is declared otherwise by task {shared[name][2]!r} "
                              f"({shared[name][0].kind}, default {shared[name][1]!r})")
+    for c in cls.coordinates:
+        if c.name in COORDINATES and COORDINATES[c.name] != c:
+            raise ValueError(f"task {cls.type!r}: coordinate {c.name} ({c.unit}) is declared "
+                             f"otherwise already ({COORDINATES[c.name].unit})")
     TASKS[cls.type] = cls
     COORDINATES.update({c.name: c for c in cls.coordinates})
     return cls
