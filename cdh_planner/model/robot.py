@@ -7,8 +7,8 @@ A robot file is a ROS 2 parameters file, so the same file configures the node:
         robot: {name, winch_names, base_anchors, platform_anchors, length_min, ...}
 
 Arrays are flat because ROS 2 parameters cannot nest lists: ``base_anchors`` holds
-A_1..A_m as 3m numbers (m, base frame F1; m cables, one per winch name, m = 6),
-``platform_anchors`` B_1..B_m (m, platform frame F2); a 6x6 matrix is 36 numbers
+A_1..A_m, x y z each (metres, base frame F1; m cables, one per winch name, 6 for now),
+``platform_anchors`` B_1..B_m (metres, platform frame F2); a 6x6 matrix is 36 numbers
 row-major, or 6 numbers for a diagonal. Every field is declared once, on ``Robot``
 (key, unit, size, bounds, description: ``robot_schema.RobotField``); the table of them
 is docs/parameters.md (``robot.*``).
@@ -41,7 +41,9 @@ class Robot:
     ``moment``; the wrench ellipsoid K = {w : (w - w0)^T E (w - w0) <= 1} has centre
     w0 = load wrench + ``ellipsoid_offset`` and shape ``ellipsoid_matrix`` (E), both given
     in ``ellipsoid_frame``: "load" (F3: parallel to the base, origin at the load point, the
-    paper's App. A) or "base" (F1, moments about the base origin).
+    paper's App. A) or "base" (F1, moments about the base origin). A contact ellipsoid
+    (``contact_matrix``, ``contact_center`` as given, or None) is already folded into
+    ``ellipsoid_matrix`` and ``ellipsoid_offset`` (paper Eqs. 22-23).
 
     Each field read from the robot file carries its declaration (``RobotField``, see
     ``robot_schema``): the file's key, unit, size, bounds and description. The node's
