@@ -188,13 +188,6 @@ class Task:
         """One line for titles and logs."""
         return f"{self.type} task"
 
-    @classmethod
-    def example(cls):
-        """A valid task of this class for the registry's contract tests (test_tasks.py:
-        equations against finite differences, the pose map both ways): its defaults unless
-        the class gives its own."""
-        return cls()
-
     # ----- problem files and node parameters --------------------------------------------
     @classmethod
     def task_fields(cls):
@@ -218,6 +211,13 @@ class Task:
     def dict_of_parameters(cls, values):
         """The problem-file mapping of the node's flat parameter values (name -> value)."""
         return {"type": cls.type, **{name: values[f"task.{name}"] for name, _, _ in cls.task_fields()}}
+
+    @classmethod
+    def example(cls):
+        """A valid task of this class for the registry's contract tests (test_tasks.py:
+        equations against finite differences, the pose map both ways): its defaults unless
+        the class gives its own."""
+        return cls()
 
 
 
