@@ -19,6 +19,9 @@ from cdh_planner.model.pose import quaternion_from_tau  # noqa: E402
 from cdh_planner.model.robot import load_robot  # noqa: E402
 from cdh_planner.model.task import PivotTask, SliceTask  # noqa: E402
 from cdh_planner.ros import planning  # noqa: E402
+from cdh_planner.model import robot_schema  # noqa: E402
+from cdh_planner.model.robot import FIELDS as ROBOT_FIELDS, OPTIONAL_GROUPS  # noqa: E402
+from cdh_planner.ros import params  # noqa: E402
 from cdh_planner.ros.params import SPEC, SPECS, node_config  # noqa: E402
 from cdh_planner.ros.streaming import Stream  # noqa: E402
 from cdh_planner.trajectory.path import PlannedPath  # noqa: E402
@@ -83,6 +86,8 @@ def test_integers_are_accepted_for_numbers():
     ("robot.base_anchors", None, "robot.base_anchors = None: required parameter is not set"),
     ("robot.length_min", [0.2] * 5, "robot.length_min"),
     ("robot.winch_names", ["a"] * 6, "robot.winch_names"),
+    ("robot.winch_names", 0.0, "robot.winch_names = 0.0: expected a list of strings"),
+    ("robot.winch_names", ["w1", "w2"], "robot.winch_names = ['w1', 'w2']: expected 6 distinct"),
     ("robot.wrench_ellipsoid.frame", "world", "robot.wrench_ellipsoid.frame = 'world'"),
     ("task.type", "cube", "task.type = 'cube': expected one of free, slice, sphere, pivot"),
     ("task.radius", 0.0, "task.radius = 0.0: must be > 0"),
@@ -227,3 +232,39 @@ def test_stream_refuses_wrong_joint_names():
     robot, path = _path()
     with pytest.raises(InputError):
         Stream(replace(path), ["a", "b"])
+
+
+def test_the_parameter_table_in_the_docs_is_generated_from_the_specs():
+    text = (REPO / "docs" / "parameters.md").read_text()
+    assert text == params.parameters_markdown(), \
+        "docs/parameters.md is stale: python -m cdh_planner.ros.params > docs/parameters.md"
+    assert all(f"| `{s.name}` |" in text for s in SPECS)
+
+
+def test_robot_parameters_are_the_declared_robot_fields():
+    """robot.* is exactly Robot's declaration: one parameter per field, required where the
+    file must give it (the contact ellipsoid's matrix: only with its group, so optional)."""
+    assert [s.name for s in SPECS if s.name.startswith("robot.")] == \
+        [f"robot.{f.key}" for f in ROBOT_FIELDS]
+    for f in ROBOT_FIELDS:
+        spec = SPEC[f"robot.{f.key}"]
+        required = f.default is robot_schema.REQUIRED and f.group not in OPTIONAL_GROUPS
+        assert (spec.default is params.REQUIRED) == required, f.key
+        assert spec.choices == f.choices and robot_schema.describe(f) == spec.description
+
+
+def test_contact_ellipsoid_as_parameters_is_the_file_robot(tmp_path):
+    import yaml
+    doc = yaml.safe_load((REPO / "config" / "robot2.yaml").read_text())
+    robot = doc["cdh_planner"]["ros__parameters"]["robot"]
+    robot["contact_ellipsoid"] = {"matrix": [2e4, 2e4, 2e4, 3e10, 3e10, 3e10],
+                                  "center": [0.0, 0.0, 1.0, 0.0, 0.0, 0.0]}
+    path = tmp_path / "robot.yaml"
+    path.write_text(yaml.safe_dump(doc))
+    offline, node = load_robot(path), node_config(file_parameters(path)).robot
+    for name in ("ellipsoid_matrix", "ellipsoid_offset", "contact_matrix", "contact_center"):
+        np.testing.assert_array_equal(getattr(node, name), getattr(offline, name))
+    assert not np.allclose(offline.ellipsoid_matrix, load_robot(REPO / "config" / "robot2.yaml")
+                           .ellipsoid_matrix)
+    values = dict(file_parameters(path), **{"robot.contact_ellipsoid.matrix": None})
+    assert node_config(values).robot.contact_matrix is None  # center alone: no contact ellipsoid

@@ -83,10 +83,45 @@ TASKS = {}
 
 
 def register(cls):
-    """Class decorator: make ``cls`` a task of problem files, node parameters and slice."""
+    """Class decorator: make ``cls`` a task of problem files, node parameters and slice.
+
+    Tasks share one ``task.<field>`` namespace of node parameters: a parameter that two
+    tasks declare (task.center) must be declared alike (same TaskField and default), as
+    must a coordinate two tasks introduce, and a type is registered once; a conflict is
+    refused here (ValueError naming the task) rather than giving one task the other's
+    parameter or coordinate."""
+    if cls.type in TASKS and TASKS[cls.type] is not cls:
+        raise ValueError(f"task type {cls.type!r} is already registered ({TASKS[cls.type].__name__})")
+    shared = task_parameters()
+    for name, meta, default in cls.parameters():
+        if name in shared and not _same_parameter(shared[name][:2], (meta, default)):
+            raise ValueError(f"task {cls.type!r}: parameter {name} ({meta.kind}, default "
+                             f"{default!r}) is declared otherwise by task {shared[name][2]!r} "
+                             f"({shared[name][0].kind}, default {shared[name][1]!r})")
+    for c in cls.coordinates:
+        if c.name in COORDINATES and COORDINATES[c.name] != c:
+            raise ValueError(f"task {cls.type!r}: coordinate {c.name} ({c.unit}) is declared "
+                             f"otherwise already ({COORDINATES[c.name].unit})")
     TASKS[cls.type] = cls
     COORDINATES.update({c.name: c for c in cls.coordinates})
     return cls
+
+
+def task_parameters():
+    """node parameter -> (TaskField, default, type of the first task declaring it), over
+    every registered task (``register`` keeps them consistent)."""
+    out = {}
+    for cls in TASKS.values():
+        for name, meta, default in cls.parameters():
+            out.setdefault(name, (meta, default, cls.type))
+    return out
+
+
+def _same_parameter(a, b):
+    """Two (TaskField, default) declarations alike (NaN defaults equal)."""
+    (meta_a, da), (meta_b, db) = a, b
+    nan = isinstance(da, float) and isinstance(db, float) and np.isnan(da) and np.isnan(db)
+    return meta_a == meta_b and (nan or da == db)
 
 
 class Task:
@@ -177,6 +212,13 @@ class Task:
         """The problem-file mapping of the node's flat parameter values (name -> value)."""
         return {"type": cls.type, **{name: values[f"task.{name}"] for name, _, _ in cls.task_fields()}}
 
+    @classmethod
+    def example(cls):
+        """A valid task of this class for the registry's contract tests (test_tasks.py:
+        equations against finite differences, the pose map both ways): its defaults unless
+        the class gives its own."""
+        return cls()
+
 
 
 def _check_field(where, meta, value):
@@ -208,6 +250,10 @@ class SliceTask(Task):
 
     fixed: dict = field(default_factory=dict)
     type: ClassVar[str] = "slice"
+
+    @classmethod
+    def example(cls):
+        return cls(fixed={"x": 0.0, "y": 0.0, "z": 0.35, "sigma": 0.6})  # Robot 1's slices
 
     @property
     def names(self):
@@ -302,6 +348,10 @@ class SphereTask(Task):
     n_vars: ClassVar[int] = 2
     costs: ClassVar[tuple] = ("great_circle", "se3")
 
+    @classmethod
+    def example(cls):
+        return cls(center=(0.0, 0.0, 0.306), radius=0.13, free_torsion=True)  # Robot 2's, Eq. 17
+
     @property
     def names(self):
         return ("alpha1", "alpha2", "sigma") if self.free_torsion else ("alpha1", "alpha2")
@@ -390,6 +440,10 @@ class PivotTask(Task):
     costs: ClassVar[tuple] = ("so3", "se3")
     n_equations: ClassVar[int] = 3
     length_rows: ClassVar[tuple] = (True, True, True)
+
+    @classmethod
+    def example(cls):
+        return cls(tool=(0.0, 0.0, 0.1), center=(0.0, 0.0, 0.35))
 
     @property
     def names(self):
