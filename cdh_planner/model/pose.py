@@ -97,7 +97,7 @@ def tau_from_rotation(R, phi_hint=0.0, tol=SINGULAR_TOL):
     sin_t = np.hypot(R[..., 0, 2], R[..., 1, 2])
     theta = np.arctan2(sin_t, cos_t)
     hint = np.broadcast_to(np.asarray(phi_hint, dtype=float), theta.shape)
-    north, south = theta <= tol, np.pi - theta <= tol
+    north, south = theta <= tol, np.arctan2(sin_t, -cos_t) <= tol   # (pi - theta, exact)
     phi = np.where(north | south, hint, np.arctan2(R[..., 1, 2], R[..., 0, 2]))
     sum_ = np.arctan2(R[..., 1, 0] - R[..., 0, 1], R[..., 0, 0] + R[..., 1, 1])   # phi + psi
     diff = np.arctan2(-(R[..., 1, 0] + R[..., 0, 1]), R[..., 1, 1] - R[..., 0, 0])  # phi - psi
