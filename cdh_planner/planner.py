@@ -122,7 +122,9 @@ class Planner:
         """A PlanResult from ``start`` to ``goal``. ``cancel``: an object with ``is_set()``
         (threading.Event) that stops the search (answer ``canceled``). ``tolerance`` (m or
         rad, > 0; default the settings' ``task_tolerance``): how far start and goal may be off
-        the task; within it they are projected onto it. ``strategy`` and ``timeout_s`` (s):
+        the task; within it they are projected onto it, and onto theta = 0 or pi, where phi
+        is chosen by the task or the other end (``model.task.end_taus``): one pose plans one
+        path, however it is written. ``strategy`` and ``timeout_s`` (s):
         this call's, instead of the settings' (InputError naming them if invalid)."""
         s = self.settings
         if strategy is not None or timeout_s is not None:
@@ -298,7 +300,8 @@ class Planner:
         them (``task.end_taus``: from the rotation only, snapped onto theta = 0 or pi
         within ``tolerance`` (rad, at least TASK_TOL), phi chosen there by the task and the
         other end), so one pose plans one path whichever way it was written."""
-        ends = [(label, _finite_vector(f"{label}.p", pose.p, 3), _finite_vector(f"{label}.tau", pose.tau, 3))
+        ends = [(label, _finite_vector(f"{label}.p", pose.p, 3),
+                 _finite_vector(f"{label}.tau", pose.tau, 3))
                 for label, pose in (("start", start), ("goal", goal))]
         taus = end_taus(self.task, [tau for _, _, tau in ends], max(tolerance, TASK_TOL))
         return [(label, p, tau) for (label, p, _), tau in zip(ends, taus)]
