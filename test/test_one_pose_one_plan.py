@@ -251,3 +251,22 @@ def test_the_snap_is_bounded_by_the_tolerance():
     kept = Planner(pr.robot, pr.task, pr.settings).plan(start, pr.goal, tolerance=1e-4)
     assert kept.success and kept.path.tau[0, 1] == pytest.approx(5e-4, rel=1e-9)
     assert angle_gap(kept.path.tau[0, 0], -1.0 - np.pi) < 1e-9
+
+
+def test_a_measured_start_through_the_nodes_messages_plans_the_pole_path():
+    """use_current_start: forward kinematics of q1's lengths, measured (rounded to 0.1 um)
+    or with noise, becomes a PoseStamped, then the node's request poses: the plan is the
+    one from q1's task coordinates (before: 13 % longer over the node)."""
+    pytest.importorskip("rclpy")
+    from nav_msgs.srv import GetPlan
+    from cdh_planner.ros import messages as M
+    from cdh_planner.ros.planning import request_poses
+    pr = load_problem(PROBLEMS / "robot2_q1_q2.yaml")
+    goal = M.pose_stamped_msg(pr.goal.p, rotation_tt(pr.goal.tau), "base")
+    results = [("lambda", Planner(pr.robot, pr.task, pr.settings).plan(pr.start, pr.goal))]
+    for label, pose in writings(pr.robot, pr.start)[1:]:
+        request = GetPlan.Request(start=M.pose_stamped_msg(pose.p, rotation_tt(pose.tau), "base"),
+                                  goal=goal)
+        start, end = request_poses(request, "base")
+        results.append((label, Planner(pr.robot, pr.task, pr.settings).plan(start, end)))
+    assert_one_plan(results)
