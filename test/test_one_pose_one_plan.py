@@ -228,6 +228,20 @@ def test_the_other_tasks_at_theta_zero(task, coords):
     assert_one_plan(plan_all(pr, [(label, q, goal) for label, q in writings(pr.robot, start)], task))
 
 
+@pytest.mark.parametrize("name", ["robot2_q2_q3", "robot2_pivot"])
+def test_searched_queries_between_regular_poses_plan_one_path(name):
+    """Off the singular set, both ends measured or turned by noise: the same search (GBF),
+    the same path."""
+    pr = load_problem(PROBLEMS / f"{name}.yaml")
+    pr.settings = dataclasses.replace(pr.settings, strategy="gbf")
+    ends = [("given", pr.start, pr.goal), ("measured", measured(pr.robot, pr.start),
+                                           measured(pr.robot, pr.goal)),
+            ("noise", noisy(pr.start, 7), noisy(pr.goal, 8))]
+    results = plan_all(pr, ends)
+    assert_one_plan(results)
+    assert results[0][1].stats["chart_path"] > 0
+
+
 def test_a_slice_that_fixes_phi_plans_from_a_quaternion_on_theta_zero():
     """Before, the quaternion's phi (0) made the pose 1.7 rad off the slice: refused."""
     pr = load_problem(PROBLEMS / "robot1_qs2_qg.yaml")
