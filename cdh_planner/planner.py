@@ -27,7 +27,7 @@ from .feasibility import evaluate
 from .manifold.constraint import TaskConstraint
 from .model.pose import (Pose, quaternion_from_tau, rotation_angle_between, rotation_tt,
                          tau_from_rotation, wrap_angle)
-from .model.task import COORDINATES
+from .model.task import COORDINATES, end_taus
 from .search.search import MB, Stop, run
 from .settings import COSTS, PlannerSettings, check_setting  # noqa: F401  (PlannerSettings: API)
 from .status import Status
@@ -122,7 +122,9 @@ class Planner:
         """A PlanResult from ``start`` to ``goal``. ``cancel``: an object with ``is_set()``
         (threading.Event) that stops the search (answer ``canceled``). ``tolerance`` (m or
         rad, > 0; default the settings' ``task_tolerance``): how far start and goal may be off
-        the task; within it they are projected onto it. ``strategy`` and ``timeout_s`` (s):
+        the task; within it they are projected onto it, and onto theta = 0 or pi, where phi
+        is chosen by the task or the other end (``model.task.end_taus``): one pose plans one
+        path, however it is written. ``strategy`` and ``timeout_s`` (s):
         this call's, instead of the settings' (InputError naming them if invalid)."""
         s = self.settings
         if strategy is not None or timeout_s is not None:
@@ -150,9 +152,9 @@ class Planner:
             return PlanResult(ok, reason, message, strategy, c.dim, c.n_vars,
                               len(self.atlas.charts), time.perf_counter() - t0, cost, path, stats)
 
-        points = {}
-        for label, pose in (("start", start), ("goal", goal)):
-            x, why = self._lift(label, pose, tolerance or self.settings.task_tolerance)
+        points, tolerance = {}, tolerance or self.settings.task_tolerance
+        for label, p, tau in self._end_poses(start, goal, tolerance):
+            x, why = self._lift(label, p, tau, tolerance)
             if x is None:
                 return answer(False, why[0], why[1])
             points[label] = x
@@ -293,11 +295,21 @@ class Planner:
         return np.concatenate(parts)
 
     # ----- start and goal ----------------------------------------------------------------
-    def _lift(self, label, pose, tolerance):
-        """(x on M, None) or (None, (reason, message)). A pose within ``tolerance`` (m or
-        rad) of the task is projected onto it (the pose of its own task coordinates)."""
-        p = _finite_vector(f"{label}.p", pose.p, 3)
-        tau = _finite_vector(f"{label}.tau", pose.tau, 3)
+    def _end_poses(self, start, goal, tolerance):
+        """(label, p m, tau rad) of start and goal, their angles as the query plans between
+        them (``task.end_taus``: from the rotation only, snapped onto theta = 0 or pi
+        within ``tolerance`` (rad, at least TASK_TOL), phi chosen there by the task and the
+        other end), so one pose plans one path whichever way it was written."""
+        ends = [(label, _finite_vector(f"{label}.p", pose.p, 3),
+                 _finite_vector(f"{label}.tau", pose.tau, 3))
+                for label, pose in (("start", start), ("goal", goal))]
+        taus = end_taus(self.task, [tau for _, _, tau in ends], max(tolerance, TASK_TOL))
+        return [(label, p, tau) for (label, p, _), tau in zip(ends, taus)]
+
+    def _lift(self, label, p, tau, tolerance):
+        """(x on M, None) or (None, (reason, message)) of the pose (p m, tau rad). A pose
+        within ``tolerance`` (m or rad) of the task is projected onto it (the pose of its
+        own task coordinates)."""
         off = float(self.task.residual(p[None], tau[None])[0])
         if off > max(tolerance, TASK_TOL):
             return None, ("invalid", f"{label} pose is off the {self.task.type} task by "

@@ -24,7 +24,8 @@ from typing import ClassVar
 import numpy as np
 
 from ..errors import MAX_POSITION_M, InputError, check_finite, check_keys, check_numbers
-from .pose import rotation_angle_between, rotation_tt, rotation_tt_derivatives, wrap_angle
+from .pose import (on_singular_set, rotation_angle_between, rotation_tt, rotation_tt_derivatives,
+                   tau_from_rotation, wrap_angle)
 
 POSE_NAMES = ("x", "y", "z", "phi", "theta", "sigma")
 
@@ -188,6 +189,25 @@ class Task:
         """One line for titles and logs."""
         return f"{self.type} task"
 
+    # ----- the singular set of tilt-and-torsion (theta = 0 or pi: end_taus) -------------
+    def fixed_angle(self, name):
+        """The value (rad) the task holds the pose angle ``name`` ("phi" or "sigma") at, or
+        None where it is free."""
+        return None
+
+    def singular_phi(self, tau, hint):
+        """The azimuth phi (rad) of the pose tau (3,) on theta = 0 or pi, where the rotation
+        does not fix it, in this task's coordinates: the task's fixed phi; at theta = pi with
+        sigma fixed, where the rotation fixes 2 phi - sigma, the one of the two solutions
+        (pi apart) nearest ``hint``; else ``hint`` (rad)."""
+        phi_fixed, sigma_fixed = self.fixed_angle("phi"), self.fixed_angle("sigma")
+        if phi_fixed is not None:
+            return float(phi_fixed)
+        if tau[1] == np.pi and sigma_fixed is not None:
+            base = 0.5 * (2.0 * tau[0] - tau[2] + sigma_fixed)
+            return float(wrap_angle(base + np.pi * np.round(wrap_angle(hint - base) / np.pi)))
+        return float(hint)
+
     # ----- problem files and node parameters --------------------------------------------
     @classmethod
     def task_fields(cls):
@@ -301,6 +321,9 @@ class SliceTask(Task):
                for v in [self.fixed[name]]]
         return np.max(dev, axis=0) if dev else np.zeros(full.shape[0])
 
+    def fixed_angle(self, name):
+        return self.fixed.get(name)
+
     def describe(self):
         return "slice " + ", ".join(describe_value(n, v) for n, v in self.fixed.items())
 
@@ -408,6 +431,9 @@ class SphereTask(Task):
         ang = rotation_angle_between(rotation_tt(tau), rotation_tt(tau_ref))
         return np.maximum(np.abs(dist - self.radius), ang)
 
+    def fixed_angle(self, name):
+        return 0.0 if name == "sigma" and not self.free_torsion else None
+
     def own_cost(self, kind):
         """great_circle: the arc on the sphere (m), plus r times the torsion change (free
         torsion)."""
@@ -512,6 +538,31 @@ def task_from_dict(d, where="task"):
     if not isinstance(kind, str) or kind not in TASKS:
         raise InputError(f"{where}.type", kind, f"unknown task type (expected one of {', '.join(TASKS)})")
     return TASKS[kind].from_dict(d, where)
+
+
+def end_taus(task, taus, tol):
+    """The tilt-and-torsion angles (2, 3) rad a query plans between, of the start's and the
+    goal's ``taus`` (2, 3): one pose, one plan, whatever angles wrote the pose.
+
+    Each orientation is rewritten from its rotation (``pose.tau_from_rotation``); one within
+    ``tol`` (rad) of theta = 0 or pi is snapped onto it (moved by at most ``tol``, as a pose
+    off the task is projected onto it), so that noise there (forward kinematics of measured
+    lengths) does not pick phi. On that set the rotation leaves phi free, and phi is, in
+    this order: the task's (``Task.singular_phi``: a fixed phi, or with sigma fixed at
+    theta = pi the allowed one nearest what follows); the other end's azimuth when that end
+    is off the set, so the straight line in task coordinates tilts straight toward it (the
+    sphere task's pole: the other end's meridian, the shortest arc), which is also the
+    limit of what a pose tilted toward the other end gives; else 0.
+    """
+    taus = np.asarray(taus, dtype=float)
+    R = rotation_tt(taus)
+    first = tau_from_rotation(R, 0.0, tol)
+    singular = on_singular_set(first)
+    phi = first[:, 0].copy()
+    for k, other in ((0, 1), (1, 0)):
+        if singular[k]:
+            phi[k] = task.singular_phi(first[k], 0.0 if singular[other] else first[other, 0])
+    return tau_from_rotation(R, phi, tol)
 
 
 def describe_value(name, value):
