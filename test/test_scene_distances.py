@@ -250,11 +250,12 @@ def test_lower_bounds_never_exceed_the_exact_distance():
         obstacles = [{"id": f"b{k}", "type": "box", "size": [0.04, 0.01, 0.02],
                       "quaternion": random_quaternion(rng),
                       "position": near_cable_point(rng, ROBOT2, p, R, 0.05)} for k in range(6)]
-        cm = model(obstacles)
-        Bw = platform_anchors(ROBOT2, p, R)
-        lb, _, _ = cm._bounds(p, R, Bw)
-        for (oid, i), d in cable_obstacle_distances(cm, p, R).items():
-            assert lb[i, int(oid[1:])] <= d + 1e-12
+        cm = model(obstacles, platform={"type": "box", "size": [0.14, 0.14, 0.01]})
+        lb = cm.lower_bounds(p, R)
+        for kind, oid, cables, d in cm.distances(p, R):
+            row = cables[0] if kind == "cable-obstacle" else 6
+            if kind != "cable-cable":
+                assert lb[row, int(oid[1:])] <= d + 1e-12
 
 
 def test_an_empty_scene_binds_only_cable_pairs_and_robot2_cables_clear_each_other():

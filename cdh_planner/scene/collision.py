@@ -41,35 +41,60 @@ class Clearance:
     kind: str = None
     obstacle: str = None
     cables: tuple = ()
-    binding: str = ""
+    names: tuple = ()  # the cables' winch names
 
     @property
     def ok(self):
         return self.margin >= 0.0
+
+    @property
+    def binding(self):
+        """What binds, in words: "winch_2 / ball", "platform / post", "winch_1 / winch_4"."""
+        if self.kind is None:
+            return ""
+        parts = [self.names[i] for i in self.cables] if self.cables else ["platform"]
+        return " / ".join(parts + ([self.obstacle] if self.obstacle is not None else []))
 
 
 class CollisionModel:
     """The robot's cables and platform against the scene's obstacles, ready to check poses.
 
     ``clearance(p, R)``: the least signed distance and what binds (exact, pruned);
-    ``distances(p, R)``: every checked pair's distance (no pruning: tests, markers)."""
+    ``distances(p, R)``: every checked pair's distance (no pruning: tests, markers).
+    Holds its work buffers: one model per thread."""
 
     def __init__(self, robot, scene):
         self.scene = scene
         self.names = tuple(robot.winch_names)
-        self.A = np.ascontiguousarray(robot.base_anchors, dtype=float)
-        self.B = np.ascontiguousarray(robot.platform_anchors, dtype=float)
-        self.r = float(scene.cable_radius)
+        A = np.asarray(robot.base_anchors, dtype=float)
+        B = np.asarray(robot.platform_anchors, dtype=float)
+        m, K = len(A), len(scene.obstacles)
         self.obstacles = scene.obstacles
-        self.geometry = [_geometry(o) for o in self.obstacles]
-        self.placement = [coal.Transform3s(o.rotation, o.position) for o in self.obstacles]
-        self.centres = np.array([o.position for o in self.obstacles], dtype=float).reshape(-1, 3)
-        self.radii = np.array([o.bounding_radius() for o in self.obstacles], dtype=float)
         self.platform = scene.platform
-        self.platform_geometry = _geometry(scene.platform) if scene.platform else None
-        self.pairs, self.trims = _cable_pairs(self.A, self.B)
-        self.rho = float(scene.shared_anchor_exemption)
-        self.capsules = [coal.Capsule(self.r, 1.0) for _ in self.names]
+        self.pairs, trims = _cable_pairs(A, B)
+        centres = np.array([o.position for o in self.obstacles], dtype=float).reshape(-1, 3)
+        radii = np.array([o.bounding_radius() for o in self.obstacles], dtype=float)
+        plat = self.platform
+        self.static = np.concatenate([  # the kernel's constants, one array (see _unpack)
+            A.ravel(), B.ravel(), centres.ravel(), radii, trims.ravel(),
+            [scene.cable_radius, scene.shared_anchor_exemption],
+            plat.position if plat else np.zeros(3),
+            [plat.bounding_radius() if plat else np.inf]])
+        # work buffers: lower bounds (cables, then the platform) and each cable's capsule
+        # frame (rotation 9, centre 3, half length 1; its platform anchor 3), cable pair distances
+        self.lb = np.empty((m + 1, K))
+        self.frames = np.empty((m, 16))
+        self.cc = np.empty(len(self.pairs))
+        self.capsules = [coal.Capsule(float(scene.cable_radius), 1.0) for _ in range(m)]
+        self.cable_T = [coal.Transform3s() for _ in range(m)]
+        self.platform_T = coal.Transform3s()
+        # ComputeDistance keeps pointers to its shapes: the model holds them
+        self.geometry = geometry = [_geometry(o) for o in self.obstacles]
+        self.platform_geometry = _geometry(plat) if plat else None
+        self.placement = [coal.Transform3s(o.rotation, o.position) for o in self.obstacles]
+        self.cable_fn = [[coal.ComputeDistance(c, g) for g in geometry] for c in self.capsules]
+        self.platform_fn = [coal.ComputeDistance(self.platform_geometry, g) for g in geometry] \
+            if plat else []
         self.request = coal.DistanceRequest()
         self.request.gjk_tolerance = GJK_TOLERANCE
         self.result = coal.DistanceResult()
@@ -78,91 +103,83 @@ class CollisionModel:
 
     def clearance(self, p, R):
         """The least signed distance (m) at pose (p (3,) m, R (3, 3)) and what binds."""
-        p = np.asarray(p, dtype=float)
-        R = np.asarray(R, dtype=float)
-        Bw = p + self.B @ R.T
-        lb, cc, plb = self._bounds(p, R, Bw)
+        p, R = self._pose(p, R)
         best, what = math.inf, None
-        if cc.size:
-            k = int(np.argmin(cc))
-            best, what = float(cc[k]), ("cable-cable", None, tuple(map(int, self.pairs[k])))
+        if self.cc.size:
+            k = int(np.argmin(self.cc))
+            best, what = float(self.cc[k]), ("cable-cable", None, tuple(map(int, self.pairs[k])))
         if self.obstacles:
-            flat = np.concatenate([lb.ravel(), plb])
-            m = len(self.names)
-            for idx in np.argsort(flat):
+            flat = self.lb.ravel()  # consumed: each pair tried is set to inf
+            m, K = len(self.names), len(self.obstacles)
+            while True:  # in increasing order of the bounds, while one is below the best
+                idx = int(np.argmin(flat))
                 if flat[idx] >= best:
                     break
-                i, k = divmod(int(idx), len(self.obstacles))
+                flat[idx] = math.inf
+                i, k = divmod(idx, K)
                 if i < m:
-                    d, w = self.cable_obstacle(i, k, Bw), ("cable-obstacle", k, (i,))
+                    d, w = self._cable_obstacle(i, k), ("cable-obstacle", k, (i,))
                 else:
-                    d, w = self.platform_obstacle(k, p, R), ("platform-obstacle", k, ())
+                    d, w = self._platform_obstacle(k, p, R), ("platform-obstacle", k, ())
                 if d < best:
                     best, what = d, w
         return self._answer(best, what)
 
-    def _bounds(self, p, R, Bw):
-        """Cable-obstacle lower bounds (m, K), cable pair distances, platform lower bounds."""
-        m, K = len(self.names), len(self.obstacles)
-        lb = np.empty((m, K))
-        cc = np.empty(len(self.pairs))
-        _kernel(self.A, Bw, self.centres, self.radii, self.r, self.pairs, self.trims, self.rho,
-                lb, cc)
-        if self.platform is None or not K:
-            return lb, cc, np.full(0, math.inf)
-        centre = p + R @ self.platform.position
-        plb = np.linalg.norm(self.centres - centre, axis=1) - self.radii \
-            - self.platform.bounding_radius()
-        return lb, cc, plb
+    def _pose(self, p, R):
+        """Fill the work buffers for pose (p, R): lower bounds, pair distances, frames."""
+        p = np.ascontiguousarray(p, dtype=float)
+        R = np.ascontiguousarray(R, dtype=float)
+        _kernel(p, R, self.static, self.pairs, self.lb, self.frames, self.cc)
+        return p, R
 
     def _answer(self, best, what):
         if what is None:
             return Clearance(distance=math.inf, margin=math.inf)
         kind, k, cables = what
         oid = self.obstacles[k].id if k is not None else None
-        parts = [self.names[i] for i in cables] if cables else ["platform"]
-        binding = " / ".join(parts + ([oid] if oid is not None else []))
         return Clearance(distance=best, margin=best - self.scene.clearance, kind=kind,
-                         obstacle=oid, cables=cables, binding=binding)
+                         obstacle=oid, cables=cables, names=self.names)
 
     # ------------------------------------------------------------------ one pair (coal)
 
-    def cable_obstacle(self, i, k, Bw):
-        """Signed distance (m) of cable i (capsule a_i .. Bw[i]) to obstacle k, by coal."""
-        a, b = self.A[i], Bw[i]
-        d = b - a
-        length = float(np.linalg.norm(d))
-        cap = self.capsules[i]
-        cap.halfLength = 0.5 * length
-        T = coal.Transform3s(_z_to(d / max(length, EPS)), 0.5 * (a + b))
-        return self._distance(cap, T, self.geometry[k], self.placement[k])
+    def _cable_obstacle(self, i, k):
+        """Signed distance (m) of cable i's capsule (frame from the last ``_pose``) to
+        obstacle k, by coal."""
+        f = self.frames[i]
+        self.capsules[i].halfLength = f[12]
+        T = self.cable_T[i]
+        T.setTransform(f[:9].reshape(3, 3), f[9:12])
+        self.result.clear()
+        return float(self.cable_fn[i][k](T, self.placement[k], self.request, self.result))
 
-    def platform_obstacle(self, k, p, R):
+    def _platform_obstacle(self, k, p, R):
         """Signed distance (m) of the platform's shape at (p, R) to obstacle k, by coal."""
         s = self.platform
-        T = coal.Transform3s(R @ s.rotation, p + R @ s.position)
-        return self._distance(self.platform_geometry, T, self.geometry[k], self.placement[k])
-
-    def _distance(self, g1, T1, g2, T2):
+        self.platform_T.setTransform(R @ s.rotation, p + R @ s.position)
         self.result.clear()
-        return float(coal.distance(g1, T1, g2, T2, self.request, self.result))
+        return float(self.platform_fn[k](self.platform_T, self.placement[k], self.request,
+                                         self.result))
 
     # ------------------------------------------------------------------ every pair
 
     def distances(self, p, R):
         """Every checked pair at pose (p, R): a list of (kind, obstacle id or None, cable
         indices, signed distance m), unpruned (for tests and markers)."""
-        p, R = np.asarray(p, dtype=float), np.asarray(R, dtype=float)
-        Bw = p + self.B @ R.T
-        _, cc, _ = self._bounds(p, R, Bw)
+        p, R = self._pose(p, R)
         out = [("cable-cable", None, tuple(map(int, pair)), float(d))
-               for pair, d in zip(self.pairs, cc)]
+               for pair, d in zip(self.pairs, self.cc)]
         for k, o in enumerate(self.obstacles):
-            out += [("cable-obstacle", o.id, (i,), self.cable_obstacle(i, k, Bw))
+            out += [("cable-obstacle", o.id, (i,), self._cable_obstacle(i, k))
                     for i in range(len(self.names))]
             if self.platform is not None:
-                out.append(("platform-obstacle", o.id, (), self.platform_obstacle(k, p, R)))
+                out.append(("platform-obstacle", o.id, (), self._platform_obstacle(k, p, R)))
         return out
+
+    def lower_bounds(self, p, R):
+        """Lower bounds (m + 1, K), m, of the cable-obstacle (rows 0..m-1) and
+        platform-obstacle (row m) distances at pose (p, R), from bounding spheres."""
+        self._pose(p, R)
+        return self.lb.copy()
 
 
 def _geometry(shape):
@@ -179,16 +196,6 @@ def _geometry(shape):
     return coal.Convex.convexHull(points, False, "")
 
 
-def _z_to(u):
-    """A rotation matrix taking the z axis to the unit vector u (a capsule's axis)."""
-    c = float(u[2])
-    if c < -1.0 + 1e-12:
-        return np.diag([1.0, -1.0, -1.0])
-    v = np.array([-u[1], u[0], 0.0])  # z x u
-    K = np.array([[0.0, -v[2], v[1]], [v[2], 0.0, -v[0]], [-v[1], v[0], 0.0]])
-    return np.eye(3) + K + K @ K / (1.0 + c)
-
-
 def _cable_pairs(A, B):
     """Every pair (i, j), i < j, of cables, and which ends they share: trims (n, 2) with
     1.0 where the base anchors (column 0) or platform anchors (column 1) coincide."""
@@ -202,63 +209,135 @@ def _cable_pairs(A, B):
 # ----------------------------------------------------------------------------- kernel
 
 @njit(cache=True)
-def _kernel(A, Bw, C, rad, r, pairs, trims, rho, lb, cc):
-    """lb[i, k] = dist(segment a_i b_i, C[k]) - rad[k] - r (a lower bound of cable i's
-    distance to obstacle k); cc[n] = distance of the capsules of cable pair n (shared ends
-    cut by rho; inf when a cut leaves nothing)."""
-    m, K = A.shape[0], C.shape[0]
+def _kernel(p, R, static, pairs, lb, frames, cc):
+    """For pose (p, R): lb[i, k] = dist(segment a_i b_i, c_k) - rho_k - r, a lower bound
+    of cable i's distance to obstacle k (c_k, rho_k its bounding sphere), and lb[m, k]
+    the platform's (|centre - c_k| - rho_k - rho_platform); frames[i]: cable i's capsule
+    frame (rotation taking z to the cable, row-major; centre; half length); cc[n]: the
+    distance of the capsules of cable pair n (shared ends cut by rho; inf if nothing is
+    left). Scalar code on 3-tuples: no allocation in the loops."""
+    m, K, P = lb.shape[0] - 1, lb.shape[1], pairs.shape[0]
+    oB, oC = 3 * m, 6 * m
+    oR = oC + 3 * K
+    oT = oR + K
+    o = oT + 2 * P
+    r, rho = static[o], static[o + 1]
+    pc = _add(_rot(R, _v(static, o + 2)), _v(p, 0))
+    prad = static[o + 5]
     for i in range(m):
+        a = _v(static, 3 * i)
+        b = _add(_rot(R, _v(static, oB + 3 * i)), _v(p, 0))
+        frames[i, 13], frames[i, 14], frames[i, 15] = b  # the platform anchor, for the pairs
+        _frame(a, b, frames[i])
         for k in range(K):
-            lb[i, k] = _point_segment(C[k], A[i], Bw[i]) - rad[k] - r
-    p0, p1, q0, q1 = np.empty(3), np.empty(3), np.empty(3), np.empty(3)
-    for n in range(pairs.shape[0]):
+            lb[i, k] = _point_segment(_v(static, oC + 3 * k), a, b) - static[oR + k] - r
+    for k in range(K):
+        lb[m, k] = _norm(_sub(_v(static, oC + 3 * k), pc)) - static[oR + k] - prad
+    for n in range(P):
         i, j = pairs[n, 0], pairs[n, 1]
-        ok = _cut(A[i], Bw[i], trims[n, 0], trims[n, 1], rho, p0, p1) and \
-            _cut(A[j], Bw[j], trims[n, 0], trims[n, 1], rho, q0, q1)
-        cc[n] = _segment_segment(p0, p1, q0, q1) - 2.0 * r if ok else np.inf
+        cut_a, cut_b = static[oT + 2 * n], static[oT + 2 * n + 1]
+        ok1, p0, p1 = _cut(_v(static, 3 * i), _v(frames[i], 13), cut_a, cut_b, rho)
+        ok2, q0, q1 = _cut(_v(static, 3 * j), _v(frames[j], 13), cut_a, cut_b, rho)
+        cc[n] = _segment_segment(p0, p1, q0, q1) - 2.0 * r if ok1 and ok2 else np.inf
+
+
+@njit(cache=True, inline="always")
+def _v(x, o):
+    return (x[o], x[o + 1], x[o + 2])
+
+
+@njit(cache=True, inline="always")
+def _add(a, b):
+    return (a[0] + b[0], a[1] + b[1], a[2] + b[2])
+
+
+@njit(cache=True, inline="always")
+def _sub(a, b):
+    return (a[0] - b[0], a[1] - b[1], a[2] - b[2])
+
+
+@njit(cache=True, inline="always")
+def _scale(s, a):
+    return (s * a[0], s * a[1], s * a[2])
+
+
+@njit(cache=True, inline="always")
+def _dot(a, b):
+    return a[0] * b[0] + a[1] * b[1] + a[2] * b[2]
+
+
+@njit(cache=True, inline="always")
+def _norm(a):
+    return math.sqrt(_dot(a, a))
+
+
+@njit(cache=True, inline="always")
+def _rot(R, x):
+    return (R[0, 0] * x[0] + R[0, 1] * x[1] + R[0, 2] * x[2],
+            R[1, 0] * x[0] + R[1, 1] * x[1] + R[1, 2] * x[2],
+            R[2, 0] * x[0] + R[2, 1] * x[1] + R[2, 2] * x[2])
 
 
 @njit(cache=True)
-def _cut(a, b, cut_a, cut_b, rho, out0, out1):
-    """The segment a..b with rho removed at the ends flagged; False if nothing is left."""
-    length = math.sqrt((b[0] - a[0]) ** 2 + (b[1] - a[1]) ** 2 + (b[2] - a[2]) ** 2)
-    s0 = rho / length if cut_a > 0.0 and length > 0.0 else 0.0
-    s1 = 1.0 - (rho / length if cut_b > 0.0 and length > 0.0 else 0.0)
-    if (cut_a > 0.0 or cut_b > 0.0) and (length == 0.0 or s1 <= s0):
-        return False
+def _frame(a, b, out):
+    """out[:13] = rotation taking z to the unit vector u along a -> b (row-major:
+    Rodrigues about z x u, R = I + K + K^2 / (1 + u_z)), the midpoint, half the length."""
+    d = _sub(b, a)
+    length = _norm(d)
+    x, y, z = (d[0] / length, d[1] / length, d[2] / length) if length > 0.0 else (0.0, 0.0, 1.0)
+    if z < -1.0 + 1e-12:
+        rows = (1.0, 0.0, 0.0, 0.0, -1.0, 0.0, 0.0, 0.0, -1.0)
+    else:
+        h = 1.0 / (1.0 + z)
+        rows = (1.0 - h * x * x, -h * x * y, x,
+                -h * x * y, 1.0 - h * y * y, y,
+                -x, -y, 1.0 - h * (x * x + y * y))
+    for c in range(9):
+        out[c] = rows[c]
     for c in range(3):
-        out0[c] = a[c] + s0 * (b[c] - a[c])
-        out1[c] = a[c] + s1 * (b[c] - a[c])
-    return True
+        out[9 + c] = 0.5 * (a[c] + b[c])
+    out[12] = 0.5 * length
+
+
+@njit(cache=True)
+def _cut(a, b, cut_a, cut_b, rho):
+    """(ok, a', b'): the segment a..b with rho removed at the ends flagged; ok False if
+    nothing is left."""
+    d = _sub(b, a)
+    length = _norm(d)
+    if (cut_a > 0.0 or cut_b > 0.0) and length == 0.0:
+        return False, a, b
+    s0 = rho / length if cut_a > 0.0 else 0.0
+    s1 = 1.0 - (rho / length if cut_b > 0.0 else 0.0)
+    if (cut_a > 0.0 or cut_b > 0.0) and s1 <= s0:
+        return False, a, b
+    return True, _add(a, _scale(s0, d)), _add(a, _scale(s1, d))
 
 
 @njit(cache=True)
 def _point_segment(c, a, b):
-    d0, d1, d2 = b[0] - a[0], b[1] - a[1], b[2] - a[2]
-    w0, w1, w2 = c[0] - a[0], c[1] - a[1], c[2] - a[2]
-    dd = d0 * d0 + d1 * d1 + d2 * d2
-    t = 0.0 if dd <= 0.0 else min(1.0, max(0.0, (w0 * d0 + w1 * d1 + w2 * d2) / dd))
-    return math.sqrt((w0 - t * d0) ** 2 + (w1 - t * d1) ** 2 + (w2 - t * d2) ** 2)
+    d, w = _sub(b, a), _sub(c, a)
+    dd = _dot(d, d)
+    t = 0.0 if dd <= 0.0 else min(1.0, max(0.0, _dot(w, d) / dd))
+    return _norm(_sub(w, _scale(t, d)))
 
 
 @njit(cache=True)
 def _segment_segment(p0, p1, q0, q1):
     """Least distance between segments p0..p1 and q0..q1 (Ericson, Real-Time Collision
     Detection, 5.1.9)."""
-    d1 = p1 - p0
-    d2 = q1 - q0
-    r = p0 - q0
-    a, e, f = d1 @ d1, d2 @ d2, d2 @ r
+    d1, d2, r = _sub(p1, p0), _sub(q1, q0), _sub(p0, q0)
+    a, e, f = _dot(d1, d1), _dot(d2, d2), _dot(d2, r)
     if a <= EPS and e <= EPS:
-        return math.sqrt(r @ r)
+        return _norm(r)
     if a <= EPS:
         s, t = 0.0, min(1.0, max(0.0, f / e))
     else:
-        c = d1 @ r
+        c = _dot(d1, r)
         if e <= EPS:
             s, t = min(1.0, max(0.0, -c / a)), 0.0
         else:
-            b = d1 @ d2
+            b = _dot(d1, d2)
             denom = a * e - b * b
             s = min(1.0, max(0.0, (b * f - c * e) / denom)) if denom > 1e-14 * a * e else 0.0
             t = (b * s + f) / e
@@ -266,5 +345,4 @@ def _segment_segment(p0, p1, q0, q1):
                 s, t = min(1.0, max(0.0, -c / a)), 0.0
             elif t > 1.0:
                 s, t = min(1.0, max(0.0, (b - c) / a)), 1.0
-    g = p0 + s * d1 - q0 - t * d2
-    return math.sqrt(g @ g)
+    return _norm(_sub(_add(r, _scale(s, d1)), _scale(t, d2)))
