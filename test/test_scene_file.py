@@ -58,10 +58,23 @@ def test_a_valid_scene_reads_as_given():
     assert post.bounding_radius() == pytest.approx(0.5 * math.sqrt(0.02**2 * 2 + 0.2**2))
 
 
+def test_the_robot_file_declares_a_cable_radius(config_dir):
+    from cdh_planner.model.robot import load_robot, robot_from_dict, FIELDS
+    import dataclasses
+    robot = load_robot(config_dir / "robot2.yaml")
+    assert robot.cable_radius == 0.0
+    assert "cable_radius" in [f.key for f in FIELDS]
+    assert scene_from_dict({}, robot=dataclasses.replace(robot, cable_radius=0.002)).cable_radius \
+        == 0.002
+    d = yaml.safe_load((config_dir / "robot2.yaml").read_text())["cdh_planner"]["ros__parameters"]
+    d["robot"]["cable_radius"] = -1.0
+    with pytest.raises(InputError, match="robot.cable_radius"):
+        robot_from_dict(d["robot"])
+
+
 def test_defaults_come_from_the_robot_then_zero():
     class Robot:
         cable_radius = 0.003
-        platform_shape = None
 
     assert scene_from_dict({}, robot=Robot()).cable_radius == 0.003
     assert scene_from_dict({}).cable_radius == 0.0

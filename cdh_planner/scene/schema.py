@@ -3,11 +3,11 @@
 One format everywhere (problem files' ``scene:`` key, ``verify --scene FILE``, the node):
 
     scene:
-      cable_radius: 0.001            # m; absent: robot.cable_radius
+      cable_radius: 0.001            # m; absent: robot.cable_radius (else 0)
       clearance: 0.0                 # m: the least distance kept everywhere
       shared_anchor_exemption: 0.01  # m: see below
       platform: {type: box, size: [0.14, 0.14, 0.01],
-                 position: [0, 0, 0], quaternion: [0, 0, 0, 1]}   # platform frame
+                 position: [0, 0, 0], quaternion: [0, 0, 0, 1]}   # platform frame; absent: none
       obstacles:                     # base frame
         - {id: ball, type: sphere, radius: 0.02, position: [x, y, z]}
         - {id: post, type: box, size: [sx, sy, sz], position: [...], quaternion: [x, y, z, w]}
@@ -40,6 +40,7 @@ import numpy as np
 from .. import files
 from ..errors import MAX_POSITION_M, InputError, check_finite, check_keys, check_numbers
 from ..model.pose import check_quaternion, rotation_from_quaternion
+from ..model.robot import MAX_CABLE_RADIUS_M
 
 TYPES = ("sphere", "box", "cylinder", "mesh")
 PLATFORM_TYPES = TYPES  # a platform shape may be any of them, in the platform frame
@@ -47,7 +48,6 @@ MAX_OBSTACLES = 1000  # per scene: every one is checked at every pose
 MAX_ID_CHARS = 64
 MAX_MESH_BYTES = 16 << 20  # a mesh file's size
 MAX_MESH_VERTICES = 100_000  # of a mesh, before its convex hull is taken
-MAX_CABLE_RADIUS_M = 1.0
 DEFAULT_EXEMPTION_M = 0.01
 SHARED_ANCHOR_M = 1e-6  # two anchors closer than this are one shared anchor point
 IDENTITY = (0.0, 0.0, 0.0, 1.0)
@@ -119,7 +119,7 @@ class Scene:
 
 def load_scene(path, robot=None):
     """The scene of the YAML file ``path`` (its top-level key ``scene:``); ``robot`` gives
-    the defaults (robot.cable_radius, robot.platform_shape). InputError naming the field."""
+    the default cable radius (robot.cable_radius). InputError naming the field."""
     doc = files.read_yaml(path, "scene")
     check_keys("", doc, ("scene",), required=("scene",))
     return scene_from_dict(doc["scene"], robot=robot, base_dir=Path(path).parent, source=str(path))
@@ -127,7 +127,8 @@ def load_scene(path, robot=None):
 
 def scene_from_dict(d, robot=None, base_dir=".", where="scene", source=""):
     """A checked Scene from the ``scene:`` mapping ``d``; mesh files are relative to
-    ``base_dir``. Absent cable_radius and platform take the robot's (else 0 and none)."""
+    ``base_dir``. An absent cable_radius is the robot's (robot.cable_radius, else 0); an
+    absent platform is none (the platform is not checked)."""
     check_keys(where, d, SCENE_KEYS)
     radius = d.get("cable_radius")
     if radius is None:
@@ -137,9 +138,7 @@ def scene_from_dict(d, robot=None, base_dir=".", where="scene", source=""):
     rho = _non_negative(f"{where}.shared_anchor_exemption",
                         d.get("shared_anchor_exemption", DEFAULT_EXEMPTION_M), MAX_POSITION_M)
     platform = d.get("platform")
-    if platform is None:
-        platform = getattr(robot, "platform_shape", None)
-    else:
+    if platform is not None:
         platform = shape_from_dict(platform, f"{where}.platform", "platform", base_dir)
     return Scene(cable_radius=radius, clearance=clearance, shared_anchor_exemption=rho,
                  platform=platform, obstacles=_obstacles(d.get("obstacles", []), where, base_dir),
