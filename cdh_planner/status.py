@@ -14,14 +14,14 @@ from enum import StrEnum
 class Status(StrEnum):
     # the planner's answers
     OK = "ok"                              # a path, densely verified
-    START_INFEASIBLE = "start_infeasible"  # start pose not wrench-feasible (or off the task)
-    GOAL_INFEASIBLE = "goal_infeasible"    # goal pose not wrench-feasible (or off the task)
+    START_INFEASIBLE = "start_infeasible"  # start not wrench-feasible, or under the margin floor
+    GOAL_INFEASIBLE = "goal_infeasible"    # goal not wrench-feasible, or under the margin floor
     NO_PATH = "no_path"                    # a component was exhausted: no path at resolution r
     TIMEOUT = "timeout"                    # the deadline passed
     CHART_LIMIT = "chart_limit"            # the atlas reached its chart limit
     RESOURCE_LIMIT = "resource_limit"      # the atlas reached its memory limit
     CANCELED = "canceled"                  # the caller cancelled the plan
-    INVALID = "invalid"                    # request inconsistent with the task, or malformed
+    INVALID = "invalid"                    # a pose off the task beyond the tolerance, or malformed
     # the node's refusals
     BAD_FRAME = "bad_frame"                # a pose's frame_id is not the node's base frame
     BAD_STRATEGY = "bad_strategy"          # a search strategy the planner does not have

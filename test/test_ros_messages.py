@@ -272,6 +272,15 @@ def test_every_status_has_an_action_code_and_every_code_is_used_or_reserved():
     assert {v for v, comment in declared.values() if "not used" in comment} == reserved
 
 
+def test_the_docs_table_of_reasons_is_error_codes():
+    """docs/ros-node.md's table (reason | code NAME | when) says what ERROR_CODES says."""
+    text = (REPO / "docs" / "ros-node.md").read_text()
+    rows = re.findall(r"^\| `([a-z_]+)` \| (\d+) ([A-Z_]+) \|", text, flags=re.M)
+    assert {Status(r): int(code) for r, code, _ in rows} == M.ERROR_CODES
+    assert len(rows) == len(Status) and all(getattr(M, name) == int(code)
+                                            for _, code, name in rows)
+
+
 # ----------------------------------------------------------------------------- sampling
 
 def test_sample_at_waypoints_and_clamped_ends():

@@ -232,8 +232,8 @@ INVALID_REQUEST, NO_CURRENT_STATE, OUTPUT_LIMIT = (_R.INVALID_REQUEST, _R.NO_CUR
 # the task is INVALID_REQUEST. test_ros_messages checks both directions.
 ERROR_CODES = {
     Status.OK: NONE,
-    Status.START_INFEASIBLE: START_OCCUPIED,  # start not wrench-feasible (or off the task)
-    Status.GOAL_INFEASIBLE: GOAL_OCCUPIED,    # goal not wrench-feasible (or off the task)
+    Status.START_INFEASIBLE: START_OCCUPIED,  # start not wrench-feasible
+    Status.GOAL_INFEASIBLE: GOAL_OCCUPIED,    # goal not wrench-feasible
     Status.NO_PATH: NO_VALID_PATH,            # a component exhausted
     Status.TIMEOUT: TIMEOUT,
     Status.CHART_LIMIT: NO_VALID_PATH,        # no path found within max_charts
