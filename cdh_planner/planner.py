@@ -56,6 +56,10 @@ class PlanResult:
     least_margin: float = math.nan  # normalised (feasibility.evaluate)
     least_tension_margin: float = math.nan  # N: min over cables of f - v - fmin, fmax - f - v
 
+    def __post_init__(self):  # one closed vocabulary: a member, never a loose string
+        if not isinstance(self.reason, Status):
+            raise TypeError(f"PlanResult.reason must be a Status, not {self.reason!r}")
+
 
 ProgressCallback = Callable[[dict], None]  # called with {"charts": int, "time_s": float, "best_h": float}
 
@@ -312,21 +316,21 @@ class Planner:
         own task coordinates)."""
         off = float(self.task.residual(p[None], tau[None])[0])
         if off > max(tolerance, TASK_TOL):
-            return None, ("invalid", f"{label} pose is off the {self.task.type} task by "
+            return None, (Status.INVALID, f"{label} pose is off the {self.task.type} task by "
                                      f"{off:.3g} (m or rad), beyond the tolerance {tolerance:g}: "
                                      f"{_describe(p, tau)}")
         p, tau = (a[0] for a in self.task.pose(self.task.coords(p[None], tau[None])))
         if float(self.task.residual(p[None], tau[None])[0]) > TASK_TOL:  # e.g. an implicit task
-            return None, ("invalid", f"{label} pose is off the {self.task.type} task by "
+            return None, (Status.INVALID, f"{label} pose is off the {self.task.type} task by "
                                      f"{off:.3g} (m or rad) and cannot be projected onto it: "
                                      f"{_describe(p, tau)}")
         f = evaluate(self.robot, p[None], tau[None])
         if not f.feasible[0]:
-            return None, (f"{label}_infeasible", f"{label} pose is not wrench-feasible: "
+            return None, (Status.infeasible(label), f"{label} pose is not wrench-feasible: "
                           f"{f.binding[0]} violated (margin {f.margin[0]:.3g}) at {_describe(p, tau)}")
         x = self.constraint.lift(p, tau)
         if not self.atlas.in_domain(x):
-            return None, (f"{label}_infeasible", f"{label} pose is feasible but closer to the "
+            return None, (Status.infeasible(label), f"{label} pose is feasible but closer to the "
                           f"boundary of C than the planner's margin floor "
                           f"({self.settings.margin_floor:g}): {_describe(p, tau)}")
         return x, None

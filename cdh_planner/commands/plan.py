@@ -26,8 +26,12 @@ from ..io.problem import load_problem
 from ..io.progress import chart_progress
 from ..planner import Planner
 from ..settings import SETTINGS, check_setting
+from ..status import Status
 
-EXIT_OK, EXIT_NO_PLAN = 0, 1
+EXIT_OK, EXIT_NO_PLAN, EXIT_INTERNAL = 0, 1, 3  # cdh_planner.cli's contract
+# every way a plan ends has its exit code: a path, an answer without one, a bug
+EXIT_CODES = {s: EXIT_OK if s is Status.OK else EXIT_INTERNAL if s is Status.INTERNAL_ERROR
+              else EXIT_NO_PLAN for s in Status}
 
 
 def add_parser(subparsers):
@@ -80,7 +84,7 @@ def run(args):
             outs = plot_plan(planner, problem, result, args.plot)
         for out in outs:
             print(f"picture: {out}")
-    return EXIT_OK if result.success else EXIT_NO_PLAN
+    return EXIT_CODES[result.reason]
 
 
 def plan_with_progress(planner, start, goal, quiet=False):

@@ -200,7 +200,7 @@ class PlannerNode(Node):
                 if cancel.is_set():
                     return None, planning.refusal(Status.CANCELED, "canceled while waiting "
                                                   "for the winches' joint states")
-                return None, planning.refusal("no_current_state",
+                return None, planning.refusal(Status.NO_CURRENT_STATE,
                                               f"use_current_start: {measured.why}")
             start = measured.pose
         return planning.PlanCall.of_plan_path(goal, start, cancel,
