@@ -72,7 +72,7 @@ def run(args):
     if args.plot is not None:
         plot = check_output("--plot", args.plot)
         check_output("--plot", plot.with_name(plot.stem + "_tensions.png"))
-    planner = Planner(problem.robot, problem.task, settings)
+    planner = Planner(problem.robot, problem.task, settings, scene=problem.scene)
     result = plan_with_progress(planner, problem.start, problem.goal, quiet=args.quiet)
     print_result(result, problem)
     if args.json:

@@ -25,6 +25,9 @@ from numba import njit
 
 from .schema import SHARED_ANCHOR_M
 
+# A collision margin joins the normalised wrench margin as metres / COLLISION_UNIT_M: the
+# planner's margin floor (1e-3) keeps planned waypoints 1 mm beyond the scene's clearance.
+COLLISION_UNIT_M = 1.0
 GJK_TOLERANCE = 1e-9  # m: coal's convergence tolerance (its default, 1e-6, is too coarse)
 EPS = 1e-300
 
@@ -175,11 +178,35 @@ class CollisionModel:
                 out.append(("platform-obstacle", o.id, (), self._platform_obstacle(k, p, R)))
         return out
 
+    def margins(self, p, R):
+        """Collision margins (m, distance - clearance) and bindings ("collision winch_2 /
+        ball") of N poses: p (N, 3) m, R (N, 3, 3)."""
+        p = np.asarray(p, dtype=float).reshape(-1, 3)
+        R = np.asarray(R, dtype=float).reshape(-1, 3, 3)
+        margin, binding = np.empty(len(p)), np.empty(len(p), dtype=object)
+        for n in range(len(p)):
+            c = self.clearance(p[n], R[n])
+            margin[n], binding[n] = c.margin, f"collision {c.binding}"
+        return margin, binding
+
     def lower_bounds(self, p, R):
         """Lower bounds (m + 1, K), m, of the cable-obstacle (rows 0..m-1) and
         platform-obstacle (row m) distances at pose (p, R), from bounding spheres."""
         self._pose(p, R)
         return self.lb.copy()
+
+
+def combine(margin, binding, collision, p, R):
+    """The margins (N,) and bindings (N,) of wrench feasibility (normalised, from
+    ``feasibility.evaluate``) and of collision (``collision``: a CollisionModel or None)
+    at poses (p, R): the least of the two, the collision margin in units of
+    COLLISION_UNIT_M; positive iff the pose is wrench-feasible and collision-free."""
+    if collision is None:
+        return margin, binding
+    cm, cb = collision.margins(p, R)
+    cm = cm / COLLISION_UNIT_M
+    worse = cm < margin
+    return np.where(worse, cm, margin), np.where(worse, cb, binding)
 
 
 def _geometry(shape):
