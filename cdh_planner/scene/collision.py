@@ -25,9 +25,10 @@ from numba import njit
 
 from .schema import SHARED_ANCHOR_M
 
-# A collision margin joins the normalised wrench margin as metres / COLLISION_UNIT_M: the
-# planner's margin floor (1e-3) keeps planned waypoints 1 mm beyond the scene's clearance.
-COLLISION_UNIT_M = 1.0
+# A collision margin joins the normalised wrench margin as metres / COLLISION_UNIT_M: 1 cm
+# of room counts as a wrench margin of 0.1 (Robot 2's poses have 0.03 to 0.15), and the
+# planner's margin floor (1e-3) keeps planned waypoints 0.1 mm beyond the scene's clearance.
+COLLISION_UNIT_M = 0.1
 GJK_TOLERANCE = 1e-9  # m: coal's convergence tolerance (its default, 1e-6, is too coarse)
 EPS = 1e-300
 
@@ -82,7 +83,7 @@ class CollisionModel:
             A.ravel(), B.ravel(), centres.ravel(), radii, trims.ravel(),
             [scene.cable_radius, scene.shared_anchor_exemption],
             plat.position if plat else np.zeros(3),
-            [plat.bounding_radius() if plat else np.inf]])
+            [plat.bounding_radius() if plat else -1.0]])  # < 0: no platform
         # work buffers: lower bounds (cables, then the platform) and each cable's capsule
         # frame (rotation 9, centre 3, half length 1; its platform anchor 3), cable pair distances
         self.lb = np.empty((m + 1, K))
@@ -239,7 +240,7 @@ def _cable_pairs(A, B):
 def _kernel(p, R, static, pairs, lb, frames, cc):
     """For pose (p, R): lb[i, k] = dist(segment a_i b_i, c_k) - rho_k - r, a lower bound
     of cable i's distance to obstacle k (c_k, rho_k its bounding sphere), and lb[m, k]
-    the platform's (|centre - c_k| - rho_k - rho_platform); frames[i]: cable i's capsule
+    the platform's (|centre - c_k| - rho_k - rho_platform; inf without a platform); frames[i]: cable i's capsule
     frame (rotation taking z to the cable, row-major; centre; half length); cc[n]: the
     distance of the capsules of cable pair n (shared ends cut by rho; inf if nothing is
     left). Scalar code on 3-tuples: no allocation in the loops."""
@@ -259,7 +260,8 @@ def _kernel(p, R, static, pairs, lb, frames, cc):
         for k in range(K):
             lb[i, k] = _point_segment(_v(static, oC + 3 * k), a, b) - static[oR + k] - r
     for k in range(K):
-        lb[m, k] = _norm(_sub(_v(static, oC + 3 * k), pc)) - static[oR + k] - prad
+        lb[m, k] = _norm(_sub(_v(static, oC + 3 * k), pc)) - static[oR + k] - prad \
+            if prad >= 0.0 else np.inf
     for n in range(P):
         i, j = pairs[n, 0], pairs[n, 1]
         cut_a, cut_b = static[oT + 2 * n], static[oT + 2 * n + 1]
