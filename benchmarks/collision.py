@@ -1,6 +1,6 @@
 """Time of a full collision check of a pose (issue 22 target: under 20 us).
 
-    python benchmarks/collision.py [--poses 2000] [--repeats 5]
+    python benchmarks/collision.py [--poses 2000] [--repeats 5] [--plans 5]
 
 Robot 2 (6 cables, 15 cable pairs), a box platform and 10 primitive obstacles (spheres,
 boxes, cylinders), in two scenes: "spread" (obstacles about the workspace, 2-10 cm from
@@ -8,7 +8,10 @@ the cables) and "close" (obstacles on the cables: many hits, the pruning works l
 Per scene it prints the median and mean microseconds per ``CollisionModel.clearance``
 (the least signed distance, exact, and what binds) over random poses, the same for
 ``distances`` (every pair by coal, unpruned: 85 pairs), the compiled kernel alone, and
-one coal capsule-box distance call from Python. Exit code 0 always (a benchmark).
+one coal capsule-box distance call from Python. Then the issue's planning target: Robot 2
+free flight q2 -> q3 (Table 1) with a 1 cm ball on the platform's straight path and a ball
+platform of 3 cm: seconds per plan (a new Planner each time, in a process that has loaded
+the compiled kernels), median of ``--plans``. Exit code 0 always (a benchmark).
 """
 
 import argparse
@@ -81,6 +84,7 @@ def main():
     ap = argparse.ArgumentParser()
     ap.add_argument("--poses", type=int, default=2000)
     ap.add_argument("--repeats", type=int, default=5)
+    ap.add_argument("--plans", type=int, default=5)
     args = ap.parse_args()
     robot = load_robot(CONFIG / "robot2.yaml")
     rng = np.random.default_rng(0)
@@ -102,6 +106,27 @@ def main():
         print(f"{name}: kernel (15 cable pairs + 70 lower bounds): median {med:.1f} us")
     med, _ = per_call_us(lambda: cm._cable_obstacle(0, 1), [()] * 2000, args.repeats)
     print(f"one coal capsule-box distance from Python (with its transform): median {med:.1f} us")
+    plan_times(args.plans)
+
+
+def plan_times(n):
+    """Median seconds of Robot 2's free flight q2 -> q3 around a ball on the straight path."""
+    from cdh_planner.io.problem import load_problem
+    from cdh_planner.planner import Planner
+
+    pr = load_problem(CONFIG / "problems" / "robot2_q2_q3_free_flight.yaml")
+    mid = (0.5 * (pr.start.p + pr.goal.p)).tolist()
+    scene = scene_from_dict({"cable_radius": 0.001, "platform": {"type": "sphere", "radius": 0.03},
+                             "obstacles": [{"id": "ball", "type": "sphere", "radius": 0.01,
+                                            "position": mid}]})
+    times, charts = [], []
+    for _ in range(n):
+        t = time.perf_counter()
+        r = Planner(pr.robot, pr.task, pr.settings, scene=scene).plan(pr.start, pr.goal)
+        times.append(time.perf_counter() - t)
+        charts.append(r.charts if r.success else -1)
+    print(f"Robot 2 free flight around a ball: median {np.median(times):.2f} s "
+          f"(min {min(times):.2f}, max {max(times):.2f}) over {n} plans; charts {charts}")
 
 
 if __name__ == "__main__":
