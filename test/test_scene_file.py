@@ -205,3 +205,19 @@ def test_random_scene_file_text_reads_or_is_refused_cleanly(text, tmp_path_facto
         load_scene(path)
     except InputError as exc:
         assert "\n" not in str(exc)
+
+
+@bounded(80)
+@given(scene=VALUES)
+def test_a_problem_files_scene_reads_or_is_refused_cleanly(scene, tmp_path_factory):
+    from cdh_planner.io.problem import problem_from_dict
+    from conftest import CONFIG, PROBLEMS
+
+    doc = yaml.safe_load((PROBLEMS / "robot2_q2_q3_free_flight.yaml").read_text())
+    doc["robot"] = str(CONFIG / "robot2.yaml")
+    for value in (scene, {"obstacles": [scene]}, {"platform": scene}):
+        doc["scene"] = value
+        try:
+            problem_from_dict(doc, base_dir=tmp_path_factory.getbasetemp())
+        except InputError as exc:
+            assert "\n" not in str(exc) and len(str(exc)) <= MAX_MESSAGE_CHARS
