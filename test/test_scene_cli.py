@@ -76,3 +76,11 @@ def test_a_problem_files_bad_scene_exits_2_naming_the_field(tmp_path, capsys):
     path = problem(tmp_path, {"obstacles": [dict(BALL, type="cone")]})
     assert cli.main(["plan", str(path), "--quiet"]) == 2
     assert "scene.obstacles[0].type" in capsys.readouterr().err
+
+
+def test_plan_reports_the_least_clearance_and_what_binds(tmp_path, capsys):
+    path = problem(tmp_path, {"cable_radius": 0.001, "platform": PLATFORM, "obstacles": [BALL]})
+    assert cli.main(["plan", str(path), "--quiet", "--json", str(tmp_path / "plan.json")]) == 0
+    doc = json.loads((tmp_path / "plan.json").read_text())
+    assert doc["least_clearance_m"] > 0 and " / " in doc["clearance_binding"]
+    assert "least clearance" in capsys.readouterr().out

@@ -105,6 +105,9 @@ def print_result(result, problem):
               f"{path.length_m():.4f} m, duration {path.t[-1]:.2f} s, least margin "
               f"{result.least_margin:.4f} ({result.least_tension_margin:.3g} N)")
         print(f"  timing: {result.stats.get('timing', 'quasi-static')}")
+        if "least_clearance_m" in result.stats:  # a scene: the least distance at a waypoint
+            print(f"  least clearance {1e3 * result.stats['least_clearance_m']:.3g} mm "
+                  f"({result.stats['clearance_binding']})")
 
 
 def result_dict(result):
@@ -115,6 +118,9 @@ def result_dict(result):
            "least_margin": _num(result.least_margin),
            "least_tension_margin_n": _num(result.least_tension_margin),
            "timing": result.stats.get("timing", ""), "path": []}
+    if "least_clearance_m" in result.stats:  # with a scene (m, and what binds there)
+        out["least_clearance_m"] = _num(result.stats["least_clearance_m"])
+        out["clearance_binding"] = result.stats["clearance_binding"]
     path = result.path
     if path is not None:
         for k in range(len(path)):
