@@ -259,7 +259,11 @@ def test_outputs_are_checked_before_the_work(tmp_path, capsys, poses, monkeypatc
     assert "directory does not exist" in run_cli(
         capsys, ["verify", ROBOT2, poses, "--json", tmp_path / "no" / "out.json"])
     assert "is a directory" in run_cli(capsys, ["plan", "--quiet", PROBLEM, "--json", tmp_path])
-    assert "is a directory" in run_cli(capsys, ["plan", "--quiet", PROBLEM, "--plot", tmp_path])
+    (tmp_path / "d.png").mkdir()
+    assert "is a directory" in run_cli(capsys, ["plan", "--quiet", PROBLEM, "--plot",
+                                                tmp_path / "d.png"])
+    assert "expected a .png file" in run_cli(capsys, ["plan", "--quiet", PROBLEM, "--plot",
+                                                      tmp_path / "out.txt"])
     (tmp_path / "p_tensions.png").mkdir()
     assert "p_tensions.png" in run_cli(capsys, ["plan", "--quiet", PROBLEM, "--plot", tmp_path / "p.png"])
     (tmp_path / "dir.png").mkdir()
@@ -514,3 +518,98 @@ def test_a_closed_stdout_stops_quietly(tmp_path):
     err = proc.stderr.read()
     assert proc.wait(timeout=60) == cli.EXIT_BROKEN_PIPE
     assert err == b""
+
+
+# ----------------------------------------------------------------------------- outputs vs inputs
+
+def _problem_copy(tmp_path):
+    """A problem file in tmp_path naming a robot file copied beside it: (problem, robot)."""
+    robot = tmp_path / "robot.yaml"
+    robot.write_text(ROBOT2.read_text())
+    problem = tmp_path / "problem.yaml"
+    problem.write_text(PROBLEM.read_text().replace("../robot2.yaml", "robot.yaml"))
+    return problem, robot
+
+
+def test_plan_json_onto_its_problem_file_is_refused_as_a_process(tmp_path):
+    """Issue 19, item 3: ``plan P.yaml --json P.yaml`` replaced P.yaml with its JSON."""
+    problem, _ = _problem_copy(tmp_path)
+    before = problem.read_bytes()
+    rc, err, _ = run_process(["plan", "--quiet", problem, "--json", problem])
+    assert rc == 2 and len(err) == 1, err
+    assert "--json" in err[0] and "the problem file" in err[0] and str(problem) in err[0]
+    assert problem.read_bytes() == before
+
+
+def test_no_output_names_an_input(tmp_path, capsys, poses, monkeypatch):
+    """Every output option of every command, against every input of the command: the
+    same name, a symbolic link, a hard link, a path through ``..``; refused before the
+    work, the input unchanged."""
+    def no_work(*args, **kwargs):
+        raise AssertionError("worked before checking the outputs")
+
+    monkeypatch.setattr("cdh_planner.commands.plan.Planner", no_work)
+    monkeypatch.setattr("cdh_planner.commands.verify.check_motion", no_work)
+    monkeypatch.setattr("cdh_planner.commands.slice.render_slice", no_work)
+    problem, robot = _problem_copy(tmp_path)
+    (tmp_path / "sub").mkdir()
+    (tmp_path / "link.yaml").symlink_to(problem)
+    os.link(robot, tmp_path / "hard.yaml")
+    png = tmp_path / "robot.png"   # a robot file under a picture's name
+    png.write_text(ROBOT2.read_text())
+    task = tmp_path / "task.png"
+    task.write_text("task: {type: sphere, center: [0.0, 0.0, 0.306], radius: 0.13}\n")
+    before = {f: f.read_bytes() for f in (problem, robot, poses, png, task)}
+    cases = [
+        (["plan", "--quiet", problem, "--json", problem], "the problem file"),
+        (["plan", "--quiet", problem, "--json", tmp_path / "link.yaml"], "the problem file"),
+        (["plan", "--quiet", problem, "--json", tmp_path / "sub" / ".." / "problem.yaml"],
+         "the problem file"),
+        (["plan", "--quiet", problem, "--json", robot], "the robot file"),
+        (["plan", "--quiet", problem, "--json", tmp_path / "hard.yaml"], "the robot file"),
+        (["plan", "--quiet", problem, "--json", tmp_path / "o.png", "--plot",
+          tmp_path / "o.png"], "the --json output"),
+        (["plan", "--quiet", problem, "--json", tmp_path / "o_tensions.png", "--plot",
+          tmp_path / "o.png"], "the --json output"),
+        (["verify", robot, poses, "--json", poses], "the poses file"),
+        (["verify", robot, poses, "--json", tmp_path / "hard.yaml"], "the robot file"),
+        (["slice", png, "--sphere", "0,0,0.306,0.13", "-o", png], "the robot file"),
+        (["slice", ROBOT2, "--task-file", task, "-o", task], "the --task-file"),
+    ]
+    for argv, label in cases:
+        line = run_cli(capsys, argv)
+        assert label in line, (argv, line)
+    assert {f: f.read_bytes() for f in before} == before
+
+
+def test_recover_onto_its_run_file_is_refused(tmp_path, capsys):
+    run = tmp_path / "run.mcap"
+    _write_recording(run)
+    before = run.read_bytes()
+    (tmp_path / "link.mcap").symlink_to(run)
+    for out in (run, tmp_path / "link.mcap"):
+        assert "the run file" in run_cli(capsys, ["recover", run, "-o", out])
+    assert run.read_bytes() == before
+
+
+def test_demo_out_dir_may_not_overwrite_its_robot_files(tmp_path, capsys):
+    """``demo --out D --config-dir C``: none of the demo's files in D may be one of C's
+    robot files (here C/robot1.yaml is a link to D/node.log, which the demo writes)."""
+    out, config = tmp_path / "out", tmp_path / "config"
+    out.mkdir(), config.mkdir()
+    (config / "robot2.yaml").write_text(ROBOT2.read_text())
+    (out / "node.log").write_text(ROBOT1.read_text())
+    (config / "robot1.yaml").symlink_to(out / "node.log")
+    line = run_cli(capsys, ["demo", "--out", out, "--config-dir", config])
+    assert "node.log" in line and "robot1.yaml" in line
+
+
+def _write_recording(path, n=3):
+    """A small complete run file (RunRecorder; needs the ROS 2 message packages)."""
+    pytest.importorskip("mcap_ros2")
+    JointState = pytest.importorskip("sensor_msgs.msg").JointState
+    from cdh_planner.io.mcap_log import RunRecorder
+    with RunRecorder(path) as rec:
+        for i in range(n):
+            rec.write("/cmd", JointState(name=["w"], position=[float(i)]), 1000 + i)
+    return path

@@ -53,7 +53,8 @@ def run(args):
     except NotARecording as exc:
         raise InputError("RUN", str(src), str(exc)) from None
     # the output, checked before the work
-    out = check_output("--output", args.output if args.output else default_output(src))
+    out = check_output("--output", args.output if args.output else default_output(src),
+                       inputs=[("the run file RUN", src)])
     if out.exists():
         raise InputError("--output", str(out), "exists already: give another -o, or remove "
                                                "it first")

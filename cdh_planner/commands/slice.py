@@ -93,7 +93,8 @@ def add_parser(subparsers):
 def run(args):
     """Compute, draw and summarise the slice; 0 when the picture was written."""
     robot = load_robot(args.robot)
-    out = _check_output(args.output)
+    out = _check_output(args.output, [("the robot file ROBOT", args.robot),
+                                      ("the --task-file", args.task_file)])
     for option, text in (("--title", args.title), ("--start-label", args.start_label),
                          ("--goal-label", args.goal_label)):
         _check_label(option, text)
@@ -307,10 +308,10 @@ def _check_resolution(n):
     return n
 
 
-def _check_output(path):
+def _check_output(path, inputs):
     if Path(path).suffix.lower() != ".png":
         raise InputError("--output", path, "must be a .png file")
-    return check_output("--output", path)
+    return check_output("--output", path, inputs=inputs)
 
 
 def _print_segment(check, start_label, goal_label):
