@@ -53,8 +53,19 @@ def _command_module(name: str):
     return importlib.import_module(modname)
 
 
+class OneLineErrors(argparse.ArgumentParser):
+    """argparse's parser whose usage errors are one line too (argparse prints the usage
+    text first: 13 lines for ``plan --max-cable-speed fast``), pointing at --help; the
+    subcommands' parsers are of this class as well (``add_subparsers`` uses the parent's)."""
+
+    def error(self, message):
+        hint = f" (see {self.prog} --help)"
+        text = clip(message, max(20, MAX_MESSAGE_CHARS - len(hint))) + hint
+        self.exit(EXIT_USAGE, f'{PROG}: error: {text}\n')
+
+
 def build_parser() -> argparse.ArgumentParser:
-    parser = argparse.ArgumentParser(
+    parser = OneLineErrors(
         prog=PROG,
         description='Wrench-feasible path planning for cable-driven hexapods.',
     )

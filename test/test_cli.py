@@ -55,7 +55,40 @@ def test_version(capsys):
 
 def test_no_command_is_usage_error(capsys):
     assert cli.main([]) == 2
-    assert 'usage' in capsys.readouterr().err
+    err = capsys.readouterr().err
+    assert err == 'cdh-planner: error: the following arguments are required: COMMAND (see ' \
+                  'cdh-planner --help)\n'
+
+
+@pytest.mark.parametrize('argv, text', [
+    (['plan', 'p.yaml', '--max-cable-speed', 'fast'], "invalid float value: 'fast'"),
+    (['plan', 'p.yaml', '--strategy', 'best'], "invalid choice: 'best'"),
+    (['plan'], 'required: problem'),
+    (['plan', 'p.yaml', '--no-such-flag'], 'unrecognized arguments: --no-such-flag'),
+    (['slice', 'r.yaml', '-o', 'x.png', '--resolution', '1.5'], "invalid int value: '1.5'"),
+    (['call', '--goal', '0 0 0 0 0 0 1'], 'one of the arguments --start --current-start'),
+    (['call', '--start', '1', '--current-start', '--goal', '1'], 'not allowed with'),
+    (['no-such-command'], "invalid choice: 'no-such-command'"),
+])
+def test_usage_errors_are_one_line(capsys, argv, text):
+    """argparse's errors without its usage text (13 lines for --max-cable-speed fast):
+    exit 2, one line naming the argument, pointing at the command's --help."""
+    assert cli.main(argv) == 2
+    captured = capsys.readouterr()
+    assert captured.out == ''
+    lines = captured.err.splitlines()
+    assert len(lines) == 1 and lines[0].startswith('cdh-planner: error: '), captured.err
+    assert text in lines[0] and lines[0].endswith('--help)')
+
+
+def test_usage_error_as_a_process_is_one_line():
+    """Issue 19, item 7: ``plan P --max-cable-speed fast`` printed 13 lines."""
+    proc = subprocess.run([sys.executable, '-m', 'cdh_planner.cli', 'plan', 'p.yaml',
+                           '--max-cable-speed', 'fast'], capture_output=True, text=True,
+                          timeout=60)
+    assert proc.returncode == 2 and proc.stdout == ''
+    assert proc.stderr == "cdh-planner: error: argument --max-cable-speed: invalid float " \
+                          "value: 'fast' (see cdh-planner plan --help)\n"
 
 
 def test_handler_return_code_is_passed_through(fake):
