@@ -613,3 +613,43 @@ def _write_recording(path, n=3):
         for i in range(n):
             rec.write("/cmd", JointState(name=["w"], position=[float(i)]), 1000 + i)
     return path
+
+
+# ----------------------------------------------------------------------------- duplicate keys
+
+def test_a_duplicate_json_key_is_refused_as_a_process(tmp_path):
+    """Issue 19, item 7: json keeps the last of two equal keys; a pose file with two
+    positions was accepted silently."""
+    path = tmp_path / "dup.json"
+    path.write_text('[{"position": [1e308, 0, 0.35], "position": [0, 0, 0.35], '
+                    '"tau": [0, 0.1, 0]}]')
+    rc, err, _ = run_process(["verify", ROBOT2, path])
+    assert rc == 2 and len(err) == 1, err
+    assert "duplicate key 'position'" in err[0] and str(path) in err[0]
+
+
+@pytest.mark.parametrize("text, key", [
+    ('{"poses": [{"position": [0, 0, 0.35], "tau": [0, 0.1, 0], "tau": [0, 0.2, 0]}]}', "tau"),
+    ('{"poses": [], "poses": [{"position": [0, 0, 0.35], "tau": [0, 0.1, 0]}]}', "poses"),
+])
+def test_duplicate_json_keys_are_refused_at_any_depth(tmp_path, capsys, text, key):
+    path = tmp_path / "dup.json"
+    path.write_text(text)
+    assert f"duplicate key {key!r}" in run_cli(capsys, ["verify", ROBOT2, path])
+    json.loads(text.replace(f'"{key}": [0, 0.2, 0]', '"x": 1'))  # valid JSON otherwise
+
+
+def test_duplicate_yaml_keys_are_refused(tmp_path, capsys, poses):
+    """In a problem file (top level), a robot file (nested): the key and its line named;
+    1 and 1.0 are one key (equal in Python); a merge key's entries may be overridden."""
+    text = PROBLEM.read_text().replace("../robot2.yaml", str(ROBOT2))
+    problem = tmp_path / "p.yaml"
+    problem.write_text(text + "goal: {lambda: [2.63, 0.7]}\n")
+    line = run_cli(capsys, ["plan", "--quiet", problem])
+    assert "duplicate key 'goal'" in line and f"line {len(text.splitlines()) + 1}," in line
+    robot = tmp_path / "r.yaml"
+    robot.write_text(ROBOT2.read_text().replace("robot:\n", "robot:\n      name: a\n      name: b\n", 1))
+    assert "duplicate key 'name'" in run_cli(capsys, ["verify", robot, poses])
+    with pytest.raises(InputError, match="duplicate key 1.0"):
+        files.parse_yaml("{1: a, 1.0: b}", "x")
+    assert files.parse_yaml("a: {<<: {b: 1, c: 2}, b: 3}", "x") == {"a": {"b": 3, "c": 2}}
