@@ -16,7 +16,20 @@ MAX_VALUE_CHARS = 80  # an error line shows at most this much of the value
 MAX_FIELD_CHARS = 60  # ... and of the field's name
 MAX_MESSAGE_CHARS = 200  # an InputError's whole message, whatever its parts
 
-_REPR = reprlib.Repr()
+class _Repr(reprlib.Repr):
+    """reprlib's bounded repr, with a huge integer (``int(1e308)``, a 309-digit number)
+    shown as a float is (``1e+308``), not as its digits cut in the middle."""
+
+    def repr_int(self, x, level):
+        if abs(x) < 10 ** 16:
+            return repr(x)
+        try:
+            return f"{x:.6g}"
+        except OverflowError:  # beyond a float: its order of magnitude
+            return f"{'-' if x < 0 else ''}~1e{int((x.bit_length() - 1) * math.log10(2))}"
+
+
+_REPR = _Repr()
 _REPR.maxlevel, _REPR.maxdict, _REPR.maxlist, _REPR.maxtuple = 3, 4, 6, 6
 _REPR.maxset = _REPR.maxfrozenset = _REPR.maxdeque = _REPR.maxarray = 6
 _REPR.maxstring, _REPR.maxlong, _REPR.maxother = MAX_VALUE_CHARS, 40, MAX_VALUE_CHARS
