@@ -668,3 +668,90 @@ def test_huge_numbers_are_shown_short(capsys):
     assert "--max-charts = 1e+308: must be <=" in line
     text = _describe(np.array([1e308, 0.081092, -0.2]), np.array([0.5, 1.25, -np.pi]))
     assert text == "p = [1e+308, 0.081092, -0.2] m, tau = [0.5, 1.25, -3.14159] rad"
+
+
+# ----------------------------------------------------------------------------- call, replay: ROS input
+
+START, GOAL = "0 0 0.176 0 0 0 1", "0.081092 0.049718 0.217387 0.208539 -0.340136 0 0.916962"
+
+
+@pytest.fixture
+def ros_domain(monkeypatch):
+    """A claimed ROS domain (ros_harness) set for this process and its children."""
+    pytest.importorskip("rclpy")
+    from ros_harness import claimed_domain
+    with claimed_domain() as domain:
+        monkeypatch.setenv("ROS_DOMAIN_ID", str(domain))
+        monkeypatch.setenv("ROS_AUTOMATIC_DISCOVERY_RANGE", "LOCALHOST")
+        yield domain
+
+
+@pytest.mark.parametrize("argv, text", [
+    # issue 19, item 5: poses the node refused (292) are checked as a pose file's are
+    (["--start", "nan 0 0.176 0 0 0 1"], "--start.position[0] = nan: expected a finite number"),
+    (["--start", "0 inf 0.176 0 0 0 1"], "--start.position[1] = inf: expected a finite number"),
+    (["--start", "0 0 0.176 0 0 0 0"], "--start.quaternion = [0.0, 0.0, 0.0, 0.0]: zero"),
+    (["--start", "0 0 0.176 0 0 0 2"], "not normalised (norm 2"),
+    (["--start", "0 0 0.176 0 0 nan 1"], "--start.quaternion[2] = nan: expected a finite"),
+    (["--start", "1e308 0 0.176 0 0 0 1"], "--start.position[0] = 1e+308: must be within"),
+    (["--start", "0 0 0.176 0 0 0"], "expected 7 numbers"),
+    (["--start", START, "--goal", "0 0 0.2 0.7 0.7 0.7 0.7"], "--goal.quaternion"),
+    # issue 19, item 4: InvalidServiceNameException and RCLError were exit 3
+    (["--start", START, "--node", "bad name!!"], "--node = 'bad name!!': not a valid ROS"),
+    (["--start", START, "--node", "/9lives"], "not a valid ROS node name"),
+    (["--start", START, "--ros-args", "-r", "::::"],
+     "--ros-args = '-r ::::': ROS 2 cannot start with them: failed to initialize rcl: "
+     "Couldn't parse remap rule"),
+    (["--start", START, "--ros-args", "-p", "x:=[1"], "--ros-args = '-p x:=[1'"),
+    (["--start", START, "--ros-args", "--params-file", "/no/such.yaml"], "--ros-args = '--p"),
+    (["--start", START, "--timeout", "nan"], "--timeout = nan"),
+])
+def test_call_refuses_bad_input_before_joining_ros(capsys, ros_domain, argv, text):
+    argv = ["call", "--goal", GOAL, *argv] if "--goal" not in argv else ["call", *argv]
+    line = run_cli(capsys, argv)
+    assert text in line, line
+
+
+def test_a_bad_ros_environment_is_bad_input(capsys, ros_domain, monkeypatch):
+    monkeypatch.setenv("ROS_DOMAIN_ID", "abc")
+    line = run_cli(capsys, ["call", "--start", START, "--goal", GOAL])
+    assert "ROS environment = " in line and "ROS_DOMAIN_ID is not an integral number" in line
+
+
+def test_call_refusals_as_processes_are_one_line(ros_domain):
+    """Issue 19 items 4, 5: as the campaign ran them, rcl's own log line included."""
+    for argv, text in ((["--ros-args", "-r", "::::"], "--ros-args"),
+                       (["--node", "bad name!!"], "--node")):
+        rc, err, _ = run_process(["call", "--start", START, "--goal", GOAL, *argv])
+        assert rc == 2 and len(err) == 1 and text in err[0], (argv, err)
+
+
+def test_call_without_a_node_says_so_in_one_line_exit_1(ros_domain):
+    """Issue 19, item 5: with no node it waited for --timeout and exited 3 (internal
+    error); now it waits at most call.NODE_WAIT_S for the node's services."""
+    from cdh_planner.commands.call import NODE_WAIT_S
+    rc, err, seconds = run_process(["call", "--start", START, "--goal", GOAL])
+    assert rc == 1 and len(err) == 1, err
+    assert "no service /cdh_planner/plan after 5 s" in err[0]
+    assert seconds >= NODE_WAIT_S
+
+
+def test_replay_refuses_bad_ros_input(tmp_path, capsys, ros_domain):
+    run = _write_recording(tmp_path / "run.mcap")
+    line = run_cli(capsys, ["replay", run, "--delay", "0", "--ros-args", "-r", "::::"])
+    assert "--ros-args = '-r ::::'" in line
+
+
+def test_recover_and_replay_refuse_a_damaged_chunk(tmp_path, capsys):
+    """Issue 19, item 4: recover on a bad chunk CRC was exit 3; replay gave exit 2."""
+    run = _write_recording(tmp_path / "run.mcap")
+    data = bytearray(run.read_bytes())
+    data[data.index(b"/cmd", 200) + 40] ^= 0xFF   # inside the chunk of a message
+    damaged = tmp_path / "damaged.mcap"
+    damaged.write_bytes(bytes(data))
+    for argv in (["recover", damaged, "-o", tmp_path / "out.mcap"], ["replay", damaged]):
+        line = run_cli(capsys, argv)
+        assert "damaged MCAP data" in line and "CRCValidationError" in line, line
+    assert not (tmp_path / "out.mcap").exists()
+    rc, err, _ = run_process(["recover", damaged, "-o", tmp_path / "out.mcap"])
+    assert rc == 2 and len(err) == 1 and "damaged MCAP data" in err[0], err

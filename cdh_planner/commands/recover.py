@@ -12,8 +12,8 @@ output is written in full or not at all; the input is never changed. A complete 
 copied the same way. Do not point it at the file of a node still running: it copies what
 is there so far.
 
-Exit codes: 0 recovered; 2 bad input (not a recording, no complete message, an output that
-exists or cannot be written).
+Exit codes: 0 recovered; 2 bad input (not a recording, damaged data in a complete file (a
+chunk CRC), no complete message, an output that exists, is the input or cannot be written).
 """
 
 import argparse
@@ -63,9 +63,12 @@ def run(args):
             result = recover(src, out)
     except NotARecording as exc:
         raise InputError("RUN", str(src), str(exc)) from None
+    # no summary: a kill, a power cut, or a write that failed (a full disk) before or
+    # while the summary was written; the file cannot tell which
     state = ("it was complete already" if result.complete else
-             f"it had no summary (the node was killed); "
-             f"{result.dropped_bytes} bytes after the last complete message dropped")
+             f"it had no summary: its recording did not end normally (the node killed, or "
+             f"a write failed, e.g. a full disk); {result.dropped_bytes} bytes after the "
+             f"last complete message dropped")
     print(f"{src}: {result.messages} messages on {result.topics} topics written to {out} "
           f"({state})")
     if result.renamed_schemas:

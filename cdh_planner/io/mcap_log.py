@@ -54,6 +54,7 @@ from mcap.writer import CompressionType, Writer
 from mcap_ros2._dynamic import serialize_dynamic
 from mcap_ros2.decoder import DecoderFactory
 
+from ..errors import exception_line
 from .ros_schemas import encodable, full_definition, mcap_ros2_alias, recorded_type, \
     rosidl_type, split_type_name, type_name_of
 
@@ -295,8 +296,10 @@ def scan_records(path, decode: bool):
 
     A killed writer leaves a torn last record: the scan stops there quietly (chunk CRCs are
     checked, so a torn chunk is dropped whole, never half-decoded). The same errors in a
-    complete file (one that ends with the MCAP magic) are real damage and are raised. No
-    record is read beyond the file's size (a corrupt length cannot make it allocate more).
+    complete file (one that ends with the MCAP magic) are real damage, raised as
+    NotARecording ("damaged MCAP data: ..."), as is any other error of mcap or mcap_ros2
+    reading the file's bytes (the file is the cause, whatever the type). No record is read
+    beyond the file's size (a corrupt length cannot make it allocate more).
     """
     with open(path, "rb") as f:
         size = f.seek(0, os.SEEK_END)
@@ -311,9 +314,11 @@ def _scan_file(f, size, decode):
                (r + (None,) for r in reader.iter_messages(log_time_order=False)))
     try:
         yield from records
-    except (EndOfFile, CRCValidationError, RecordLengthLimitExceeded, struct.error):
-        if _ends_with_magic(f):
-            raise
+    except (EndOfFile, CRCValidationError, RecordLengthLimitExceeded, struct.error) as exc:
+        if _ends_with_magic(f):   # not a torn tail: damage
+            raise NotARecording(f"damaged MCAP data: {exception_line(exc, 120)}") from exc
+    except Exception as exc:  # noqa: BLE001 - mcap's and mcap_ros2's many error types
+        raise NotARecording(f"damaged MCAP data: {exception_line(exc, 120)}") from exc
 
 
 def _ends_with_magic(f) -> bool:

@@ -17,7 +17,12 @@ calls ``~/execute`` and follows the streamed ``~/cable_command`` to the last way
 """
 
 import math
+import os
+import re
+import sys
+import tempfile
 import time
+from contextlib import contextmanager
 from dataclasses import dataclass, field
 from typing import Optional
 
@@ -36,7 +41,8 @@ from trajectory_msgs.msg import JointTrajectory
 from cdh_planner_interfaces.action import PlanPath
 from cdh_planner_interfaces.msg import TensionEnvelope
 
-from ..errors import InputError
+from ..errors import InputError, clip
+from ..io.poses import pose_from_values
 from . import messages as M
 from .node import CABLE_COMMAND, EXECUTE, EXECUTION_RESULT, LATCHED, NODE_NAME, PLAN, \
     PLAN_PATH, PLAN_RESULT, PLANNED_TRAJECTORY, SERVICE_QOS, STOP, TENSION_ENVELOPE
@@ -142,9 +148,73 @@ class ClientError(RuntimeError):
     """The node did not answer (not running, wrong name, timeout)."""
 
 
+def init_context(args=None, domain_id=None):
+    """A new rclpy Context initialised with ``args`` (``[prog, "--ros-args", ...]``).
+    rcl's refusal of the arguments (a bad remap rule, ``-p`` value, a ROS_DOMAIN_ID that is
+    not a number) is an InputError naming ``--ros-args``: bad input, not a bug; rcl's own
+    log line about it is kept off stderr (the error says it), shown when init succeeds."""
+    context = rclpy.Context()
+    try:
+        with _stderr_held():
+            rclpy.init(args=args, context=context, domain_id=domain_id)
+    except Exception as exc:  # noqa: BLE001 - rclpy's RCLError, not importable by name
+        given = list(args or [])
+        shown = given[given.index("--ros-args") + 1:] if "--ros-args" in given else given
+        if not shown:  # then the environment is the cause (ROS_DOMAIN_ID=abc)
+            raise InputError("ROS environment", " ".join(
+                f"{k}={v}" for k, v in sorted(os.environ.items()) if k.startswith("ROS_")),
+                f"ROS 2 cannot start: {_rcl_text(exc)}") from None
+        raise InputError("--ros-args", " ".join(shown), f"ROS 2 cannot start with them: "
+                                                        f"{_rcl_text(exc)}") from None
+    return context
+
+
+def _rcl_text(exc):
+    """rcl's message without its source locations (``, at /project/src/rcl/x.c:12``)."""
+    return clip(re.sub(r",? at \S+\.c(pp)?:\d+", "", str(exc)), 300)
+
+
+@contextmanager
+def _stderr_held():
+    """What C code (rcl's logging) writes to file descriptor 2 in the block: dropped if
+    the block raises (its exception says the same), written to stderr after it if not."""
+    sys.stderr.flush()
+    saved = os.dup(2)
+    with tempfile.TemporaryFile() as f:
+        os.dup2(f.fileno(), 2)
+        try:
+            yield
+        finally:
+            os.dup2(saved, 2)
+            os.close(saved)
+        f.seek(0)
+        text = f.read()
+    if text:
+        sys.stderr.write(text.decode(errors="replace"))
+        sys.stderr.flush()
+
+
+def check_node_name(name, field="--node"):
+    """The absolute name of the node ``name`` (``cdh_planner`` -> ``/cdh_planner``), if its
+    services can have names (letters, digits, ``_``, ``/``; a part not starting with a
+    digit); InputError naming ``field`` otherwise (rclpy would raise
+    InvalidServiceNameException on creating the first client)."""
+    from rclpy.exceptions import NameValidationException
+    from rclpy.validate_full_topic_name import validate_full_topic_name
+    target = "/" + str(name).strip("/")
+    try:
+        validate_full_topic_name(f"{target}/{PLAN}", is_service=True)
+    except NameValidationException:
+        raise InputError(field, name, "not a valid ROS node name (letters, digits, '_' and "
+                                      "'/', a part not starting with a digit)") from None
+    return target
+
+
 def pose_stamped(values, frame_id, field="pose"):
-    """PoseStamped of "x y z qx qy qz qw" (a string or 7 numbers; m, quaternion x y z w);
-    InputError naming ``field`` if malformed (finite / normalised are checked by the node)."""
+    """PoseStamped of "x y z qx qy qz qw" (a string or 7 numbers; m, quaternion x y z w),
+    checked as a pose file's pose is (``io.poses.pose_from_values``: finite, within
+    +-1e3 m, a unit quaternion); InputError naming ``field`` if not. The quaternion is sent
+    as given."""
     if isinstance(values, str):
         parts = values.replace(",", " ").split()
         try:
@@ -153,8 +223,7 @@ def pose_stamped(values, frame_id, field="pose"):
             raise InputError(field, " ".join(parts), "expected 7 numbers: x y z qx qy qz qw "
                                                      "(m, quaternion)") from None
     values = list(values)
-    if len(values) != 7:
-        raise InputError(field, values, "expected 7 numbers: x y z qx qy qz qw (m, quaternion)")
+    pose_from_values(values, field)
     msg = PoseStamped()
     msg.header.frame_id = frame_id
     p, o = msg.pose.position, msg.pose.orientation
@@ -166,12 +235,10 @@ class PlannerClient:
     """A small rclpy node talking to one planner node (``node_name``, absolute)."""
 
     def __init__(self, node_name=DEFAULT_NODE, args=None, name="cdh_planner_client",
-                 context=None, domain_id=None):
-        self.target = "/" + node_name.strip("/")
+                 context=None, domain_id=None, node_field="node"):
+        self.target = check_node_name(node_name, node_field)
         self._own_context = context is None
-        self.context = context if context is not None else rclpy.Context()
-        if self._own_context:
-            rclpy.init(args=args, context=self.context, domain_id=domain_id)
+        self.context = context if context is not None else init_context(args, domain_id)
         self.node = Node(name, context=self.context)
         self.executor = SingleThreadedExecutor(context=self.context)
         self.executor.add_node(self.node)
