@@ -5,11 +5,13 @@ This module only builds the top-level parser, collects the subcommands that exis
 and holds the exit-code contract of every command:
 
     0  ok
-    1  no path, or not feasible (the command's answer is "no")
+    1  no path, or not feasible (the command's answer is "no"); for ``call`` and
+       ``replay --requests`` also: no node answered (one line says so)
     2  bad input: arguments, input files (unreadable, not UTF-8, beyond the limits of
-       ``cdh_planner.files``, wrong types or magnitudes), output paths that cannot be
-       written (checked before the work starts; a write that fails at the end, a full
-       disk, is exit 2 too)
+       ``cdh_planner.files``, wrong types or magnitudes, damaged), output paths that cannot
+       be written or that name an input (checked before the work starts; a write that
+       fails at the end, a full disk, is exit 2 too), ROS arguments and names that rcl
+       refuses; the library exceptions only bad input raises (``INPUT_EXCEPTIONS``) too
     3  internal error: any other exception (a bug)
     130 interrupted (Ctrl-C); 141 stdout closed by its reader (``| head``), silently
 
@@ -39,6 +41,15 @@ EXIT_USAGE = 2  # bad input (arguments, files)
 EXIT_INTERNAL = 3  # an unexpected exception
 EXIT_INTERRUPTED = 130
 EXIT_BROKEN_PIPE = 141  # 128 + SIGPIPE, as a shell reports a process killed by it
+
+# Exception types of the libraries that only bad input raises (a name given on the command
+# line or read from a file, a damaged file's bytes), by qualified name: the commands turn
+# them into InputErrors where they arise; one that escapes is still exit 2, not 3.
+INPUT_EXCEPTIONS = frozenset({
+    'rclpy.exceptions.NameValidationException',   # topic, service, node, namespace names
+    'mcap.exceptions.McapError',                   # bad records, lengths, magic
+    'mcap.stream_reader.CRCValidationError',       # a damaged chunk
+})
 
 
 def _command_module(name: str):
@@ -126,12 +137,23 @@ def main(argv: list[str] | None = None) -> int:
         print(f'{PROG}: interrupted', file=sys.stderr)
         return EXIT_INTERRUPTED
     except (Exception, RecursionError, MemoryError) as exc:
-        try:
-            text = str(exc)
-        except Exception:
-            text = '?'
-        return _error(f'internal error: {type(exc).__name__}: {text} (run with --debug for '
-                      'the traceback)', EXIT_INTERNAL, debug)
+        if _caused_by_input(exc):
+            return _error(_text(exc), EXIT_USAGE, debug)
+        return _error(f'internal error: {type(exc).__name__}: {_text(exc)} (run with --debug '
+                      'for the traceback)', EXIT_INTERNAL, debug)
+
+
+def _caused_by_input(exc) -> bool:
+    """Whether ``exc`` is of one of INPUT_EXCEPTIONS (or derived from one)."""
+    return any(f'{c.__module__}.{c.__qualname__}' in INPUT_EXCEPTIONS for c in type(exc).__mro__)
+
+
+def _text(exc) -> str:
+    """str(exc), or '?' if even that fails."""
+    try:
+        return str(exc)
+    except Exception:
+        return '?'
 
 
 if __name__ == '__main__':  # python -m cdh_planner.cli

@@ -755,3 +755,15 @@ def test_recover_and_replay_refuse_a_damaged_chunk(tmp_path, capsys):
     assert not (tmp_path / "out.mcap").exists()
     rc, err, _ = run_process(["recover", damaged, "-o", tmp_path / "out.mcap"])
     assert rc == 2 and len(err) == 1 and "damaged MCAP data" in err[0], err
+
+
+def test_replay_refuses_a_recorded_topic_name_rclpy_refuses(tmp_path, capsys, ros_domain):
+    """A file written by another tool with a topic named '/bad topic!!': rclpy's
+    InvalidTopicNameException on its publisher was exit 3."""
+    JointState = pytest.importorskip("sensor_msgs.msg").JointState
+    from cdh_planner.io.mcap_log import RunRecorder
+    path = tmp_path / "bad.mcap"
+    with RunRecorder(path) as rec:
+        rec.write("/bad topic!!", JointState(name=["w"], position=[1.0]), 1000)
+    line = run_cli(capsys, ["replay", path, "--delay", "0"])
+    assert "RUN = '/bad topic!!': a recorded topic whose name is not a valid ROS" in line

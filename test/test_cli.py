@@ -135,3 +135,35 @@ def test_console_script_help_runs():
                           capture_output=True, text=True, timeout=60)
     assert proc.returncode == 0, proc.stderr
     assert 'usage: cdh-planner' in proc.stdout
+
+
+def _raise_name_error():
+    from rclpy.exceptions import InvalidTopicNameException
+    raise InvalidTopicNameException('/bad topic!!', 'must not contain spaces', 4)
+
+
+def _raise_crc_error():
+    from mcap.exceptions import RecordLengthLimitExceeded
+    raise RecordLengthLimitExceeded(6, 1 << 40, 1000)
+
+
+@pytest.mark.parametrize('raise_it, module', [(_raise_name_error, 'rclpy'),
+                                              (_raise_crc_error, 'mcap')])
+def test_library_exceptions_of_bad_input_are_exit_2(fake, capsys, raise_it, module):
+    """rclpy's name errors and mcap's read errors that escape a command are bad input
+    (cli.INPUT_EXCEPTIONS, by qualified name, subclasses included), not internal errors."""
+    pytest.importorskip(module)
+    fake('fakelib', lambda args: raise_it())
+    assert cli.main(['fakelib']) == 2
+    lines = capsys.readouterr().err.splitlines()
+    assert len(lines) == 1 and lines[0].startswith('cdh-planner: error: ')
+    assert 'internal error' not in lines[0]
+
+
+def test_other_library_exceptions_stay_internal(fake, capsys):
+    class McapError(Exception):   # same name, another module: not the library's
+        pass
+
+    fake('fakeother', lambda args: (_ for _ in ()).throw(McapError('x')))
+    assert cli.main(['fakeother']) == 3
+    assert 'internal error: McapError: x' in capsys.readouterr().err

@@ -128,6 +128,7 @@ def replay_topics(args, records):
     from ..ros import replay as R
     from ..ros.client import init_context
     chosen = R.select_topics(records, args.topics, args.commands)
+    _check_topic_names(chosen)
     context = init_context(["cdh-planner-replay", "--ros-args", *args.ros_args])
     try:
         node = Node("cdh_planner_replay", context=context)
@@ -145,6 +146,21 @@ def replay_topics(args, records):
     finally:
         rclpy.try_shutdown(context=context)
     return EXIT_OK
+
+
+def _check_topic_names(records):
+    """InputError naming a recorded topic that is not a valid ROS name (a file written by
+    another tool): rclpy would refuse its publisher mid-replay."""
+    from rclpy.exceptions import NameValidationException
+    from rclpy.validate_full_topic_name import validate_full_topic_name
+
+    from ..errors import InputError
+    for topic in sorted({r.topic for r in records}):
+        try:
+            validate_full_topic_name(topic if topic.startswith("/") else "/" + topic)
+        except NameValidationException:
+            raise InputError("RUN", topic, "a recorded topic whose name is not a valid ROS "
+                                           "topic name: it cannot be republished") from None
 
 
 def replay_requests(args, records):
