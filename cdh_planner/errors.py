@@ -75,6 +75,19 @@ class InputError(ValueError):
         super().__init__(clip(text, MAX_MESSAGE_CHARS))
 
 
+def check_text(field: str, text) -> str:
+    """``text`` if it is UTF-8 text; an InputError naming ``field`` if it holds bytes of the
+    command line that were not UTF-8 (Python keeps them as lone surrogates, which no
+    drawing or ROS message can take). File names are not checked with it: any bytes are a
+    file name."""
+    try:
+        text.encode("utf-8")
+    except UnicodeEncodeError as exc:
+        raise InputError(field, text, f"not UTF-8 text (byte "
+                                      f"0x{ord(text[exc.start]) & 0xFF:02x} at {exc.start})") from None
+    return text
+
+
 def is_number(value) -> bool:
     """True for an int or float (numpy's included), False for booleans, strings and the rest."""
     return isinstance(value, (int, float)) and not isinstance(value, bool) or (

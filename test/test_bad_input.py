@@ -767,3 +767,15 @@ def test_replay_refuses_a_recorded_topic_name_rclpy_refuses(tmp_path, capsys, ro
         rec.write("/bad topic!!", JointState(name=["w"], position=[1.0]), 1000)
     line = run_cli(capsys, ["replay", path, "--delay", "0"])
     assert "RUN = '/bad topic!!': a recorded topic whose name is not a valid ROS" in line
+
+
+def test_command_line_text_that_is_not_utf8_is_refused(tmp_path, capsys, ros_domain):
+    """Bytes of argv that are not UTF-8 reach Python as lone surrogates: matplotlib raised
+    TypeError on a --title holding one (exit 3); a ROS message cannot carry one either."""
+    bad = b"q\xff".decode("utf-8", "surrogateescape")
+    for argv, field in ((["slice", ROBOT2, "--title", bad, "-o", tmp_path / "s.png"], "--title"),
+                        (["slice", ROBOT2, "--point", f"{bad}=1,1", "-o", tmp_path / "s.png"],
+                         "--point"),
+                        (["call", "--start", START, "--goal", GOAL, "--frame", bad], "--frame")):
+        line = run_cli(capsys, argv)
+        assert f"{field} = " in line and "not UTF-8 text (byte 0xff at 1)" in line, line

@@ -29,7 +29,7 @@ from dataclasses import dataclass
 from pathlib import Path
 from typing import Optional
 
-from ..errors import InputError
+from ..errors import InputError, check_text
 from ..feasibility import evaluate
 from ..io.outputs import check_output, writing
 from ..io.plots import FEASIBLE, Marker, SegmentOverlay, SliceGrid, SliceView, \
@@ -286,9 +286,11 @@ def _parse_point(text, view):
 
 
 def _check_label(option, text):
-    """A title or label is drawn: at most MAX_LABEL_CHARS characters."""
+    """A title or label is drawn: UTF-8 text of at most MAX_LABEL_CHARS characters."""
     if text is not None and len(text) > MAX_LABEL_CHARS:
         raise InputError(option, text, f"at most {MAX_LABEL_CHARS} characters")
+    if text is not None:
+        check_text(option, text)
 
 
 def _parse_size(text):
