@@ -779,3 +779,23 @@ def test_command_line_text_that_is_not_utf8_is_refused(tmp_path, capsys, ros_dom
                         (["call", "--start", START, "--goal", GOAL, "--frame", bad], "--frame")):
         line = run_cli(capsys, argv)
         assert f"{field} = " in line and "not UTF-8 text (byte 0xff at 1)" in line, line
+
+
+def test_recover_tells_a_summary_cut_short_from_none(tmp_path, capsys):
+    """Issue 19, item 7: a disk that fills while the node closes its file leaves a summary
+    cut short, and recover said 'the node was killed'. A file cut after the writer's
+    DataEnd record (its summary begun) is told apart from one that just stops."""
+    import io
+    from mcap.records import DataEnd
+    from mcap.stream_reader import StreamReader
+    data = _write_recording(tmp_path / "run.mcap").read_bytes()
+    stream = io.BytesIO(data)
+    next(r for r in StreamReader(stream, emit_chunks=True).records if isinstance(r, DataEnd))
+    data_end = stream.tell()
+    for cut, says in ((data_end + 1, "summary was cut short"), (len(data) - 9, "cut short"),
+                      (data_end - 20, "did not end normally")):
+        path = tmp_path / f"cut{cut}.mcap"
+        path.write_bytes(data[:cut])
+        assert cli.main(["recover", str(path), "-o", str(tmp_path / f"out{cut}.mcap")]) == 0
+        out = capsys.readouterr().out
+        assert "3 messages" in out and says in out and "was killed" not in out, out

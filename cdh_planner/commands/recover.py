@@ -63,12 +63,18 @@ def run(args):
             result = recover(src, out)
     except NotARecording as exc:
         raise InputError("RUN", str(src), str(exc)) from None
-    # no summary: a kill, a power cut, or a write that failed (a full disk) before or
-    # while the summary was written; the file cannot tell which
-    state = ("it was complete already" if result.complete else
-             f"it had no summary: its recording did not end normally (the node killed, or "
-             f"a write failed, e.g. a full disk); {result.dropped_bytes} bytes after the "
-             f"last complete message dropped")
+    # the file tells a summary cut short (closing, a write failed) from none at all (a
+    # kill, a power cut, or a write that failed before: no cause is certain)
+    if result.complete:
+        state = "it was complete already"
+    elif result.summary_begun:
+        state = (f"its summary was cut short: the recording was being closed when a write "
+                 f"failed (a full disk?); {result.dropped_bytes} bytes after the last "
+                 f"complete message dropped")
+    else:
+        state = (f"it had no summary: its recording did not end normally (the node killed, "
+                 f"or a write failed, e.g. a full disk); {result.dropped_bytes} bytes after "
+                 f"the last complete message dropped")
     print(f"{src}: {result.messages} messages on {result.topics} topics written to {out} "
           f"({state})")
     if result.renamed_schemas:
