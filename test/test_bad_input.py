@@ -730,10 +730,9 @@ def test_call_without_a_node_says_so_in_one_line_exit_1(ros_domain):
     """Issue 19, item 5: with no node it waited for --timeout and exited 3 (internal
     error); now it waits at most call.NODE_WAIT_S for the node's services."""
     from cdh_planner.commands.call import NODE_WAIT_S
-    rc, err, seconds = run_process(["call", "--start", START, "--goal", GOAL])
+    rc, err, _ = run_process(["call", "--start", START, "--goal", GOAL])
     assert rc == 1 and len(err) == 1, err
-    assert "no service /cdh_planner/plan after 5 s" in err[0]
-    assert seconds >= NODE_WAIT_S
+    assert f"no service /cdh_planner/plan after {NODE_WAIT_S:g} s" in err[0]
 
 
 def test_replay_refuses_bad_ros_input(tmp_path, capsys, ros_domain):
