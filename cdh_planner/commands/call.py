@@ -67,14 +67,15 @@ def add_parser(subparsers):
 
 def run(args):
     from ..errors import InputError, check_text
-    from ..ros.client import ClientError, PlannerClient, plan_path_goal, pose_stamped
+    from ..io.poses import pose_values
     if not (args.timeout > 0 and math.isfinite(args.timeout)):
         raise InputError("--timeout", args.timeout, "must be a positive number of seconds")
-    if args.start is not None:
-        pose_stamped(args.start, "", "--start")  # refuse malformed input before joining ROS
-    pose_stamped(args.goal, "", "--goal")
+    if args.start is not None:   # bad input refused before importing ROS (seconds)
+        pose_values(args.start, "--start")
+    pose_values(args.goal, "--goal")
     if args.frame is not None:
         check_text("--frame", args.frame)
+    from ..ros.client import ClientError, PlannerClient, plan_path_goal, pose_stamped
     with PlannerClient(args.node, args=["cdh-planner-call", "--ros-args", *args.ros_args],
                        node_field="--node") as client:
         try:

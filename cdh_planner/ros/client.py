@@ -42,7 +42,7 @@ from cdh_planner_interfaces.action import PlanPath
 from cdh_planner_interfaces.msg import TensionEnvelope
 
 from ..errors import InputError, clip
-from ..io.poses import pose_from_values
+from ..io.poses import pose_values
 from . import messages as M
 from .node import CABLE_COMMAND, EXECUTE, EXECUTION_RESULT, LATCHED, NODE_NAME, PLAN, \
     PLAN_PATH, PLAN_RESULT, PLANNED_TRAJECTORY, SERVICE_QOS, STOP, TENSION_ENVELOPE
@@ -212,18 +212,9 @@ def check_node_name(name, field="--node"):
 
 def pose_stamped(values, frame_id, field="pose"):
     """PoseStamped of "x y z qx qy qz qw" (a string or 7 numbers; m, quaternion x y z w),
-    checked as a pose file's pose is (``io.poses.pose_from_values``: finite, within
-    +-1e3 m, a unit quaternion); InputError naming ``field`` if not. The quaternion is sent
-    as given."""
-    if isinstance(values, str):
-        parts = values.replace(",", " ").split()
-        try:
-            values = [float(v) for v in parts]
-        except ValueError:
-            raise InputError(field, " ".join(parts), "expected 7 numbers: x y z qx qy qz qw "
-                                                     "(m, quaternion)") from None
-    values = list(values)
-    pose_from_values(values, field)
+    checked as a pose file's pose is (``io.poses.pose_values``: finite, within +-1e3 m, a
+    unit quaternion); InputError naming ``field`` if not. The quaternion is sent as given."""
+    values = pose_values(values, field)
     msg = PoseStamped()
     msg.header.frame_id = frame_id
     p, o = msg.pose.position, msg.pose.orientation
