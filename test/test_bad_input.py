@@ -798,3 +798,22 @@ def test_recover_tells_a_summary_cut_short_from_none(tmp_path, capsys):
         assert cli.main(["recover", str(path), "-o", str(tmp_path / f"out{cut}.mcap")]) == 0
         out = capsys.readouterr().out
         assert "3 messages" in out and says in out and "was killed" not in out, out
+
+
+def test_replay_requests_refuses_a_request_that_does_not_decode(tmp_path, capsys, ros_domain):
+    """A file (of another tool) whose GetPlan event holds bytes that are not one: rclpy's
+    RMWError on deserializing it was exit 3."""
+    from mcap.writer import CompressionType, Writer
+    from cdh_planner.io.ros_schemas import full_definition, recorded_type
+    name = recorded_type("nav_msgs/srv/GetPlan_Event")
+    path = tmp_path / "garbage.mcap"
+    with open(path, "wb") as f:
+        writer = Writer(f, compression=CompressionType.NONE)
+        writer.start(profile="ros2", library="test")
+        schema = writer.register_schema(name, "ros2msg", full_definition(name).encode())
+        channel = writer.register_channel("/cdh_planner/plan/_service_event", "cdr", schema)
+        writer.add_message(channel, log_time=1000, data=b"\x00\x01\x00\x00" + b"\xff" * 40,
+                           publish_time=1000)
+        writer.finish()
+    line = run_cli(capsys, ["replay", path, "--requests", "--timeout", "1"])
+    assert "a recorded request or parameter event does not decode" in line, line

@@ -164,9 +164,17 @@ def _check_topic_names(records):
 
 
 def replay_requests(args, records):
+    from rclpy.impl.implementation_singleton import rclpy_implementation
+
+    from ..errors import InputError, exception_line
     from ..ros import replay as R
     from ..ros.client import ClientError, PlannerClient
-    plans = R.recorded_plans(records)
+    try:
+        plans = R.recorded_plans(records)
+    except rclpy_implementation.RMWError as exc:  # bytes that are not the recorded type
+        raise InputError("RUN", " ".join(args.run), f"a recorded request or parameter event "
+                                                    f"does not decode: "
+                                                    f"{exception_line(exc, 100)}") from None
     if not plans:
         print("no recorded plan requests in this file")
         return EXIT_OK
