@@ -126,7 +126,7 @@ def replay_topics(args, records):
     from rclpy.node import Node
 
     from ..ros import replay as R
-    from ..ros.client import init_context
+    from ..ros.context import init_context
     chosen = R.select_topics(records, args.topics, args.commands)
     _check_topic_names(chosen)
     context = init_context(["cdh-planner-replay", "--ros-args", *args.ros_args])
