@@ -47,7 +47,10 @@ EXIT_BROKEN_PIPE = 141  # 128 + SIGPIPE, as a shell reports a process killed by 
 # them into InputErrors where they arise; one that escapes is still exit 2, not 3.
 INPUT_EXCEPTIONS = frozenset({
     'rclpy.exceptions.NameValidationException',   # topic, service, node, namespace names
-    'mcap.exceptions.McapError',                   # bad records, lengths, magic
+    # mcap's reading errors (not McapError, the base of its writers' errors too)
+    'mcap.exceptions.InvalidMagic', 'mcap.exceptions.EndOfFile',
+    'mcap.exceptions.RecordLengthLimitExceeded', 'mcap.exceptions.UnsupportedCompressionError',
+    'mcap.exceptions.DecoderNotFoundError', 'mcap_ros2.decoder.McapROS2DecodeError',
     'mcap.stream_reader.CRCValidationError',       # a damaged chunk
 })
 

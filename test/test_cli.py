@@ -1,4 +1,5 @@
 """The CLI registry: --help, subcommand discovery, one-line user errors."""
+import importlib
 import subprocess
 import sys
 import types
@@ -167,3 +168,13 @@ def test_other_library_exceptions_stay_internal(fake, capsys):
     fake('fakeother', lambda args: (_ for _ in ()).throw(McapError('x')))
     assert cli.main(['fakeother']) == 3
     assert 'internal error: McapError: x' in capsys.readouterr().err
+
+
+def test_input_exception_names_are_the_libraries_own():
+    """cli.INPUT_EXCEPTIONS names classes that exist under those names (a rename in rclpy
+    or mcap would silently make them exit 3 again)."""
+    for qualified in cli.INPUT_EXCEPTIONS:
+        module, _, name = qualified.rpartition('.')
+        pytest.importorskip(module.split('.')[0])
+        cls = getattr(importlib.import_module(module), name)
+        assert issubclass(cls, Exception) and cls.__module__ == module, qualified
