@@ -501,12 +501,13 @@ def child_runs(row, planner, args, repeat):
     argv = [sys.executable, __file__, "--child", row, planner, "--timeout", str(args.timeout),
             "--seed", str(args.seed + repeat), "--blas-threads", str(args.blas_threads),
             "--spawned-at", repr(time.time())]
-    out = subprocess.run(argv, capture_output=True, text=True, timeout=4 * args.timeout + 120)
     try:
+        out = subprocess.run(argv, capture_output=True, text=True, timeout=6 * args.timeout + 300)
         data = json.loads(out.stdout.strip().splitlines()[-1])
-    except (IndexError, json.JSONDecodeError):
-        err = (out.stderr.strip().splitlines() or ["no output"])[-1][:200]
-        failed = Run("error", float("nan"), float("nan"), error=f"child exit {out.returncode}: {err}")
+    except (subprocess.TimeoutExpired, IndexError, json.JSONDecodeError) as exc:
+        err = (out.stderr.strip().splitlines() or ["no output"])[-1][:200] \
+            if not isinstance(exc, subprocess.TimeoutExpired) else "killed after its time limit"
+        failed = Run("error", float("nan"), float("nan"), error=f"child process: {err}")
         return float("nan"), failed, failed
     cold, warm = (Run(**r) for r in data["runs"])
     return data["start_s"], cold, warm
