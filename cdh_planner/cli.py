@@ -5,11 +5,13 @@ This module only builds the top-level parser, collects the subcommands that exis
 and holds the exit-code contract of every command:
 
     0  ok
-    1  no path, or not feasible (the command's answer is "no")
+    1  no path, or not feasible (the command's answer is "no"); for ``call`` and
+       ``replay --requests`` also: no node answered (one line says so)
     2  bad input: arguments, input files (unreadable, not UTF-8, beyond the limits of
-       ``cdh_planner.files``, wrong types or magnitudes), output paths that cannot be
-       written (checked before the work starts; a write that fails at the end, a full
-       disk, is exit 2 too)
+       ``cdh_planner.files``, wrong types or magnitudes, damaged), output paths that cannot
+       be written or that name an input (checked before the work starts; a write that
+       fails at the end, a full disk, is exit 2 too), ROS arguments and names that rcl
+       refuses; the library exceptions only bad input raises (``INPUT_EXCEPTIONS``) too
     3  internal error: any other exception (a bug)
     130 interrupted (Ctrl-C); 141 stdout closed by its reader (``| head``), silently
 
@@ -55,6 +57,18 @@ EXIT_INTERNAL = 3  # an unexpected exception
 EXIT_INTERRUPTED = 130
 EXIT_BROKEN_PIPE = 141  # 128 + SIGPIPE, as a shell reports a process killed by it
 
+# Exception types of the libraries that only bad input raises (a name given on the command
+# line or read from a file, a damaged file's bytes), by qualified name: the commands turn
+# them into InputErrors where they arise; one that escapes is still exit 2, not 3.
+INPUT_EXCEPTIONS = frozenset({
+    'rclpy.exceptions.NameValidationException',   # topic, service, node, namespace names
+    # mcap's reading errors (not McapError, the base of its writers' errors too)
+    'mcap.exceptions.InvalidMagic', 'mcap.exceptions.EndOfFile',
+    'mcap.exceptions.RecordLengthLimitExceeded', 'mcap.exceptions.UnsupportedCompressionError',
+    'mcap.exceptions.DecoderNotFoundError', 'mcap_ros2.decoder.McapROS2DecodeError',
+    'mcap.stream_reader.CRCValidationError',       # a damaged chunk
+})
+
 
 def _command_module(name: str, load: bool = True):
     """Import ``cdh_planner.commands.<name>`` (with ``load`` False: only find it), or return
@@ -80,10 +94,21 @@ def requested_command(argv: list[str]) -> str | None:
     return None
 
 
+class OneLineErrors(argparse.ArgumentParser):
+    """argparse's parser whose usage errors are one line too (argparse prints the usage
+    text first: 13 lines for ``plan --max-cable-speed fast``), pointing at --help; the
+    subcommands' parsers are of this class as well (``add_subparsers`` uses the parent's)."""
+
+    def error(self, message):
+        hint = f" (see {self.prog} --help)"
+        text = clip(message, max(20, MAX_MESSAGE_CHARS - len(hint))) + hint
+        self.exit(EXIT_USAGE, f'{PROG}: error: {text}\n')
+
+
 def build_parser(commands: list[str] | None = None) -> argparse.ArgumentParser:
     """The parser with the full subparsers of ``commands`` (default: every command; their
     modules are imported) and, for the others, a one-line entry (not imported)."""
-    parser = argparse.ArgumentParser(
+    parser = OneLineErrors(
         prog=PROG,
         description='Wrench-feasible path planning for cable-driven hexapods.',
     )
@@ -150,12 +175,23 @@ def main(argv: list[str] | None = None) -> int:
         print(f'{PROG}: interrupted', file=sys.stderr)
         return EXIT_INTERRUPTED
     except (Exception, RecursionError, MemoryError) as exc:
-        try:
-            text = str(exc)
-        except Exception:
-            text = '?'
-        return _error(f'internal error: {type(exc).__name__}: {text} (run with --debug for '
-                      'the traceback)', EXIT_INTERNAL, debug)
+        if _caused_by_input(exc):
+            return _error(_text(exc), EXIT_USAGE, debug)
+        return _error(f'internal error: {type(exc).__name__}: {_text(exc)} (run with --debug '
+                      'for the traceback)', EXIT_INTERNAL, debug)
+
+
+def _caused_by_input(exc) -> bool:
+    """Whether ``exc`` is of one of INPUT_EXCEPTIONS (or derived from one)."""
+    return any(f'{c.__module__}.{c.__qualname__}' in INPUT_EXCEPTIONS for c in type(exc).__mro__)
+
+
+def _text(exc) -> str:
+    """str(exc), or '?' if even that fails."""
+    try:
+        return str(exc)
+    except Exception:
+        return '?'
 
 
 if __name__ == '__main__':  # python -m cdh_planner.cli

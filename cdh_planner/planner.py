@@ -27,7 +27,7 @@ from .feasibility import evaluate
 from .manifold.constraint import TaskConstraint
 from .model.pose import (Pose, quaternion_from_tau, rotation_angle_between, rotation_tt,
                          tau_from_rotation, wrap_angle)
-from .model.task import COORDINATES
+from .model.task import COORDINATES, end_taus
 from .search.search import MB, Stop, run
 from .settings import COSTS, PlannerSettings, check_setting  # noqa: F401  (PlannerSettings: API)
 from .status import Status
@@ -55,6 +55,10 @@ class PlanResult:
     # over the waypoints and the motion between them (trajectory.clearance.path_margins)
     least_margin: float = math.nan  # normalised (feasibility.evaluate)
     least_tension_margin: float = math.nan  # N: min over cables of f - v - fmin, fmax - f - v
+
+    def __post_init__(self):  # one closed vocabulary: a member, never a loose string
+        if not isinstance(self.reason, Status):
+            raise TypeError(f"PlanResult.reason must be a Status, not {self.reason!r}")
 
 
 ProgressCallback = Callable[[dict], None]  # called with {"charts": int, "time_s": float, "best_h": float}
@@ -122,7 +126,9 @@ class Planner:
         """A PlanResult from ``start`` to ``goal``. ``cancel``: an object with ``is_set()``
         (threading.Event) that stops the search (answer ``canceled``). ``tolerance`` (m or
         rad, > 0; default the settings' ``task_tolerance``): how far start and goal may be off
-        the task; within it they are projected onto it. ``strategy`` and ``timeout_s`` (s):
+        the task; within it they are projected onto it, and onto theta = 0 or pi, where phi
+        is chosen by the task or the other end (``model.task.end_taus``): one pose plans one
+        path, however it is written. ``strategy`` and ``timeout_s`` (s):
         this call's, instead of the settings' (InputError naming them if invalid)."""
         s = self.settings
         if strategy is not None or timeout_s is not None:
@@ -150,9 +156,9 @@ class Planner:
             return PlanResult(ok, reason, message, strategy, c.dim, c.n_vars,
                               len(self.atlas.charts), time.perf_counter() - t0, cost, path, stats)
 
-        points = {}
-        for label, pose in (("start", start), ("goal", goal)):
-            x, why = self._lift(label, pose, tolerance or self.settings.task_tolerance)
+        points, tolerance = {}, tolerance or self.settings.task_tolerance
+        for label, p, tau in self._end_poses(start, goal, tolerance):
+            x, why = self._lift(label, p, tau, tolerance)
             if x is None:
                 return answer(False, why[0], why[1])
             points[label] = x
@@ -293,28 +299,38 @@ class Planner:
         return np.concatenate(parts)
 
     # ----- start and goal ----------------------------------------------------------------
-    def _lift(self, label, pose, tolerance):
-        """(x on M, None) or (None, (reason, message)). A pose within ``tolerance`` (m or
-        rad) of the task is projected onto it (the pose of its own task coordinates)."""
-        p = _finite_vector(f"{label}.p", pose.p, 3)
-        tau = _finite_vector(f"{label}.tau", pose.tau, 3)
+    def _end_poses(self, start, goal, tolerance):
+        """(label, p m, tau rad) of start and goal, their angles as the query plans between
+        them (``task.end_taus``: from the rotation only, snapped onto theta = 0 or pi
+        within ``tolerance`` (rad, at least TASK_TOL), phi chosen there by the task and the
+        other end), so one pose plans one path whichever way it was written."""
+        ends = [(label, _finite_vector(f"{label}.p", pose.p, 3),
+                 _finite_vector(f"{label}.tau", pose.tau, 3))
+                for label, pose in (("start", start), ("goal", goal))]
+        taus = end_taus(self.task, [tau for _, _, tau in ends], max(tolerance, TASK_TOL))
+        return [(label, p, tau) for (label, p, _), tau in zip(ends, taus)]
+
+    def _lift(self, label, p, tau, tolerance):
+        """(x on M, None) or (None, (reason, message)) of the pose (p m, tau rad). A pose
+        within ``tolerance`` (m or rad) of the task is projected onto it (the pose of its
+        own task coordinates)."""
         off = float(self.task.residual(p[None], tau[None])[0])
         if off > max(tolerance, TASK_TOL):
-            return None, ("invalid", f"{label} pose is off the {self.task.type} task by "
+            return None, (Status.INVALID, f"{label} pose is off the {self.task.type} task by "
                                      f"{off:.3g} (m or rad), beyond the tolerance {tolerance:g}: "
                                      f"{_describe(p, tau)}")
         p, tau = (a[0] for a in self.task.pose(self.task.coords(p[None], tau[None])))
         if float(self.task.residual(p[None], tau[None])[0]) > TASK_TOL:  # e.g. an implicit task
-            return None, ("invalid", f"{label} pose is off the {self.task.type} task by "
+            return None, (Status.INVALID, f"{label} pose is off the {self.task.type} task by "
                                      f"{off:.3g} (m or rad) and cannot be projected onto it: "
                                      f"{_describe(p, tau)}")
         f = evaluate(self.robot, p[None], tau[None])
         if not f.feasible[0]:
-            return None, (f"{label}_infeasible", f"{label} pose is not wrench-feasible: "
+            return None, (Status.infeasible(label), f"{label} pose is not wrench-feasible: "
                           f"{f.binding[0]} violated (margin {f.margin[0]:.3g}) at {_describe(p, tau)}")
         x = self.constraint.lift(p, tau)
         if not self.atlas.in_domain(x):
-            return None, (f"{label}_infeasible", f"{label} pose is feasible but closer to the "
+            return None, (Status.infeasible(label), f"{label} pose is feasible but closer to the "
                           f"boundary of C than the planner's margin floor "
                           f"({self.settings.margin_floor:g}): {_describe(p, tau)}")
         return x, None
@@ -538,8 +554,9 @@ def _finite_vector(name, v, n):
 
 
 def _describe(p, tau):
-    return (f"p = [{', '.join(f'{v:.4f}' for v in p)}] m, "
-            f"tau = [{', '.join(f'{v:.4f}' for v in tau)}] rad")
+    # 6 significant digits: a position of 1e308 (a node's goal) is not 309 digits long
+    return (f"p = [{', '.join(f'{v:.6g}' for v in p)}] m, "
+            f"tau = [{', '.join(f'{v:.6g}' for v in tau)}] rad")
 
 
 def _failure_message(status, charts, s, radius):

@@ -11,6 +11,8 @@ modules, the demo) never share a domain (two nodes with the same service name in
 answer each other's calls).
 """
 
+import contextlib
+import importlib.util
 import math
 import signal
 import subprocess
@@ -31,6 +33,42 @@ FRAME = "cdh_base"
 Q1, Q2, Q3 = (0.55, math.pi / 2), (0.55, 0.75), (2.63, 0.75)
 EQUATOR = (0.55, 0.0)         # on the sphere, not wrench-feasible (margin -0.15)
 EQUATOR_Q3 = (2.63, 0.0)      # on the sphere, not wrench-feasible
+
+
+def fake_planner_class():
+    """The TEST DOUBLE planner class (test/doubles/fake_planner.py)."""
+    spec = importlib.util.spec_from_file_location("fake_planner", FAKE_NODE)
+    module = importlib.util.module_from_spec(spec)
+    spec.loader.exec_module(module)
+    return module.FakePlanner
+
+
+@contextlib.contextmanager
+def in_process_nodes(log_dir):
+    """Yield make(factory=FakePlanner, params=()) -> a PlannerNode in this process, in a ROS
+    domain of its own (Robot 2's file, recording to ``log_dir``); each is closed and
+    destroyed at the end. Nothing spins it: tests call its callbacks or spin it."""
+    import rclpy
+    from cdh_planner.ros.node import PlannerNode
+    made = []
+    with claimed_domain() as domain:
+        def make(factory=None, params=()):
+            context = rclpy.Context()
+            rclpy.init(context=context, domain_id=domain)
+            args = ["--ros-args", "--params-file", str(ROBOT2), "-p", f"log_dir:={log_dir}"]
+            for p in params:
+                args += ["-p", p]
+            node = PlannerNode(factory or fake_planner_class(), context=context,
+                               cli_args=args)
+            made.append((node, context))
+            return node
+        try:
+            yield make
+        finally:
+            for node, context in made:
+                node.close()
+                node.destroy_node()
+                rclpy.try_shutdown(context=context)
 
 
 def ros_env(domain):

@@ -13,9 +13,9 @@ import setuptools
 
 from conftest import CONFIG, REPO
 
-pytest.importorskip("rclpy")   # cdh_planner.ros.node imports it
+pytest.importorskip("rclpy")   # cdh_planner.ros.interface imports it
 
-from cdh_planner.ros import node  # noqa: E402
+from cdh_planner.ros import interface  # noqa: E402
 from cdh_planner.ros.params import SPEC  # noqa: E402
 
 LAYOUT_FILE = CONFIG / "cdh_planner.foxglove.json"
@@ -24,7 +24,7 @@ PACKAGE = "cdh_planner_interfaces"
 TOP_LEVEL = {"configById", "globalVariables", "userNodes", "playbackConfig", "layout"}
 NOTE_KEY = "_comment"   # the layout's one-paragraph note, not a Foxglove setting
 
-# the node's published topics, by their constants in ros/node.py
+# the node's published topics, by their constants in ros/interface.py
 TOPIC_CONSTANTS = ("PATH", "MARKERS", "PLAN_RESULT", "PLAN_PROGRESS", "CABLE_COMMAND",
                    "TENSION_ENVELOPE", "PLANNED_TRAJECTORY", "EXECUTION_RESULT")
 # fields of the two standard types the envelope messages embed (not in this repository)
@@ -114,7 +114,7 @@ def test_every_panel_in_the_layout_has_a_config_and_vice_versa(layout):
 
 
 def test_every_topic_is_one_the_node_publishes_or_joint_states(layout):
-    published = {f"/{node.NODE_NAME}/{getattr(node, c)}" for c in TOPIC_CONSTANTS}
+    published = {f"/{interface.NODE_NAME}/{getattr(interface, c)}" for c in TOPIC_CONSTANTS}
     allowed = published | {"/joint_states"}
     topics = {topic_of(s) for s in strings(layout) if s.startswith("/")}
     assert topics <= allowed, sorted(topics - allowed)
@@ -125,13 +125,13 @@ def test_every_topic_is_one_the_node_publishes_or_joint_states(layout):
 def test_the_3d_panel_renders_markers_and_path_in_the_default_base_frame(layout):
     (scene,) = [c for i, c in layout["configById"].items() if i.startswith("3D!")]
     assert scene["followTf"] == SPEC["base_frame"].default
-    for name in (node.MARKERS, node.PATH):
-        assert scene["topics"][f"/{node.NODE_NAME}/{name}"]["visible"] is True
+    for name in (interface.MARKERS, interface.PATH):
+        assert scene["topics"][f"/{interface.NODE_NAME}/{name}"]["visible"] is True
 
 
 def test_tension_envelope_paths_use_the_messages_field_names(layout):
     known = msg_fields() | STANDARD_FIELDS
-    envelope = f"/{node.NODE_NAME}/{node.TENSION_ENVELOPE}"
+    envelope = f"/{interface.NODE_NAME}/{interface.TENSION_ENVELOPE}"
     paths = [s for s in strings(layout) if topic_of(s) == envelope]
     assert any("tension_max" in p for p in paths)
     for path in paths:
@@ -144,7 +144,7 @@ def test_tension_envelope_paths_use_the_messages_field_names(layout):
 
 def test_the_envelope_plot_is_against_the_waypoint_index(layout):
     """Index mode: the points of the latest (latched) envelope, x = waypoint index."""
-    envelope = f"/{node.NODE_NAME}/{node.TENSION_ENVELOPE}"
+    envelope = f"/{interface.NODE_NAME}/{interface.TENSION_ENVELOPE}"
     plots = [c for i, c in layout["configById"].items() if i.startswith("Plot!")
              and any(topic_of(p["value"]) == envelope for p in c["paths"])]
     assert plots and all(c["xAxisVal"] == "index" for c in plots)

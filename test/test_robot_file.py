@@ -4,6 +4,7 @@ import copy
 import json
 import subprocess
 import sys
+from dataclasses import dataclass
 
 import numpy as np
 import pytest
@@ -12,7 +13,9 @@ import yaml
 from cdh_planner import cli
 from cdh_planner.errors import InputError
 from cdh_planner.io.poses import load_poses
-from cdh_planner.model.robot import load_robot
+from cdh_planner.model import robot_schema
+from cdh_planner.model.robot import FIELDS, OPTIONAL_GROUPS, Robot, load_robot, read_yaml, \
+    robot_from_dict, ros_parameters
 
 from conftest import REPO as ROOT
 ROBOT1 = ROOT / "config" / "robot1.yaml"
@@ -179,3 +182,108 @@ def assert_one_line_error(err, field, text):
     assert len(lines) == 1, err
     assert lines[0].startswith(f"cdh-planner: error: {field} = "), err
     assert text in lines[0]
+
+
+# ------------------------------------------------------------------ the declaration (schema)
+
+def _robot_block():
+    """Robot 1's robot: block, read as load_robot reads it (YAML 1.2: 1.0e4 is a number)."""
+    return ros_parameters(read_yaml(ROBOT1, "robot"), str(ROBOT1))["robot"]
+
+
+def test_winch_names_give_the_cable_count_and_only_six_is_accepted():
+    doc = _robot_block()
+    doc["winch_names"] = [f"w{i}" for i in range(7)]
+    with pytest.raises(InputError) as exc:
+        robot_from_dict(doc)
+    assert exc.value.field == "robot.winch_names" and "expected 6 distinct" in str(exc.value)
+    doc["winch_names"] = ["a", "b", "c", "d", "e", "a"]
+    with pytest.raises(InputError, match="robot.winch_names = .*distinct"):
+        robot_from_dict(doc)
+
+
+def test_per_cable_sizes_follow_the_number_of_winches(monkeypatch):
+    """Issue 21's groundwork: with the one m != 6 refusal lifted, an 8-winch robot block is
+    read with 24 anchor coordinates and 8 limits per side (a single number broadcast to 8),
+    and 18 anchor coordinates are then refused naming the count."""
+    monkeypatch.setattr(robot_schema, "N_CABLES", 8)
+    doc = _robot_block()
+    doc["winch_names"] = [f"w{i}" for i in range(8)]
+    doc["base_anchors"] = doc["base_anchors"] + doc["base_anchors"][:6]
+    doc["platform_anchors"] = doc["platform_anchors"] + doc["platform_anchors"][:6]
+    doc["length_min"], doc["length_max"] = 0.1, [0.6] * 8
+    doc["tension_min"], doc["tension_max"] = 0.05, 0.5
+    robot_schema.check_groups(doc, FIELDS, OPTIONAL_GROUPS)
+    v = robot_schema.read_fields(doc, FIELDS)
+    assert v["base_anchors"].shape == v["platform_anchors"].shape == (8, 3)
+    assert v["length_min"].tolist() == [0.1] * 8 and v["length_max"].shape == (8,)
+    assert v["load.force"].shape == (3,) and v["wrench_ellipsoid.matrix"].shape == (6, 6)
+    doc["base_anchors"] = doc["base_anchors"][:18]
+    with pytest.raises(InputError, match=r"robot.base_anchors = .*expected 24 numbers, got 18"):
+        robot_schema.read_fields(doc, FIELDS)
+
+
+def test_contact_ellipsoid_is_folded_into_the_wrench_ellipsoid():
+    """Paper Eqs. 22-23: E = E_w (E_w + E_c)^-1 E_c / 2 (symmetrised), centres added."""
+    doc = _robot_block()
+    Ew = load_robot(ROBOT1).ellipsoid_matrix
+    Ec = np.diag([2e4, 2e4, 2e4, 3e10, 3e10, 3e10])
+    doc["contact_ellipsoid"] = {"matrix": np.diag(Ec).tolist(), "center": [0.0, 0.0, 1.0, 0, 0, 0]}
+    robot = robot_from_dict(doc)
+    np.testing.assert_allclose(robot.ellipsoid_matrix, 0.5 * Ew @ np.linalg.solve(Ew + Ec, Ec),
+                               rtol=1e-12)
+    assert np.allclose(robot.ellipsoid_matrix, robot.ellipsoid_matrix.T, rtol=0, atol=0)
+    assert robot.ellipsoid_offset.tolist() == [0.0, 0.0, 1.0, 0.0, 0.0, 0.0]
+    del doc["contact_ellipsoid"]["matrix"]
+    with pytest.raises(InputError, match="robot.contact_ellipsoid.matrix = None: required key"):
+        robot_from_dict(doc)
+
+
+@dataclass(frozen=True, kw_only=True)
+class WinchRobot(Robot):
+    """A new robot field is one declaration: the drum radius of the winches."""
+
+    drum_radius: float = robot_schema.robot_field(
+        key="drum_radius", kind=robot_schema.NUMBER, unit="m", sign="positive", limit=1.0,
+        default=0.05, description="winch drum radius")
+
+
+def test_a_new_robot_field_is_one_declaration():
+    fields = robot_schema.schema_of(WinchRobot)
+    assert fields[:-1] == FIELDS and fields[-1].key == "drum_radius"
+    doc = _robot_block()
+    robot_schema.check_groups(doc, fields, OPTIONAL_GROUPS)  # absent: its default
+    assert robot_schema.read_fields(doc, fields)["drum_radius"] == 0.05
+    doc["drum_radius"] = 0.0
+    with pytest.raises(InputError, match=r"robot.drum_radius = 0.0: must be positive"):
+        robot_schema.read_fields(doc, fields)
+    with pytest.raises(InputError, match="robot.drum_radius = .*unknown key"):
+        robot_schema.check_groups(doc, FIELDS, OPTIONAL_GROUPS)  # Robot does not declare it
+
+
+def test_every_declared_field_has_a_unit_or_kind_that_needs_none_and_a_description():
+    keys = [f.key for f in FIELDS]
+    assert len(set(keys)) == len(keys) and all(f.description for f in FIELDS)
+    assert all(f.unit for f in FIELDS if f.kind in (robot_schema.NUMBER, robot_schema.NUMBERS,
+                                                    robot_schema.MATRIX))
+    for f in FIELDS:  # a default is a valid value of its own field
+        if f.default not in (None, robot_schema.REQUIRED):
+            robot_schema.read_value(f, f.key, f.default, 6)
+
+
+@pytest.mark.parametrize("f", FIELDS, ids=[f.key for f in FIELDS])
+def test_a_null_value_is_refused_naming_the_field_unless_the_field_is_optional(f):
+    """``key: null`` (YAML) is "not set" for an optional field (default None) and refused,
+    naming the field, for every other one (a field with a default included)."""
+    doc = _robot_block()
+    doc.setdefault("contact_ellipsoid", {"matrix": [1e4] * 3 + [1e10] * 3})
+    group = doc[f.group] if f.group else doc
+    group[f.name] = None
+    if f.key == "load.mass":
+        doc["load"].pop("inertia", None)
+    if f.default is None:
+        robot_from_dict(doc)
+        return
+    with pytest.raises(InputError) as exc:
+        robot_from_dict(doc)
+    assert exc.value.field == f"robot.{f.key}" and exc.value.value is None

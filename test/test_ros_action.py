@@ -164,6 +164,33 @@ def test_use_current_start_without_measurements_is_refused_after_the_wait(ros):
     assert wait_s <= took < wait_s + 2.0, took
 
 
+@pytest.mark.parametrize("fault,code,words", [
+    ("nan", "INVALID_REQUEST", "goal.pose.position.x"),
+    ("frame", "TF_ERROR", "goal.header.frame_id"),
+    ("strategy", "INVALID_PLANNER", "strategy"),
+    ("timeout", "INVALID_REQUEST", "timeout_s"),
+])
+def test_use_current_start_with_a_bad_goal_is_refused_before_any_wait(ros, fault, code, words):
+    """The goal's own error, not "nothing received" after the wait: with a 60 s wait for
+    joint states and none coming, the answer arrives within the client's 30 s."""
+    goal = plan_path_goal(None, sphere_pose_msg(Q3, frame="map" if fault == "frame"
+                                                else "cdh_base"), use_current_start=True)
+    if fault == "nan":
+        goal.goal.pose.position.x = math.nan
+    elif fault == "strategy":
+        goal.strategy = "dijkstra"
+    elif fault == "timeout":
+        goal.timeout_s = -1.0
+    assert ros.set_parameters({"execution.joint_states_wait_s": 60.0}) == [(True, "")]
+    try:
+        answer = ros.plan_path(goal, timeout_s=30)
+    finally:
+        assert ros.set_parameters({"execution.joint_states_wait_s": 5.0}) == [(True, "")]
+    assert answer.goal_status == GoalStatus.STATUS_ABORTED
+    assert answer.result.error_code == getattr(PlanPath.Result, code), answer.result.error_msg
+    assert words in answer.result.error_msg and "joint_states" not in answer.result.error_msg
+
+
 def test_use_current_start_waits_for_winches_that_appear_after_the_goal(ros):
     """The goal is sent before anything publishes joint states; a publisher that starts
     1 s later (a controller coming up) is waited for, and the plan starts at its pose."""

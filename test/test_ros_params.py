@@ -19,8 +19,12 @@ from cdh_planner.model.pose import quaternion_from_tau  # noqa: E402
 from cdh_planner.model.robot import load_robot  # noqa: E402
 from cdh_planner.model.task import PivotTask, SliceTask  # noqa: E402
 from cdh_planner.ros import planning  # noqa: E402
+from cdh_planner.model import robot_schema  # noqa: E402
+from cdh_planner.model.robot import FIELDS as ROBOT_FIELDS, OPTIONAL_GROUPS  # noqa: E402
+from cdh_planner.ros import params  # noqa: E402
 from cdh_planner.ros.params import SPEC, SPECS, node_config  # noqa: E402
 from cdh_planner.ros.streaming import Stream  # noqa: E402
+from cdh_planner.status import Status  # noqa: E402
 from cdh_planner.trajectory.path import PlannedPath  # noqa: E402
 from cdh_planner.trajectory.timing import time_path  # noqa: E402
 from ros_harness import Q1, Q2, REPO, ROBOT2, file_parameters, sphere_pose_msg  # noqa: E402
@@ -83,6 +87,8 @@ def test_integers_are_accepted_for_numbers():
     ("robot.base_anchors", None, "robot.base_anchors = None: required parameter is not set"),
     ("robot.length_min", [0.2] * 5, "robot.length_min"),
     ("robot.winch_names", ["a"] * 6, "robot.winch_names"),
+    ("robot.winch_names", 0.0, "robot.winch_names = 0.0: expected a list of strings"),
+    ("robot.winch_names", ["w1", "w2"], "robot.winch_names = ['w1', 'w2']: expected 6 distinct"),
     ("robot.wrench_ellipsoid.frame", "world", "robot.wrench_ellipsoid.frame = 'world'"),
     ("task.type", "cube", "task.type = 'cube': expected one of free, slice, sphere, pivot"),
     ("task.radius", 0.0, "task.radius = 0.0: must be > 0"),
@@ -167,12 +173,32 @@ def test_refusal_reasons_and_codes():
     with pytest.raises(InputError) as err:
         planning.request_poses(request, "cdh_base")
     result = planning.input_refusal(err.value)
-    assert result.reason == "bad_frame" and not result.success
+    assert result.reason is Status.BAD_FRAME and result.reason == "bad_frame"
+    assert not result.success
     robot = load_robot(ROBOT2)
     status = planning.result_status(result, robot, "r#1", "", sphere_pose_msg(Q1).header.stamp)
     values = {kv.key: kv.value for kv in status.values}
     assert values["error_code"] == "202" and "map" in values["error_msg"]
     assert values["path_stamp"] == "0"
+
+
+@pytest.mark.parametrize("fault, reason, code", [
+    (None, None, None), ("frame", Status.BAD_FRAME, 202), ("strategy", Status.BAD_STRATEGY, 201),
+    ("timeout", Status.INVALID, 292), ("nan", Status.INVALID, 292)])
+def test_a_goals_own_faults_are_refused_with_their_member(fault, reason, code):
+    from cdh_planner.ros.client import plan_path_goal
+    from cdh_planner.ros import messages as M
+    goal = plan_path_goal(None, sphere_pose_msg(Q2, frame="map" if fault == "frame"
+                                                else "cdh_base"), use_current_start=True)
+    goal.strategy = "dijkstra" if fault == "strategy" else ""
+    goal.timeout_s = -1.0 if fault == "timeout" else 0.0
+    goal.goal.pose.position.x = math.nan if fault == "nan" else goal.goal.pose.position.x
+    refused = planning.goal_refusal(goal, "cdh_base", "astar")
+    if fault is None:
+        assert refused is None
+    else:
+        assert refused.reason is reason and M.error_code(refused.reason) == code
+        assert refused.message.startswith("invalid request: ") and refused.strategy == "astar"
 
 
 class Exploding:
@@ -185,7 +211,8 @@ class Exploding:
 def test_planner_exception_becomes_an_answer():
     lines = []
     result = planning.run_planner(Exploding(), None, None, logger=lines.append)
-    assert not result.success and result.reason == "internal_error"
+    assert not result.success and result.reason is Status.INTERNAL_ERROR
+    assert result.reason == "internal_error"
     assert "ZeroDivisionError: boom" in result.message and "Traceback" in lines[0]
 
 
@@ -227,3 +254,39 @@ def test_stream_refuses_wrong_joint_names():
     robot, path = _path()
     with pytest.raises(InputError):
         Stream(replace(path), ["a", "b"])
+
+
+def test_the_parameter_table_in_the_docs_is_generated_from_the_specs():
+    text = (REPO / "docs" / "parameters.md").read_text()
+    assert text == params.parameters_markdown(), \
+        "docs/parameters.md is stale: python -m cdh_planner.ros.params > docs/parameters.md"
+    assert all(f"| `{s.name}` |" in text for s in SPECS)
+
+
+def test_robot_parameters_are_the_declared_robot_fields():
+    """robot.* is exactly Robot's declaration: one parameter per field, required where the
+    file must give it (the contact ellipsoid's matrix: only with its group, so optional)."""
+    assert [s.name for s in SPECS if s.name.startswith("robot.")] == \
+        [f"robot.{f.key}" for f in ROBOT_FIELDS]
+    for f in ROBOT_FIELDS:
+        spec = SPEC[f"robot.{f.key}"]
+        required = f.default is robot_schema.REQUIRED and f.group not in OPTIONAL_GROUPS
+        assert (spec.default is params.REQUIRED) == required, f.key
+        assert spec.choices == f.choices and robot_schema.describe(f) == spec.description
+
+
+def test_contact_ellipsoid_as_parameters_is_the_file_robot(tmp_path):
+    import yaml
+    doc = yaml.safe_load((REPO / "config" / "robot2.yaml").read_text())
+    robot = doc["cdh_planner"]["ros__parameters"]["robot"]
+    robot["contact_ellipsoid"] = {"matrix": [2e4, 2e4, 2e4, 3e10, 3e10, 3e10],
+                                  "center": [0.0, 0.0, 1.0, 0.0, 0.0, 0.0]}
+    path = tmp_path / "robot.yaml"
+    path.write_text(yaml.safe_dump(doc))
+    offline, node = load_robot(path), node_config(file_parameters(path)).robot
+    for name in ("ellipsoid_matrix", "ellipsoid_offset", "contact_matrix", "contact_center"):
+        np.testing.assert_array_equal(getattr(node, name), getattr(offline, name))
+    assert not np.allclose(offline.ellipsoid_matrix, load_robot(REPO / "config" / "robot2.yaml")
+                           .ellipsoid_matrix)
+    values = dict(file_parameters(path), **{"robot.contact_ellipsoid.matrix": None})
+    assert node_config(values).robot.contact_matrix is None  # center alone: no contact ellipsoid

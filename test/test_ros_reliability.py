@@ -10,7 +10,6 @@ DDS), so that failures can be injected. The concurrency test runs the real node 
 """
 
 import dataclasses
-import importlib.util
 import struct
 import threading
 import time
@@ -21,7 +20,6 @@ import pytest
 
 pytest.importorskip("rclpy")
 
-import rclpy  # noqa: E402
 from nav_msgs.srv import GetPlan  # noqa: E402
 from rclpy.parameter import Parameter  # noqa: E402
 from std_srvs.srv import Trigger  # noqa: E402
@@ -30,14 +28,10 @@ from cdh_planner.io.mcap_log import REQUEST_RECEIVED, RESPONSE_SENT, read_run  #
 from cdh_planner.ros import messages as M  # noqa: E402
 from cdh_planner.ros import planning  # noqa: E402
 from cdh_planner.ros.client import PlannerClient, path_duration  # noqa: E402
-from cdh_planner.ros.node import PlannerNode  # noqa: E402
-from ros_harness import (FAKE_NODE, Q1, Q2, ROBOT2, NodeProcess, claimed_domain,  # noqa: E402
-                         sphere_pose_msg)
+from ros_harness import (Q1, Q2, ROBOT2, NodeProcess, claimed_domain, fake_planner_class,  # noqa: E402
+                         in_process_nodes, sphere_pose_msg)
 
-_spec = importlib.util.spec_from_file_location("fake_planner", FAKE_NODE)
-fake_planner = importlib.util.module_from_spec(_spec)
-_spec.loader.exec_module(fake_planner)
-FakePlanner = fake_planner.FakePlanner
+FakePlanner = fake_planner_class()
 PLAN_EVENTS = "/cdh_planner/plan/_service_event"
 
 
@@ -45,25 +39,10 @@ PLAN_EVENTS = "/cdh_planner/plan/_service_event"
 
 @pytest.fixture
 def make_node(tmp_path):
-    """make_node(factory=FakePlanner, params=()) -> a PlannerNode in this process, in a ROS
-    domain of its own, recording to tmp_path/runs; closed and destroyed at the end."""
-    made = []
-    with claimed_domain() as domain:
-        def make(factory=FakePlanner, params=()):
-            context = rclpy.Context()
-            rclpy.init(context=context, domain_id=domain)
-            args = ["--ros-args", "--params-file", str(ROBOT2),
-                    "-p", f"log_dir:={tmp_path / 'runs'}"]
-            for p in params:
-                args += ["-p", p]
-            node = PlannerNode(factory, context=context, cli_args=args)
-            made.append((node, context))
-            return node
+    """make_node(factory=FakePlanner, params=()) -> a PlannerNode in this process
+    (ros_harness.in_process_nodes)."""
+    with in_process_nodes(tmp_path / "runs") as make:
         yield make
-        for node, context in made:
-            node.close()
-            node.destroy_node()
-            rclpy.try_shutdown(context=context)
 
 
 def plan(node, start=Q1, goal=Q2):
@@ -135,7 +114,7 @@ def test_failed_outputs_keep_the_previous_plan(make_node, monkeypatch):
     assert good.poses
     trajectories = spy(monkeypatch, node.pub_trajectory)
     node.set_parameters([Parameter("trajectory.max_cable_speed", value=0.1)])
-    monkeypatch.setattr(node, "_publish_outputs", lambda *a, **k: 1 / 0)
+    monkeypatch.setattr(node.plans, "_publish_outputs", lambda *a, **k: 1 / 0)
     path, values = plan(node)
     assert not path.poses and "ZeroDivisionError" in values["error_msg"]
     assert not trajectories
@@ -161,7 +140,7 @@ def test_a_publishing_failure_midway_puts_the_previous_outputs_back(make_node, m
     node.set_parameters([Parameter("trajectory.max_cable_speed", value=0.1)])
     path, values = plan(node)
     assert not path.poses and "publisher gone" in values["error_msg"]
-    assert len(paths) == 2 and paths[-1] is node._last[2].path    # the previous path again
+    assert len(paths) == 2 and paths[-1] is node.plans.with_last(lambda p: p)[2].path    # the previous path again
     assert M.time_ns(paths[-1].header.stamp) == M.time_ns(good.header.stamp)
     ok, message = execute(node)
     assert ok and executing_s(message) == pytest.approx(path_duration(good), abs=1e-3)
@@ -290,7 +269,7 @@ def test_an_internal_error_still_records_the_response(make_node, monkeypatch):
     def crash(*args, **kwargs):
         raise RuntimeError("the planner thread fell over")
 
-    monkeypatch.setattr(node, "_compute", crash)
+    monkeypatch.setattr(node.plans, "compute", crash)
     path, values = plan(node)
     assert not path.poses and "fell over" in values["error_msg"]
     monkeypatch.undo()
@@ -423,3 +402,14 @@ def test_every_concurrent_request_is_answered(tmp_path):
         for path in node.run_files():
             events += [m.info.event_type for t, _, m, _ in read_run(path) if t == PLAN_EVENTS]
         assert events.count(REQUEST_RECEIVED) == events.count(RESPONSE_SENT) == CLIENTS * CALLS
+
+
+def test_an_undeclared_parameter_is_refused_naming_it(make_node):
+    """Through the parameter service's own path (set_parameters_atomically), as
+    ``ros2 param set`` reaches it: the name and value, not rclpy's empty list."""
+    node = make_node()
+    result = node.set_parameters_atomically([Parameter("planner.radius_typo", value=0.25)])
+    assert not result.successful
+    assert "planner.radius_typo" in result.reason and "0.25" in result.reason, result.reason
+    assert node.set_parameters_atomically(
+        [Parameter("planner.radius", value=0.25)]).successful

@@ -25,13 +25,10 @@ from cdh_planner.trajectory.verify import check_motion
 ROBOT2 = load_robot(CONFIG / "robot2.yaml")
 PIVOT = T.PivotTask(tool=(0.0, 0.0, 0.1), center=(0.0, 0.0, 0.35))
 PIVOT_FILE = PROBLEMS / "robot2_pivot.yaml"
-TASKS = {
-    "slice": T.SliceTask(fixed={"x": 0.0, "y": 0.0, "z": 0.35, "sigma": 0.6}),
-    "sphere": T.SphereTask(center=(0.0, 0.0, 0.306), radius=0.13),
-    "sphere-free": T.SphereTask(center=(0.0, 0.0, 0.306), radius=0.13, free_torsion=True),
-    "pivot": PIVOT,
-    "free": T.FreeTask(),
-}
+# the contract tests run over the registry: each task's own example(), and a variant the
+# examples do not cover
+VARIANTS = {"sphere-fixed-torsion": T.SphereTask(center=(0.0, 0.0, 0.306), radius=0.13)}
+TASKS = {**{name: cls.example() for name, cls in T.TASKS.items()}, **VARIANTS}
 
 
 def _y(task, rng):
@@ -43,9 +40,23 @@ def _y(task, rng):
     return np.array(cols)
 
 
+def test_every_registered_task_has_an_example_of_its_own():
+    assert {"free", "slice", "sphere", "pivot"} <= set(T.TASKS)
+    for name, cls in T.TASKS.items():
+        task = cls.example()
+        assert type(task) is cls and task.type == name
+        assert len(task.names) == 6 + task.n_vars - task.n_equations
+
+
 @pytest.mark.parametrize("name", TASKS)
 def test_equations_vanish_on_the_task_and_match_finite_differences(name):
-    task, rng = TASKS[name], np.random.default_rng(3)
+    check_task_contract(TASKS[name])
+
+
+def check_task_contract(task):
+    """C = 0 and residual 0 on the task, pose and coords inverse maps, dC/d(q, v) equal to
+    central differences off the task (5 random task coordinates)."""
+    rng, name = np.random.default_rng(3), task.type
     for _ in range(5):
         y = _y(task, rng)
         p, tau = task.pose(y[None])
@@ -67,7 +78,7 @@ def _split(qv):
     return qv[:6], qv[6:]
 
 
-@pytest.mark.parametrize("name", ["slice", "sphere", "pivot"])
+@pytest.mark.parametrize("name", TASKS)
 def test_constraint_dimension_is_six_minus_the_task_equations(name):
     task = TASKS[name]
     c = TaskConstraint(ROBOT2, task)
@@ -183,6 +194,34 @@ def test_a_new_task_is_one_class(plane_registered):
     x = c.lift(np.array([0.0, 0.0, 0.25]), np.array([0.0, 0.2, 3.0]))
     F, _ = c.residual_and_jacobian(x)
     assert np.max(np.abs(F)) < 1e-9
+    check_task_contract(PlaneTask.example())  # registered: the contract tests cover it
+
+
+@dataclass(frozen=True)
+class RingTask(PlaneTask):
+    """A task whose task.center is a number, where the sphere and pivot tasks have a point."""
+
+    center: float = T._field(0.0, unit="m", description="ring task: its height")
+    type: ClassVar[str] = "ring"
+
+
+def test_a_task_declaring_a_shared_parameter_otherwise_is_refused_at_registration():
+    before = dict(T.TASKS)
+    with pytest.raises(ValueError, match=r"task 'ring': parameter task.center \(double, default "
+                                         r"0.0\) is declared otherwise by task 'sphere' \(point"):
+        T.register(RingTask)
+    with pytest.raises(ValueError, match="task type 'pivot' is already registered"):
+        T.register(dataclass(frozen=True)(type("OtherPivot", (T.PivotTask,), {})))
+    alpha = T.Coordinate("alpha1", "m")  # the sphere's alpha1 is an angle
+    with pytest.raises(ValueError, match="task 'arc': coordinate alpha1 \\(m\\) is declared otherwise"):
+        T.register(dataclass(frozen=True)(type("ArcTask", (PlaneTask,), {
+            "type": "arc", "coordinates": (alpha,), "__annotations__": {}})))
+    assert T.TASKS == before and T.COORDINATES["alpha1"].unit == "rad"
+    assert T.register(T.PivotTask) is T.PivotTask  # the same class again: nothing changes
+    # declared alike (sphere and pivot share task.center) is one parameter
+    params = T.task_parameters()
+    assert params["task.center"][2] == "sphere" and params["task.center"][:2] == \
+        (T.SphereTask.task_fields()[0][1], (0.0, 0.0, 0.0))
 
 
 def test_pivot_plans_over_the_node(tmp_path):

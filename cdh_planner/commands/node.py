@@ -30,5 +30,5 @@ def add_parser(subparsers):
 
 
 def run(args):
-    from ..ros.node import main
+    from ..ros.node_main import main
     return main(args.ros_args, log=lambda line: print(line, file=sys.stderr))

@@ -26,8 +26,12 @@ from ..io.problem import load_problem
 from ..io.progress import chart_progress
 from ..planner import Planner
 from ..settings import SETTINGS, check_setting
+from ..status import Status
 
-EXIT_OK, EXIT_NO_PLAN = 0, 1
+EXIT_OK, EXIT_NO_PLAN, EXIT_INTERNAL = 0, 1, 3  # cdh_planner.cli's contract
+# every way a plan ends has its exit code: a path, an answer without one, a bug
+EXIT_CODES = {s: EXIT_OK if s is Status.OK else EXIT_INTERNAL if s is Status.INTERNAL_ERROR
+              else EXIT_NO_PLAN for s in Status}
 
 
 def add_parser(subparsers):
@@ -63,11 +67,7 @@ def run(args):
     overrides = {name: check_setting(name, getattr(args, name), s.flag)
                  for name, (_, _, s) in SETTINGS.items() if getattr(args, name) is not None}
     settings = replace(settings, **overrides)
-    if args.json is not None:
-        check_output("--json", args.json)
-    if args.plot is not None:
-        plot = check_output("--plot", args.plot)
-        check_output("--plot", plot.with_name(plot.stem + "_tensions.png"))
+    check_outputs(args, problem)
     planner = Planner(problem.robot, problem.task, settings)
     result = plan_with_progress(planner, problem.start, problem.goal, quiet=args.quiet)
     print_result(result, problem)
@@ -80,7 +80,20 @@ def run(args):
             outs = plot_plan(planner, problem, result, args.plot)
         for out in outs:
             print(f"picture: {out}")
-    return EXIT_OK if result.success else EXIT_NO_PLAN
+    return EXIT_CODES[result.reason]
+
+
+def check_outputs(args, problem):
+    """Refuse, before planning, an output that cannot be written or that names an input
+    (the problem or robot file) or another output."""
+    files = [("the problem file", args.problem), ("the robot file", problem.robot.source)]
+    if args.json is not None:
+        check_output("--json", args.json, inputs=files)
+        files.append(("the --json output", args.json))
+    if args.plot is not None:
+        plot = check_output("--plot", args.plot, suffixes=(".png",), inputs=files)
+        tensions = plot.with_name(plot.stem + "_tensions.png")
+        check_output("--plot", tensions, inputs=files + [("the --plot picture", plot)])
 
 
 def plan_with_progress(planner, start, goal, quiet=False):

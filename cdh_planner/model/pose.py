@@ -73,30 +73,43 @@ def _ry(a):
     return R, dR
 
 
-def tau_from_rotation(R, phi_hint=0.0):
-    """Tilt-and-torsion angles of rotation matrices, theta in [0, pi].
+SINGULAR_TOL = 1e-9  # rad: tau_from_rotation's default distance for snapping to theta = 0 or pi
 
-    At theta = 0 (and theta = pi) phi is not determined by R: ``phi_hint`` (radians) is
-    used there, so a pose on the representation singularity keeps the azimuth the caller
-    meant. Returns shape (..., 3), phi and sigma wrapped to [-pi, pi).
+
+def tau_from_rotation(R, phi_hint=0.0, tol=SINGULAR_TOL):
+    """Tilt-and-torsion angles of rotation matrices, theta in [0, pi], phi and sigma wrapped
+    to [-pi, pi). Shape (..., 3).
+
+    theta = 0 and theta = pi are the representation's singular set: there R = Rz(sigma)
+    fixes only sigma, and R = Rz(2 phi - sigma) Ry(pi) only 2 phi - sigma, so phi is free.
+    A rotation within ``tol`` (rad, < pi/2) of that set -- its tilt theta, or pi - theta,
+    is its angle to the nearest rotation on the set -- is snapped onto it: theta becomes
+    exactly 0 (pi), phi is ``phi_hint`` (rad), and sigma keeps R's rotation about z (0) or
+    2 phi - sigma (pi). Elsewhere phi is R's own azimuth (ill-conditioned as 1 / theta
+    near the set, which is why noise there needs the snap).
+
+    sigma = phi + psi and 2 phi - sigma = phi - psi (psi = sigma - phi) come from the upper
+    2x2 block, scaled by 1 + cos theta and 1 - cos theta: each is used on the half of the
+    sphere where it is well-conditioned, so sigma is continuous up to the singular set.
     """
     R = np.asarray(R, dtype=float)
     cos_t = np.clip(R[..., 2, 2], -1.0, 1.0)
     sin_t = np.hypot(R[..., 0, 2], R[..., 1, 2])
     theta = np.arctan2(sin_t, cos_t)
-    phi_hint = np.broadcast_to(np.asarray(phi_hint, dtype=float), theta.shape)
-    regular = sin_t > 1e-9
-    phi = np.where(regular, np.arctan2(R[..., 1, 2], R[..., 0, 2]), phi_hint)
-    # psi = sigma - phi from the last row when regular; on the singular set the
-    # product reduces to a plane rotation whose angle gives sigma directly.
-    psi = np.arctan2(R[..., 2, 1], -R[..., 2, 0])
-    sigma_regular = phi + psi
-    angle_xy = np.arctan2(R[..., 1, 0], R[..., 0, 0])
-    sigma_north = angle_xy  # theta = 0: R = Rz(sigma)
-    # theta = pi: R = Rz(phi) Ry(pi) Rz(sigma - phi); R[1,0], -R[0,0] give sigma - 2 phi
-    sigma_south = 2.0 * phi_hint + np.arctan2(R[..., 1, 0], -R[..., 0, 0])
-    sigma = np.where(regular, sigma_regular, np.where(cos_t > 0, sigma_north, sigma_south))
+    hint = np.broadcast_to(np.asarray(phi_hint, dtype=float), theta.shape)
+    north, south = theta <= tol, np.arctan2(sin_t, -cos_t) <= tol   # (pi - theta, exact)
+    phi = np.where(north | south, hint, np.arctan2(R[..., 1, 2], R[..., 0, 2]))
+    sum_ = np.arctan2(R[..., 1, 0] - R[..., 0, 1], R[..., 0, 0] + R[..., 1, 1])   # phi + psi
+    diff = np.arctan2(-(R[..., 1, 0] + R[..., 0, 1]), R[..., 1, 1] - R[..., 0, 0])  # phi - psi
+    sigma = np.where(cos_t >= 0.0, sum_, 2.0 * phi - diff)
+    theta = np.where(north, 0.0, np.where(south, np.pi, theta))
     return np.stack([wrap_angle(phi), theta, wrap_angle(sigma)], axis=-1)
+
+
+def on_singular_set(tau):
+    """Is theta exactly 0 or pi (where phi is not determined by the rotation)? Shape (...)."""
+    theta = np.asarray(tau, dtype=float)[..., 1]
+    return (theta == 0.0) | (theta == np.pi)
 
 
 def quaternion_from_tau(tau):
@@ -126,11 +139,12 @@ def check_quaternion(q, field="quaternion", tol=1e-3):
     return q / norm
 
 
-def tau_from_quaternion(q, phi_hint=0.0):
-    """Tilt-and-torsion angles (radians) of unit quaternions (x, y, z, w), shape (..., 3)."""
+def tau_from_quaternion(q, phi_hint=0.0, tol=SINGULAR_TOL):
+    """Tilt-and-torsion angles (radians) of unit quaternions (x, y, z, w), shape (..., 3);
+    ``phi_hint`` and ``tol`` as in ``tau_from_rotation``."""
     q = np.asarray(q, dtype=float)
     R = Rotation.from_quat(q.reshape(-1, 4)).as_matrix().reshape(q.shape[:-1] + (3, 3))
-    return tau_from_rotation(R, phi_hint)
+    return tau_from_rotation(R, phi_hint, tol)
 
 
 def rotation_from_quaternion(q):

@@ -7,29 +7,33 @@ A robot file is a ROS 2 parameters file, so the same file configures the node:
         robot: {name, winch_names, base_anchors, platform_anchors, length_min, ...}
 
 Arrays are flat because ROS 2 parameters cannot nest lists: ``base_anchors`` holds
-A_1..A_6 as 18 numbers (m, base frame F1), ``platform_anchors`` B_1..B_6 (m, platform
-frame F2); a 6x6 matrix is 36 numbers row-major, or 6 numbers for a diagonal.
+A_1..A_m, x y z each (metres, base frame F1; m cables, one per winch name, 6 for now),
+``platform_anchors`` B_1..B_m (metres, platform frame F2); a 6x6 matrix is 36 numbers
+row-major, or 6 numbers for a diagonal. Every field is declared once, on ``Robot``
+(key, unit, size, bounds, description: ``robot_schema.RobotField``); the table of them
+is docs/parameters.md (``robot.*``).
 """
 
-from dataclasses import dataclass, field
+from dataclasses import dataclass, field, fields, replace
 from pathlib import Path
 
 import numpy as np
 
 from .. import files
-from ..errors import MAX_FORCE_N, MAX_POSITION_M, InputError, check_finite, check_keys, check_numbers, \
-    is_number
+from ..errors import MAX_FORCE_N, MAX_POSITION_M, InputError
+from .robot_schema import CHOICE, MATRIX, N_CABLES, NAME, NAMES, NUMBER, NUMBERS, check_groups, \
+    read_fields, robot_field, schema_of
 
-N_CABLES = 6
-ELLIPSOID_FRAMES = ("load", "base")
-MAX_NAME_CHARS = 64
 MAX_ELLIPSOID = 1e18  # largest |entry| of an ellipsoid matrix (1/N^2, 1/(N m)^2)
 MIN_SPREAD_M = 1e-6  # anchors closer than this to one line are collinear
 SINGULAR_RCOND = 1e-9  # J with smallest / largest singular value below this is singular
 JACOBIAN_PROBES = 16  # poses at which a robot's J must be regular at least once
+GRAVITY = 9.80665  # m/s^2: |force| of a load with a mass is its weight (within 2 %)
+OPTIONAL_GROUPS = ("contact_ellipsoid",)  # absent, or given with its required keys
+WINCH_NAMES = tuple(f"winch_{i + 1}" for i in range(N_CABLES))
 
 
-@dataclass(frozen=True)
+@dataclass(frozen=True, kw_only=True)
 class Robot:
     """A cable-driven hexapod. Lengths in m, forces in N, moments in N m.
 
@@ -37,31 +41,85 @@ class Robot:
     ``moment``; the wrench ellipsoid K = {w : (w - w0)^T E (w - w0) <= 1} has centre
     w0 = load wrench + ``ellipsoid_offset`` and shape ``ellipsoid_matrix`` (E), both given
     in ``ellipsoid_frame``: "load" (F3: parallel to the base, origin at the load point, the
-    paper's App. A) or "base" (F1, moments about the base origin).
+    paper's App. A) or "base" (F1, moments about the base origin). A contact ellipsoid
+    (``contact_matrix``, ``contact_center`` as given, or None) is already folded into
+    ``ellipsoid_matrix`` and ``ellipsoid_offset`` (paper Eqs. 22-23).
+
+    Each field read from the robot file carries its declaration (``RobotField``, see
+    ``robot_schema``): the file's key, unit, size, bounds and description. The node's
+    ``robot.*`` parameters and docs/parameters.md are built from them; a new robot field is
+    one field here. m, the number of cables, is the number of ``winch_names``.
     """
 
-    name: str
-    winch_names: tuple
-    base_anchors: np.ndarray  # (6, 3) A_i in F1
-    platform_anchors: np.ndarray  # (6, 3) B_i in F2
-    length_min: np.ndarray  # (6,)
-    length_max: np.ndarray
-    tension_min: np.ndarray
-    tension_max: np.ndarray
-    force: np.ndarray  # (3,) N, base frame
-    load_point: np.ndarray  # (3,) m, platform frame (the paper's g / p_m)
-    moment: np.ndarray  # (3,) N m, base frame
-    ellipsoid_frame: str
-    ellipsoid_offset: np.ndarray  # (6,)
-    ellipsoid_matrix: np.ndarray  # (6, 6) SPD, combined with the contact ellipsoid if any
+    name: str = robot_field(
+        key="name", kind=NAME, unit="", default=None,
+        description="robot name, for messages (absent: the file's name)")
+    winch_names: tuple = robot_field(
+        key="winch_names", kind=NAMES, unit="", default=WINCH_NAMES,
+        description="joint names of the winches (JointState / JointTrajectory names)")
+    base_anchors: np.ndarray = robot_field(  # (m, 3) A_i in F1
+        key="base_anchors", kind=NUMBERS, unit="m", count=3, per_cable=True,
+        limit=MAX_POSITION_M, description="cable anchors A_i on the base, x y z in the base frame")
+    platform_anchors: np.ndarray = robot_field(  # (m, 3) B_i in F2
+        key="platform_anchors", kind=NUMBERS, unit="m", count=3, per_cable=True,
+        limit=MAX_POSITION_M, description="cable anchors B_i on the platform, x y z in the platform frame")
+    length_min: np.ndarray = robot_field(  # (m,)
+        key="length_min", kind=NUMBERS, unit="m", per_cable=True, broadcast=True,
+        limit=MAX_POSITION_M, sign="positive", description="least cable length")
+    length_max: np.ndarray = robot_field(
+        key="length_max", kind=NUMBERS, unit="m", per_cable=True, broadcast=True,
+        limit=MAX_POSITION_M, sign="positive", description="greatest cable length")
+    tension_min: np.ndarray = robot_field(
+        key="tension_min", kind=NUMBERS, unit="N", per_cable=True, broadcast=True,
+        limit=MAX_FORCE_N, sign="non-negative", description="least cable tension")
+    tension_max: np.ndarray = robot_field(
+        key="tension_max", kind=NUMBERS, unit="N", per_cable=True, broadcast=True,
+        limit=MAX_FORCE_N, sign="positive", description="greatest cable tension")
+    force: np.ndarray = robot_field(  # (3,)
+        key="load.force", kind=NUMBERS, unit="N", count=3, limit=MAX_FORCE_N,
+        description="load force, base frame")
+    load_point: np.ndarray = robot_field(  # (3,) the paper's g / p_m
+        key="load.point", kind=NUMBERS, unit="m", count=3, limit=MAX_POSITION_M,
+        default=(0.0, 0.0, 0.0), description="where the load force acts, platform frame")
+    moment: np.ndarray = robot_field(  # (3,)
+        key="load.moment", kind=NUMBERS, unit="N m", count=3, limit=MAX_FORCE_N,
+        default=(0.0, 0.0, 0.0), description="load moment, base frame")
+    mass: float = robot_field(
+        key="load.mass", kind=NUMBER, unit="kg", sign="positive", limit=MAX_FORCE_N,
+        default=None, description="load mass (optional: enables the dynamic timing; "
+                                  "load.force must then be its weight)")
+    inertia: np.ndarray = robot_field(  # (3, 3) about the centre of mass (load_point)
+        key="load.inertia", kind=MATRIX, unit="kg m^2", count=3, limit=MAX_FORCE_N,
+        definite="semi", default=None,
+        description="load inertia about its centre of mass, platform frame (needs load.mass; "
+                    "empty: 0, a point mass)")
+    ellipsoid_frame: str = robot_field(
+        key="wrench_ellipsoid.frame", kind=CHOICE, unit="", choices=("load", "base"),
+        default="load", description="frame of the wrench ellipsoid (load: F3, parallel to the "
+                                    "base, origin at the load point; base: F1)")
+    ellipsoid_matrix: np.ndarray = robot_field(  # (6, 6), combined with the contact one if any
+        key="wrench_ellipsoid.matrix", kind=MATRIX, unit="1/N^2 (force rows), 1/(N m)^2 "
+        "(moment rows)", count=6, limit=MAX_ELLIPSOID, definite="positive",
+        description="wrench ellipsoid shape E, symmetric positive definite")
+    ellipsoid_offset: np.ndarray = robot_field(  # (6,), plus the contact centre if any
+        key="wrench_ellipsoid.offset", kind=NUMBERS, unit="N, N m", count=6, limit=MAX_FORCE_N,
+        default=(0.0,) * 6, description="wrench ellipsoid centre offset from the load wrench")
+    contact_matrix: np.ndarray = robot_field(  # (6, 6) or None; folded into ellipsoid_matrix
+        key="contact_ellipsoid.matrix", kind=MATRIX, unit="1/N^2, 1/(N m)^2", count=6,
+        limit=MAX_ELLIPSOID, definite="positive",
+        description="contact wrench ellipsoid shape (paper Eqs. 22-23; optional: empty for none)")
+    contact_center: np.ndarray = robot_field(  # (6,); folded into ellipsoid_offset
+        key="contact_ellipsoid.center", kind=NUMBERS, unit="N, N m", count=6, limit=MAX_FORCE_N,
+        default=(0.0,) * 6, description="contact wrench ellipsoid centre")
     source: str = field(default="", compare=False)
-    mass: float = None  # kg, the load's (optional): enables the dynamic timing
-    inertia: np.ndarray = None  # (3, 3) kg m^2 about the centre of mass (load_point), platform frame
 
     @property
     def wrench_center_local(self):
         """w0 in the ellipsoid frame before moving to F1: [F; M] + offset (N, N m)."""
         return np.concatenate([self.force, self.moment]) + self.ellipsoid_offset
+
+
+FIELDS = schema_of(Robot)  # the robot file's fields, declared once (above)
 
 
 def combine_contact_ellipsoid(E_w, E_c):
@@ -97,93 +155,53 @@ def ros_parameters(doc, where):
     raise InputError(where, list(doc), "no '<node>: ros__parameters:' entry")
 
 
-ROBOT_KEYS = {
-    "name", "winch_names", "base_anchors", "platform_anchors", "length_min", "length_max",
-    "tension_min", "tension_max", "load", "wrench_ellipsoid", "contact_ellipsoid",
-}
-LOAD_KEYS = {"force", "point", "moment", "mass", "inertia"}
-GRAVITY = 9.80665  # m/s^2: |force| of a load with a mass is its weight (within 2 %)
-ELLIPSOID_KEYS = {"frame", "matrix", "offset"}
-CONTACT_KEYS = {"matrix", "center"}
-
-
 def robot_from_dict(d, source=""):
-    """Build and validate a Robot from the ``robot:`` mapping (field names as in YAML).
+    """Build and validate a Robot from the ``robot:`` mapping (keys as declared in ``Robot``).
 
-    Numbers must be numbers (not strings), finite and within the input bounds of
-    ``errors`` (coordinates and lengths 1e3 m, forces and tensions 1e7 N). A degenerate
-    robot is refused: the six base (or platform) anchors on one line, all coincident
-    included, or a J singular at every pose tried (see ``check_not_degenerate``)."""
-    check_keys("robot", d, ROBOT_KEYS, required={"base_anchors", "platform_anchors",
-                                                  "length_min", "length_max", "tension_min",
-                                                  "tension_max", "load", "wrench_ellipsoid"})
-    name = d.get("name", Path(source).stem or "robot")
-    if not isinstance(name, str) or not name or len(name) > MAX_NAME_CHARS:
-        raise InputError("robot.name", name, f"expected a name of 1 to {MAX_NAME_CHARS} characters")
-    winches = d.get("winch_names", [f"winch_{i + 1}" for i in range(N_CABLES)])
-    if (not isinstance(winches, (list, tuple)) or len(winches) != N_CABLES
-            or not all(isinstance(w, str) and 0 < len(w) <= MAX_NAME_CHARS for w in winches)
-            or len(set(winches)) != N_CABLES):
-        raise InputError("robot.winch_names", winches, "expected 6 distinct non-empty names")
-    A = _vector("robot.base_anchors", d["base_anchors"], 3 * N_CABLES, MAX_POSITION_M).reshape(N_CABLES, 3)
-    B = _vector("robot.platform_anchors", d["platform_anchors"], 3 * N_CABLES,
-                MAX_POSITION_M).reshape(N_CABLES, 3)
-    lmin = _per_cable("robot.length_min", d["length_min"], positive=True, limit=MAX_POSITION_M)
-    lmax = _per_cable("robot.length_max", d["length_max"], positive=True, limit=MAX_POSITION_M)
-    fmin = _per_cable("robot.tension_min", d["tension_min"], positive=False, limit=MAX_FORCE_N)
-    fmax = _per_cable("robot.tension_max", d["tension_max"], positive=True, limit=MAX_FORCE_N)
-    _check_below("robot.length_min", lmin, "robot.length_max", lmax)
-    _check_below("robot.tension_min", fmin, "robot.tension_max", fmax)
-
-    load = d["load"]
-    check_keys("robot.load", load, LOAD_KEYS, required={"force"})
-    force = _vector("robot.load.force", load["force"], 3, MAX_FORCE_N)
-    point = _vector("robot.load.point", load.get("point", [0.0, 0.0, 0.0]), 3, MAX_POSITION_M)
-    moment = _vector("robot.load.moment", load.get("moment", [0.0, 0.0, 0.0]), 3, MAX_FORCE_N)
-    mass, inertia = _mass_properties(load, force)
-
-    ell = d["wrench_ellipsoid"]
-    check_keys("robot.wrench_ellipsoid", ell, ELLIPSOID_KEYS, required={"matrix"})
-    frame = ell.get("frame", "load")
-    if not isinstance(frame, str) or frame not in ELLIPSOID_FRAMES:
-        raise InputError("robot.wrench_ellipsoid.frame", frame, f"expected one of {ELLIPSOID_FRAMES}")
-    E = _spd_matrix("robot.wrench_ellipsoid.matrix", ell["matrix"])
-    offset = _vector("robot.wrench_ellipsoid.offset", ell.get("offset", [0.0] * 6), 6, MAX_FORCE_N)
-    if "contact_ellipsoid" in d:
-        con = d["contact_ellipsoid"]
-        check_keys("robot.contact_ellipsoid", con, CONTACT_KEYS, required={"matrix"})
-        E_c = _spd_matrix("robot.contact_ellipsoid.matrix", con["matrix"])
-        offset = offset + _vector("robot.contact_ellipsoid.center", con.get("center", [0.0] * 6),
-                                  6, MAX_FORCE_N)
-        E = combine_contact_ellipsoid(E, E_c)
-        E = 0.5 * (E + E.T)
-    check_not_degenerate(A, B, lmin, lmax)
-    return Robot(name=name, winch_names=tuple(winches), base_anchors=A, platform_anchors=B,
-                 length_min=lmin, length_max=lmax, tension_min=fmin, tension_max=fmax,
-                 force=force, load_point=point, moment=moment, ellipsoid_frame=frame,
-                 ellipsoid_offset=offset, ellipsoid_matrix=E, source=source, mass=mass,
-                 inertia=inertia)
+    Each field is read by its declaration (``robot_schema.read_fields``): numbers must be
+    numbers (not strings), finite and within the input bounds of ``errors`` (coordinates
+    and lengths 1e3 m, forces and tensions 1e7 N). Then what involves several fields: each
+    minimum below its maximum, a load mass matching the load force, the contact ellipsoid
+    folded into the wrench ellipsoid, and a degenerate robot refused: the base (or
+    platform) anchors on one line, all coincident included, or a J singular at every pose
+    tried (see ``check_not_degenerate``)."""
+    check_groups(d, FIELDS, OPTIONAL_GROUPS)
+    v = read_fields(d, FIELDS, defaults={"name": Path(source).stem or "robot"})
+    _check_below("robot.length_min", v["length_min"], "robot.length_max", v["length_max"])
+    _check_below("robot.tension_min", v["tension_min"], "robot.tension_max", v["tension_max"])
+    _check_mass_properties(v, d)
+    if v["contact_ellipsoid.matrix"] is None:
+        v["contact_ellipsoid.center"] = None
+    check_not_degenerate(v["base_anchors"], v["platform_anchors"], v["length_min"], v["length_max"])
+    declared = {f.name: v[f.metadata["robot"].key] for f in fields(Robot) if "robot" in f.metadata}
+    return _with_contact(Robot(**declared, source=source))
 
 
-def _mass_properties(load, force):
-    """(mass kg, inertia (3, 3) kg m^2) of ``load`` (None, None without ``mass``). The force
-    must then be the load's weight (|force| = mass g within 2 %), so that gravity and the
-    inertial terms of the dynamic timing agree; inertia is 9 numbers (row-major) or 3
-    (diagonal), symmetric positive semi-definite, default 0 (a point mass)."""
-    if load.get("mass") is None:
-        if load.get("inertia") is not None:
-            raise InputError("robot.load.inertia", load["inertia"], "needs robot.load.mass")
-        return None, None
-    mass = check_finite("robot.load.mass", load["mass"], positive=True, limit=MAX_FORCE_N)
+def _with_contact(robot):
+    """``robot`` with its contact ellipsoid (if any) folded into the wrench ellipsoid: the
+    outer ellipsoid of their sum (``combine_contact_ellipsoid``), centres added."""
+    if robot.contact_matrix is None:
+        return robot
+    E = combine_contact_ellipsoid(robot.ellipsoid_matrix, robot.contact_matrix)
+    return replace(robot, ellipsoid_matrix=0.5 * (E + E.T),
+                   ellipsoid_offset=robot.ellipsoid_offset + robot.contact_center)
+
+
+def _check_mass_properties(v, d):
+    """With a load mass, the load force must be its weight (|force| = mass g within 2 %), so
+    that gravity and the inertial terms of the dynamic timing agree; the inertia then
+    defaults to 0 (a point mass). Without one, no inertia."""
+    mass, force = v["load.mass"], v["load.force"]
+    if mass is None:
+        if v["load.inertia"] is not None:
+            raise InputError("robot.load.inertia", d["load"]["inertia"], "needs robot.load.mass")
+        return
     weight = mass * GRAVITY
     if abs(float(np.linalg.norm(force)) - weight) > 0.02 * weight:
         raise InputError("robot.load.mass", mass, f"the load force ({np.linalg.norm(force):.4g} N) "
                          f"must be its weight, {weight:.4g} N (mass x {GRAVITY} m/s^2, 2 %)")
-    value = load.get("inertia", [0.0, 0.0, 0.0])
-    I = _square_matrix("robot.load.inertia", value, 3, MAX_FORCE_N)
-    if not np.allclose(I, I.T, rtol=1e-9, atol=1e-15) or np.linalg.eigvalsh(I)[0] < -1e-12:
-        raise InputError("robot.load.inertia", value, "must be symmetric positive semi-definite (kg m^2)")
-    return mass, I
+    if v["load.inertia"] is None:
+        v["load.inertia"] = np.zeros((3, 3))
 
 
 def check_not_degenerate(A, B, length_min, length_max):
@@ -196,7 +214,7 @@ def check_not_degenerate(A, B, length_min, length_max):
         spread = _distance_from_best_line(P)
         if spread < MIN_SPREAD_M:
             kind = "coincident" if np.ptp(P, axis=0).max() < MIN_SPREAD_M else "collinear"
-            raise InputError(where, P.ravel().tolist(), f"the 6 anchors are {kind}: J is singular "
+            raise InputError(where, P.ravel().tolist(), f"the {len(P)} anchors are {kind}: J is singular "
                              "at every pose (need 3 anchors not on one line)")
     rng = np.random.default_rng(0)
     centre = A.mean(axis=0)
@@ -236,49 +254,9 @@ def _random_rotations(rng, n, max_angle):
     return np.eye(3) + s * K + (1.0 - c) * K @ K
 
 
-def _vector(where, value, n, limit):
-    """``n`` numbers (a single number when n is 1), each finite, a number (not a string)
-    and within +-``limit``; InputError naming the list or its first bad entry."""
-    if is_number(value):
-        value = [value]
-    if isinstance(value, np.ndarray):
-        value = value.ravel().tolist()
-    return np.array(check_numbers(where, value, n, limit), dtype=float)
-
-
-def _per_cable(where, value, positive, limit):
-    """6 per-cable values; a single number applies to every cable."""
-    if is_number(value):
-        value = [value] * N_CABLES
-    arr = _vector(where, value, N_CABLES, limit)
-    bad = np.flatnonzero(arr <= 0 if positive else arr < 0)
-    if bad.size:
-        need = "positive" if positive else "non-negative"
-        raise InputError(f"{where}[{bad[0]}]", float(arr[bad[0]]), f"must be {need}")
-    return arr
-
-
 def _check_below(lo_name, lo, hi_name, hi):
     bad = np.flatnonzero(lo >= hi)
     if bad.size:
         i = bad[0]
         raise InputError(f"{lo_name}[{i}]", float(lo[i]),
                          f"must be below {hi_name}[{i}] = {float(hi[i])!r}")
-
-
-def _square_matrix(where, value, n, limit):
-    """An n x n matrix from n*n numbers (row-major) or n numbers (its diagonal)."""
-    if isinstance(value, (list, tuple)) and len(value) == n:
-        return np.diag(_vector(where, value, n, limit))
-    return _vector(where, value, n * n, limit).reshape(n, n)
-
-
-def _spd_matrix(where, value):
-    """A 6x6 symmetric positive definite matrix from 36 numbers or a 6-number diagonal."""
-    E = _square_matrix(where, value, 6, MAX_ELLIPSOID)
-    if not np.allclose(E, E.T, rtol=1e-9, atol=0.0):
-        raise InputError(where, value, "must be symmetric")
-    eig = np.linalg.eigvalsh(E)
-    if eig[0] <= 0:
-        raise InputError(where, value, f"must be positive definite (smallest eigenvalue {eig[0]:.3g})")
-    return E

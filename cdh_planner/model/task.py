@@ -24,7 +24,8 @@ from typing import ClassVar
 import numpy as np
 
 from ..errors import MAX_POSITION_M, InputError, check_finite, check_keys, check_numbers
-from .pose import rotation_angle_between, rotation_tt, rotation_tt_derivatives, wrap_angle
+from .pose import (on_singular_set, rotation_angle_between, rotation_tt, rotation_tt_derivatives,
+                   tau_from_rotation, wrap_angle)
 
 POSE_NAMES = ("x", "y", "z", "phi", "theta", "sigma")
 
@@ -83,10 +84,45 @@ TASKS = {}
 
 
 def register(cls):
-    """Class decorator: make ``cls`` a task of problem files, node parameters and slice."""
+    """Class decorator: make ``cls`` a task of problem files, node parameters and slice.
+
+    Tasks share one ``task.<field>`` namespace of node parameters: a parameter that two
+    tasks declare (task.center) must be declared alike (same TaskField and default), as
+    must a coordinate two tasks introduce, and a type is registered once; a conflict is
+    refused here (ValueError naming the task) rather than giving one task the other's
+    parameter or coordinate."""
+    if cls.type in TASKS and TASKS[cls.type] is not cls:
+        raise ValueError(f"task type {cls.type!r} is already registered ({TASKS[cls.type].__name__})")
+    shared = task_parameters()
+    for name, meta, default in cls.parameters():
+        if name in shared and not _same_parameter(shared[name][:2], (meta, default)):
+            raise ValueError(f"task {cls.type!r}: parameter {name} ({meta.kind}, default "
+                             f"{default!r}) is declared otherwise by task {shared[name][2]!r} "
+                             f"({shared[name][0].kind}, default {shared[name][1]!r})")
+    for c in cls.coordinates:
+        if c.name in COORDINATES and COORDINATES[c.name] != c:
+            raise ValueError(f"task {cls.type!r}: coordinate {c.name} ({c.unit}) is declared "
+                             f"otherwise already ({COORDINATES[c.name].unit})")
     TASKS[cls.type] = cls
     COORDINATES.update({c.name: c for c in cls.coordinates})
     return cls
+
+
+def task_parameters():
+    """node parameter -> (TaskField, default, type of the first task declaring it), over
+    every registered task (``register`` keeps them consistent)."""
+    out = {}
+    for cls in TASKS.values():
+        for name, meta, default in cls.parameters():
+            out.setdefault(name, (meta, default, cls.type))
+    return out
+
+
+def _same_parameter(a, b):
+    """Two (TaskField, default) declarations alike (NaN defaults equal)."""
+    (meta_a, da), (meta_b, db) = a, b
+    nan = isinstance(da, float) and isinstance(db, float) and np.isnan(da) and np.isnan(db)
+    return meta_a == meta_b and (nan or da == db)
 
 
 class Task:
@@ -153,6 +189,25 @@ class Task:
         """One line for titles and logs."""
         return f"{self.type} task"
 
+    # ----- the singular set of tilt-and-torsion (theta = 0 or pi: end_taus) -------------
+    def fixed_angle(self, name):
+        """The value (rad) the task holds the pose angle ``name`` ("phi" or "sigma") at, or
+        None where it is free."""
+        return None
+
+    def singular_phi(self, tau, hint):
+        """The azimuth phi (rad) of the pose tau (3,) on theta = 0 or pi, where the rotation
+        does not fix it, in this task's coordinates: the task's fixed phi; at theta = pi with
+        sigma fixed, where the rotation fixes 2 phi - sigma, the one of the two solutions
+        (pi apart) nearest ``hint``; else ``hint`` (rad)."""
+        phi_fixed, sigma_fixed = self.fixed_angle("phi"), self.fixed_angle("sigma")
+        if phi_fixed is not None:
+            return float(phi_fixed)
+        if tau[1] == np.pi and sigma_fixed is not None:
+            base = 0.5 * (2.0 * tau[0] - tau[2] + sigma_fixed)
+            return float(wrap_angle(base + np.pi * np.round(wrap_angle(hint - base) / np.pi)))
+        return float(hint)
+
     # ----- problem files and node parameters --------------------------------------------
     @classmethod
     def task_fields(cls):
@@ -176,6 +231,13 @@ class Task:
     def dict_of_parameters(cls, values):
         """The problem-file mapping of the node's flat parameter values (name -> value)."""
         return {"type": cls.type, **{name: values[f"task.{name}"] for name, _, _ in cls.task_fields()}}
+
+    @classmethod
+    def example(cls):
+        """A valid task of this class for the registry's contract tests (test_tasks.py:
+        equations against finite differences, the pose map both ways): its defaults unless
+        the class gives its own."""
+        return cls()
 
 
 
@@ -208,6 +270,10 @@ class SliceTask(Task):
 
     fixed: dict = field(default_factory=dict)
     type: ClassVar[str] = "slice"
+
+    @classmethod
+    def example(cls):
+        return cls(fixed={"x": 0.0, "y": 0.0, "z": 0.35, "sigma": 0.6})  # Robot 1's slices
 
     @property
     def names(self):
@@ -255,6 +321,9 @@ class SliceTask(Task):
                for v in [self.fixed[name]]]
         return np.max(dev, axis=0) if dev else np.zeros(full.shape[0])
 
+    def fixed_angle(self, name):
+        return self.fixed.get(name)
+
     def describe(self):
         return "slice " + ", ".join(describe_value(n, v) for n, v in self.fixed.items())
 
@@ -301,6 +370,10 @@ class SphereTask(Task):
         Coordinate("alpha2", "rad", False, (-np.pi / 2, np.pi / 2), r"$\alpha_2$"))
     n_vars: ClassVar[int] = 2
     costs: ClassVar[tuple] = ("great_circle", "se3")
+
+    @classmethod
+    def example(cls):
+        return cls(center=(0.0, 0.0, 0.306), radius=0.13, free_torsion=True)  # Robot 2's, Eq. 17
 
     @property
     def names(self):
@@ -358,6 +431,9 @@ class SphereTask(Task):
         ang = rotation_angle_between(rotation_tt(tau), rotation_tt(tau_ref))
         return np.maximum(np.abs(dist - self.radius), ang)
 
+    def fixed_angle(self, name):
+        return 0.0 if name == "sigma" and not self.free_torsion else None
+
     def own_cost(self, kind):
         """great_circle: the arc on the sphere (m), plus r times the torsion change (free
         torsion)."""
@@ -390,6 +466,10 @@ class PivotTask(Task):
     costs: ClassVar[tuple] = ("so3", "se3")
     n_equations: ClassVar[int] = 3
     length_rows: ClassVar[tuple] = (True, True, True)
+
+    @classmethod
+    def example(cls):
+        return cls(tool=(0.0, 0.0, 0.1), center=(0.0, 0.0, 0.35))
 
     @property
     def names(self):
@@ -458,6 +538,31 @@ def task_from_dict(d, where="task"):
     if not isinstance(kind, str) or kind not in TASKS:
         raise InputError(f"{where}.type", kind, f"unknown task type (expected one of {', '.join(TASKS)})")
     return TASKS[kind].from_dict(d, where)
+
+
+def end_taus(task, taus, tol):
+    """The tilt-and-torsion angles (2, 3) rad a query plans between, of the start's and the
+    goal's ``taus`` (2, 3): one pose, one plan, whatever angles wrote the pose.
+
+    Each orientation is rewritten from its rotation (``pose.tau_from_rotation``); one within
+    ``tol`` (rad) of theta = 0 or pi is snapped onto it (moved by at most ``tol``, as a pose
+    off the task is projected onto it), so that noise there (forward kinematics of measured
+    lengths) does not pick phi. On that set the rotation leaves phi free, and phi is, in
+    this order: the task's (``Task.singular_phi``: a fixed phi, or with sigma fixed at
+    theta = pi the allowed one nearest what follows); the other end's azimuth when that end
+    is off the set, so the straight line in task coordinates tilts straight toward it (the
+    sphere task's pole: the other end's meridian, the shortest arc), which is also the
+    limit of what a pose tilted toward the other end gives; else 0.
+    """
+    taus = np.asarray(taus, dtype=float)
+    R = rotation_tt(taus)
+    first = tau_from_rotation(R, 0.0, tol)
+    singular = on_singular_set(first)
+    phi = first[:, 0].copy()
+    for k, other in ((0, 1), (1, 0)):
+        if singular[k]:
+            phi[k] = task.singular_phi(first[k], 0.0 if singular[other] else first[other, 0])
+    return tau_from_rotation(R, phi, tol)
 
 
 def describe_value(name, value):

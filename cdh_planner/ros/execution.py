@@ -34,6 +34,7 @@ from trajectory_msgs.msg import JointTrajectory, JointTrajectoryPoint
 from ..errors import InputError, check_finite, exception_line
 from ..feasibility import evaluate
 from ..model.kinematics import cable_lengths, forward_kinematics, rotation_vector_exp
+from .interface import ACTION_QOS
 from .messages import check_joint_names, duration_msg
 
 COMPLETED, STOPPED, FAILED = "completed", "stopped", "failed"
@@ -341,6 +342,7 @@ class _Run:
         self.cancel_requested = False
         self.sent = False            # send_goal_async called (once: timer callbacks may overlap)
         self.done = False
+        self.on_accepted = None
 
 
 class TrajectoryExecutor:
@@ -368,7 +370,7 @@ class TrajectoryExecutor:
         self._node = node
         self._group = callback_group
         self._client = ActionClient(node, FollowJointTrajectory, action_name,
-                                    callback_group=callback_group)
+                                    callback_group=callback_group, **ACTION_QOS)
         self.action_name = action_name
         self.server_wait_s = float(server_wait_s)
         self.goal_time_tolerance_s = goal_time_tolerance_s
@@ -382,10 +384,12 @@ class TrajectoryExecutor:
         with self._lock:
             return self._run is not None
 
-    def start(self, trajectory_msg, on_done):
+    def start(self, trajectory_msg, on_done, on_accepted=None):
         """Send ``trajectory_msg`` (trajectory_msgs/JointTrajectory) as a goal
-        (``fjt_goal``); ``on_done(outcome, message)`` is called exactly once."""
+        (``fjt_goal``); ``on_done(outcome, message)`` is called exactly once, and
+        ``on_accepted()`` (if given) when the controller accepts the goal."""
         run = _Run(on_done)
+        run.on_accepted = on_accepted
         with self._lock:
             busy = self._run is not None
             if not busy:
@@ -485,6 +489,8 @@ class TrajectoryExecutor:
                 run.timer = self._node.create_timer(self._result_wait_s(run.goal),
                                                     lambda: self._no_result(run),
                                                     callback_group=self._group)
+        if run.on_accepted is not None:
+            _call(self._node, run.on_accepted)
         handle.get_result_async().add_done_callback(lambda f: self._result(run, f))
         if cancel:
             self._request_cancel(run, handle)
@@ -553,9 +559,9 @@ class TrajectoryExecutor:
             self._node.destroy_timer(timer)
 
 
-def _call(node, on_done, outcome, message):
+def _call(node, callback, *args):
     """The caller's callback; what it raises is logged, never passed into the executor."""
     try:
-        on_done(outcome, message)
+        callback(*args)
     except Exception as exc:  # noqa: BLE001
-        node.get_logger().error(f"trajectory on_done callback failed: {exception_line(exc)}")
+        node.get_logger().error(f"trajectory callback failed: {exception_line(exc)}")

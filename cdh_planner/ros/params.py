@@ -12,42 +12,12 @@ No rclpy here: ``declare`` in ``ros/node.py`` turns ``SPECS`` into declarations.
 parameters are dynamically typed in ROS so that ``-p planner.timeout_s:=5`` (an integer) and
 YAML integer lists work; ``node_config`` checks their types and ranges itself.
 
-Parameters (SI units):
-
-==============================  =========  ================================================
-name                            default    meaning
-==============================  =========  ================================================
-base_frame                      cdh_base   frame_id requests must use and outputs carry
-robot.*                         (file)     the robot (model/robot.py; from the robot file)
-task.type                       free       free, slice, sphere or pivot
-task.fixed.x .. task.fixed.sigma  NaN      slice: fixed coordinate (m, rad); NaN = free
-task.center, task.radius        0 0 0, 0.1 sphere (paper Eq. 17), m; pivot: the point c
-task.free_torsion               false      sphere: sigma free as well
-task.tool                       0 0 0      pivot: tool point t, platform frame (m)
-planner.strategy                auto       auto (astar up to 3-D, gbf above), astar or gbf
-planner.cost                    auto       auto, so3, great_circle or se3
-planner.timeout_s               60         give up after this long (answer TIMEOUT)
-planner.radius                  0          chart radius (scaled units, about rad); 0: by
-                                           the task's dimension (0.1 to 3-D, 0.5 in 6-D)
-planner.max_charts              100000     give up after this many charts
-planner.max_memory_mb           1024       give up when the atlas holds this much (MiB)
-planner.complete                false      grow the whole atlas component
-planner.margin_floor            0.001      least normalised feasibility margin kept
-trajectory.max_cable_speed      0.05       per-winch speed limit (m/s)
-trajectory.max_cable_accel      0.2        per-winch acceleration limit (m/s^2)
-stream_rate_hz                  50         rate of ~/cable_command while executing (Hz)
-stream_interpolation            linear     linear (never above the speed limit) or quintic
-execution.mode                  stream     stream or follow_joint_trajectory (ros2_control)
-execution.controller_action     /cable_controller/follow_joint_trajectory  (read-only)
-execution.joint_states_topic    /joint_states  measured cable lengths (read-only)
-execution.start_tolerance       0.005      ~/execute refuses beyond this start error (m)
-execution.joint_states_max_age_s  1.0      older measurements are not used (s)
-execution.joint_states_wait_s   5.0        use_current_start waits this long for one (s)
-log_dir                         ~/.ros/cdh_planner  where run MCAP files go
-log_enabled                     true       record plan calls to MCAP
-log_max_file_mb                 100        next run file beyond this size (MiB); 0: none
-log_max_file_s                  0          next run file after this long (s); 0: no limit
-==============================  =========  ================================================
+The parameters are ``SPECS``: the robot file's fields (``robot.*``, declared on
+``model.robot.Robot``), the registered tasks' fields (``task.*``, ``model/task.py``), the
+planner settings (``settings.py``) and the node's own (below). Their table, with units,
+defaults and ranges, is docs/parameters.md, generated from ``SPECS`` by
+``python -m cdh_planner.ros.params > docs/parameters.md`` (test_ros_params checks it is
+current).
 """
 
 import math
@@ -58,14 +28,15 @@ from dataclasses import dataclass, field
 import numpy as np
 
 from ..errors import InputError
-from ..model.robot import robot_from_dict
-from ..model.task import TASKS, task_from_dict
+from ..model import robot_schema as rs
+from ..model.robot import FIELDS as ROBOT_FIELDS, OPTIONAL_GROUPS, robot_from_dict
+from ..model.task import TASKS, task_from_dict, task_parameters
 from ..planner import task_cost
 from ..settings import SETTINGS, Bounds, PlannerSettings, check_range
 
 STRING, BOOL, INT, DOUBLE, DOUBLES, STRINGS = "string", "bool", "int", "double", "doubles", \
     "strings"
-REQUIRED = object()  # default of a parameter that must come from the robot file
+REQUIRED = rs.REQUIRED  # default of a parameter that must come from the robot file
 
 # the groups whose change means a new Planner (the others only affect the node)
 PLANNER_PREFIXES = ("robot.", "task.", "planner.", "trajectory.")
@@ -102,64 +73,46 @@ def _setting_spec(name):
                 open_low=s.open_low, open_high=s.open_high, choices=s.choices)
 
 
-def _robot_specs():
-    r = "robot."
-    six = "6 numbers, one per cable (or a single number for all)"
-    return [
-        Spec(r + "name", STRING, "", "robot name (for messages)"),
-        Spec(r + "winch_names", STRINGS, [f"winch_{i + 1}" for i in range(6)],
-             "6 distinct joint names, one per winch (JointState / JointTrajectory names)"),
-        Spec(r + "base_anchors", DOUBLES, REQUIRED,
-             "A_1..A_6 in the base frame: 18 numbers (m), x y z per anchor"),
-        Spec(r + "platform_anchors", DOUBLES, REQUIRED,
-             "B_1..B_6 in the platform frame: 18 numbers (m), x y z per anchor"),
-        Spec(r + "length_min", DOUBLES, REQUIRED, f"least cable length (m): {six}"),
-        Spec(r + "length_max", DOUBLES, REQUIRED, f"greatest cable length (m): {six}"),
-        Spec(r + "tension_min", DOUBLES, REQUIRED, f"least cable tension (N): {six}"),
-        Spec(r + "tension_max", DOUBLES, REQUIRED, f"greatest cable tension (N): {six}"),
-        Spec(r + "load.force", DOUBLES, REQUIRED, "load force, base frame (N): 3 numbers"),
-        Spec(r + "load.point", DOUBLES, [0.0, 0.0, 0.0],
-             "where the load force acts, platform frame (m): 3 numbers"),
-        Spec(r + "load.moment", DOUBLES, [0.0, 0.0, 0.0], "load moment, base frame (N m)"),
-        Spec(r + "load.mass", DOUBLE, None, "load mass (kg; optional: enables the dynamic "
-             "timing; load.force must then be its weight)", low=0.0, high=1e7, open_low=True),
-        Spec(r + "load.inertia", DOUBLES, None, "load inertia about its centre of mass, "
-             "platform frame (kg m^2): 9 numbers row-major or 3 for a diagonal; empty: 0"),
-        Spec(r + "wrench_ellipsoid.frame", STRING, "load",
-             "frame of the wrench ellipsoid: load (F3, parallel to base at the load point) "
-             "or base", choices=("load", "base")),
-        Spec(r + "wrench_ellipsoid.matrix", DOUBLES, REQUIRED,
-             "ellipsoid shape E (SPD): 36 numbers row-major or 6 for a diagonal "
-             "(force rows 1/N^2, moment rows 1/(N m)^2)"),
-        Spec(r + "wrench_ellipsoid.offset", DOUBLES, [0.0] * 6,
-             "ellipsoid centre offset from the load wrench: 6 numbers (N, N m)"),
-        Spec(r + "contact_ellipsoid.matrix", DOUBLES, None,
-             "optional contact wrench ellipsoid (paper Eqs. 22-23): 36 or 6 numbers; empty "
-             "for none"),
-        Spec(r + "contact_ellipsoid.center", DOUBLES, [0.0] * 6,
-             "contact ellipsoid centre: 6 numbers (N, N m)"),
-    ]
+_ROBOT_KINDS = {rs.NAME: STRING, rs.NAMES: STRINGS, rs.CHOICE: STRING, rs.NUMBER: DOUBLE,
+                rs.NUMBERS: DOUBLES, rs.MATRIX: DOUBLES}
+
+
+def _robot_spec(f):
+    """The node parameter robot.<key> of a robot file field, from its declaration
+    (model/robot.py, ``Robot``): a required field of an optional group (the contact
+    ellipsoid's matrix) is an optional parameter, empty for none."""
+    default = f.default
+    if default is None and _ROBOT_KINDS[f.kind] == STRING:
+        default = ""  # a string parameter is typed: empty is "not set" (_robot_dict)
+    elif default is rs.REQUIRED:
+        default = None if f.group in OPTIONAL_GROUPS else REQUIRED
+    elif isinstance(default, tuple):
+        default = list(default)
+    bounds = {}
+    if f.kind == rs.NUMBER:
+        bounds = dict(low=0.0 if f.sign else None, open_low=f.sign == "positive", high=f.limit)
+    return Spec("robot." + f.key, _ROBOT_KINDS[f.kind], default, rs.describe(f),
+                choices=f.choices, **bounds)
 
 
 def _task_specs():
-    """task.type and every registered task's parameters (model/task.py); a parameter that
-    two tasks share (task.center) is declared once."""
+    """task.type and every registered task's parameters (model/task.py: ``register`` has
+    checked that tasks sharing a parameter, task.center, declare it alike)."""
     kinds = {"double": DOUBLE, "point": DOUBLES, "bool": BOOL}
-    specs = {"task.type": Spec("task.type", STRING, "free", "task constraint: "
-                               + ", ".join(TASKS), choices=tuple(TASKS))}
-    for task in TASKS.values():
-        for name, meta, default in task.parameters():
-            unit = f" ({meta.unit})" if meta.unit else ""
-            specs.setdefault(name, Spec(name, kinds[meta.kind], list(default) if meta.kind == "point"
-                                        else default, meta.description + unit,
-                                        low=0.0 if meta.positive else None, open_low=meta.positive))
-    return list(specs.values())
+    specs = [Spec("task.type", STRING, "free", "task constraint: " + ", ".join(TASKS),
+                  choices=tuple(TASKS))]
+    for name, (meta, default, _) in task_parameters().items():
+        unit = f" ({meta.unit})" if meta.unit else ""
+        specs.append(Spec(name, kinds[meta.kind], list(default) if meta.kind == "point" else default,
+                          meta.description + unit, low=0.0 if meta.positive else None,
+                          open_low=meta.positive))
+    return specs
 
 
 SPECS = (
     [Spec("base_frame", STRING, "cdh_base",
           "frame_id that plan requests must use and every output carries (REP 103, m)")]
-    + _robot_specs()
+    + [_robot_spec(f) for f in ROBOT_FIELDS]
     + _task_specs()
     + [_setting_spec(name) for name in SETTINGS]
     + [Spec("stream_rate_hz", DOUBLE, 50.0,
@@ -244,7 +197,8 @@ def check_value(spec, value):
             raise InputError(name, value, "expected true or false")
         return value
     if spec.kind == STRINGS:
-        if isinstance(value, str) or not all(isinstance(v, str) for v in value):
+        if isinstance(value, str) or not hasattr(value, "__iter__") \
+                or not all(isinstance(v, str) for v in value):
             raise InputError(name, value, "expected a list of strings")
         return list(value)
     if spec.kind == DOUBLES:
@@ -309,16 +263,16 @@ def _robot_dict(checked):
     for name, value in checked.items():
         if not name.startswith("robot.") or value is None:
             continue
-        if name == "robot.name" and not value:
-            continue
+        if SPEC[name].kind == STRING and not value:
+            continue  # not set
         keys = name.split(".")[1:]
         node = out
         for key in keys[:-1]:
             node = node.setdefault(key, {})
         node[keys[-1]] = value
-    contact = out.get("contact_ellipsoid", {})
-    if "matrix" not in contact:
-        out.pop("contact_ellipsoid", None)
+    for f in ROBOT_FIELDS:  # an optional group without its required fields is not given
+        if f.group in OPTIONAL_GROUPS and f.default is rs.REQUIRED and f.name not in out.get(f.group, {}):
+            out.pop(f.group, None)
     return out
 
 
@@ -356,3 +310,58 @@ def parameter_error(exc):
     the PlannerSettings field (``margin_floor`` -> ``planner.margin_floor``)."""
     name = SETTING_PARAMETERS.get(exc.field)
     return exc if name is None else InputError(name, exc.value, exc.reason)
+
+
+DOCS_HEADER = """# The node's parameters
+
+Generated from `cdh_planner/ros/params.py` (`SPECS`) by
+`python -m cdh_planner.ros.params > docs/parameters.md`; `test/test_ros_params.py` checks
+that it is current. The `robot.*` parameters are the robot file's `robot:` block (keys
+nested in the file: `load: {force: ...}` is `robot.load.force`), declared on
+`cdh_planner/model/robot.py`'s `Robot`; `task.*` are the registered tasks' fields (the
+problem file's `task:` keys); `planner.*` and `trajectory.*` the planner settings
+(`cdh_planner/settings.py`). SI units. Default "required": the robot file must give it;
+"empty": not set.
+"""
+
+
+def parameters_markdown():
+    """docs/parameters.md: a Markdown table of every parameter of ``SPECS``."""
+    rows = ["| parameter | type | default | range | description |", "|---|---|---|---|---|"]
+    for spec in SPECS:
+        cells = (f"`{spec.name}`", spec.kind, _default_text(spec.default), _range_text(spec),
+                 spec.description)
+        rows.append("| " + " | ".join(c.replace("|", "\\|") for c in cells) + " |")
+    return DOCS_HEADER + "\n" + "\n".join(rows) + "\n"
+
+
+def _default_text(value):
+    if value is REQUIRED:
+        return "required"
+    if value is None:
+        return "empty"
+    if isinstance(value, bool):
+        return str(value).lower()
+    if isinstance(value, (int, float)):
+        return "NaN" if math.isnan(value) else f"{value:g}"
+    if isinstance(value, (list, tuple)):
+        return "[" + ", ".join(str(v) if isinstance(v, str) else _default_text(v) for v in value) + "]"
+    return f"`{value}`" if value != "" else '""'
+
+
+def _range_text(spec):
+    if spec.choices:
+        return ", ".join(spec.choices)
+    lo = None if spec.low is None else f"{spec.low:g}"
+    hi = None if spec.high is None else f"{spec.high:g}"
+    if lo is not None and hi is not None:
+        return f"{'(' if spec.open_low else '['}{lo}, {hi}{')' if spec.open_high else ']'}"
+    if lo is not None:
+        return f"{'>' if spec.open_low else '>='} {lo}"
+    if hi is not None:
+        return f"{'<' if spec.open_high else '<='} {hi}"
+    return ""
+
+
+if __name__ == "__main__":
+    print(parameters_markdown(), end="")

@@ -1,13 +1,12 @@
 """Executing the node's last good plan, in the configured ``execution.mode``, and saying
 how it ended (the node's part behind ``~/execute``, ``~/stop`` and ``use_current_start``).
 
-    run = PlanExecution(node, config, command_publisher, result_publisher, publish, lock,
-                        on_end)
+    run = PlanExecution(node, config, command_publisher, result_publisher, publish, on_end)
     ok, message = run.start(plan, config)     # plan: (PlannedPath, Robot, PlanOutputs)
     message = run.stop()                      # hold where the winches are
     run.running                               # executing now (either mode)
-    start = run.current_start(config, plan, cancelled)  # PoseStamped of the measured
-                                                         # lengths, or why not
+    start = run.current_start(config, plan, cancelled)  # MeasuredStart: the pose of the
+                                                         # measured lengths, or why not
     run.close()                               # shutting down: hold, end as stopped
 
 - ``stream``: the plan's cable lengths sampled in real time (``streaming.Stream``) and sent
@@ -16,40 +15,50 @@ how it ended (the node's part behind ``~/execute``, ``~/stop`` and ``use_current
   FollowJointTrajectory action (``execution.TrajectoryExecutor``); its result ends the run.
 
 Either way ``start`` first compares the measured lengths (``execution.joint_states_topic``)
-with the plan's first point, and every run ends exactly once: the result published latched
-(diagnostic_msgs/DiagnosticStatus: completed, stopped or failed, and why), then ``on_end``.
-``publish(publisher, msg, latched)`` is the node's (it records what it publishes); ``lock``
-is the node's too, so that "executing" and the node's plan hand-over change together.
+with the plan's first point. Each run is a token of the state machine ``runs``
+(``execution_runs.ExecutionRuns``: starting, running, stopping, idle) and ends exactly once,
+whatever fails inside: the transition to idle first, then the result published latched
+(diagnostic_msgs/DiagnosticStatus: completed, stopped or failed, and why) and ``on_end``.
+``publish(publisher, msg, latched)`` is the node's (it records what it publishes).
 """
 
 import time
 import traceback
+from dataclasses import dataclass
 
 from ..errors import InputError, exception_line
 from ..model.pose import rotation_from_quaternion
 from . import execution
 from . import messages as M
+from .execution_runs import ExecutionRuns, Phase
 from .streaming import Stream
 
 STREAM, FOLLOW = "stream", "follow_joint_trajectory"
 
 
+@dataclass
+class MeasuredStart:
+    """``use_current_start``'s start: the pose (geometry_msgs/PoseStamped, base frame) of
+    the measured cable lengths, or why there is none."""
+
+    pose: object = None
+    why: str = ""
+
+
 class PlanExecution:
 
-    def __init__(self, node, config, command_publisher, result_publisher, publish, lock,
-                 on_end, callback_group=None):
+    def __init__(self, node, config, command_publisher, result_publisher, publish, on_end,
+                 callback_group=None):
         self._node = node
         self._commands = command_publisher
         self._results = result_publisher
         self._publish = publish
-        self._lock = lock
-        self._on_end = on_end          # on_end(publish_pending), under lock, once per run
-        self._stream = None            # the running execution in stream mode
-        self._following = False        # the running execution in follow_joint_trajectory mode
+        self._on_end = on_end          # on_end(publish_pending), once per run
+        self.runs = ExecutionRuns()    # the state machine: one run at a time, one end each
+        self._stream = None            # the Stream of the current run in stream mode
         self._timer = None
         self._timer_period = None
         self._last_pose = None         # (p, R) of the last forward kinematics, its next guess
-        self._ended_with = ""          # "execution <outcome>: <why>" of the last run
         values = config.values
         self.joints = execution.JointStateMonitor(
             node, values["execution.joint_states_topic"], config.robot.winch_names)
@@ -58,7 +67,7 @@ class PlanExecution:
 
     @property
     def running(self):
-        return self._stream is not None or self._following
+        return self.runs.current is not None
 
     def configure(self, config):
         """A new configuration (parameters changed): the winch names to measure."""
@@ -69,12 +78,11 @@ class PlanExecution:
     def start(self, plan, config):
         """(started, message): ``plan`` (PlannedPath, Robot, PlanOutputs) executed in
         ``execution.mode``, or why not (executing already, no plan, the winches away from
-        its start). Measured lengths are checked when there are any. Call under ``lock``."""
+        its start). Measured lengths are checked when there are any. A refusal here is
+        only in the answer: ``~/execution_result`` reports runs that started."""
         values = config.values
         if self.running:
-            where = (f" (at {self._stream.t:.2f} s of {self._stream.duration:.2f} s)"
-                     if self._stream is not None else "")
-            return False, f"refused: already executing{where}; call ~/stop first"
+            return False, f"refused: already executing{self._where()}; call ~/stop first"
         if plan is None:
             return False, "refused: no plan to execute; call ~/plan first"
         path, robot, out = plan
@@ -87,47 +95,77 @@ class PlanExecution:
                 return False, f"refused: {mismatch}"
         note = "" if lengths is not None else f" (start not checked: {why})"
         what = f"{len(path)} waypoints, {float(path.t[-1]):.3f} s"
-        if values["execution.mode"] == FOLLOW:
-            self._following = True
-            self.controller.start(out.cable_trajectory, self._end)
-            if not self._following:   # ended at once (no controller): the reason is logged
-                return False, f"refused: {self._ended_with}"
-            return True, f"executing: {what} through {self.controller.action_name}{note}"
-        self._stream = Stream(path, robot.winch_names, config.stream_interpolation,
-                              start=time.monotonic())
-        self._start_timer(1.0 / config.stream_rate_hz)
+        run = self.runs.begin(values["execution.mode"])
+        if run is None:
+            return False, f"refused: already executing{self._where()}; call ~/stop first"
+        try:
+            if run.mode == FOLLOW:
+                return self._start_following(run, out, f"{what} through "
+                                                       f"{self.controller.action_name}{note}")
+            self._stream = Stream(path, robot.winch_names, config.stream_interpolation,
+                                  start=time.monotonic())
+            self.runs.advance(run, Phase.RUNNING)
+            self._start_timer(1.0 / config.stream_rate_hz)
+        except Exception as exc:  # noqa: BLE001 - the run ends, the node stays ready
+            self._node.get_logger().error(f"starting the execution failed: "
+                                          f"{traceback.format_exc()}")
+            self._end(run, execution.FAILED, f"could not start: {exception_line(exc)}")
+            return False, f"refused: {run.message}"
+        if run.outcome:    # ended already: the first tick failed
+            return False, f"refused: execution {run.outcome}: {run.message}"
         return True, (f"executing: {what} at {config.stream_rate_hz:g} Hz on "
                       f"{self._commands.topic_name}{note}")
 
+    def _start_following(self, run, out, what):
+        self.controller.start(out.cable_trajectory,
+                              lambda outcome, message: self._end(run, outcome, message),
+                              on_accepted=lambda: self.runs.advance(run, Phase.RUNNING))
+        if run.outcome:   # ended at once (no controller, a bad goal): the reason is logged
+            return False, f"refused: execution {run.outcome}: {run.message}"
+        return True, f"executing: {what}"
+
+    def _where(self):
+        stream = self._stream
+        return (f" (at {stream.t:.2f} s of {stream.duration:.2f} s)" if stream is not None
+                else f" ({self.runs.phase.value} on {self.controller.action_name})")
+
     def stop(self):
         """Stop the running execution where it is; what happened (str). A stream holds its
-        last setpoint and ends now; a controller is sent a cancel and its result ends it."""
+        last setpoint and ends now; a controller is sent a cancel and its result ends it
+        (at once when the controller has nothing running)."""
+        run = self.runs.current
+        if run is None:
+            return "not executing: nothing to stop"
         stream = self._stream
-        if stream is not None:
-            self._publish(self._commands, stream.hold(self._stamp()))
+        if run.mode == STREAM:
+            if stream is not None:
+                self._publish(self._commands, stream.hold(self._stamp()))
             message = (f"stopped at {stream.t:.3f} s of {stream.duration:.3f} s; "
-                       f"holding the last setpoint")
-            self._end(execution.STOPPED, message)
+                       f"holding the last setpoint" if stream is not None else "stopped")
+            self._end(run, execution.STOPPED, message)
             return message
-        if self._following:
-            self.controller.cancel()   # the controller holds; its result ends the execution
-            return (f"stopping: cancel sent to {self.controller.action_name} "
-                    f"(the controller holds its position)")
-        return "not executing: nothing to stop"
+        self.runs.advance(run, Phase.STOPPING)
+        if not self.controller.cancel():   # nothing on the controller: end here
+            message = f"stopped: nothing was running on {self.controller.action_name}"
+            self._end(run, execution.STOPPED, message)
+            return message
+        return (f"stopping: cancel sent to {self.controller.action_name} "
+                f"(the controller holds its position)")
 
     def close(self):
         """Shutting down: hold (stream) or cancel (controller), and end as stopped without
         handing over a pending plan. Safe after the context has shut down."""
-        if not self.running:
+        run = self.runs.current
+        if run is None:
             return
         try:
-            if self._stream is not None:
+            if run.mode == STREAM and self._stream is not None:
                 self._publish(self._commands, self._stream.hold(self._stamp()))
-            else:
+            elif run.mode == FOLLOW:
                 self.controller.cancel()
         except Exception:  # noqa: BLE001 - context already gone: nothing to tell
             pass
-        self._end(execution.STOPPED, "shutting down while executing: held the last setpoint",
+        self._end(run, execution.STOPPED, "shutting down while executing: held the last setpoint",
                   publish_pending=False)
 
     # ------------------------------------------------------------------ the stream
@@ -143,68 +181,82 @@ class PlanExecution:
         self._tick()
 
     def _tick(self):
-        stream = self._stream
-        if stream is None:
+        run, stream = self.runs.current, self._stream
+        if run is None or run.mode != STREAM or stream is None:
             return
         try:
             msg, finished = stream.command(time.monotonic(), self._stamp())
+            self._publish(self._commands, msg)
         except Exception as exc:  # noqa: BLE001 - never take the node down
             self._node.get_logger().error(f"streaming failed: {traceback.format_exc()}")
-            self._end(execution.FAILED,
+            self._end(run, execution.FAILED,
                       f"streaming stopped after an error: {exception_line(exc)}")
             return
-        self._publish(self._commands, msg)
         if finished:
-            self._end(execution.COMPLETED, f"execution finished: {stream.sent} "
-                                           f"commands over {stream.duration:.3f} s")
+            self._end(run, execution.COMPLETED, f"execution finished: {stream.sent} "
+                                                f"commands over {stream.duration:.3f} s")
 
     # ------------------------------------------------------------------ the end
 
-    def _end(self, outcome, message, publish_pending=True):
-        """The run is over (``execution.COMPLETED``, ``STOPPED`` or ``FAILED``, and why):
-        the result published latched, then ``on_end(publish_pending)``; once per run."""
-        with self._lock:
-            if not self.running:
-                return   # ended already (stop and the last tick, shutdown and the controller)
-            if self._timer is not None:
-                self._timer.cancel()
-            logger = self._node.get_logger()
-            (logger.error if outcome == execution.FAILED else logger.info)(
-                f"execution {outcome}: {message}")
-            mode = STREAM if self._stream is not None else FOLLOW
-            self._stream, self._following = None, False
-            self._ended_with = f"execution {outcome}: {message}"
+    def _end(self, run, outcome, message, publish_pending=True):
+        """End ``run`` (``execution.COMPLETED``, ``STOPPED`` or ``FAILED``, and why): the
+        state machine's one terminal transition first, then, each on its own so that no
+        failure can undo it, the stream's timer cancelled, a log line, the result published
+        latched and ``on_end(publish_pending)``. Later calls for the same run do nothing."""
+        if not self.runs.end(run, outcome, message):
+            return   # ended already (stop and the last tick, shutdown and the controller)
+        self._stream = None
+        self._quietly("cancelling the stream timer",
+                      lambda: self._timer is not None and self._timer.cancel())
+        self._quietly("logging the end", lambda: self._log_end(outcome, message))
+        self._quietly("publishing the execution result",
+                      lambda: self._publish(self._results, M.execution_status(
+                          outcome, message, run.mode), latched=True))
+        self._quietly("handing over the plan made while executing",
+                      lambda: self._on_end(publish_pending))
+
+    def _log_end(self, outcome, message):
+        # one call site per severity: rclpy refuses a call site whose severity changes
+        logger = self._node.get_logger()
+        if outcome == execution.FAILED:
+            logger.error(f"execution {outcome}: {message}")
+        else:
+            logger.info(f"execution {outcome}: {message}")
+
+    def _quietly(self, what, step):
+        """Run one side effect of an end; what it raises is logged (if logging still
+        works), never passed on: the run has ended whatever happens here."""
+        try:
+            step()
+        except Exception:  # noqa: BLE001
             try:
-                self._publish(self._results, M.execution_status(outcome, message, mode),
-                              latched=True)
-            except Exception:  # noqa: BLE001 - a diagnostic: the execution is over anyway
-                logger.error(f"publishing the execution result failed: "
-                             f"{traceback.format_exc()}")
-            self._on_end(publish_pending)
+                self._node.get_logger().error(f"{what} failed: {traceback.format_exc()}")
+            except Exception:  # noqa: BLE001 - nothing left to tell it with
+                pass
 
     # ------------------------------------------------------------------ where it is
 
     def current_start(self, config, plan=None, cancelled=lambda: False):
-        """The measured start pose (PoseStamped in the base frame) by forward kinematics
-        from the winches' lengths, Newton from the nearest known pose (the last forward
-        kinematics, the ends of ``plan``); or why not (a str). Without recent lengths it
-        waits up to ``execution.joint_states_wait_s`` for them, or until ``cancelled()``."""
+        """The MeasuredStart: the pose by forward kinematics from the winches' lengths,
+        Newton from the nearest known pose (the last forward kinematics, the ends of
+        ``plan``), or why not. Without recent lengths it waits up to
+        ``execution.joint_states_wait_s`` for them, or until ``cancelled()``."""
         values = config.values
         lengths, why = self.joints.wait_lengths(values["execution.joint_states_max_age_s"],
                                                 values["execution.joint_states_wait_s"],
                                                 cancelled)
         if lengths is None:
-            return why
+            return MeasuredStart(why=why)
         try:
             guess = execution.nearest_pose(config.robot, lengths, self._known_poses(plan))
             p, R = execution.current_pose(config.robot, lengths, guess)
         except InputError as exc:
-            return str(exc)
+            return MeasuredStart(why=str(exc))
         except Exception as exc:  # noqa: BLE001 - the goal still gets a result, with why
             self._node.get_logger().error(f"forward kinematics failed: {traceback.format_exc()}")
-            return f"forward kinematics failed: {exception_line(exc)}"
+            return MeasuredStart(why=f"forward kinematics failed: {exception_line(exc)}")
         self._last_pose = (p, R)
-        return M.pose_stamped_msg(p, R, config.base_frame, self._stamp())
+        return MeasuredStart(pose=M.pose_stamped_msg(p, R, config.base_frame, self._stamp()))
 
     def _known_poses(self, plan):
         """Platform poses (p, R): the last forward kinematics and the ends of ``plan``."""

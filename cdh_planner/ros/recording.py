@@ -249,3 +249,53 @@ def log_limits(values):
     ``log_max_file_mb`` and ``log_max_file_s``."""
     return {"max_bytes": int(float(values.get("log_max_file_mb") or 0.0) * MIB),
             "max_s": float(values.get("log_max_file_s") or 0.0)}
+
+
+class NodeRecording:
+    """The node's recording calls over its RunLog, none of them ever raising: a failure is
+    logged (at most once every ``ERROR_PERIOD_S``) and the answer goes on. ``publish``
+    records before it publishes: whatever a subscriber got is in the run file, even if the
+    process is killed right after."""
+
+    ERROR_PERIOD_S = 10.0
+
+    def __init__(self, node, runlog):
+        self._node, self.runlog = node, runlog
+
+    def __call__(self, method, *args, **kwargs):
+        """``method(*args, **kwargs)`` (a RunLog method); None if it raised."""
+        try:
+            return method(*args, **kwargs)
+        except Exception as exc:  # noqa: BLE001
+            self._node.get_logger().error(
+                f"recording failed ({getattr(method, '__name__', method)}): "
+                f"{exception_line(exc)}", throttle_duration_sec=self.ERROR_PERIOD_S)
+            return None
+
+    def publish(self, publisher, msg, latched=False):
+        self(self.runlog.write, publisher.topic_name, msg, self.now(), transient_local=latched)
+        publisher.publish(msg)
+
+    def trigger(self, service, event, request=None, response=None):
+        """A std_srvs/Trigger call of ``service`` (a Service) as it arrived or was answered."""
+        self(self.runlog.service_event, self._node.resolve_service_name(service.srv_name),
+             "std_srvs/srv/Trigger", event, request=request, response=response,
+             log_time_ns=self.now())
+
+    def plan(self, service, event, seq, request=None, response=None):
+        self(self.runlog.service_event, self._node.resolve_service_name(service.srv_name),
+             "nav_msgs/srv/GetPlan", event, request=request, response=response,
+             sequence_number=seq, log_time_ns=self.now())
+
+    def goal(self, action, event, seq, goal_handle, goal=None, result=None):
+        """A PlanPath goal as it arrived (REQUEST_RECEIVED) or its result as sent
+        (RESPONSE_SENT, with the goal's final status), paired by ``seq``."""
+        self(self.runlog.action_event, action, "cdh_planner_interfaces/action/PlanPath", event,
+             goal=goal, result=result, sequence_number=seq, log_time_ns=self.now(),
+             goal_id=bytes(goal_handle.goal_id.uuid), status=goal_handle.status)
+
+    def parameters(self, params, **kwargs):
+        self(self.runlog.parameters, [p.to_parameter_msg() for p in params], **kwargs)
+
+    def now(self):
+        return self._node.get_clock().now().nanoseconds

@@ -40,7 +40,7 @@ from ..io.mcap_log import ACTION_INFIX, GET_RESULT, REQUEST_RECEIVED, RESPONSE_S
 from ..io.mcap_log import scan_records as scan_run  # raw records of a (possibly killed) run file
 from ..io.ros_schemas import rosidl_type
 from .messages import path_arrays
-from .node import CABLE_COMMAND
+from .interface import CABLE_COMMAND, SERVICE_QOS
 from .recording import PARAMETER_EVENTS
 
 
@@ -402,7 +402,7 @@ class ParameterSetter:
     def __init__(self, client, timeout_s):
         from rclpy.parameter_client import AsyncParameterClient
         self._client = client
-        self._params = AsyncParameterClient(client.node, client.target)
+        self._params = AsyncParameterClient(client.node, client.target, qos_profile=SERVICE_QOS)
         self._timeout = timeout_s
         self._names = None
 

@@ -60,6 +60,8 @@ from rclpy.qos import DurabilityPolicy, QoSProfile, ReliabilityPolicy
 from sensor_msgs.msg import JointState
 from trajectory_msgs.msg import JointTrajectoryPoint
 
+from .interface import ACTION_QOS
+
 NODE = "simulated_cable_controller"
 PERIOD_S = 0.02          # 50 Hz: joint states and the interpolation step
 FEEDBACK_EVERY = 3       # feedback every 3rd step, ~17 Hz (the controller's
@@ -137,7 +139,8 @@ class SimulatedController:
         self.server = ActionServer(
             node, FollowJointTrajectory, args.action, execute_callback=self.execute,
             goal_callback=self.goal_received, handle_accepted_callback=self.goal_accepted,
-            cancel_callback=lambda handle: CancelResponse.ACCEPT, callback_group=group)
+            cancel_callback=lambda handle: CancelResponse.ACCEPT, callback_group=group,
+            **ACTION_QOS)
 
     def now_s(self):
         return self.node.get_clock().now().nanoseconds * 1e-9

@@ -26,6 +26,8 @@ from trajectory_msgs.msg import JointTrajectoryPoint
 from cdh_planner_interfaces.action import PlanPath
 from cdh_planner_interfaces.msg import TensionEnvelopePoint
 
+from cdh_planner.ros.interface import ACTION_QOS
+
 NODE = "plan_path_double"
 PERIOD_S = 0.02
 WAYPOINTS = 3
@@ -86,7 +88,7 @@ def main():
     ActionServer(node, PlanPath, f"/{NODE}/plan_path", execute_callback=execute,
                  goal_callback=lambda goal: GoalResponse.ACCEPT,
                  cancel_callback=lambda handle: CancelResponse.ACCEPT,
-                 callback_group=ReentrantCallbackGroup())
+                 callback_group=ReentrantCallbackGroup(), **ACTION_QOS)
     executor = MultiThreadedExecutor(num_threads=4)
     executor.add_node(node)
     print("ready", flush=True)
