@@ -42,9 +42,10 @@ p90 of seconds count a timeout as the time limit. Peak memory: the process's pea
 start after gc.collect() and malloc_trim(0), MB (what the call itself added). BLAS is
 limited to --blas-threads (default 1) with threadpoolctl when present.
 
-Time on a 2-core machine: the Table 1 part about 4 min; each random query up to 4 x
---timeout, and most reach it (10 queries at --timeout 15: 8 min), so the defaults take
-about 1.5 h. For a quick look: --queries 4 --timeout 5 --repeats 1 (about 3 min).
+Time on a 2-core machine: the Table 1 part 20 min at a load average of 7 - 9 (105 processes;
+OMPL-fine's simplification most of it); each random query up to 4 x --timeout, and most
+reach it (10 queries at --timeout 15: 8 min), so the defaults take about 1.5 h. For a
+quick look: --queries 4 --timeout 5 --repeats 1 --only robot2_q2_q3 (about 3 min).
 """
 
 import argparse
