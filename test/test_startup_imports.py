@@ -8,6 +8,7 @@ import sys
 import pytest
 
 from cdh_planner import cli
+from conftest import REPO
 
 HEAVY = ("toppra", "matplotlib", "matplotlib.pyplot", "rclpy", "scipy.spatial", "numba", "numpy")
 
@@ -33,6 +34,18 @@ def test_help_imports_no_command_module():
 def test_plan_command_parser_loads_no_plotting_and_no_ros():
     code = "from cdh_planner import cli\ncli.build_parser(['plan'])"
     loaded = _modules_after(code)
+    assert not loaded & {"matplotlib", "matplotlib.pyplot", "rclpy", "numba"}
+
+
+def test_a_direct_motion_plan_loads_no_plotting_ros_or_numba():
+    """robot2_q1_q2: one direct motion, dynamically timed (toppra runs), no chart."""
+    problem = REPO / "config" / "problems" / "robot2_q1_q2.yaml"
+    code = ("import contextlib, io\nfrom cdh_planner import cli\n"
+            "with contextlib.redirect_stdout(io.StringIO()) as out:\n"
+            f"    assert cli.main(['plan', {str(problem)!r}, '--quiet']) == 0\n"
+            "assert 'dynamic timing' in out.getvalue()")
+    loaded = _modules_after(code)
+    assert "toppra" in loaded
     assert not loaded & {"matplotlib", "matplotlib.pyplot", "rclpy", "numba"}
 
 
