@@ -36,7 +36,7 @@ PROG = 'cdh-planner'
 COMMANDS = ['verify', 'slice', 'plan', 'node', 'call', 'replay', 'recover', 'demo']
 
 # The one-line summaries of `cdh-planner --help`, the same as each module's add_parser help
-# (test_cli checks). Held here so that a run imports only the module of the command it runs:
+# (test_startup_imports checks). Held here so that a run imports only the module of the command it runs:
 # a module imports what its command needs (the planner, plotting, ROS), up to seconds.
 SUMMARIES = {
     'verify': 'check poses and the motion between them for wrench feasibility',
