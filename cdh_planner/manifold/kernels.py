@@ -360,7 +360,7 @@ def aot_kernel():
     """The ahead-of-time compiled kernel, or None if it was not built for this source."""
     try:
         module = importlib.import_module(f"{__package__}.{aot_module_name()}")
-    except ImportError:
+    except (ImportError, OSError):  # not built, or the source not readable as files
         return None
     return getattr(module, AOT_EXPORT)
 
