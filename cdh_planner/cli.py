@@ -35,6 +35,21 @@ PROG = 'cdh-planner'
 # Order here is the order in --help. A name whose module does not exist yet is skipped.
 COMMANDS = ['verify', 'slice', 'plan', 'node', 'call', 'replay', 'recover', 'demo']
 
+# The one-line summaries of `cdh-planner --help`, the same as each module's add_parser help
+# (test_startup_imports checks). Held here so that a run imports only the module of the command it runs:
+# a module imports what its command needs (the planner, plotting, ROS), up to seconds.
+SUMMARIES = {
+    'verify': 'check poses and the motion between them for wrench feasibility',
+    'slice': 'draw a 2-D slice of the wrench-feasible C-space to a PNG',
+    'plan': 'plan a wrench-feasible path for a problem file (no ROS needed)',
+    'node': 'run the ROS 2 planner node',
+    'call': "call a running node's plan service (and execute)",
+    'replay': 'republish a recorded run, or re-send its plan requests',
+    'recover': 'complete the run file of a killed node (summary, indexes, footer)',
+    'demo': "the whole story: the paper's robots, poses and motions checked, then the ROS "
+            "node planning, streaming, recording and replaying Robot 2's sphere task",
+}
+
 EXIT_OK = 0
 EXIT_NO = 1  # no path, infeasible
 EXIT_USAGE = 2  # bad input (arguments, files)
@@ -55,8 +70,9 @@ INPUT_EXCEPTIONS = frozenset({
 })
 
 
-def _command_module(name: str):
-    """Import ``cdh_planner.commands.<name>``, or return None if there is no such module."""
+def _command_module(name: str, load: bool = True):
+    """Import ``cdh_planner.commands.<name>`` (with ``load`` False: only find it), or return
+    None if there is no such module."""
     modname = f'cdh_planner.commands.{name}'
     if modname not in sys.modules:
         try:
@@ -64,7 +80,18 @@ def _command_module(name: str):
                 return None
         except (ImportError, ValueError):
             return None
-    return importlib.import_module(modname)
+    return importlib.import_module(modname) if load else modname
+
+
+def requested_command(argv: list[str]) -> str | None:
+    """The command ``argv`` runs: its first argument that is not an option, if that is a
+    command and no --help / --version comes before it; else None."""
+    for arg in argv:
+        if arg in ('-h', '--help', '--version'):
+            return None
+        if not arg.startswith('-'):
+            return arg if arg in COMMANDS else None
+    return None
 
 
 class OneLineErrors(argparse.ArgumentParser):
@@ -78,7 +105,9 @@ class OneLineErrors(argparse.ArgumentParser):
         self.exit(EXIT_USAGE, f'{PROG}: error: {text}\n')
 
 
-def build_parser() -> argparse.ArgumentParser:
+def build_parser(commands: list[str] | None = None) -> argparse.ArgumentParser:
+    """The parser with the full subparsers of ``commands`` (default: every command; their
+    modules are imported) and, for the others, a one-line entry (not imported)."""
     parser = OneLineErrors(
         prog=PROG,
         description='Wrench-feasible path planning for cable-driven hexapods.',
@@ -89,9 +118,14 @@ def build_parser() -> argparse.ArgumentParser:
                              'path / infeasible, 2 bad input, 3 internal error)')
     subparsers = parser.add_subparsers(dest='command', required=True, metavar='COMMAND')
     for name in COMMANDS:
-        module = _command_module(name)
-        if module is not None:
+        full = commands is None or name in commands
+        module = _command_module(name, load=full)
+        if module is None:
+            continue
+        if full:
             module.add_parser(subparsers)
+        else:
+            subparsers.add_parser(name, help=SUMMARIES.get(name), add_help=False)
     return parser
 
 
@@ -111,7 +145,8 @@ def main(argv: list[str] | None = None) -> int:
         argv = sys.argv[1:]
     debug = '--debug' in argv  # until the arguments are parsed
     try:
-        parser = build_parser()
+        command = requested_command(argv)
+        parser = build_parser([command] if command else [])
         try:
             args = parser.parse_args(argv)
         except SystemExit as exc:  # --help, --version, usage errors: argparse already printed

@@ -1,7 +1,9 @@
 """Subcommands of ``cdh-planner``, one module per subcommand.
 
-``cdh_planner.cli`` imports ``cdh_planner.commands.<name>`` for each name in
-``cdh_planner.cli.COMMANDS`` that exists, and calls its ``add_parser(subparsers)``.
+``cdh_planner.cli`` imports ``cdh_planner.commands.<name>`` of the command being run (of
+each name in ``cdh_planner.cli.COMMANDS`` for the full parser; ``--help`` lists them from
+``cli.SUMMARIES`` without importing any) and calls its ``add_parser(subparsers)``: a
+module's imports are paid by its own command only.
 A module adds its own parser and sets ``func`` with ``set_defaults(func=run)``,
 where ``run(args) -> int`` returns the process exit code (0 ok, 1 no path / not
 feasible). Raise ``cdh_planner.errors.InputError`` for bad user input: the CLI prints it
