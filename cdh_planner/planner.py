@@ -603,8 +603,9 @@ def _finite_vector(name, v, n):
 
 
 def _describe(p, tau):
-    return (f"p = [{', '.join(f'{v:.4f}' for v in p)}] m, "
-            f"tau = [{', '.join(f'{v:.4f}' for v in tau)}] rad")
+    # 6 significant digits: a position of 1e308 (a node's goal) is not 309 digits long
+    return (f"p = [{', '.join(f'{v:.6g}' for v in p)}] m, "
+            f"tau = [{', '.join(f'{v:.6g}' for v in tau)}] rad")
 
 
 def _failure_message(status, charts, s, radius):

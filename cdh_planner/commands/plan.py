@@ -67,11 +67,7 @@ def run(args):
     overrides = {name: check_setting(name, getattr(args, name), s.flag)
                  for name, (_, _, s) in SETTINGS.items() if getattr(args, name) is not None}
     settings = replace(settings, **overrides)
-    if args.json is not None:
-        check_output("--json", args.json)
-    if args.plot is not None:
-        plot = check_output("--plot", args.plot)
-        check_output("--plot", plot.with_name(plot.stem + "_tensions.png"))
+    check_outputs(args, problem)
     planner = Planner(problem.robot, problem.task, settings, scene=problem.scene)
     result = plan_with_progress(planner, problem.start, problem.goal, quiet=args.quiet)
     print_result(result, problem)
@@ -85,6 +81,19 @@ def run(args):
         for out in outs:
             print(f"picture: {out}")
     return EXIT_CODES[result.reason]
+
+
+def check_outputs(args, problem):
+    """Refuse, before planning, an output that cannot be written or that names an input
+    (the problem or robot file) or another output."""
+    files = [("the problem file", args.problem), ("the robot file", problem.robot.source)]
+    if args.json is not None:
+        check_output("--json", args.json, inputs=files)
+        files.append(("the --json output", args.json))
+    if args.plot is not None:
+        plot = check_output("--plot", args.plot, suffixes=(".png",), inputs=files)
+        tensions = plot.with_name(plot.stem + "_tensions.png")
+        check_output("--plot", tensions, inputs=files + [("the --plot picture", plot)])
 
 
 def plan_with_progress(planner, start, goal, quiet=False):

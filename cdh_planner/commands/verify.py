@@ -71,7 +71,9 @@ def run(args):
     poses = load_poses(args.poses)
     step_m = _positive(parse_length(args.step, "--step"), "--step", args.step)
     step_rad = _positive(parse_angle(args.angle_step, "--angle-step"), "--angle-step", args.angle_step)
-    json_out = check_output("--json", args.json) if args.json is not None else None
+    json_out = None if args.json is None else check_output(
+        "--json", args.json, inputs=[("the robot file ROBOT", args.robot),
+                                     ("the poses file POSES", args.poses)])
 
     collision = CollisionModel(robot, load_scene(args.scene, robot)) if args.scene else None
 

@@ -38,14 +38,12 @@ dynamically feasible timing exists (a zero static margin, or more rounds than
 from dataclasses import dataclass, replace
 
 import numpy as np
-import toppra
-import toppra.algorithm
-import toppra.constraint
 from scipy.interpolate import CubicSpline
 from scipy.spatial.transform import Rotation, RotationSpline
 
 from ..errors import InputError, check_finite
 from ..feasibility import cable_vectors, inverse_ellipsoid_factor, nominal_wrench, screw_jacobian
+from ._toppra import toppra  # toppra without matplotlib (0.25 s of start-up)
 from .path import PlannedPath
 
 GRID_POINTS = 400       # toppra gridpoints along the path (at least one per waypoint)
