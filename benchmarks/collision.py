@@ -91,7 +91,7 @@ def main():
     p, R = poses(rng, args.poses)
     pairs = list(zip(p, R))
     for name, offset in (("spread", 0.06), ("close", 0.0)):
-        cm = CollisionModel(robot, scene(robot, rng, offset))
+        cm = CollisionModel(robot, scene(robot, np.random.default_rng(1), offset))
         cm.clearance(*pairs[0])  # load the compiled kernel
         hits = sum(not cm.clearance(*a).ok for a in pairs)
         med, mean = per_call_us(cm.clearance, pairs, args.repeats)

@@ -79,7 +79,7 @@ class CollisionModel:
         centres = np.array([o.position for o in self.obstacles], dtype=float).reshape(-1, 3)
         radii = np.array([o.bounding_radius() for o in self.obstacles], dtype=float)
         plat = self.platform
-        self.static = np.concatenate([  # the kernel's constants, one array (see _unpack)
+        self.static = np.concatenate([  # the kernel's constants, one array (offsets: _kernel)
             A.ravel(), B.ravel(), centres.ravel(), radii, trims.ravel(),
             [scene.cable_radius, scene.shared_anchor_exemption],
             plat.position if plat else np.zeros(3),
