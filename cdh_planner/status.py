@@ -17,6 +17,7 @@ class Status(StrEnum):
     RESOURCE_LIMIT = "resource_limit"      # the atlas reached its memory limit
     CANCELED = "canceled"                  # the caller cancelled the plan
     INVALID = "invalid"                    # request inconsistent with the task
+    NOT_EXECUTABLE = "not_executable"      # a path, but no trajectory that executes as checked
 
     @property
     def is_limit(self):

@@ -1,0 +1,260 @@
+"""A cable-length trajectory checked as its consumer executes it.
+
+    check = check_executed(robot, t, lengths, velocities, accelerations, p0, R0,
+                           mass, inertia, max_cable_speed, max_cable_accel)
+    check.ok, check.reason, check.least_tension_margin_n, check.bad_segments
+
+A ros2_control JointTrajectoryController (JTC) moves each joint between two points with
+the quintic matching position, velocity and acceleration at both ends (``quintic``). The
+platform then follows the cable lengths: its pose is their forward kinematics (Newton,
+``model.forward_kinematics.forward_kinematics_many``), seeded at each instant with the planned
+pose there (so Newton stays on the platform's branch). Its acceleration c'' (centre of
+mass) and body angular rate and acceleration come from central differences at ``dt``
+(1 ms), and the cables must balance the load wrench minus the inertial wrench
+
+    w_in = [m c''; c x m c'' + R (I alpha + omega x I omega)]   (omega, alpha body frame),
+
+as trajectory.dynamics models it. The tensions f = J^-1 (w0 - w_in) with the ellipsoid's
+spread v must keep fmin + v <= f <= fmax - v; the quintic's lengths, rates and
+accelerations must stay within the length and winch limits. Samples evenly, at most ``dt``
+s apart, from start to end; the differences are taken at the interior samples (a stencil
+never straddles an end, where the JTC's hold makes the acceleration jump).
+
+``executable`` adds points to a timed PlannedPath until this check passes (module
+docstring of that function).
+"""
+
+from dataclasses import dataclass, replace
+
+import numpy as np
+from scipy.spatial.transform import Rotation, Slerp
+
+from ..feasibility import (cable_vectors, evaluate, inverse_ellipsoid_factor, load_point,
+                           nominal_wrench, screw_jacobian)
+from ..model.forward_kinematics import forward_kinematics_many
+from ..model.pose import tau_from_rotation
+
+CHECK_DT = 1e-3        # s: sample step of the check and of its central differences
+TOL = 1e-9             # N, m, m/s, m/s^2: rounding allowed
+MAX_POINTS = 4000      # points of a trajectory handed to a consumer
+MAX_ROUNDS = 12        # rounds of adding points
+SLOWDOWNS = 8          # uniform slow-downs tried when adding points is not enough
+SLOWDOWN = 1.05        # time scale per slow-down
+SEED_TOL_M = 1e-2      # m: a forward kinematics solution this far from its seed is a twin
+
+
+# ----------------------------------------------------------------------------- the quintic
+
+def quintic(t_wp, L, V, A, t):
+    """Positions (M, J) m, velocities m/s and accelerations m/s^2 at times ``t`` (M,) of the
+    JTC interpolation of points at ``t_wp`` (N,) s with positions L, velocities V and
+    accelerations A (N, J): per segment the quintic through both ends' position, velocity
+    and acceleration; before the first point and after the last the end is held (rest)."""
+    t_wp = np.asarray(t_wp, dtype=float)
+    t = np.asarray(t, dtype=float)
+    k = np.clip(np.searchsorted(t_wp, t, side="right") - 1, 0, len(t_wp) - 2)
+    h = (t_wp[k + 1] - t_wp[k])[:, None]
+    s = np.clip((t - t_wp[k]) / h[:, 0], 0.0, 1.0)[:, None]
+    p0, v0, a0, p1, v1, a1 = L[k], V[k] * h, A[k] * h * h, L[k + 1], V[k + 1] * h, A[k + 1] * h * h
+    # p(s) = p0 + v0 s + a0/2 s^2 + c3 s^3 + c4 s^4 + c5 s^5 (s = tau / h, rates per unit s)
+    d = p1 - p0 - v0 - 0.5 * a0
+    dv = v1 - v0 - a0
+    da = a1 - a0
+    c3 = 10 * d - 4 * dv + 0.5 * da
+    c4 = -15 * d + 7 * dv - da
+    c5 = 6 * d - 3 * dv + 0.5 * da
+    pos = p0 + s * (v0 + s * (0.5 * a0 + s * (c3 + s * (c4 + s * c5))))
+    vel = (v0 + s * (a0 + s * (3 * c3 + s * (4 * c4 + s * 5 * c5)))) / h
+    acc = (a0 + s * (6 * c3 + s * (12 * c4 + s * 20 * c5))) / (h * h)
+    before, after = t < t_wp[0], t > t_wp[-1]
+    pos[before], pos[after] = L[0], L[-1]
+    vel[before | after] = 0.0
+    acc[before | after] = 0.0
+    return pos, vel, acc
+
+
+# ----------------------------------------------------------------------------- the check
+
+@dataclass(frozen=True)
+class ExecutionCheck:
+    """The check of one trajectory as executed: ``ok``; ``reason`` (what failed, one
+    line); least tension margin (N, and normalised by fmax - fmin) and when (s);
+    largest winch speed and acceleration over the limits (1 = at a limit); the segments
+    (indices k of [t_k, t_k+1]) where something failed; ``samples`` checked."""
+
+    ok: bool
+    reason: str
+    least_tension_margin_n: float
+    least_margin: float
+    worst_t: float
+    speed_ratio: float
+    accel_ratio: float
+    bad_segments: np.ndarray
+    samples: int
+    added: int = 0       # points ``executable`` added
+    slowdown: float = 1.0  # the uniform slow-down ``executable`` applied
+
+    def describe(self):
+        """One line: how the trajectory was made executable and its least margin."""
+        slow = f", slowed x {self.slowdown:.3g}" if self.slowdown > 1 else ""
+        return (f"checked as a JointTrajectoryController executes it (quintic, every "
+                f"{CHECK_DT * 1e3:g} ms): {self.added} points added{slow}, least tension "
+                f"slack {self.least_tension_margin_n:.3g} N")
+
+
+def check_executed(robot, t_wp, L, V, A, seed, mass=None, inertia=None, max_cable_speed=np.inf,
+                   max_cable_accel=np.inf, dt=CHECK_DT):
+    """ExecutionCheck of the points (t_wp (N,) s; L, V, A (N, 6) m, m/s, m/s^2) executed by
+    a JTC (module docstring). ``seed(t)`` -> (p (M, 3), R (M, 3, 3)): a pose near the
+    platform's at times t (the planned motion), where forward kinematics starts. ``mass``
+    (kg) and ``inertia`` (3x3 kg m^2 about the load point) None: no inertial wrench."""
+    t_wp, L, V, A = (np.asarray(x, dtype=float) for x in (t_wp, L, V, A))
+    n = max(2, int(np.ceil((t_wp[-1] - t_wp[0]) / dt)))
+    ts = np.linspace(t_wp[0], t_wp[-1], n + 1)  # uniform, at most dt apart
+    dt = ts[1] - ts[0]
+    pos, vel, acc = quintic(t_wp, L, V, A, ts)
+    p_seed, R_seed = seed(ts)
+    fk = forward_kinematics_many(robot, pos, p_seed, R_seed)
+    twin = np.linalg.norm(fk.p - p_seed, axis=1) > SEED_TOL_M
+    mid = slice(1, -1)
+    p, R = fk.p, fk.R
+    c = load_point(robot, p, R)
+    c_dd = (c[2:] - 2 * c[1:-1] + c[:-2]) / dt ** 2
+    back = Rotation.from_matrix(np.swapaxes(R[:-1], 1, 2) @ R[1:]).as_rotvec()  # body frame
+    omega = (back[1:] + back[:-1]) / (2 * dt)
+    alpha = (back[1:] - back[:-1]) / dt ** 2
+    f, v = _tensions(robot, p[mid], R[mid], c[mid], c_dd, omega, alpha, mass, inertia)
+    span = robot.tension_max - robot.tension_min
+    margin = np.minimum(f - v - robot.tension_min, robot.tension_max - f - v)
+    lengths_ok = (pos[mid] >= robot.length_min - TOL) & (pos[mid] <= robot.length_max + TOL)
+    speed = np.max(np.abs(vel[mid]) / np.broadcast_to(max_cable_speed, (6,)), axis=1)
+    accel = np.max(np.abs(acc[mid]) / np.broadcast_to(max_cable_accel, (6,)), axis=1)
+    bad = ((np.min(margin, axis=1) < -TOL) | ~np.all(lengths_ok, axis=1) | (speed > 1 + TOL)
+           | (accel > 1 + TOL) | ~fk.ok[mid] | twin[mid])
+    t_mid = ts[mid]
+    j = int(np.argmin(np.min(margin / span, axis=1)))
+    least_n = float(np.min(margin))
+    reason = _reason(least_n, lengths_ok, speed, accel, ~fk.ok[mid] | twin[mid])
+    seg = np.clip(np.searchsorted(t_wp, t_mid[bad], side="right") - 1, 0, len(t_wp) - 2)
+    return ExecutionCheck(ok=not bad.any(), reason=reason, least_tension_margin_n=least_n,
+                          least_margin=float(np.min(margin / span)), worst_t=float(t_mid[j]),
+                          speed_ratio=float(np.max(speed)), accel_ratio=float(np.max(accel)),
+                          bad_segments=np.unique(seg), samples=int(t_mid.size))
+
+
+def _tensions(robot, p, R, c, c_dd, omega, alpha, mass, inertia):
+    """Tensions f (M, 6) balancing the load wrench minus the inertial wrench, and the
+    ellipsoid's spread v (M, 6), N."""
+    u = cable_vectors(robot, p, R)
+    u /= np.linalg.norm(u, axis=-1)[..., None]
+    J_inv = np.linalg.inv(screw_jacobian(robot, u))
+    w = nominal_wrench(robot, c)
+    if mass is not None:
+        I = np.asarray(inertia, dtype=float).reshape(3, 3)
+        Iw = omega @ I.T
+        moment = np.einsum("nij,nj->ni", R, alpha @ I.T + np.cross(omega, Iw))
+        force = mass * c_dd
+        w = w - np.concatenate([force, np.cross(c, force) + moment], axis=1)
+    f = np.einsum("nij,nj->ni", J_inv, w)
+    v = np.linalg.norm(J_inv @ inverse_ellipsoid_factor(robot, c), axis=-1)
+    return f, v
+
+
+def _reason(least_n, lengths_ok, speed, accel, no_pose):
+    bad = []
+    if least_n < -TOL:
+        bad.append(f"tension margin {least_n:.3g} N")
+    if not np.all(lengths_ok):
+        bad.append("cable length out of range")
+    if np.max(speed) > 1 + TOL:
+        bad.append(f"winch speed {np.max(speed):.4g} x the limit")
+    if np.max(accel) > 1 + TOL:
+        bad.append(f"winch acceleration {np.max(accel):.4g} x the limit")
+    if np.any(no_pose):
+        bad.append("forward kinematics lost the platform's pose")
+    return ", ".join(bad)
+
+
+def path_seed(path):
+    """seed(t) for check_executed from a PlannedPath: position linear and orientation
+    slerp between its waypoints (near the platform's pose between dense waypoints)."""
+    rot = Rotation.from_quat(path.quaternion)
+    slerp = Slerp(path.t, rot)
+
+    def seed(t):
+        k = np.clip(np.searchsorted(path.t, t, side="right") - 1, 0, len(path) - 2)
+        w = ((t - path.t[k]) / (path.t[k + 1] - path.t[k]))[:, None]
+        return (1 - w) * path.p[k] + w * path.p[k + 1], slerp(t).as_matrix()
+    return seed
+
+
+def check_path(robot, path, mass=None, inertia=None, max_cable_speed=np.inf,
+               max_cable_accel=np.inf, dt=CHECK_DT):
+    """check_executed of a timed PlannedPath's points (lengths, velocities, accelerations
+    at path.t), forward kinematics seeded from its waypoint poses."""
+    return check_executed(robot, path.t, path.lengths, path.velocities, path.accelerations,
+                          path_seed(path), mass, inertia, max_cable_speed, max_cable_accel, dt)
+
+
+# ----------------------------------------------------------------------------- making it pass
+
+def executable(robot, path, motion=None, mass=None, inertia=None, max_cable_speed=np.inf,
+               max_cable_accel=np.inf, max_points=MAX_POINTS):
+    """(path, ExecutionCheck): the timed PlannedPath ``path`` with points added until a JTC
+    executing it passes ``check_path``, or the last check (``ok`` False) if it does not
+    within ``max_points`` points and the rounds allowed.
+
+    ``motion(t, scale)`` -> PlannedPath: the motion that was checked (e.g. the dynamic
+    timing's, ``trajectory.dynamics.motion_rows``), slowed ``scale`` times, at times t
+    (s). Where the check fails, the midpoint of each failing segment is added, with that
+    motion's own pose, lengths, rates, accelerations and tensions: between dense points
+    the quintic approaches the motion. When that is not enough (or without a motion: the
+    quasi-static timing of straight cable segments, whose quintic overshoots the winch
+    limits), the whole trajectory is slowed uniformly. A slowed quintic is the same curve
+    in lengths with rates / scale and accelerations / scale^2, so the winch ratios shrink
+    exactly, and the inertial wrench shrinks towards the static one (feasible at every
+    planned pose)."""
+    scale, rounds, slowed, n = 1.0, 0, 0, len(path)
+    while True:
+        check = check_path(robot, path, mass, inertia, max_cable_speed, max_cable_accel)
+        check = replace(check, added=len(path) - n, slowdown=scale)
+        if check.ok:
+            return path, check
+        k = check.bad_segments
+        if motion is not None and rounds < MAX_ROUNDS and len(path) + k.size <= max_points:
+            t = 0.5 * (path.t[k] + path.t[k + 1])
+            path = _merged(path, motion(t, scale), k + 1)
+            rounds += 1
+        elif slowed < SLOWDOWNS:
+            c = max(SLOWDOWN, check.speed_ratio, np.sqrt(check.accel_ratio)) * (1 + 1e-6)
+            path, scale, slowed = slow_down(robot, path, c), scale * c, slowed + 1
+        else:
+            return path, replace(check, reason=f"{check.reason} after {rounds} rounds of "
+                                               f"added points ({len(path)} points) and "
+                                               f"{slowed} slow-downs (x {scale:.3g})")
+
+
+def _merged(path, rows, at):
+    """``path`` with the rows of the PlannedPath ``rows`` inserted before indices ``at``;
+    each new row's tau continues its left neighbour's azimuth (phi at a pole)."""
+    fields = {}
+    for name in path.__dataclass_fields__:
+        new = np.asarray(getattr(rows, name))
+        if name == "tau":
+            R = Rotation.from_quat(rows.quaternion).as_matrix()
+            new = tau_from_rotation(R, phi_hint=path.tau[at - 1, 0])
+        fields[name] = np.insert(np.asarray(getattr(path, name)), at, new, axis=0)
+    return type(path)(**fields)
+
+
+def slow_down(robot, path, scale):
+    """``path`` executed ``scale`` (> 1) times slower: times x scale, cable rates / scale,
+    accelerations / scale^2, and the dynamic part of the tensions / scale^2 (the static
+    tensions of each pose, f0, unchanged; the ellipsoid's spread unchanged)."""
+    R = Rotation.from_quat(path.quaternion).as_matrix()
+    f0 = evaluate(robot, path.p, R=R).tension_nominal
+    f = f0 + (path.tension_nominal - f0) / scale ** 2
+    return replace(path, t=path.t * scale, velocities=path.velocities / scale,
+                   accelerations=path.accelerations / scale ** 2, tension_nominal=f,
+                   tension_min=f - (path.tension_nominal - path.tension_min),
+                   tension_max=f + (path.tension_max - path.tension_nominal))
