@@ -36,7 +36,7 @@ planner.margin_floor            0.001      least normalised feasibility margin k
 trajectory.max_cable_speed      0.05       per-winch speed limit (m/s)
 trajectory.max_cable_accel      0.2        per-winch acceleration limit (m/s^2)
 stream_rate_hz                  50         rate of ~/cable_command while executing (Hz)
-stream_interpolation            linear     linear (never above the speed limit) or quintic
+stream_interpolation            quintic    quintic (as checked, a JTC's) or linear (not checked)
 execution.mode                  stream     stream or follow_joint_trajectory (ros2_control)
 execution.controller_action     /cable_controller/follow_joint_trajectory  (read-only)
 execution.joint_states_topic    /joint_states  measured cable lengths (read-only)
@@ -164,10 +164,11 @@ SPECS = (
     + [_setting_spec(name) for name in SETTINGS]
     + [Spec("stream_rate_hz", DOUBLE, 50.0,
             "rate of ~/cable_command while executing (Hz)", low=1.0, high=1000.0),
-       Spec("stream_interpolation", STRING, "linear",
-            "between waypoints while streaming: linear (straight in cable space at the mean "
-            "speed, never above the limit) or quintic (as a JointTrajectoryController "
-            "interpolates the same points)", choices=INTERPOLATIONS),
+       Spec("stream_interpolation", STRING, "quintic",
+            "between waypoints while streaming: quintic (as a JointTrajectoryController "
+            "interpolates the same points: the motion the planner checked) or linear "
+            "(straight in cable space at the mean speed; its velocity steps at every point, "
+            "which the check does not cover)", choices=INTERPOLATIONS),
        Spec("execution.mode", STRING, "stream",
             "how ~/execute moves the winches: stream (sensor_msgs/JointState setpoints on "
             "~/cable_command at stream_rate_hz) or follow_joint_trajectory (the cable "
