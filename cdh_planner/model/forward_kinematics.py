@@ -39,23 +39,24 @@ def forward_kinematics_many(robot, lengths, p0, R0, tol=TOL_M, max_iterations=MA
     p = np.array(p0, dtype=float)
     R = np.array(R0, dtype=float)
     tol = tol * np.maximum(1.0, np.max(L, axis=1))
-    b = robot.platform_anchors
+    idx = np.arange(len(L))    # the poses still iterating
     for _ in range(max_iterations):
-        Rb = np.einsum("nij,kj->nki", R, b)
-        d = p[:, None, :] + Rb - robot.base_anchors
-        length = np.linalg.norm(d, axis=-1)
-        error = length - L
-        active = np.max(np.abs(error), axis=1) > tol
+        Rb = R[idx] @ robot.platform_anchors.T               # (m, 3, 6): R b_i as columns
+        d = p[idx, :, None] + Rb - robot.base_anchors.T       # (m, 3, 6)
+        length = np.sqrt(np.einsum("nik,nik->nk", d, d))
+        error = length - L[idx]
+        active = np.max(np.abs(error), axis=1) > tol[idx]
         if not active.any():
             break
-        u = d / length[..., None]
-        J = np.concatenate([u, np.cross(Rb, u)], axis=-1)
+        idx, d, Rb, length, error = idx[active], d[active], Rb[active], length[active], error[active]
+        u = d / length[:, None, :]
+        J = np.concatenate([np.swapaxes(u, 1, 2), np.swapaxes(np.cross(Rb, u, axis=1), 1, 2)], axis=2)
         try:
-            step = np.linalg.solve(J[active], -error[active][..., None])[..., 0]
+            step = np.linalg.solve(J, -error[..., None])[..., 0]
         except np.linalg.LinAlgError:  # a singular Jacobian: the least-squares step
-            step = (np.linalg.pinv(J[active]) @ -error[active][..., None])[..., 0]
-        p[active] += step[:, :3]
-        R[active] = Rotation.from_rotvec(step[:, 3:]).as_matrix() @ R[active]
-    d = p[:, None, :] + np.einsum("nij,kj->nki", R, b) - robot.base_anchors
-    residual = np.max(np.abs(np.linalg.norm(d, axis=-1) - L), axis=1)
+            step = (np.linalg.pinv(J) @ -error[..., None])[..., 0]
+        p[idx] += step[:, :3]
+        R[idx] = Rotation.from_rotvec(step[:, 3:]).as_matrix() @ R[idx]
+    d = p[:, :, None] + R @ robot.platform_anchors.T - robot.base_anchors.T
+    residual = np.max(np.abs(np.sqrt(np.einsum("nik,nik->nk", d, d)) - L), axis=1)
     return ManyPoses(p=p, R=R, residual=residual, ok=residual <= tol)

@@ -16,9 +16,10 @@ mass) and body angular rate and acceleration come from central differences at ``
 
 as trajectory.dynamics models it. The tensions f = J^-1 (w0 - w_in) with the ellipsoid's
 spread v must keep fmin + v <= f <= fmax - v; the quintic's lengths, rates and
-accelerations must stay within the length and winch limits. Samples evenly, at most ``dt``
-s apart, from start to end; the differences are taken at the interior samples (a stencil
-never straddles an end, where the JTC's hold makes the acceleration jump).
+accelerations must stay within the length and winch limits. The check samples every
+dt / PHASES s from dt after the start to dt before the end, each sample with its own
+stencil t - dt, t, t + dt (one never straddles an end, where the JTC's hold makes the
+acceleration jump): a violation narrower than dt is seen whatever its phase.
 
 ``executable`` adds points to a timed PlannedPath until this check passes (module
 docstring of that function).
@@ -34,7 +35,9 @@ from ..feasibility import (cable_vectors, evaluate, inverse_ellipsoid_factor, lo
 from ..model.forward_kinematics import forward_kinematics_many
 from ..model.pose import tau_from_rotation
 
-CHECK_DT = 1e-3        # s: sample step of the check and of its central differences
+CHECK_DT = 1e-3        # s: step of the check's central differences
+PHASES = 4             # samples per CHECK_DT: a violation narrower than the step is not
+                       # missed by the phase of the samples
 TOL = 1e-9             # N, m, m/s, m/s^2: rounding allowed
 MAX_POINTS = 4000      # points of a trajectory handed to a consumer
 MAX_ROUNDS = 12        # rounds of adding points
@@ -103,43 +106,69 @@ class ExecutionCheck:
 
 
 def check_executed(robot, t_wp, L, V, A, seed, mass=None, inertia=None, max_cable_speed=np.inf,
-                   max_cable_accel=np.inf, dt=CHECK_DT):
+                   max_cable_accel=np.inf, dt=CHECK_DT, within=None):
     """ExecutionCheck of the points (t_wp (N,) s; L, V, A (N, 6) m, m/s, m/s^2) executed by
     a JTC (module docstring). ``seed(t)`` -> (p (M, 3), R (M, 3, 3)): a pose near the
     platform's at times t (the planned motion), where forward kinematics starts. ``mass``
-    (kg) and ``inertia`` (3x3 kg m^2 about the load point) None: no inertial wrench."""
+    (kg) and ``inertia`` (3x3 kg m^2 about the load point) None: no inertial wrench.
+    ``within`` (K, 2) s: check only the samples in these intervals (the same samples as a
+    whole check has there); None: all."""
     t_wp, L, V, A = (np.asarray(x, dtype=float) for x in (t_wp, L, V, A))
-    n = max(2, int(np.ceil((t_wp[-1] - t_wp[0]) / dt)))
-    ts = np.linspace(t_wp[0], t_wp[-1], n + 1)  # uniform, at most dt apart
-    dt = ts[1] - ts[0]
-    pos, vel, acc = quintic(t_wp, L, V, A, ts)
-    p_seed, R_seed = seed(ts)
-    fk = forward_kinematics_many(robot, pos, p_seed, R_seed)
-    twin = np.linalg.norm(fk.p - p_seed, axis=1) > SEED_TOL_M
-    mid = slice(1, -1)
-    p, R = fk.p, fk.R
-    c = load_point(robot, p, R)
-    c_dd = (c[2:] - 2 * c[1:-1] + c[:-2]) / dt ** 2
-    back = Rotation.from_matrix(np.swapaxes(R[:-1], 1, 2) @ R[1:]).as_rotvec()  # body frame
-    omega = (back[1:] + back[:-1]) / (2 * dt)
-    alpha = (back[1:] - back[:-1]) / dt ** 2
-    f, v = _tensions(robot, p[mid], R[mid], c[mid], c_dd, omega, alpha, mass, inertia)
+    n = max(4, int(np.ceil((t_wp[-1] - t_wp[0]) * PHASES / dt)))
+    ts = np.linspace(t_wp[0], t_wp[-1], n + 1)      # every dt / PHASES s or less
+    q = min(PHASES, n // 4)                          # the stencil: t - h, t, t + h
+    h = ts[q] - ts[0]
+    sel = np.ones(n + 1, dtype=bool)
+    if within is not None:
+        w = np.asarray(within, dtype=float).reshape(-1, 2)
+        sel = np.any((ts[:, None] >= w[:, 0]) & (ts[:, None] <= w[:, 1]), axis=1)
+    # lengths and winch rates first: the quintic's own, cheap; the tensions only if they pass
+    t_sel = ts[sel]
+    pos, vel, acc = quintic(t_wp, L, V, A, t_sel)
+    lengths_ok = (pos >= robot.length_min - TOL) & (pos <= robot.length_max + TOL)
+    speed = np.max(np.abs(vel) / np.broadcast_to(max_cable_speed, (6,)), axis=1, initial=0.0)
+    accel = np.max(np.abs(acc) / np.broadcast_to(max_cable_accel, (6,)), axis=1, initial=0.0)
+    bad = ~np.all(lengths_ok, axis=1) | (speed > 1 + TOL) | (accel > 1 + TOL)
+    margin, lost, worst_t = np.full((0, 6), np.inf), np.zeros(0, dtype=bool), float("nan")
+    if not bad.any():
+        mid = np.flatnonzero(sel[q:n + 1 - q]) + q   # samples whose tensions are checked
+        margin, lost = _executed_margins(robot, t_wp, L, V, A, seed, ts, mid, q, mass, inertia)
+        bad = np.isin(np.flatnonzero(sel), mid[(np.min(margin, axis=1) < -TOL) | lost])
+        if mid.size:
+            worst_t = float(ts[mid][np.argmin(np.min(margin / (robot.tension_max - robot.tension_min), axis=1))])
+    near = np.concatenate([t_sel[bad] - h, t_sel[bad], t_sel[bad] + h])  # the stencil's segments
+    seg = np.clip(np.searchsorted(t_wp, near, side="right") - 1, 0, len(t_wp) - 2)
+    least_n = float(np.min(margin, initial=np.inf))
     span = robot.tension_max - robot.tension_min
+    return ExecutionCheck(ok=not bad.any(), reason=_reason(least_n, lengths_ok, speed, accel, lost),
+                          least_tension_margin_n=least_n,
+                          least_margin=float(np.min(margin / span, initial=np.inf)),
+                          worst_t=worst_t, speed_ratio=float(np.max(speed, initial=0.0)),
+                          accel_ratio=float(np.max(accel, initial=0.0)),
+                          bad_segments=np.unique(seg), samples=int(t_sel.size))
+
+
+def _executed_margins(robot, t_wp, L, V, A, seed, ts, mid, q, mass, inertia):
+    """Tension margins (M, 6) N at the samples ts[mid] of the executed motion (forward
+    kinematics of the quintic's lengths, differences over ts[mid -+ q]), and where forward
+    kinematics lost the platform (M,) (no convergence, or a twin far from the seed)."""
+    need = np.unique(np.concatenate([mid - q, mid, mid + q]))
+    pos, _, _ = quintic(t_wp, L, V, A, ts[need])
+    p_seed, R_seed = seed(ts[need])
+    fk = forward_kinematics_many(robot, pos, p_seed, R_seed)
+    lost = ~fk.ok | (np.linalg.norm(fk.p - p_seed, axis=1) > SEED_TOL_M)
+    c_all = load_point(robot, fk.p, fk.R)
+    at = [np.searchsorted(need, mid + o) for o in (-q, 0, q)]
+    R, c = [fk.R[i] for i in at], [c_all[i] for i in at]
+    h = ts[q] - ts[0]
+    c_dd = (c[2] - 2 * c[1] + c[0]) / h ** 2
+    back = Rotation.from_matrix(np.swapaxes(R[1], 1, 2) @ R[2]).as_rotvec()   # body frame
+    front = Rotation.from_matrix(np.swapaxes(R[0], 1, 2) @ R[1]).as_rotvec()
+    omega = (back + front) / (2 * h)
+    alpha = (back - front) / h ** 2
+    f, v = _tensions(robot, fk.p[at[1]], R[1], c[1], c_dd, omega, alpha, mass, inertia)
     margin = np.minimum(f - v - robot.tension_min, robot.tension_max - f - v)
-    lengths_ok = (pos[mid] >= robot.length_min - TOL) & (pos[mid] <= robot.length_max + TOL)
-    speed = np.max(np.abs(vel[mid]) / np.broadcast_to(max_cable_speed, (6,)), axis=1)
-    accel = np.max(np.abs(acc[mid]) / np.broadcast_to(max_cable_accel, (6,)), axis=1)
-    bad = ((np.min(margin, axis=1) < -TOL) | ~np.all(lengths_ok, axis=1) | (speed > 1 + TOL)
-           | (accel > 1 + TOL) | ~fk.ok[mid] | twin[mid])
-    t_mid = ts[mid]
-    j = int(np.argmin(np.min(margin / span, axis=1)))
-    least_n = float(np.min(margin))
-    reason = _reason(least_n, lengths_ok, speed, accel, ~fk.ok[mid] | twin[mid])
-    seg = np.clip(np.searchsorted(t_wp, t_mid[bad], side="right") - 1, 0, len(t_wp) - 2)
-    return ExecutionCheck(ok=not bad.any(), reason=reason, least_tension_margin_n=least_n,
-                          least_margin=float(np.min(margin / span)), worst_t=float(t_mid[j]),
-                          speed_ratio=float(np.max(speed)), accel_ratio=float(np.max(accel)),
-                          bad_segments=np.unique(seg), samples=int(t_mid.size))
+    return margin, lost[at[0]] | lost[at[1]] | lost[at[2]]
 
 
 def _tensions(robot, p, R, c, c_dd, omega, alpha, mass, inertia):
@@ -189,11 +218,12 @@ def path_seed(path):
 
 
 def check_path(robot, path, mass=None, inertia=None, max_cable_speed=np.inf,
-               max_cable_accel=np.inf, dt=CHECK_DT):
+               max_cable_accel=np.inf, dt=CHECK_DT, within=None):
     """check_executed of a timed PlannedPath's points (lengths, velocities, accelerations
     at path.t), forward kinematics seeded from its waypoint poses."""
     return check_executed(robot, path.t, path.lengths, path.velocities, path.accelerations,
-                          path_seed(path), mass, inertia, max_cable_speed, max_cable_accel, dt)
+                          path_seed(path), mass, inertia, max_cable_speed, max_cable_accel, dt,
+                          within)
 
 
 # ----------------------------------------------------------------------------- making it pass
@@ -215,19 +245,25 @@ def executable(robot, path, motion=None, mass=None, inertia=None, max_cable_spee
     exactly, and the inertial wrench shrinks towards the static one (feasible at every
     planned pose)."""
     scale, rounds, slowed, n = 1.0, 0, 0, len(path)
+    within = None  # after adding points, only the samples they change are checked again
     while True:
-        check = check_path(robot, path, mass, inertia, max_cable_speed, max_cable_accel)
+        check = check_path(robot, path, mass, inertia, max_cable_speed, max_cable_accel,
+                           within=within)
         check = replace(check, added=len(path) - n, slowdown=scale)
-        if check.ok:
+        if check.ok and within is None:
             return path, check
+        if check.ok:
+            within = None  # the whole trajectory once more: the answer's own check
+            continue
         k = check.bad_segments
         if motion is not None and rounds < MAX_ROUNDS and len(path) + k.size <= max_points:
             t = 0.5 * (path.t[k] + path.t[k + 1])
+            within = np.column_stack([path.t[k] - CHECK_DT, path.t[k + 1] + CHECK_DT])
             path = _merged(path, motion(t, scale), k + 1)
             rounds += 1
         elif slowed < SLOWDOWNS:
             c = max(SLOWDOWN, check.speed_ratio, np.sqrt(check.accel_ratio)) * (1 + 1e-6)
-            path, scale, slowed = slow_down(robot, path, c), scale * c, slowed + 1
+            path, scale, slowed, within = slow_down(robot, path, c), scale * c, slowed + 1, None
         else:
             return path, replace(check, reason=f"{check.reason} after {rounds} rounds of "
                                                f"added points ({len(path)} points) and "
