@@ -79,14 +79,14 @@ def executed_margins(robot, msg, p0, R0):
     interior sample the tension
     margin (N, ellipsoid around the dynamic wrench), lengths (m), winch speed and
     acceleration (m/s, m/s^2, differences of the lengths)."""
-    t_wp = np.array([pt.time_from_start.sec + 1e-9 * pt.time_from_start.nanosec for pt in msg.points])
+    t_wp = np.array([p.time_from_start.sec + 1e-9 * p.time_from_start.nanosec for p in msg.points])
     L, V, A = (np.array([getattr(pt, f) for pt in msg.points]) for f in
                ("positions", "velocities", "accelerations"))
     t = np.arange(0.0, t_wp[-1], DT)
     lengths = jtc_quintic(t_wp, L, V, A, t)
     # Newton from the nearest published point's pose: converged to rounding, and every step
     # between samples small, so each is the pose reached from the previous one
-    k = np.clip(np.searchsorted(t_wp, t) , 0, len(t_wp) - 1)
+    k = np.clip(np.searchsorted(t_wp, t), 0, len(t_wp) - 1)
     fk = forward_kinematics_many(robot, lengths, p0[k], R0[k])
     assert np.all(fk.ok) and np.max(fk.residual) < 1e-12
     p, R = fk.p, fk.R

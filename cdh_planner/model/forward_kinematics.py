@@ -1,6 +1,6 @@
 """Forward kinematics of many cable-length vectors at once (numpy, vectorised).
 
-    fk = forward_kinematics_many(robot, lengths, p0, R0)    # lengths (M, 6), seeds (M, 3), (M, 3, 3)
+    fk = forward_kinematics_many(robot, lengths, p0, R0)   # (M, 6); seeds (M, 3), (M, 3, 3)
     fk.p, fk.R, fk.residual, fk.ok                          # (M, 3), (M, 3, 3), (M,), (M,)
 
 The same Newton on SE(3) as ``model.kinematics.forward_kinematics`` (one pose, with
@@ -48,9 +48,9 @@ def forward_kinematics_many(robot, lengths, p0, R0, tol=TOL_M, max_iterations=MA
         active = np.max(np.abs(error), axis=1) > tol[idx]
         if not active.any():
             break
-        idx, d, Rb, length, error = idx[active], d[active], Rb[active], length[active], error[active]
-        u = d / length[:, None, :]
-        J = np.concatenate([np.swapaxes(u, 1, 2), np.swapaxes(np.cross(Rb, u, axis=1), 1, 2)], axis=2)
+        idx, d, Rb, error = idx[active], d[active], Rb[active], error[active]
+        u = d / length[active][:, None, :]
+        J = np.swapaxes(np.concatenate([u, np.cross(Rb, u, axis=1)], axis=1), 1, 2)  # (m, 6, 6)
         try:
             step = np.linalg.solve(J, -error[..., None])[..., 0]
         except np.linalg.LinAlgError:  # a singular Jacobian: the least-squares step

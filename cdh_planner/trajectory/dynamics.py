@@ -36,6 +36,7 @@ dynamically feasible timing exists (a zero static margin, or more rounds than
 """
 
 from dataclasses import dataclass, replace
+from functools import partial
 
 import numpy as np
 import toppra
@@ -337,6 +338,11 @@ def motion_rows(robot, timing, t, mass, inertia, scale=1.0):
                        accelerations=L_s * sddot[:, None] + L_ss * (sdot ** 2)[:, None])
 
 
+def _load_rows(robot, timing, t, scale):
+    """motion_rows with the robot's own load (what ``executable`` samples)."""
+    return motion_rows(robot, timing, t, robot.mass, robot.inertia, scale)
+
+
 def check_dynamics(robot, dynamics):
     """InputError (naming the setting ``dynamics``) when the dynamic timing is asked for
     and the robot file gives no load mass."""
@@ -366,7 +372,7 @@ def timed_path(robot, path, dynamics, max_cable_speed, max_cable_accel):
             note = f"dynamic timing impossible ({timing.reason}): quasi-static timing kept"
         elif timing is not None:
             path = timing.path
-            motion = lambda t, scale: motion_rows(robot, timing, t, robot.mass, robot.inertia, scale)  # noqa: E731
+            motion = partial(_load_rows, robot, timing)
             note = (f"dynamic timing {timing.duration:.3f} s (least tension slack "
                     f"{timing.least_tension_margin_n:.3g} N, checked every {CHECK_DT * 1e3:g} ms)")
     path, check = executable(robot, path, motion, *load, max_cable_speed, max_cable_accel)

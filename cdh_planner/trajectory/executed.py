@@ -130,16 +130,16 @@ def check_executed(robot, t_wp, L, V, A, seed, mass=None, inertia=None, max_cabl
     accel = np.max(np.abs(acc) / np.broadcast_to(max_cable_accel, (6,)), axis=1, initial=0.0)
     bad = ~np.all(lengths_ok, axis=1) | (speed > 1 + TOL) | (accel > 1 + TOL)
     margin, lost, worst_t = np.full((0, 6), np.inf), np.zeros(0, dtype=bool), float("nan")
+    span = robot.tension_max - robot.tension_min
     if not bad.any():
         mid = np.flatnonzero(sel[q:n + 1 - q]) + q   # samples whose tensions are checked
         margin, lost = _executed_margins(robot, t_wp, L, V, A, seed, ts, mid, q, mass, inertia)
         bad = np.isin(np.flatnonzero(sel), mid[(np.min(margin, axis=1) < -TOL) | lost])
         if mid.size:
-            worst_t = float(ts[mid][np.argmin(np.min(margin / (robot.tension_max - robot.tension_min), axis=1))])
+            worst_t = float(ts[mid][np.argmin(np.min(margin / span, axis=1))])
     near = np.concatenate([t_sel[bad] - h, t_sel[bad], t_sel[bad] + h])  # the stencil's segments
     seg = np.clip(np.searchsorted(t_wp, near, side="right") - 1, 0, len(t_wp) - 2)
     least_n = float(np.min(margin, initial=np.inf))
-    span = robot.tension_max - robot.tension_min
     return ExecutionCheck(ok=not bad.any(), reason=_reason(least_n, lengths_ok, speed, accel, lost),
                           least_tension_margin_n=least_n,
                           least_margin=float(np.min(margin / span, initial=np.inf)),
