@@ -191,7 +191,7 @@ class Planner:
                           f"Controller executes within the limits: {executed.reason}")
         out = answer(True, Status.OK, f"path of {len(path)} waypoints over {how}", cost=cost,
                      path=path, chart_path=charts, direct=direct, timing=timing or "quasi-static",
-                     executed=executed.describe())
+                     executed=executed.describe(), points_added=executed.added)
         out.least_margin, out.least_tension_margin = least
         return out
 

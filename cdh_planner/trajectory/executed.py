@@ -36,7 +36,7 @@ from ..model.forward_kinematics import forward_kinematics_many
 from ..model.pose import tau_from_rotation
 
 CHECK_DT = 1e-3        # s: step of the check's central differences
-PHASES = 4             # samples per CHECK_DT: a violation narrower than the step is not
+PHASES = 2             # samples per CHECK_DT: a violation narrower than the step is not
                        # missed by the phase of the samples
 TOL = 1e-9             # N, m, m/s, m/s^2: rounding allowed
 MAX_POINTS = 4000      # points of a trajectory handed to a consumer
