@@ -1,14 +1,15 @@
 """A cable-length trajectory checked as its consumer executes it.
 
-    check = check_executed(robot, t, lengths, velocities, accelerations, p0, R0,
-                           mass, inertia, max_cable_speed, max_cable_accel)
+    check = check_path(robot, path, mass, inertia, max_cable_speed, max_cable_accel)
     check.ok, check.reason, check.least_tension_margin_n, check.bad_segments
+    path, check = executable(robot, path, motion, mass, inertia, max_cable_speed, max_cable_accel)
 
 A ros2_control JointTrajectoryController (JTC) moves each joint between two points with
 the quintic matching position, velocity and acceleration at both ends (``quintic``). The
 platform then follows the cable lengths: its pose is their forward kinematics (Newton,
-``model.forward_kinematics.forward_kinematics_many``), seeded at each instant with the planned
-pose there (so Newton stays on the platform's branch). Its acceleration c'' (centre of
+``model.forward_kinematics.forward_kinematics_many``), seeded at each instant with the
+planned pose there (so Newton stays on the platform's branch; a solution more than
+SEED_TOL_M away is a failure). Its acceleration c'' (centre of
 mass) and body angular rate and acceleration come from central differences at ``dt``
 (1 ms), and the cables must balance the load wrench minus the inertial wrench
 
@@ -114,6 +115,9 @@ def check_executed(robot, t_wp, L, V, A, seed, mass=None, inertia=None, max_cabl
     ``within`` (K, 2) s: check only the samples in these intervals (the same samples as a
     whole check has there); None: all."""
     t_wp, L, V, A = (np.asarray(x, dtype=float) for x in (t_wp, L, V, A))
+    if len(t_wp) < 2:  # one point: the controller holds it
+        return ExecutionCheck(True, "", np.inf, np.inf, float("nan"), 0.0, 0.0,
+                              np.zeros(0, dtype=int), 0)
     n = max(4, int(np.ceil((t_wp[-1] - t_wp[0]) * PHASES / dt)))
     ts = np.linspace(t_wp[0], t_wp[-1], n + 1)      # every dt / PHASES s or less
     q = min(PHASES, n // 4)                          # the stencil: t - h, t, t + h
