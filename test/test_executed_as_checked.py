@@ -174,7 +174,9 @@ def test_the_published_trajectory_executes_within_every_limit(problem, outputs, 
     assert np.all(lengths > robot.length_min) and np.all(lengths < robot.length_max)
     assert np.max(speed) <= limits[0] * (1 + 1e-6)
     assert np.max(accel) <= limits[1] * (1 + 1e-3)  # second differences of a quintic: O(DT^2)
-    assert check.added > 0 and check.slowdown == 1.0
+    # points added; at the defaults also slowed a little (the winch limits near TOPP-RA's
+    # acceleration switches, module docstring of trajectory.executed)
+    assert check.added > 0 and check.slowdown < 1.2
 
 
 def test_the_checker_catches_the_sparse_points_and_agrees_with_this_test(problem, route):
@@ -246,3 +248,19 @@ def test_the_stream_sends_the_checked_quintic(problem, outputs):
         assert not finished
         assert np.allclose(msg.position, pos[j], atol=1e-12)
         assert np.allclose(msg.velocity, vel[j], atol=1e-12)
+
+
+def test_quintic_bounds_are_the_extremes_of_the_quintic():
+    rng = np.random.default_rng(11)
+    t_wp = np.concatenate([[0.0], np.cumsum(rng.uniform(1e-3, 0.3, 30))])
+    L, V, A = (rng.normal(size=(31, 6)) * x for x in (0.1, 0.5, 5.0))
+    V[3] = A[3] = 0.0                      # a segment of lower degree
+    lo, hi, vel, acc = E.quintic_bounds(t_wp, L, V, A)
+    for k in range(30):
+        t = np.linspace(t_wp[k], t_wp[k + 1], 20001)
+        p, v, a = E.quintic(t_wp, L, V, A, t)
+        assert np.all(lo[k] <= p.min(axis=0) + 1e-12) and np.all(hi[k] >= p.max(axis=0) - 1e-12)
+        assert np.allclose(lo[k], p.min(axis=0), rtol=1e-6, atol=1e-9)
+        assert np.allclose(hi[k], p.max(axis=0), rtol=1e-6, atol=1e-9)
+        assert np.allclose(vel[k], np.abs(v).max(axis=0), rtol=1e-6)
+        assert np.allclose(acc[k], np.abs(a).max(axis=0), rtol=1e-6)

@@ -305,11 +305,15 @@ def _dense_check(robot, geo, s, sd, mass, inertia, vmax, amax, dt):
 
 
 def _retimed(robot, path, geo, s, sd, t_grid, mass, inertia):
-    """The PlannedPath with t, cable rates and dynamic tensions at its waypoints."""
+    """The PlannedPath with t, cable rates and dynamic tensions at its waypoints. A waypoint
+    is a gridpoint, where s'' may switch: it gets the mean of its two intervals' s'' (a
+    controller's quintic through it then overshoots either side by half as much as with
+    one side's value; the tensions there are a mean of two feasible ones)."""
     t_wp = np.interp(geo.s_wp, s, t_grid)
     sdot = np.interp(geo.s_wp, s, sd)
-    k = np.clip(np.searchsorted(s, geo.s_wp, side="right") - 1, 0, len(s) - 2)
-    sddot = (sd[k + 1] ** 2 - sd[k] ** 2) / (2 * (s[k + 1] - s[k]))
+    u = (sd[1:] ** 2 - sd[:-1] ** 2) / (2 * np.diff(s))                  # per interval
+    g = np.clip(np.searchsorted(s, geo.s_wp), 0, len(s) - 1)            # s[g] = the waypoint's
+    sddot = 0.5 * (u[np.maximum(g - 1, 0)] + u[np.minimum(g, len(u) - 1)])
     L, L_s, L_ss, f0, v, a_f, b_f = _terms(robot, geo, geo.s_wp, mass, inertia)
     f = f0 + a_f * sddot[:, None] + b_f * (sdot ** 2)[:, None]
     return replace(path, t=t_wp, velocities=L_s * sdot[:, None],

@@ -17,7 +17,8 @@ mass) and body angular rate and acceleration come from central differences at ``
 
 as trajectory.dynamics models it. The tensions f = J^-1 (w0 - w_in) with the ellipsoid's
 spread v must keep fmin + v <= f <= fmax - v; the quintic's lengths, rates and
-accelerations must stay within the length and winch limits. The check samples every
+accelerations must stay within the length and winch limits (checked exactly: per segment,
+the extremes of each polynomial, ``quintic_bounds``). The tensions are sampled every
 dt / PHASES s from dt after the start to dt before the end, each sample with its own
 stencil t - dt, t, t + dt (one never straddles an end, where the JTC's hold makes the
 acceleration jump): a violation narrower than dt is seen whatever its phase.
@@ -42,6 +43,9 @@ PHASES = 2             # samples per CHECK_DT: a violation narrower than the ste
 TOL = 1e-9             # N, m, m/s, m/s^2: rounding allowed
 MAX_POINTS = 4000      # points of a trajectory handed to a consumer
 MAX_ROUNDS = 12        # rounds of adding points
+WINCH_ROUNDS = 3       # of which for the winch limits alone: near an acceleration switch of
+                       # the motion every quintic overshoots (by ~0.1 - 0.4 x the jump,
+                       # however dense the points), which only slowing down removes
 SLOWDOWNS = 8          # uniform slow-downs tried when adding points is not enough
 SLOWDOWN = 1.05        # time scale per slow-down
 SEED_TOL_M = 1e-2      # m: a forward kinematics solution this far from its seed is a twin
@@ -59,22 +63,65 @@ def quintic(t_wp, L, V, A, t):
     k = np.clip(np.searchsorted(t_wp, t, side="right") - 1, 0, len(t_wp) - 2)
     h = (t_wp[k + 1] - t_wp[k])[:, None]
     s = np.clip((t - t_wp[k]) / h[:, 0], 0.0, 1.0)[:, None]
-    p0, v0, a0, p1, v1, a1 = L[k], V[k] * h, A[k] * h * h, L[k + 1], V[k + 1] * h, A[k + 1] * h * h
-    # p(s) = p0 + v0 s + a0/2 s^2 + c3 s^3 + c4 s^4 + c5 s^5 (s = tau / h, rates per unit s)
-    d = p1 - p0 - v0 - 0.5 * a0
-    dv = v1 - v0 - a0
-    da = a1 - a0
-    c3 = 10 * d - 4 * dv + 0.5 * da
-    c4 = -15 * d + 7 * dv - da
-    c5 = 6 * d - 3 * dv + 0.5 * da
-    pos = p0 + s * (v0 + s * (0.5 * a0 + s * (c3 + s * (c4 + s * c5))))
-    vel = (v0 + s * (a0 + s * (3 * c3 + s * (4 * c4 + s * 5 * c5)))) / h
-    acc = (a0 + s * (6 * c3 + s * (12 * c4 + s * 20 * c5))) / (h * h)
+    b0, b1, b2, b3, b4, b5 = _coefficients(t_wp, L, V, A, k)
+    pos = b0 + s * (b1 + s * (b2 + s * (b3 + s * (b4 + s * b5))))
+    vel = (b1 + s * (2 * b2 + s * (3 * b3 + s * (4 * b4 + s * 5 * b5)))) / h
+    acc = (2 * b2 + s * (6 * b3 + s * (12 * b4 + s * 20 * b5))) / (h * h)
     before, after = t < t_wp[0], t > t_wp[-1]
     pos[before], pos[after] = L[0], L[-1]
     vel[before | after] = 0.0
     acc[before | after] = 0.0
     return pos, vel, acc
+
+
+def _coefficients(t_wp, L, V, A, k):
+    """The quintics of segments k: p(s) = sum b_i s^i, s = (t - t_k) / h_k in [0, 1]
+    (each b_i (K, J))."""
+    h = (t_wp[k + 1] - t_wp[k])[:, None]
+    p0, v0, a0, p1, v1, a1 = L[k], V[k] * h, A[k] * h * h, L[k + 1], V[k + 1] * h, A[k + 1] * h * h
+    d = p1 - p0 - v0 - 0.5 * a0
+    dv = v1 - v0 - a0
+    da = a1 - a0
+    return (p0, v0, 0.5 * a0, 10 * d - 4 * dv + 0.5 * da, -15 * d + 7 * dv - da,
+            6 * d - 3 * dv + 0.5 * da)
+
+
+def quintic_bounds(t_wp, L, V, A, segments=None):
+    """Per segment (K of them, default all) and joint, exactly: the least and largest
+    position (m), the largest |velocity| (m/s) and |acceleration| (m/s^2) of the JTC's
+    quintic, each (K, J). Each is a polynomial on [0, 1]: its extremes are at the ends or
+    where its derivative vanishes (real roots from the companion matrix, and a few fixed
+    fractions in case a root is ill-conditioned)."""
+    t_wp, L, V, A = (np.asarray(x, dtype=float) for x in (t_wp, L, V, A))
+    k = np.arange(len(t_wp) - 1) if segments is None else np.asarray(segments, dtype=int)
+    h = (t_wp[k + 1] - t_wp[k])[:, None]
+    b = np.stack(_coefficients(t_wp, L, V, A, k), axis=-1)                # (K, J, 6)
+    vel = b[..., 1:] * np.arange(1, 6)                                     # per unit s
+    acc = vel[..., 1:] * np.arange(1, 5)
+    lo, hi = _extremes(b)
+    return lo, hi, np.max(np.abs(_extremes(vel)), axis=0) / h, np.max(np.abs(_extremes(acc)), axis=0) / h ** 2
+
+
+def _extremes(c):
+    """(min, max) over s in [0, 1] of the polynomials sum c_i s^i (c (..., d + 1))."""
+    d = c[..., 1:] * np.arange(1, c.shape[-1])                             # derivative
+    lead = d[..., -1:]
+    scale = np.max(np.abs(d), axis=-1, keepdims=True) + 1e-300
+    lead = np.where(np.abs(lead) < 1e-12 * scale, np.copysign(1e-12, lead) * scale, lead)
+    n = d.shape[-1] - 1
+    s = [np.zeros(c.shape[:-1]), np.ones(c.shape[:-1])]
+    s += [np.full(c.shape[:-1], f) for f in np.linspace(0.0, 1.0, 9)[1:-1]]
+    if n >= 1:
+        comp = np.zeros(c.shape[:-1] + (n, n))
+        comp[..., 0, :] = -d[..., -2::-1] / lead                          # monic companion
+        comp[..., np.arange(1, n), np.arange(n - 1)] = 1.0
+        roots = np.linalg.eigvals(comp)
+        s += [np.clip(np.where(np.isfinite(r), r.real, 0.0), 0.0, 1.0) for r in np.moveaxis(roots, -1, 0)]
+    s = np.stack(s, axis=-1)                                               # (..., m)
+    g = np.zeros_like(s)
+    for coef in np.moveaxis(c, -1, 0)[::-1]:                               # Horner
+        g = g * s + coef[..., None]
+    return np.min(g, axis=-1), np.max(g, axis=-1)
 
 
 # ----------------------------------------------------------------------------- the check
@@ -126,30 +173,34 @@ def check_executed(robot, t_wp, L, V, A, seed, mass=None, inertia=None, max_cabl
     if within is not None:
         w = np.asarray(within, dtype=float).reshape(-1, 2)
         sel = np.any((ts[:, None] >= w[:, 0]) & (ts[:, None] <= w[:, 1]), axis=1)
-    # lengths and winch rates first: the quintic's own, cheap; the tensions only if they pass
-    t_sel = ts[sel]
-    pos, vel, acc = quintic(t_wp, L, V, A, t_sel)
-    lengths_ok = (pos >= robot.length_min - TOL) & (pos <= robot.length_max + TOL)
-    speed = np.max(np.abs(vel) / np.broadcast_to(max_cable_speed, (6,)), axis=1, initial=0.0)
-    accel = np.max(np.abs(acc) / np.broadcast_to(max_cable_accel, (6,)), axis=1, initial=0.0)
-    bad = ~np.all(lengths_ok, axis=1) | (speed > 1 + TOL) | (accel > 1 + TOL)
+    # lengths and winch rates first: the quintic's own, exactly per segment; the tensions
+    # (forward kinematics, sampled) only if they pass
+    k = np.arange(len(t_wp) - 1)
+    if within is not None:
+        k = k[np.any((t_wp[1:, None] >= w[:, 0]) & (t_wp[:-1, None] <= w[:, 1]), axis=1)]
+    lo, hi, vel, acc = quintic_bounds(t_wp, L, V, A, k)
+    lengths_ok = (lo >= robot.length_min - TOL) & (hi <= robot.length_max + TOL)
+    speed = np.max(vel / np.broadcast_to(max_cable_speed, (6,)), axis=1, initial=0.0)
+    accel = np.max(acc / np.broadcast_to(max_cable_accel, (6,)), axis=1, initial=0.0)
+    bad_k = k[~np.all(lengths_ok, axis=1) | (speed > 1 + TOL) | (accel > 1 + TOL)]
     margin, lost, worst_t = np.full((0, 6), np.inf), np.zeros(0, dtype=bool), float("nan")
     span = robot.tension_max - robot.tension_min
-    if not bad.any():
+    if bad_k.size == 0:
         mid = np.flatnonzero(sel[q:n + 1 - q]) + q   # samples whose tensions are checked
         margin, lost = _executed_margins(robot, t_wp, L, V, A, seed, ts, mid, q, mass, inertia)
-        bad = np.isin(np.flatnonzero(sel), mid[(np.min(margin, axis=1) < -TOL) | lost])
+        t_bad = ts[mid[(np.min(margin, axis=1) < -TOL) | lost]]
+        near = np.concatenate([t_bad - h, t_bad, t_bad + h])  # the stencil's segments
+        bad_k = np.clip(np.searchsorted(t_wp, near, side="right") - 1, 0, len(t_wp) - 2)
         if mid.size:
             worst_t = float(ts[mid][np.argmin(np.min(margin / span, axis=1))])
-    near = np.concatenate([t_sel[bad] - h, t_sel[bad], t_sel[bad] + h])  # the stencil's segments
-    seg = np.clip(np.searchsorted(t_wp, near, side="right") - 1, 0, len(t_wp) - 2)
     least_n = float(np.min(margin, initial=np.inf))
-    return ExecutionCheck(ok=not bad.any(), reason=_reason(least_n, lengths_ok, speed, accel, lost),
+    return ExecutionCheck(ok=bad_k.size == 0,
+                          reason=_reason(least_n, lengths_ok, speed, accel, lost),
                           least_tension_margin_n=least_n,
                           least_margin=float(np.min(margin / span, initial=np.inf)),
                           worst_t=worst_t, speed_ratio=float(np.max(speed, initial=0.0)),
                           accel_ratio=float(np.max(accel, initial=0.0)),
-                          bad_segments=np.unique(seg), samples=int(t_sel.size))
+                          bad_segments=np.unique(bad_k), samples=int(np.sum(sel)))
 
 
 def _executed_margins(robot, t_wp, L, V, A, seed, ts, mid, q, mass, inertia):
@@ -248,7 +299,7 @@ def executable(robot, path, motion=None, mass=None, inertia=None, max_cable_spee
     in lengths with rates / scale and accelerations / scale^2, so the winch ratios shrink
     exactly, and the inertial wrench shrinks towards the static one (feasible at every
     planned pose)."""
-    scale, rounds, slowed, n = 1.0, 0, 0, len(path)
+    scale, rounds, winch_rounds, slowed, n = 1.0, 0, 0, 0, len(path)
     within = None  # after adding points, only the samples they change are checked again
     while True:
         check = check_path(robot, path, mass, inertia, max_cable_speed, max_cable_accel,
@@ -260,7 +311,10 @@ def executable(robot, path, motion=None, mass=None, inertia=None, max_cable_spee
             within = None  # the whole trajectory once more: the answer's own check
             continue
         k = check.bad_segments
-        if motion is not None and rounds < MAX_ROUNDS and len(path) + k.size <= max_points:
+        winch_only = not np.isfinite(check.least_tension_margin_n)  # tensions not reached
+        winch_rounds += winch_only
+        if (motion is not None and rounds < MAX_ROUNDS and len(path) + k.size <= max_points
+                and winch_rounds <= WINCH_ROUNDS):
             t = 0.5 * (path.t[k] + path.t[k + 1])
             within = np.column_stack([path.t[k] - CHECK_DT, path.t[k + 1] + CHECK_DT])
             path = _merged(path, motion(t, scale), k + 1)
@@ -268,6 +322,7 @@ def executable(robot, path, motion=None, mass=None, inertia=None, max_cable_spee
         elif slowed < SLOWDOWNS:
             c = max(SLOWDOWN, check.speed_ratio, np.sqrt(check.accel_ratio)) * (1 + 1e-6)
             path, scale, slowed, within = slow_down(robot, path, c), scale * c, slowed + 1, None
+            winch_rounds = 0
         else:
             return path, replace(check, reason=f"{check.reason} after {rounds} rounds of "
                                                f"added points ({len(path)} points) and "
