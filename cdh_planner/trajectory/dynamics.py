@@ -49,7 +49,7 @@ from ..errors import InputError, check_finite
 from ..feasibility import (cable_vectors, evaluate, inverse_ellipsoid_factor, nominal_wrench,
                            screw_jacobian)
 from ..model.pose import tau_from_rotation
-from .executed import executable
+from .executed import executable, spline_rates
 from .path import PlannedPath
 
 GRID_POINTS = 400       # toppra gridpoints along the path (at least one per waypoint)
@@ -379,5 +379,7 @@ def timed_path(robot, path, dynamics, max_cable_speed, max_cable_accel):
             motion = partial(_load_rows, robot, timing)
             note = (f"dynamic timing {timing.duration:.3f} s (least tension slack "
                     f"{timing.least_tension_margin_n:.3g} N, checked every {CHECK_DT * 1e3:g} ms)")
+    if motion is None:  # the quasi-static timing: hand out the C2 spline through its points
+        path = spline_rates(path)
     path, check = executable(robot, path, motion, *load, max_cable_speed, max_cable_accel)
     return path, note, check
