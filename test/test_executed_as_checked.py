@@ -264,3 +264,19 @@ def test_quintic_bounds_are_the_extremes_of_the_quintic():
         assert np.allclose(hi[k], p.max(axis=0), rtol=1e-6, atol=1e-9)
         assert np.allclose(vel[k], np.abs(v).max(axis=0), rtol=1e-6)
         assert np.allclose(acc[k], np.abs(a).max(axis=0), rtol=1e-6)
+
+
+def test_a_quasi_static_timing_is_handed_out_as_its_spline_and_slowed_to_the_limits(problem, route):
+    robot = replace(problem.robot, mass=None, inertia=None)   # no load mass: quasi-static
+    timed = time_path(route.path, *DEFAULT)
+    path, note, check = D.timed_path(robot, timed, "auto", *DEFAULT)
+    assert note == "" and check.ok and check.added == 0 and 1 < check.slowdown < 1.2
+    assert np.allclose(path.t, timed.t * check.slowdown) and np.array_equal(path.lengths, timed.lengths)
+    # the JTC's quintic through these points is the clamped cubic spline through them
+    from scipy.interpolate import CubicSpline
+    spline = CubicSpline(path.t, path.lengths, bc_type="clamped")
+    t = np.linspace(0.0, path.t[-1], 5001)
+    pos, vel, acc = E.quintic(path.t, path.lengths, path.velocities, path.accelerations, t)
+    assert np.allclose(pos, spline(t), atol=1e-12) and np.allclose(acc, spline(t, 2), atol=1e-9)
+    assert np.max(np.abs(vel)) <= DEFAULT[0] * (1 + 1e-6)
+    assert np.max(np.abs(acc)) <= DEFAULT[1] * (1 + 1e-6)
