@@ -190,9 +190,14 @@ class Planner:
                          for k in range(len(path) - 1)))
         how = "the direct motion" if direct else f"{charts} charts"
         least = clearance.path_margins(self.robot, path.p, path.quaternion)
-        path, timing = timed_path(self.robot, path, s.dynamics, s.max_cable_speed, s.max_cable_accel)
+        path, timing, executed = timed_path(self.robot, path, s.dynamics, s.max_cable_speed,
+                                            s.max_cable_accel)
+        if not executed.ok:  # bounded: never hand out a trajectory that was not checked
+            return answer(False, Status.NOT_EXECUTABLE, "no trajectory a JointTrajectory"
+                          f"Controller executes within the limits: {executed.reason}")
         out = answer(True, Status.OK, f"path of {len(path)} waypoints over {how}", cost=cost,
-                     path=path, chart_path=charts, direct=direct, timing=timing or "quasi-static")
+                     path=path, chart_path=charts, direct=direct, timing=timing or "quasi-static",
+                     executed=executed.describe(), points_added=executed.added)
         out.least_margin, out.least_tension_margin = least
         return out
 

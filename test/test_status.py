@@ -16,7 +16,7 @@ from cdh_planner.status import Status
 # the contract: these strings are in plan JSON files and recordings already written
 CONTRACT = {"ok", "start_infeasible", "goal_infeasible", "no_path", "timeout", "chart_limit",
             "resource_limit", "canceled", "invalid", "bad_frame", "bad_strategy", "busy",
-            "no_current_state", "output_limit", "internal_error"}
+            "no_current_state", "output_limit", "internal_error", "not_executable"}
 
 
 def _result(reason):
