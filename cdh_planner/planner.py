@@ -197,10 +197,14 @@ class Planner:
         how = "the direct motion" if direct else f"{charts} charts"
         least = clearance.path_margins(self.robot, path.p, path.quaternion)
         extra = self._least_clearance(path)
-        path, timing = timed_path(self.robot, path, s.dynamics, s.max_cable_speed, s.max_cable_accel)
+        path, timing, executed = timed_path(self.robot, path, s.dynamics, s.max_cable_speed,
+                                            s.max_cable_accel)
+        if not executed.ok:  # bounded: never hand out a trajectory that was not checked
+            return answer(False, Status.NOT_EXECUTABLE, "no trajectory a JointTrajectory"
+                          f"Controller executes within the limits: {executed.reason}")
         out = answer(True, Status.OK, f"path of {len(path)} waypoints over {how}", cost=cost,
                      path=path, chart_path=charts, direct=direct, timing=timing or "quasi-static",
-                     **extra)
+                     executed=executed.describe(), points_added=executed.added, **extra)
         out.least_margin, out.least_tension_margin = least
         return out
 

@@ -24,6 +24,7 @@ class Status(StrEnum):
     RESOURCE_LIMIT = "resource_limit"      # the atlas reached its memory limit
     CANCELED = "canceled"                  # the caller cancelled the plan
     INVALID = "invalid"                    # a pose off the task beyond the tolerance, or malformed
+    NOT_EXECUTABLE = "not_executable"      # a path, but no trajectory that executes as checked
     # the node's refusals
     BAD_FRAME = "bad_frame"                # a pose's frame_id is not the node's base frame
     BAD_STRATEGY = "bad_strategy"          # a search strategy the planner does not have

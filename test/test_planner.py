@@ -291,7 +291,11 @@ def test_a_pose_within_the_task_tolerance_is_projected_onto_the_task():
     off = pr.task.residual(np.array([goal.p]), np.array([goal.tau]))[0]
     assert 1e-7 < off < 1e-3
     res = Planner(pr.robot, pr.task, pr.settings).plan(start, goal)
-    assert res.success and pr.task.residual(res.path.p, res.path.tau).max() < 1e-9
+    off = pr.task.residual(res.path.p, res.path.tau)
+    assert res.success and off[0] < 1e-9 and off[-1] < 1e-9
+    # the points added for a controller (trajectory.executed) are samples of the timed
+    # spline motion, which leaves the sphere by up to ~1e-6 m between planned waypoints
+    assert off.max() < 5e-6 and np.sum(off < 1e-9) >= len(off) - res.stats["points_added"]
     tight = Planner(pr.robot, pr.task, _replace(pr.settings, task_tolerance=1e-8)).plan(start, goal)
     assert tight.reason == "invalid" and "beyond the tolerance 1e-08" in tight.message
     assert not Planner(pr.robot, pr.task, PlannerSettings()).plan(start, goal, tolerance=1e-8).success

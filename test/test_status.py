@@ -17,7 +17,7 @@ from cdh_planner.status import Status
 CONTRACT = {"ok", "start_infeasible", "goal_infeasible", "start_in_collision",
             "goal_in_collision", "no_path", "timeout", "chart_limit",
             "resource_limit", "canceled", "invalid", "bad_frame", "bad_strategy", "busy",
-            "no_current_state", "output_limit", "internal_error"}
+            "no_current_state", "output_limit", "internal_error", "not_executable"}
 
 
 def _result(reason):

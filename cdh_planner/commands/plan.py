@@ -14,7 +14,9 @@ or goal), 2 for bad input
 
 ``--json OUT`` writes the plan JSON contract (README, the plan command): success, reason, message, strategy,
 n, m, charts, time_s, cost, least_margin, least_tension_margin_n, and path: [{p, quaternion,
-tau, lengths, tension_min, tension_nominal, tension_max, margin, t}] (m, rad, N, s).
+tau, lengths, tension_min, tension_nominal, tension_max, margin, t, velocities,
+accelerations}] (m, rad, N, s; cable rates m/s and m/s^2: a JointTrajectoryController's
+quintic through these points is the motion that was checked, ``trajectory.executed``).
 """
 
 import json
@@ -114,6 +116,7 @@ def print_result(result, problem):
               f"{path.length_m():.4f} m, duration {path.t[-1]:.2f} s, least margin "
               f"{result.least_margin:.4f} ({result.least_tension_margin:.3g} N)")
         print(f"  timing: {result.stats.get('timing', 'quasi-static')}")
+        print(f"  executed: {result.stats.get('executed', '')}")
         if "least_clearance_m" in result.stats:  # a scene: the least distance at a waypoint
             print(f"  least clearance {1e3 * result.stats['least_clearance_m']:.3g} mm "
                   f"({result.stats['clearance_binding']})")
@@ -126,7 +129,8 @@ def result_dict(result):
            "time_s": result.time_s, "cost": _num(result.cost),
            "least_margin": _num(result.least_margin),
            "least_tension_margin_n": _num(result.least_tension_margin),
-           "timing": result.stats.get("timing", ""), "path": []}
+           "timing": result.stats.get("timing", ""), "executed": result.stats.get("executed", ""),
+           "path": []}
     if "least_clearance_m" in result.stats:  # with a scene (m, and what binds there)
         out["least_clearance_m"] = _num(result.stats["least_clearance_m"])
         out["clearance_binding"] = result.stats["clearance_binding"]
@@ -139,7 +143,8 @@ def result_dict(result):
                 "tension_min": path.tension_min[k].tolist(),
                 "tension_nominal": path.tension_nominal[k].tolist(),
                 "tension_max": path.tension_max[k].tolist(), "margin": float(path.margin[k]),
-                "t": float(path.t[k])})
+                "t": float(path.t[k]), "velocities": path.velocities[k].tolist(),
+                "accelerations": path.accelerations[k].tolist()})
     return out
 
 

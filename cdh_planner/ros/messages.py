@@ -242,6 +242,7 @@ ERROR_CODES = {
     Status.RESOURCE_LIMIT: NO_VALID_PATH,     # no path found within max_memory_mb
     Status.CANCELED: CANCELED,                # the caller cancelled the plan
     Status.INVALID: INVALID_REQUEST,          # request inconsistent with the task / malformed
+    Status.NOT_EXECUTABLE: NO_VALID_PATH,     # no trajectory executes as checked (bounded)
     # refusals by the node, before or after planning:
     Status.BAD_FRAME: TF_ERROR,               # frame_id is not the base frame
     Status.BAD_STRATEGY: INVALID_PLANNER,     # a strategy the planner does not have

@@ -118,10 +118,11 @@ SPECS = (
     + [_setting_spec(name) for name in SETTINGS]
     + [Spec("stream_rate_hz", DOUBLE, 50.0,
             "rate of ~/cable_command while executing (Hz)", low=1.0, high=1000.0),
-       Spec("stream_interpolation", STRING, "linear",
-            "between waypoints while streaming: linear (straight in cable space at the mean "
-            "speed, never above the limit) or quintic (as a JointTrajectoryController "
-            "interpolates the same points)", choices=INTERPOLATIONS),
+       Spec("stream_interpolation", STRING, "quintic",
+            "between waypoints while streaming: quintic (as a JointTrajectoryController "
+            "interpolates the same points: the motion the planner checked) or linear "
+            "(straight in cable space at the mean speed; its velocity steps at every point, "
+            "which the check does not cover)", choices=INTERPOLATIONS),
        Spec("execution.mode", STRING, "stream",
             "how ~/execute moves the winches: stream (sensor_msgs/JointState setpoints on "
             "~/cable_command at stream_rate_hz) or follow_joint_trajectory (the cable "

@@ -20,6 +20,7 @@ from cdh_planner.planner import PlanResult
 from cdh_planner.status import Status
 from cdh_planner.trajectory.path import PlannedPath
 from cdh_planner.trajectory.timing import time_path
+from cdh_planner.trajectory.dynamics import timed_path
 
 WAYPOINTS = 40
 
@@ -66,6 +67,10 @@ class FakePlanner:
                            tension_max=f.tension_max, margin=f.margin, t=np.zeros(WAYPOINTS),
                            velocities=zeros, accelerations=zeros)
         path = time_path(path, self.settings.max_cable_speed, self.settings.max_cable_accel)
+        # the real planner's output stage: the points a controller's quintic executes within
+        # the limits (quasi-static: the C2 spline through them, slowed to the limits)
+        path, _, _ = timed_path(self.robot, path, "quasi_static", self.settings.max_cable_speed,
+                                self.settings.max_cable_accel)
         return self._result(True, Status.OK, "straight line (test double)", path, t0)
 
 
