@@ -35,25 +35,28 @@ ROOT = Path(__file__).resolve().parents[1]
 
 
 class Rate:
-    """Prints one line every ``batch`` charts: size, seconds, charts/s of the batch, and
-    (atlas mode) growth steps tried per chart made."""
+    """Prints one line every ``batch`` charts: size, seconds, charts/s of the batch (per
+    second of wall time, and per second of this process's CPU time: the machine may be
+    shared), and (atlas mode) growth steps tried per chart made."""
 
     def __init__(self, batch, steps=False):
         self.batch = batch
-        self.t0 = time.perf_counter()
-        self.last = (0, 0.0, 0)
+        self.t0, self.c0 = time.perf_counter(), time.process_time()
+        self.last = (0, 0.0, 0, 0.0)
         self.steps = 0
-        print(f"{'charts':>7s} {'seconds':>8s} {'charts/s':>9s}" + ("  steps/chart" if steps else ""), flush=True)
+        print(f"{'charts':>7s} {'seconds':>8s} {'charts/s':>9s} {'per CPU s':>9s}"
+              + ("  steps/chart" if steps else ""), flush=True)
 
     def __call__(self, charts):
         if charts - self.last[0] < self.batch:
             return
-        t = time.perf_counter() - self.t0
+        t, cpu = time.perf_counter() - self.t0, time.process_time() - self.c0
         made = charts - self.last[0]
         rate = made / max(t - self.last[1], 1e-9)
+        cpu_rate = made / max(cpu - self.last[3], 1e-9)
         steps = f"  {(self.steps - self.last[2]) / made:11.2f}" if self.steps else ""
-        print(f"{charts:7d} {t:8.1f} {rate:9.1f}{steps}", flush=True)
-        self.last = (charts, t, self.steps)
+        print(f"{charts:7d} {t:8.1f} {rate:9.1f} {cpu_rate:9.1f}{steps}", flush=True)
+        self.last = (charts, t, self.steps, cpu)
 
 
 def grow_atlas(planner, x0, timeout, rate):

@@ -7,6 +7,7 @@ from hypothesis import HealthCheck, given, settings
 from hypothesis import strategies as st
 
 from cdh_planner.atlas.atlas import Atlas, _KeyIndex
+from cdh_planner.atlas.domain import SampledDomain
 from cdh_planner.search.search import Stop, run
 from cdh_planner.status import Status
 
@@ -77,6 +78,31 @@ def test_chart_neighbours_are_exactly_the_overlapping_balls(seed, count):
     for x in (c.point(a, b) for a, b in zip(rng.uniform(-4, 4, 20), rng.uniform(-1.0, 1.0, 20))):
         want = {j for j, ch in enumerate(atlas.charts) if np.linalg.norm(atlas.diff(ch.x, x)) < ch.radius}
         assert set(atlas.closest(x)) == want
+
+
+@settings(max_examples=40, deadline=None)
+@given(seed=st.integers(0, 2 ** 32 - 1), n=st.integers(1, 6), m=st.integers(0, 300),
+       reach=st.floats(0.0, 1.2))
+def test_clipping_by_many_half_spaces_at_once_is_clipping_one_after_another(seed, n, m, reach):
+    """A new chart is clipped by all its neighbours in one product: the same free
+    directions and the same half-spaces (up to the one that closes it) as one clip after
+    another that stops once the domain is closed."""
+    rng = np.random.default_rng(seed)
+    A = rng.standard_normal((m, n))
+    A /= np.linalg.norm(A, axis=1, keepdims=True)
+    betas = rng.uniform(0.05, reach + 0.05, m)  # small reach: the domain closes part-way
+    one, many = SampledDomain(n, 0.5, 96), SampledDomain(n, 0.5, 96)
+    for a, beta in zip(A, betas):
+        if one.closed:
+            break
+        one.clip(a, beta)
+    many.clip_many(A, betas)
+    np.testing.assert_array_equal(many.alive, one.alive)
+    assert many.halfspaces.count == one.halfspaces.count
+    np.testing.assert_array_equal(many.halfspaces.a[:many.halfspaces.count], one.halfspaces.a[:one.halfspaces.count])
+    np.testing.assert_array_equal(many.halfspaces.beta[:many.halfspaces.count],
+                                  one.halfspaces.beta[:one.halfspaces.count])
+    assert many.nbytes == one.nbytes
 
 
 def test_neighbours_stay_exact_as_charts_grow_and_shrink():

@@ -153,12 +153,36 @@ class Atlas:
         near, d, dist = self._near(x, key, radius + self.radius)
         overlap = dist < radius + self._radii.rows[near]  # the balls overlap: neighbours
         # nearest first: their planes cut most, so later clips mostly find nothing to cut
-        for k in np.flatnonzero(overlap)[np.argsort(dist[overlap], kind="stable")]:
-            self._link(i, int(near[k]), d[k])
+        order = np.flatnonzero(overlap)[np.argsort(dist[overlap], kind="stable")]
+        self._link_new(i, near[order], d[order])
         self._index.add(key)
         self._centres.add(x)
         self._radii.add(radius)
         return i
+
+    def _link_new(self, i, js, d):
+        """Link the new chart i to the charts js (their balls overlap i's; d: x_j - x_i,
+        wrapped): i is clipped by all of them at once (as one clip after another would,
+        nearest first, until closed), then each open one of them by i (a Python loop over
+        the open ones only: the cost of a chart follows its open neighbours, not the
+        atlas's size)."""
+        ci = self.charts[i]
+        rj = self._radii.rows[js]
+        for j in js.tolist():
+            ci.neighbours.add(j)
+            self.charts[j].neighbours.add(i)
+        s = d @ ci.basis
+        ds = np.linalg.norm(s, axis=1)
+        ok = ds >= 1e-12
+        beta = (ds[ok] ** 2 + ci.radius ** 2 - rj[ok] ** 2) / (2.0 * ds[ok])
+        # keep a core around the centre: a chart never loses its own centre
+        before = ci.domain.nbytes
+        ci.domain.clip_many(s[ok] / ds[ok, None], np.maximum(beta, 0.05 * ci.radius))
+        self.nbytes += ci.domain.nbytes - before
+        for k, j in enumerate(js.tolist()):
+            cj = self.charts[j]
+            if not cj.closed:  # clipping a closed chart cannot change anything the search uses
+                self._clip_by(cj, ci, -d[k])
 
     def _near(self, x, key, bound):
         """Charts whose centre's key lies within ``bound`` of ``key`` (a superset of those
@@ -181,12 +205,14 @@ class Atlas:
         ci.neighbours.add(j)
         cj.neighbours.add(i)
         for a, b, dab in ((ci, cj, d), (cj, ci, -d)):
-            if a.closed:  # clipping a closed chart cannot change anything the search uses
-                continue
-            s = a.basis.T @ dab
-            ds = np.linalg.norm(s)
-            if ds < 1e-12:
-                continue
+            if not a.closed:  # clipping a closed chart cannot change anything the search uses
+                self._clip_by(a, b, dab)
+
+    def _clip_by(self, a, b, dab):
+        """Clip chart a's domain by the half-space of its neighbour b (dab: x_b - x_a)."""
+        s = a.basis.T @ dab
+        ds = np.linalg.norm(s)
+        if ds >= 1e-12:
             beta = (ds * ds + a.radius ** 2 - b.radius ** 2) / (2.0 * ds)
             # keep a core around the centre: a chart never loses its own centre
             self._clip(a, s / ds, max(beta, 0.05 * a.radius))
