@@ -162,7 +162,8 @@ class Planner:
             y, charts, direct = self._direct_points(ys[0], ys[1]), 0, True
         else:
             out = run(self.atlas, points["start"], points["goal"], self.cost, stop, strategy,
-                      self._direct_x, progress, self._edge_costs, self._link_ok, heuristic)
+                      self._direct_x, progress, self._edge_costs, self._link_ok, heuristic,
+                      self._route_unsafe)
             if out.status != Status.OK:
                 return answer(False, out.status, _failure_message(out.status, len(self.atlas.charts),
                                                                   s, self.radius),
@@ -258,6 +259,21 @@ class Planner:
         sheets of M across a thin gap of C; a few poses between each pair show the gap
         (the dense check of the whole path comes later)."""
         return self._probe(self._task_coords(xs), CHORD_SAMPLES)
+
+    def _route_unsafe(self, xs, direct):
+        """The first motion k (xs[k] -> xs[k + 1]; not the direct motions in ``direct``,
+        checked densely already) that densification cannot make dense-feasible, or None.
+        One dense check of the route finds the walls thinner than _link_ok's probe (Robot
+        2: 6 mrad wide, margin -52 inside, between two link points 0.06 rad apart); the
+        search cuts that link instead of answering with a route that cannot be a path."""
+        y = self._task_coords(xs)
+        p, tau = self.task.pose(y)
+        for k, seg in enumerate(check_motion(self.robot, p, quaternion_from_tau(tau))):
+            if k in direct or (seg.feasible and seg.unresolved == 0):
+                continue
+            if not self._densify(y[k:k + 2])[1]:
+                return k
+        return None
 
     # ----- clearance (trajectory.clearance) ------------------------------------------------
     def _clearance_cost(self, xa, xb):

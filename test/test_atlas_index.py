@@ -156,3 +156,29 @@ def test_a_restarted_search_reuses_its_heuristic_and_link_checks():
     n_links = sum(len(ch.neighbours) for ch in atlas.charts) // 2 + 3  # + the cut ones
     assert calls["link"] <= n_links
     assert calls["h"] <= 2 * len(atlas.charts) + 2 * len(out.charts)  # per side, + route costs
+
+
+def test_a_route_motion_the_caller_refuses_cuts_its_link_and_the_search_goes_on():
+    """route_check names motion k of a route: the link that made it is cut and the
+    search answers with a route whose every motion passes."""
+    c = Wave()
+    atlas = Atlas(c, radius=0.3)
+    refused = []
+
+    def route_check(points, direct):
+        for k in range(len(points) - 1):
+            if len(refused) < 2 and k not in direct:  # refuse the first motion, twice
+                refused.append((points[k].copy(), points[k + 1].copy()))
+                return k
+        return None
+
+    def cost(xa, xb):
+        return float(np.linalg.norm(atlas.diff(xa, xb)))
+
+    xs, xg = c.point(-1.0, 0.0), c.point(1.0, 0.5)
+    out = run(atlas, xs, xg, cost, Stop(max_charts=5000), "gbf", route_check=route_check)
+    assert out.status == Status.OK and len(refused) == 2
+    for a, b in refused:  # no motion the caller refused is in the answer
+        assert not any(np.array_equal(a, p) and np.array_equal(b, q) for p, q in zip(out.points, out.points[1:]))
+    for i, j in zip(out.charts, out.charts[1:]):
+        assert j in atlas.charts[i].neighbours
