@@ -161,6 +161,9 @@ class Planner:
         if self._direct_ok(ys[0], ys[1]):
             y, charts, direct = self._direct_points(ys[0], ys[1]), 0, True
         else:
+            det = self._det_j([points["start"], points["goal"]])
+            if det[0] * det[1] < 0:
+                return answer(False, Status.NO_PATH, _SINGULAR_BETWEEN.format(*det))
             out = run(self.atlas, points["start"], points["goal"], self.cost, stop, strategy,
                       self._direct_x, progress, self._edge_costs, self._link_ok, heuristic,
                       self._route_unsafe)
@@ -235,6 +238,13 @@ class Planner:
             return False
         seg = check_path(self.robot, self._direct_motion(y))[0]
         return seg.feasible and seg.unresolved == 0 and seg.worst.margin >= self.settings.margin_floor
+
+    def _det_j(self, xs):
+        """det J (the cables' screw Jacobian) at points of M. J is never singular on C (a
+        singular J makes the tension set of the wrench ellipsoid unbounded: math.md, Sec. 3),
+        so its sign is the same all along any path: ends of opposite signs have none."""
+        p, tau = self._pose_arrays(xs)
+        return evaluate(self.robot, p, tau).det_j
 
     def _direct_x(self, xa, xb):
         ya, yb = self._task_coords([xa, xb])
@@ -556,6 +566,11 @@ def _finite_vector(name, v, n):
 def _describe(p, tau):
     return (f"p = [{', '.join(f'{v:.4f}' for v in p)}] m, "
             f"tau = [{', '.join(f'{v:.4f}' for v in tau)}] rad")
+
+
+_SINGULAR_BETWEEN = ("no path: start and goal lie on opposite sides of the singularity det J = 0 "
+                     "(det J = {:.3g} and {:.3g}); every motion between them passes a pose where the "
+                     "cable Jacobian is singular, which no tension in range can hold (at any resolution)")
 
 
 def _failure_message(status, charts, s, radius):
