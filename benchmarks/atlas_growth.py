@@ -1,15 +1,19 @@
 """Charts per second as the atlas grows: does a chart cost more when the atlas is larger?
 
-    python benchmarks/atlas_growth.py [--mode query|atlas] [--robot robot2] [--count 25]
+    python benchmarks/atlas_growth.py [--mode search|atlas] [--robot robot2] [--count 25]
         [--index 21] [--radius 0.5] [--strategy gbf] [--timeout 60] [--batch 250]
 
 The query is one of the random free-flight queries of benchmarks/vs_ompl.py (seed 0):
 ``random_free_queries(robot, count, 0)[index]``; the default, Robot 2's 22nd of 25 (vs_ompl's
 query 43 of --queries 50, 13 of --queries 16), is the pair no planner answered within 60 s.
 
-- ``--mode query``: ``Planner.plan`` with the strategy and radius; prints the atlas size
-  every ``--batch`` charts with the seconds since the start and the charts/s of the batch,
-  then the answer (status, charts, seconds).
+First the planner's own answer (``Planner.plan``: on the default pair, no_path before any
+chart, its ends lying across det J = 0). Then, to watch an atlas grow:
+
+- ``--mode search``: the search from both ends as the planner runs it (its direct motions,
+  link and route checks), without that rule; prints the atlas size every ``--batch``
+  charts with the seconds since the start and the charts/s of the batch, then the answer
+  (status, charts, seconds).
 - ``--mode atlas``: the atlas alone, no search: from the start's chart, every open chart
   grown in turn (breadth first) until the time limit; the same lines. What a chart costs
   in Newton steps, index queries and domain clips, without the search's link checks.
@@ -25,11 +29,13 @@ from collections import deque
 from pathlib import Path
 
 import numpy as np
+from threadpoolctl import threadpool_limits
 
 from cdh_planner.io.random_queries import random_free_queries
 from cdh_planner.model.robot import load_robot
 from cdh_planner.model.task import FreeTask
 from cdh_planner.planner import Planner, PlannerSettings
+from cdh_planner.search.search import Stop, run
 
 ROOT = Path(__file__).resolve().parents[1]
 
@@ -79,7 +85,7 @@ def grow_atlas(planner, x0, timeout, rate):
 
 def main(argv=None):
     ap = argparse.ArgumentParser(description=__doc__, formatter_class=argparse.RawDescriptionHelpFormatter)
-    ap.add_argument("--mode", choices=("query", "atlas"), default="query")
+    ap.add_argument("--mode", choices=("search", "atlas"), default="search")
     ap.add_argument("--robot", default="robot2")
     ap.add_argument("--count", type=int, default=25, help="queries drawn for the robot (seed 0)")
     ap.add_argument("--index", type=int, default=21, help="which of them")
@@ -92,21 +98,33 @@ def main(argv=None):
     q = random_free_queries(robot, args.count, seed=0)[args.index]
     settings = dataclasses.replace(PlannerSettings(), strategy=args.strategy, radius=args.radius,
                                    timeout_s=args.timeout, max_charts=10 ** 6)
-    planner = Planner(robot, FreeTask(), settings)
     print(f"{args.robot} query {args.index} of {args.count} (seed 0), {args.mode}, radius {args.radius:g}, "
-          f"{args.strategy if args.mode == 'query' else 'no search'}, timeout {args.timeout:g} s", flush=True)
+          f"{args.strategy if args.mode == 'search' else 'no search'}, timeout {args.timeout:g} s", flush=True)
+    t = time.perf_counter()
+    res = Planner(robot, FreeTask(), settings).plan(q.start, q.goal)
+    print(f"plan: {res.reason} in {time.perf_counter() - t:.2f} s, {res.charts} charts ({res.message})")
+    with threadpool_limits(limits=1, user_api="blas"):  # as Planner.plan runs
+        grow(args, robot, q, settings)
+    return 0
+
+
+def grow(args, robot, q, settings):
+    """The search or the atlas alone on q (module docstring), printing as it grows."""
+    planner = Planner(robot, FreeTask(), settings)
     rate = Rate(args.batch, steps=args.mode == "atlas")
     t = time.perf_counter()
-    if args.mode == "query":
-        res = planner.plan(q.start, q.goal, progress=lambda d: rate(d["charts"]))
-        status = f"{res.reason} ({res.message})"
+    xs, xg = (planner.constraint.lift(e.p, e.tau) for e in (q.start, q.goal))
+    if args.mode == "search":
+        out = run(planner.atlas, xs, xg, planner.cost, Stop(t + args.timeout), args.strategy,
+                  planner._direct_x, lambda d: rate(d["charts"]), link_ok=planner._link_ok,
+                  route_check=planner._route_unsafe)
+        status = str(out.status)
     else:
-        status = grow_atlas(planner, planner.constraint.lift(q.start.p, q.start.tau), args.timeout, rate)
+        status = grow_atlas(planner, xs, args.timeout, rate)
     seconds = time.perf_counter() - t
     links = [len(ch.neighbours) for ch in planner.atlas.charts]
     print(f"answer: {status}; {len(links)} charts in {seconds:.1f} s; neighbours per chart: "
           f"mean {np.mean(links):.1f}, max {max(links)}", flush=True)
-    return 0
 
 
 if __name__ == "__main__":
