@@ -173,8 +173,12 @@ class Planner:
         if self._direct_ok(ys[0], ys[1]):
             y, charts, direct = self._direct_points(ys[0], ys[1]), 0, True
         else:
+            det = self._det_j([points["start"], points["goal"]])
+            if det[0] * det[1] < 0:
+                return answer(False, Status.NO_PATH, _SINGULAR_BETWEEN.format(*det))
             out = run(self.atlas, points["start"], points["goal"], self.cost, stop, strategy,
-                      self._direct_x, progress, self._edge_costs, self._link_ok, heuristic)
+                      self._direct_x, progress, self._edge_costs, self._link_ok, heuristic,
+                      self._route_unsafe)
             if out.status != Status.OK:
                 return answer(False, out.status, _failure_message(out.status, len(self.atlas.charts),
                                                                   s, self.radius),
@@ -253,6 +257,13 @@ class Planner:
         seg = check_path(self.robot, self._direct_motion(y), collision=self.collision)[0]
         return seg.feasible and seg.unresolved == 0 and seg.worst.margin >= self.settings.margin_floor
 
+    def _det_j(self, xs):
+        """det J (the cables' screw Jacobian) at points of M. J is never singular on C (a
+        singular J makes the tension set of the wrench ellipsoid unbounded: math.md, Sec. 3),
+        so its sign is the same all along any path: ends of opposite signs have none."""
+        p, tau = self._pose_arrays(xs)
+        return evaluate(self.robot, p, tau).det_j
+
     def _direct_x(self, xa, xb):
         ya, yb = self._task_coords([xa, xb])
         return self._direct_ok(ya, yb)
@@ -276,6 +287,21 @@ class Planner:
         sheets of M across a thin gap of C; a few poses between each pair show the gap
         (the dense check of the whole path comes later)."""
         return self._probe(self._task_coords(xs), CHORD_SAMPLES)
+
+    def _route_unsafe(self, xs, direct):
+        """The first motion k (xs[k] -> xs[k + 1]; not the direct motions in ``direct``,
+        checked densely already) that densification cannot make dense-feasible, or None.
+        One dense check of the route finds the walls thinner than _link_ok's probe (Robot
+        2: 6 mrad wide, margin -52 inside, between two link points 0.06 rad apart); the
+        search cuts that link instead of answering with a route that cannot be a path."""
+        y = self._task_coords(xs)
+        p, tau = self.task.pose(y)
+        for k, seg in enumerate(check_motion(self.robot, p, quaternion_from_tau(tau))):
+            if k in direct or (seg.feasible and seg.unresolved == 0):
+                continue
+            if not self._densify(y[k:k + 2])[1]:
+                return k
+        return None
 
     # ----- clearance (trajectory.clearance) ------------------------------------------------
     def _clearance_cost(self, xa, xb):
@@ -610,6 +636,11 @@ def _describe(p, tau):
     # 6 significant digits: a position of 1e308 (a node's goal) is not 309 digits long
     return (f"p = [{', '.join(f'{v:.6g}' for v in p)}] m, "
             f"tau = [{', '.join(f'{v:.6g}' for v in tau)}] rad")
+
+
+_SINGULAR_BETWEEN = ("no path: start and goal lie on opposite sides of the singularity det J = 0 "
+                     "(det J = {:.3g} and {:.3g}); every motion between them passes a pose where the "
+                     "cable Jacobian is singular, which no tension in range can hold (at any resolution)")
 
 
 def _failure_message(status, charts, s, radius):
