@@ -34,7 +34,7 @@ from cdh_planner.ros import execution as X  # noqa: E402
 from cdh_planner.ros.messages import cable_trajectory_msg, to_seconds  # noqa: E402
 
 from conftest import CONFIG, PROBLEMS  # noqa: E402
-from ros_harness import ControllerDouble, claimed_domain  # noqa: E402
+from ros_harness import ControllerDouble, claimed_domain, until  # noqa: E402
 
 ACTION = "/cable_controller/follow_joint_trajectory"
 FRAME = "cdh_base"
@@ -389,15 +389,6 @@ class Side:
             entity.destroy()
         self.node.destroy_node()
         self.context.try_shutdown()
-
-
-def until(condition, timeout_s):
-    end = time.monotonic() + timeout_s
-    while not condition():
-        if time.monotonic() > end:
-            return False
-        time.sleep(0.01)
-    return True
 
 
 class Done:
