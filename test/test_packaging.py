@@ -32,7 +32,7 @@ THIRD_PARTY = {
 ROS = {"rclpy", "ament_index_python", "builtin_interfaces", "rcl_interfaces", "action_msgs",
        "std_msgs", "std_srvs", "geometry_msgs", "nav_msgs", "trajectory_msgs", "sensor_msgs",
        "diagnostic_msgs", "visualization_msgs", "service_msgs", "cdh_planner_interfaces",
-       "control_msgs"}
+       "control_msgs", "tf2_msgs"}
 # the interfaces of the PlanPath action server and the FollowJointTrajectory client
 ACTION_INTERFACES = {"action_msgs", "cdh_planner_interfaces", "control_msgs"}
 
@@ -120,7 +120,7 @@ def test_launch_file_declares_the_robot_argument_and_starts_the_node():
     assert {("launch.actions", "DeclareLaunchArgument"), ("launch_ros.actions", "Node"),
             ("launch.substitutions", "LaunchConfiguration")} <= imported
 
-    declare, mode = _calls(tree, "DeclareLaunchArgument")
+    declare, mode = _calls(tree, "DeclareLaunchArgument")[:2]
     assert ast.literal_eval(declare.args[0]) == "robot"
     assert ast.literal_eval(mode.args[0]) == "execution_mode"
     from cdh_planner.ros.params import EXECUTION_MODES, SPEC
@@ -138,9 +138,20 @@ def test_launch_file_declares_the_robot_argument_and_starts_the_node():
     assert ast.literal_eval(kw["arguments"]) == ["node"]
     param, overrides = kw["parameters"].elts
     assert param.func.id == "LaunchConfiguration" and ast.literal_eval(param.args[0]) == "robot"
-    (key,), (value,) = overrides.keys, overrides.values
-    assert ast.literal_eval(key) == "execution.mode" and value.func.id == "LaunchConfiguration"
-    assert ast.literal_eval(value.args[0]) == "execution_mode"
+    given = {ast.literal_eval(k): v for k, v in zip(overrides.keys, overrides.values)}
+    assert {k: (v.func.id, ast.literal_eval(v.args[0])) for k, v in given.items()} == {
+        "execution.mode": ("LaunchConfiguration", "execution_mode"),
+        "use_sim_time": ("LaunchConfiguration", "use_sim_time")}
+    # issue 23: namespace, use_sim_time and log_level are launch arguments
+    declared = {ast.literal_eval(c.args[0]): _kwargs(c)
+                for c in _calls(tree, "DeclareLaunchArgument")}
+    assert {"namespace", "use_sim_time", "log_level"} <= set(declared)
+    assert ast.literal_eval(declared["use_sim_time"]["default_value"]) == "false"
+    assert kw["namespace"].func.id == "LaunchConfiguration"
+    assert ast.literal_eval(kw["namespace"].args[0]) == "namespace"
+    level_flag, level = kw["ros_arguments"].elts
+    assert ast.literal_eval(level_flag) == "--log-level" and ast.literal_eval(level.args[0]) == \
+        "log_level"
 
 
 def test_the_launch_files_command_exists_and_knows_node():
@@ -166,13 +177,13 @@ def test_licences_ship():
 
 def test_rviz_config_shows_the_nodes_latched_outputs(setup_kwargs):
     """config/cdh_planner.rviz (installed with the config files): the fixed frame is the
-    node's default base_frame, and its displays subscribe to the node's ~/markers and
+    node's default fixed_frame (z up), and its displays subscribe to the node's ~/markers and
     ~/path with the latched QoS they are published with."""
     import yaml
     from cdh_planner.ros.params import SPEC
     cfg = yaml.safe_load((REPO / "config" / "cdh_planner.rviz").read_text())
     manager = cfg["Visualization Manager"]
-    assert manager["Global Options"]["Fixed Frame"] == SPEC["base_frame"].default
+    assert manager["Global Options"]["Fixed Frame"] == SPEC["fixed_frame"].default
     topics = {d["Topic"]["Value"]: d for d in manager["Displays"] if "Topic" in d}
     assert set(topics) == {"/cdh_planner/markers", "/cdh_planner/path"}
     assert all(d["Topic"]["Durability Policy"] == "Transient Local" for d in topics.values())

@@ -83,6 +83,12 @@ class RunLog:
         recorder = self._recorder
         return str(recorder.path) if recorder is not None else ""
 
+    @property
+    def state(self):
+        """The open file, or "failed", "off", "on, no file open" (for /diagnostics)."""
+        return self.path or ("failed" if self._failed else
+                             "on, no file open" if self._enabled else "off")
+
     def configure(self, log_dir, enabled, max_bytes=None, max_s=None):
         """New settings: a change of directory or on/off closes the current file; new limits
         apply to it from the next record (``None``: unchanged)."""
