@@ -81,3 +81,16 @@ def test_a_loop_in_tf_does_not_hang_and_the_book_is_bounded():
     assert small.add(transform_msg("w", "y", IDENTITY, None))
     assert not small.add(transform_msg("w", "z", IDENTITY, None))
     assert small.add(transform_msg("w", "x", Z_DOWN, None))      # an update still fits
+
+
+def test_tf_message_has_the_real_tf2_msgs_type_hash():
+    """/tf must carry the standard type: the venv's partial copy (interfaces/tf2_msgs) hashes
+    as ROS 2 Jazzy's tf2_msgs/msg/TFMessage (`ros2 topic info -v /tf` on Jazzy)."""
+    import json
+    from pathlib import Path
+    from ament_index_python.packages import get_package_share_directory
+    description = Path(get_package_share_directory("tf2_msgs")) / "msg" / "TFMessage.json"
+    hashes = {h["type_name"]: h["hash_string"]
+              for h in json.loads(description.read_text())["type_hashes"]}
+    assert hashes["tf2_msgs/msg/TFMessage"] == \
+        "RIHS01_e369d0f05a23ae52508854b66f6aa0437f3449d652e8cbf22d5abe85d020f087"

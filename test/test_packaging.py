@@ -169,10 +169,12 @@ def test_licences_ship():
     assert "END OF TERMS AND CONDITIONS" in text
     root = ET.parse(REPO / "package.xml").getroot()
     assert root.findtext("license") == "Apache-2.0"
-    copy = REPO / "interfaces" / "control_msgs"
-    assert "Redistribution and use in source and binary forms" in (copy / "LICENSE").read_text()
-    assert ET.parse(copy / "package.xml").getroot().findtext("license") == "BSD-3-Clause"
-    assert "install(FILES LICENSE" in (copy / "CMakeLists.txt").read_text()
+    for name in ("control_msgs", "tf2_msgs"):
+        copy = REPO / "interfaces" / name
+        assert "Redistribution and use in source and binary forms" in (copy / "LICENSE").read_text()
+        assert ET.parse(copy / "package.xml").getroot().findtext("license") == "BSD-3-Clause"
+        assert "install(FILES LICENSE" in (copy / "CMakeLists.txt").read_text()
+        assert (copy / "COLCON_IGNORE").exists()
 
 
 def test_rviz_config_shows_the_nodes_latched_outputs(setup_kwargs):
