@@ -27,8 +27,9 @@ $(VENV)/bin/python:
 	  echo "venv creation failed: on Debian, apt-get install python3-venv (or python3.11-venv)" >&2; exit 1; }
 
 # Always use the venv's own python (ros-wheels-bootstrapper re-execs it).
-$(STAMP): $(VENV)/bin/python requirements.txt setup.py setup.cfg package.xml cdh_planner/manifold/kernels.py
+$(STAMP): $(VENV)/bin/python requirements.txt test/requirements-urdf.txt setup.py setup.cfg package.xml cdh_planner/manifold/kernels.py
 	$(PY) -m pip install -r requirements.txt
+	$(PY) -m pip install --no-deps -r test/requirements-urdf.txt
 	$(PY) -m pip install -e .
 	@# compile the numba kernel of F / F_x once (cached in __pycache__; later processes load it in 0.4 s)
 	$(PY) -c "from cdh_planner.io.problem import load_problem; from cdh_planner.manifold.constraint import TaskConstraint; \

@@ -33,7 +33,7 @@ from cdh_planner.errors import MAX_MESSAGE_CHARS, InputError, clip
 PROG = 'cdh-planner'
 
 # Order here is the order in --help. A name whose module does not exist yet is skipped.
-COMMANDS = ['verify', 'slice', 'plan', 'node', 'call', 'replay', 'recover', 'demo']
+COMMANDS = ['verify', 'slice', 'plan', 'node', 'call', 'replay', 'recover', 'urdf', 'demo']
 
 EXIT_OK = 0
 EXIT_NO = 1  # no path, infeasible

@@ -1,6 +1,7 @@
 """Frames and TF over DDS (REP 103 / 105): the z-up fixed frame ``world`` with the paper's
 z-down frame ``cdh_base`` under it (static), the platform's pose on /tf from the forward
-kinematics of the measured cable lengths, and goals in other frames transformed through TF.
+kinematics of the measured cable lengths with the live state (~/cable_state,
+~/least_margin, ~/live_markers), and goals in other frames transformed through TF.
 
 The execution test runs the node around the TEST DOUBLE planner (test/doubles/fake_planner.py)
 with the simulated controller; the z-up goal test runs the real planner.
@@ -11,8 +12,11 @@ import pytest
 from geometry_msgs.msg import PoseStamped, TransformStamped
 from nav_msgs.srv import GetPlan
 from sensor_msgs.msg import JointState
+from std_msgs.msg import Float64
+from visualization_msgs.msg import MarkerArray
 from tf2_msgs.msg import TFMessage
 
+from cdh_planner.feasibility import evaluate
 from cdh_planner.model.pose import rotation_from_quaternion
 from cdh_planner.ros import messages as M
 from cdh_planner.ros import planning
@@ -52,6 +56,9 @@ def test_tf_gives_the_platform_pose_during_an_execution(tmp_path):
         static = Collector(client.node, TFMessage, "/tf_static", TF_STATIC_QOS)
         poses = Collector(client.node, PoseStamped, "/cdh_planner/platform_pose", 10)
         measured = Collector(client.node, JointState, JOINT_STATES, 100)
+        cables = Collector(client.node, JointState, "/cdh_planner/cable_state", 100)
+        margins = Collector(client.node, Float64, "/cdh_planner/least_margin", 100)
+        live = Collector(client.node, MarkerArray, "/cdh_planner/live_markers", 100)
         assert double.ready.wait(30.0)
         client.wait_for_node(30.0)
         client.watch_execution()
@@ -89,6 +96,19 @@ def test_tf_gives_the_platform_pose_during_an_execution(tmp_path):
         assert moved > 0.01                          # it did move with the winches
         assert {_key(p.header.stamp) for p in poses.messages} >= {
             _key(t.header.stamp) for t in platform}  # ~/platform_pose: the same poses
+
+        # live state: the measured lengths as they came, the margin of the measured pose
+        for state in cables.messages[-20:]:
+            assert list(state.name) == list(ROBOT.winch_names)
+            np.testing.assert_array_equal(state.position, lengths[_key(state.header.stamp)])
+        last = platform[-1]
+        assert cables.messages[-1].header.stamp == last.header.stamp
+        p, R = _pose(last)
+        expected = evaluate(ROBOT, p[None], R=R[None]).margin[0]
+        assert margins.messages[-1].data == pytest.approx(expected, abs=1e-9)
+        drawn = {m.ns: m for m in live.messages[-1].markers}
+        assert set(drawn) == {"platform_measured", "cables_measured"}
+        assert len(drawn["cables_measured"].points) == 2 * len(ROBOT.winch_names)
 
 
 def _z_up(msg):
