@@ -115,7 +115,8 @@ def test_every_panel_in_the_layout_has_a_config_and_vice_versa(layout):
 
 def test_every_topic_is_one_the_node_publishes_or_joint_states(layout):
     published = {f"/{interface.NODE_NAME}/{getattr(interface, c)}" for c in TOPIC_CONSTANTS}
-    allowed = published | {"/joint_states"}
+    from cdh_planner.ros.live_state import LIVE_MARKERS     # measured, beside the planned
+    allowed = published | {"/joint_states", f"/{interface.NODE_NAME}/{LIVE_MARKERS}"}
     topics = {topic_of(s) for s in strings(layout) if s.startswith("/")}
     assert topics <= allowed, sorted(topics - allowed)
     # every output the brief lists is shown somewhere

@@ -213,6 +213,9 @@ def test_rviz_config_shows_the_nodes_latched_outputs(setup_kwargs):
     manager = cfg["Visualization Manager"]
     assert manager["Global Options"]["Fixed Frame"] == SPEC["fixed_frame"].default
     topics = {d["Topic"]["Value"]: d for d in manager["Displays"] if "Topic" in d}
-    assert set(topics) == {"/cdh_planner/markers", "/cdh_planner/path"}
-    assert all(d["Topic"]["Durability Policy"] == "Transient Local" for d in topics.values())
+    assert set(topics) == {"/cdh_planner/markers", "/cdh_planner/path",
+                           "/cdh_planner/live_markers"}
+    latched = {"/cdh_planner/markers", "/cdh_planner/path"}       # the plan's; live: volatile
+    assert all((d["Topic"]["Durability Policy"] == "Transient Local") == (t in latched)
+               for t, d in topics.items())
     assert "config/cdh_planner.rviz" in dict(setup_kwargs["data_files"])["share/cdh_planner/config"]

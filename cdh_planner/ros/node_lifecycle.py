@@ -30,8 +30,9 @@ class LifecycleMixin:
 
     @property
     def lifecycle_state(self):
-        """unconfigured, inactive, active, finalized (or a transition state)."""
-        return self._state_machine.current_state[1]
+        """unconfigured, inactive, active or finalized: kept by the transitions below
+        (rclpy 7.1 has no public accessor of its state machine's state)."""
+        return getattr(self, "_lifecycle_state", "unconfigured")
 
     def on_configure(self, state):
         """Check the parameters, load the robot, warm the planner, open the run file."""
@@ -42,22 +43,31 @@ class LifecycleMixin:
             if not getattr(self, "_raise_configure_error", False):
                 self.get_logger().error(f"configure failed: {exc}")
             return TransitionCallbackReturn.FAILURE
+        self._lifecycle_state = "inactive"
         return TransitionCallbackReturn.SUCCESS
 
     def on_activate(self, state):
-        self.active = True
+        self.active, self._lifecycle_state = True, "active"
         self.get_logger().info("active: serving plans")
         return super().on_activate(state)
 
     def on_deactivate(self, state):
-        self.active = False
+        self.active, self._lifecycle_state = False, "inactive"
         self.get_logger().info(f"inactive: {self.execution.stop()}")
         return super().on_deactivate(state)
 
     def on_cleanup(self, state):
         self.close()
+        self._lifecycle_state = "unconfigured"
         return super().on_cleanup(state)
 
     def on_shutdown(self, state):
         self.close()
+        self._lifecycle_state = "finalized"
         return super().on_shutdown(state)
+
+    def on_error(self, state):
+        """A transition raised: release everything; back to unconfigured."""
+        self.close()
+        self._lifecycle_state = "unconfigured"
+        return TransitionCallbackReturn.SUCCESS

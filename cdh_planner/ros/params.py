@@ -174,7 +174,13 @@ SPECS = (
        Spec("log_max_file_mb", DOUBLE, 100.0, "rotation: a run file that has reached this "
             "size (MiB) is closed and the next record starts a new one; 0: no limit", low=0.0),
        Spec("log_max_file_s", DOUBLE, 0.0, "rotation: a run file open this long (s) is "
-            "closed and the next record starts a new one; 0: no limit", low=0.0)]
+            "closed and the next record starts a new one; 0: no limit", low=0.0),
+       Spec("log_max_files", INT, 100, "pruning: when a run file is opened, only the newest "
+            "this many run files (cdh_planner_*.mcap) in log_dir are kept; 0: no limit",
+            low=0, high=1_000_000),
+       Spec("log_max_age_days", DOUBLE, 0.0, "pruning: when a run file is opened, run files "
+            "in log_dir last written longer ago than this (days) are removed; 0: no limit",
+            low=0.0)]
 )
 SPEC = {s.name: s for s in SPECS}
 
