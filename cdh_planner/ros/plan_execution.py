@@ -97,7 +97,7 @@ class PlanExecution:
     def start(self, plan, config):
         """(started, message): ``plan`` (PlannedPath, Robot, PlanOutputs) executed in
         ``execution.mode``, or why not (executing already, no plan, the winches away from
-        its start). Measured lengths are checked when there are any. A refusal here is
+        its start, or not measured unless allowed: ``_check_start``). A refusal here is
         only in the answer: ``~/execution_result`` reports runs that started."""
         values = config.values
         if self.running:
@@ -105,17 +105,9 @@ class PlanExecution:
         if plan is None:
             return False, "refused: no plan to execute; call ~/plan first"
         path, robot, out = plan
-        lengths, why = self.joints.lengths(values["execution.joint_states_max_age_s"])
-        if lengths is not None:
-            mismatch = execution.start_mismatch(lengths, path.lengths[0],
-                                                values["execution.start_tolerance"],
-                                                robot.winch_names)
-            if mismatch:
-                return False, f"refused: {mismatch}"
-        if lengths is None and not values["execution.allow_unchecked_start"]:
-            return False, (f"refused: the start is not measured ({why}); set "
-                           f"execution.allow_unchecked_start to execute unchecked")
-        note = "" if lengths is not None else f" (start not checked: {why})"
+        refused, note = self._check_start(values, path, robot)
+        if refused:
+            return False, refused
         what = f"{len(path)} waypoints, {float(path.t[-1]):.3f} s"
         run = self.runs.begin(values["execution.mode"])
         if run is None:
@@ -137,6 +129,20 @@ class PlanExecution:
             return False, f"refused: execution {run.outcome}: {run.message}"
         return True, (f"executing: {what} at {config.stream_rate_hz:g} Hz on "
                       f"{self._publisher(run).topic_name}{note}")
+
+    def _check_start(self, values, path, robot):
+        """(refusal or "", note): the measured lengths against the path's first point; with
+        none, refused unless ``execution.allow_unchecked_start`` (then noted)."""
+        lengths, why = self.joints.lengths(values["execution.joint_states_max_age_s"])
+        if lengths is not None:
+            mismatch = execution.start_mismatch(lengths, path.lengths[0],
+                                                values["execution.start_tolerance"],
+                                                robot.winch_names)
+            return (f"refused: {mismatch}" if mismatch else ""), ""
+        if not values["execution.allow_unchecked_start"]:
+            return (f"refused: the start is not measured ({why}); set "
+                    f"execution.allow_unchecked_start to execute unchecked"), ""
+        return "", f" (start not checked: {why})"
 
     def _start_following(self, run, out, what):
         self.controller.start(out.cable_trajectory,
