@@ -6,7 +6,6 @@ import io
 import subprocess
 
 import numpy as np
-import pytest
 import yourdfpy
 from std_msgs.msg import String
 

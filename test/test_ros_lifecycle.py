@@ -7,7 +7,7 @@ these tests are about the node's states, not the planner's answers.
 
 import pytest
 from diagnostic_msgs.msg import DiagnosticArray, DiagnosticStatus
-from lifecycle_msgs.msg import State, Transition
+from lifecycle_msgs.msg import Transition
 from lifecycle_msgs.srv import ChangeState, GetState
 
 from cdh_planner.ros.client import PlannerClient
