@@ -119,3 +119,26 @@ def test_diagnostics_arrive_with_the_state(tmp_path):
 def test_diagnostic_levels(health, level, words):
     status = health_status(health, "n")
     assert status.level == level and words in status.message
+
+
+def test_configure_warms_the_planners_kernel():
+    """planning.warm_up (called on every planner the node makes: configure, new parameters)
+    evaluates the constraint's compiled kernel once; a planner without one is left as is."""
+    from cdh_planner.ros.planning import warm_up
+    calls = []
+
+    class Constraint:
+        def lift(self, p, tau):
+            calls.append(("lift", tuple(p), tuple(tau)))
+            return "x"
+
+        def residual_and_jacobian(self, x):
+            calls.append(("F", x))
+
+    class Planner:
+        constraint = Constraint()
+
+    planner = Planner()
+    assert warm_up(planner) is planner and [c[0] for c in calls] == ["lift", "F"]
+    double = object()
+    assert warm_up(double) is double

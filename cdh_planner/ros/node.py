@@ -165,9 +165,10 @@ class PlannerNode(LifecycleMixin, LifecycleNode):
         return SetParametersResult(successful=True)
 
     def _new_planner(self, config):
-        """A Planner for ``config`` (a fresh atlas); InputError naming the parameter."""
+        """A Planner for ``config`` (a fresh atlas, its kernel warm); InputError naming the
+        parameter."""
         try:
-            return self._factory(config.robot, config.task, config.settings)
+            return planning.warm_up(self._factory(config.robot, config.task, config.settings))
         except InputError as exc:
             raise parameter_error(exc) from None
 
