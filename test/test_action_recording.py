@@ -56,8 +56,8 @@ def action_run(domain, client, tmp_path_factory):
         goals = [plan_path_goal(sphere_pose_msg(Q1), sphere_pose_msg(Q2)),
                  plan_path_goal(sphere_pose_msg(Q2), sphere_pose_msg(Q3), strategy="gbf",
                                 timeout_s=20.0),
-                 plan_path_goal(sphere_pose_msg(Q1, frame="world"),
-                                sphere_pose_msg(Q2, frame="world"))]
+                 plan_path_goal(sphere_pose_msg(Q1, frame="map"),     # not in TF
+                                sphere_pose_msg(Q2, frame="map"))]
         answers = [client.plan_path(goal, timeout_s=30.0) for goal in goals]
     finally:
         rc = node.stop(signal.SIGTERM)
@@ -177,7 +177,7 @@ def test_replay_requests_resends_the_goals(domain, client, action_run, tmp_path)
     for line in (f"goal 1: MATCHES: error code NONE as recorded; {n1} poses, max deviation 0 m",
                  f"goal 2: MATCHES: error code NONE as recorded; {n2} poses, max deviation 0 m",
                  "goal 3: MATCHES: error code TF_ERROR as recorded; both no plan (invalid "
-                 "request: start.header.frame_id = 'world'",
+                 "request: start.header.frame_id = 'map'",
                  "3 of 3 answers match the recording"):
         assert line in r.stdout, r.stdout
     assert "goal 1: set as recorded:" in r.stdout            # the file's parameter snapshot

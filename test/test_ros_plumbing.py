@@ -92,8 +92,8 @@ BAD_REQUESTS = [
      "zero quaternion"),
     ("quaternion not normalised", lambda m: setattr(m.pose.orientation, "w", 2.0),
      "not normalised"),
-    ("wrong frame", lambda m: setattr(m.header, "frame_id", "world"),
-     "start.header.frame_id = 'world': must be the base frame 'cdh_base'"),
+    ("unknown frame", lambda m: setattr(m.header, "frame_id", "map"),
+     "start.header.frame_id = 'map': no transform from 'map' to 'cdh_base' in TF"),
     ("empty frame", lambda m: setattr(m.header, "frame_id", ""), "start.header.frame_id"),
 ]
 

@@ -300,7 +300,7 @@ def test_replay_requests_and_call_against_a_live_node(domain, client, sigterm_ru
                      "execution completed: execution finished"):
             assert line in r.stdout, r.stdout
         r = run_cli(domain, "call", "--start", pose_text(Q1), "--goal", pose_text(Q2),
-                    "--frame", "world")
+                    "--frame", "map")          # not on TF
         assert r.returncode == 1
         assert "outcome: NO PLAN (error code 202)" in r.stdout
         # a changed sphere: replay sets the recorded parameters first (the next test shows
