@@ -43,9 +43,10 @@ SUMMARIES = {
     'slice': 'draw a 2-D slice of the wrench-feasible C-space to a PNG',
     'plan': 'plan a wrench-feasible path for a problem file (no ROS needed)',
     'node': 'run the ROS 2 planner node',
-    'call': "call a running node's plan service (and execute)",
+    'call': "plan through a running node's ~/plan_path action (and execute)",
     'replay': 'republish a recorded run, or re-send its plan requests',
     'recover': 'complete the run file of a killed node (summary, indexes, footer)',
+    'urdf': 'print the robot description (URDF) of a robot file',
     'demo': "the whole story: the paper's robots, poses and motions checked, then the ROS "
             "node planning, streaming, recording and replaying Robot 2's sphere task",
 }

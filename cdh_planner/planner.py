@@ -28,7 +28,7 @@ from .manifold.constraint import TaskConstraint
 from .model.pose import (Pose, quaternion_from_tau, rotation_angle_between, rotation_tt,
                          tau_from_rotation, wrap_angle)
 from .model.task import COORDINATES, end_taus
-from .scene.collision import COLLISION_UNIT_M, CollisionModel, combine
+from .scene.margin import COLLISION_UNIT_M, combine
 from .search.search import MB, Stop, run
 from .settings import COSTS, PlannerSettings, check_setting  # noqa: F401  (PlannerSettings: API)
 from .status import Status
@@ -107,7 +107,7 @@ class Planner:
         # a scene (scene.schema.Scene): collisions join validity everywhere wrench
         # feasibility is checked, and a chart centre in collision costs inf (paper, Sec. 6)
         self.scene = scene
-        self.collision = CollisionModel(robot, scene) if scene is not None else None
+        self.collision = _collision_model(robot, scene)
         self._clear_cache = {}
         s = self.settings
         self.constraint = TaskConstraint(robot, task, margin_floor=s.margin_floor)
@@ -655,3 +655,12 @@ def _failure_message(status, charts, s, radius):
         Status.CANCELED: f"canceled after {charts} charts",
     }
     return messages[status]
+
+
+def _collision_model(robot, scene):
+    """The CollisionModel of ``scene`` (None without one): coal and the compiled kernel are
+    loaded only when there is a scene."""
+    if scene is None:
+        return None
+    from .scene.collision import CollisionModel
+    return CollisionModel(robot, scene)

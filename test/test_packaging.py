@@ -88,7 +88,10 @@ PIP_ONLY = {"threadpoolctl"}
 ROSDEP_KEYS = {"python3-numpy", "python3-scipy", "python3-yaml", "python3-matplotlib",
                "python3-numba", "python3-tqdm", "mcap-ros2-support", "python3-rosbags-pip",
                "python3-toppra-pip", "python3-pytest", "python3-pytest-timeout",
-               "python3-hypothesis", "python3-yourdfpy-pip"}
+               "python3-hypothesis", "python3-yourdfpy-pip",
+               # python.yaml's pip key for trimesh; coal is a package released into the
+               # Jazzy distribution (ros-jazzy-coal), which rosdep resolves by its name
+               "python3-trimesh-pip", "coal"}
 
 
 def test_package_xml_declares_every_runtime_dependency():

@@ -37,7 +37,7 @@ from ..feasibility import evaluate
 from ..io.outputs import check_output, write_text
 from ..io.poses import load_poses, parse_angle, parse_length
 from ..model.robot import load_robot
-from ..scene.collision import CollisionModel, combine
+from ..scene.margin import combine
 from ..scene.schema import load_scene
 from ..trajectory.verify import DEFAULT_STEP_M, DEFAULT_STEP_RAD, check_motion
 
@@ -75,7 +75,7 @@ def run(args):
         "--json", args.json, inputs=[("the robot file ROBOT", args.robot),
                                      ("the poses file POSES", args.poses)])
 
-    collision = CollisionModel(robot, load_scene(args.scene, robot)) if args.scene else None
+    collision = _collision(robot, args.scene)
 
     feas = evaluate(robot, poses.positions, R=poses.rotations)
     if collision is not None:  # margins and bindings of wrench feasibility and collision
@@ -241,3 +241,12 @@ def _num(x, fmt):
 
 def _vec(v, fmt):
     return "[" + ", ".join(f"{x:{fmt}}" for x in v) + "]"
+
+
+def _collision(robot, scene_file):
+    """The CollisionModel of ``--scene`` (None without it; the collision library loads only
+    then)."""
+    if not scene_file:
+        return None
+    from ..scene.collision import CollisionModel
+    return CollisionModel(robot, load_scene(scene_file, robot))

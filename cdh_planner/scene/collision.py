@@ -23,12 +23,12 @@ import coal
 import numpy as np
 from numba import njit
 
+from .margin import COLLISION_UNIT_M, combine  # noqa: F401  (their home; re-exported)
 from .schema import SHARED_ANCHOR_M
 
 # A collision margin joins the normalised wrench margin as metres / COLLISION_UNIT_M: 1 cm
 # of room counts as a wrench margin of 0.1 (Robot 2's poses have 0.03 to 0.15), and the
 # planner's margin floor (1e-3) keeps planned waypoints 0.1 mm beyond the scene's clearance.
-COLLISION_UNIT_M = 0.1
 GJK_TOLERANCE = 1e-9  # m: coal's convergence tolerance (its default, 1e-6, is too coarse)
 EPS = 1e-300
 
@@ -195,19 +195,6 @@ class CollisionModel:
         platform-obstacle (row m) distances at pose (p, R), from bounding spheres."""
         self._pose(p, R)
         return self.lb.copy()
-
-
-def combine(margin, binding, collision, p, R):
-    """The margins (N,) and bindings (N,) of wrench feasibility (normalised, from
-    ``feasibility.evaluate``) and of collision (``collision``: a CollisionModel or None)
-    at poses (p, R): the least of the two, the collision margin in units of
-    COLLISION_UNIT_M; positive iff the pose is wrench-feasible and collision-free."""
-    if collision is None:
-        return margin, binding
-    cm, cb = collision.margins(p, R)
-    cm = cm / COLLISION_UNIT_M
-    worse = cm < margin
-    return np.where(worse, cm, margin), np.where(worse, cb, binding)
 
 
 def _geometry(shape):

@@ -36,7 +36,7 @@ from scipy.spatial.transform import Rotation
 from ..errors import InputError
 from ..feasibility import evaluate
 from ..model.pose import rotation_angle_between, rotation_tt
-from ..scene.collision import combine
+from ..scene.margin import combine
 
 DEFAULT_STEP_M = 1e-3
 DEFAULT_STEP_RAD = np.deg2rad(0.2)
