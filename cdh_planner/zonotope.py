@@ -31,8 +31,8 @@ from itertools import combinations
 import numpy as np
 from numba import njit
 
-from .feasibility import CONSTRAINTS, SINGULAR_DET, Feasibility, cable_vectors, \
-    inverse_ellipsoid_factor, load_point, nominal_wrench, screw_jacobian
+from .feasibility import CONSTRAINTS, SINGULAR_DET, Feasibility, cable_vectors, load_point, \
+    screw_jacobian
 from .model.pose import rotation_tt
 
 MIN_CABLES = 6
@@ -93,7 +93,8 @@ def _normal_of(J, S, A, c, perm):
 
 @njit(cache=True)
 def facet_margins(J, w0, L, tmin, tmax, subsets):
-    """Least facet slack of each pose: J (N, 6, m), w0 (N, 6), L (N, 6, 6), tension bounds
+    """The facet test as written (a normal per subset from J's columns): the reference
+    ``evaluate_kernel`` is tested against. Least facet slack of each pose: J (N, 6, m), w0 (N, 6), L (N, 6, 6), tension bounds
     (m,), subsets (K, 5). Returns (margin in N, normalised margin, its facet, its cables at
     t_max): facet = 2 k + (0 for +c, 1 for -c), k the subset, -1 (margins +inf) when no
     subset has rank 5; the last is a bit mask (bit i: cable i sits at t_max_i on that facet,
@@ -160,6 +161,314 @@ def facet_margins(J, w0, L, tmin, tmax, subsets):
     return out_n, out_r, arg_r, hi_r
 
 
+# ---------------------------------------------------------------- the compiled per-pose kernel
+# The same facet test as ``facet_margins`` (the direct transcription, kept as the reference
+# the tests compare with), computed in the coordinates of a basis of 6 columns: with
+# E = J_B^-1 (Gauss-Jordan, complete pivoting), N = E J has unit columns on the basis, so a
+# subset S's normal is c = E^T y with y supported on the basis rows off S and orthogonal to
+# the (at most m - 6) columns of S off the basis: a tiny null-vector problem (y = 1 for
+# m = 6: c is a row of J^-1, the closed form). Then c.J_i = y.N_i, c.w0 = y.(E w0) and
+# L^T c = (E L)^T y touch only the rows of y's support.
+
+@njit(cache=True)
+def _gauss_jordan(T, m, pivcol, rowof):
+    """Reduce T (6, ncol) in place to E T, choosing 6 pivot columns among its first m by
+    complete pivoting; pivcol[r] is row r's column, rowof[j] column j's row (-1: off the
+    basis). Returns False if the first m columns have rank < 6."""
+    ncol = T.shape[1]
+    for j in range(m):
+        rowof[j] = -1
+    for r in range(6):
+        best, bi, bj = 0.0, r, -1
+        for i in range(r, 6):
+            for j in range(m):
+                if rowof[j] < 0 and abs(T[i, j]) > best:
+                    best, bi, bj = abs(T[i, j]), i, j
+        if bj < 0:
+            return False
+        if bi != r:
+            for k in range(ncol):
+                T[r, k], T[bi, k] = T[bi, k], T[r, k]
+        piv = T[r, bj]
+        for k in range(ncol):
+            T[r, k] /= piv
+        for i in range(6):
+            f = T[i, bj]
+            if i != r and f != 0.0:
+                for k in range(ncol):
+                    T[i, k] -= f * T[r, k]
+                T[i, bj] = 0.0
+        T[r, bj] = 1.0
+        pivcol[r], rowof[bj] = bj, r
+    return True
+
+
+@njit(cache=True)
+def _null_vector(M, k, y, perm):
+    """y (k + 1,) with M[:k, :k + 1] y = 0 (M is overwritten), by Gaussian elimination with
+    complete pivoting. Returns the last pivot's magnitude (0: rank < k); 1.0 when k = 0."""
+    n = k + 1
+    for j in range(n):
+        perm[j] = j
+    last = 1.0
+    for step in range(k):
+        best, bi, bj = -1.0, step, step
+        for i in range(step, k):
+            for j in range(step, n):
+                v = abs(M[i, perm[j]])
+                if v > best:
+                    best, bi, bj = v, i, j
+        if best <= 0.0:
+            return 0.0
+        if bi != step:
+            for j in range(n):
+                M[step, j], M[bi, j] = M[bi, j], M[step, j]
+        perm[step], perm[bj] = perm[bj], perm[step]
+        pc = perm[step]
+        for i in range(step + 1, k):
+            f = M[i, pc] / M[step, pc]
+            if f != 0.0:
+                for j in range(step, n):
+                    M[i, perm[j]] -= f * M[step, perm[j]]
+        last = best
+    free = perm[k]
+    y[free] = 1.0
+    for step in range(k - 1, -1, -1):
+        s = -M[step, free]
+        for j in range(step + 1, k):
+            s -= M[step, perm[j]] * y[perm[j]]
+        y[perm[step]] = s / M[step, perm[step]]
+    return last
+
+
+@njit(cache=True)
+def _householder_r(A, R):
+    """R (6, 6), upper triangular, of the QR factorisation of A (m, 6) (A is overwritten).
+    Returns |det R| (= sqrt(det(A^T A)))."""
+    m = A.shape[0]
+    det = 1.0
+    for j in range(6):
+        s = 0.0
+        for i in range(j, m):
+            s += A[i, j] * A[i, j]
+        norm = np.sqrt(s)
+        if norm == 0.0:
+            return 0.0
+        alpha = -norm if A[j, j] >= 0.0 else norm
+        v0 = A[j, j] - alpha
+        vv = s - A[j, j] * A[j, j] + v0 * v0  # |v|^2, v = (v0, A[j+1:, j])
+        A[j, j] = alpha
+        for k in range(j + 1, 6):
+            d = v0 * A[j, k]
+            for i in range(j + 1, m):
+                d += A[i, j] * A[i, k]
+            f = 2.0 * d / vv
+            A[j, k] -= f * v0
+            for i in range(j + 1, m):
+                A[i, k] -= f * A[i, j]
+        det *= abs(alpha)
+    for i in range(6):
+        for j in range(6):
+            R[i, j] = A[i, j] if j >= i else 0.0
+    return det
+
+
+@njit(cache=True)
+def _forward(R, b, x):
+    """x = R^-T b for upper-triangular R (6, 6)."""
+    for i in range(6):
+        s = b[i]
+        for k in range(i):
+            s -= R[k, i] * x[k]
+        x[i] = s / R[i, i]
+
+
+@njit(cache=True)
+def _subset_normal(T, zrow, xcol, nx, M, y, perm):
+    """y (nx + 1,) on the basis rows ``zrow`` off a subset, orthogonal to its off-basis
+    columns ``xcol`` of N (T's first columns); closed forms for nx <= 2 (m = 8 needs no
+    more). False when those columns are dependent (the subset has rank 4)."""
+    if nx == 0:
+        y[0] = 1.0
+        return True
+    if nx == 1:
+        a0, a1 = T[zrow[0], xcol[0]], T[zrow[1], xcol[0]]
+        y[0], y[1] = a1, -a0
+        return max(abs(a0), abs(a1)) > RANK_TOL
+    if nx == 2:
+        a0, a1, a2 = T[zrow[0], xcol[0]], T[zrow[1], xcol[0]], T[zrow[2], xcol[0]]
+        b0, b1, b2 = T[zrow[0], xcol[1]], T[zrow[1], xcol[1]], T[zrow[2], xcol[1]]
+        y[0], y[1], y[2] = a1 * b2 - a2 * b1, a2 * b0 - a0 * b2, a0 * b1 - a1 * b0
+        return max(abs(y[0]), abs(y[1]), abs(y[2])) > RANK_TOL * max(
+            abs(a0), abs(a1), abs(a2), abs(b0), abs(b1), abs(b2), 1.0)
+    for i in range(nx):
+        for b in range(nx + 1):
+            M[i, b] = T[zrow[b], xcol[i]]
+    return _null_vector(M, nx, y, perm) > RANK_TOL
+
+
+@njit(cache=True)
+def evaluate_kernel(J, c, w_local, L3, load_frame, tmin, tmax, subsets, singular_det):
+    """Per pose: J (N, 6, m), load point c (N, 3). Returns sqrt(det J J^T) (N,), the facet
+    margins (N, normalised, facet, cables at t_max: as ``facet_margins``) and the tension
+    rule's t0, v (N, m) (module doc); margins -inf, t0 nan, v inf where singular."""
+    n, m = J.shape[0], J.shape[2]
+    K = subsets.shape[0]
+    scale = np.zeros(n)
+    out_n = np.full(n, -np.inf)
+    out_r = np.full(n, -np.inf)
+    arg_r = np.full(n, -1, np.int64)
+    hi_r = np.zeros(n, np.int64)
+    t0 = np.full((n, m), np.nan)
+    v = np.full((n, m), np.inf)
+    T = np.empty((6, m + 13))  # [J | I | w0 | L] -> [N | E | E w0 | E L]
+    pivcol = np.empty(6, np.int64)
+    rowof = np.empty(m, np.int64)
+    zrow = np.empty(6, np.int64)
+    zpos = np.empty(6, np.int64)
+    xcol = np.empty(6, np.int64)
+    inS = np.zeros(m, np.bool_)
+    M = np.empty((5, 6))
+    y = np.empty(6)
+    perm = np.empty(6, np.int64)
+    A = np.empty((m, 6))
+    R = np.empty((6, 6))
+    w0 = np.empty(6)
+    L = np.empty((6, 6))
+    Y = np.empty((6, 6))
+    col = np.empty(6)
+    a = np.empty(6)
+    mid = 0.5 * (tmin + tmax)
+    sqd = tmax - tmin  # D^(1/2)
+    for q in range(n):
+        Jq = J[q]
+        # w0 and L (L L^T = E^-1) in the base frame; a load-frame ellipsoid moves with c
+        for r in range(6):
+            w0[r] = w_local[r]
+            for j in range(6):
+                L[r, j] = L3[r, j]
+        if load_frame:
+            c0, c1, c2 = c[q, 0], c[q, 1], c[q, 2]
+            w0[3] += c1 * w_local[2] - c2 * w_local[1]
+            w0[4] += c2 * w_local[0] - c0 * w_local[2]
+            w0[5] += c0 * w_local[1] - c1 * w_local[0]
+            for j in range(6):
+                L[3, j] += c1 * L3[2, j] - c2 * L3[1, j]
+                L[4, j] += c2 * L3[0, j] - c0 * L3[2, j]
+                L[5, j] += c0 * L3[1, j] - c1 * L3[0, j]
+        for i in range(m):
+            for r in range(6):
+                A[i, r] = Jq[r, i]
+        scale[q] = _householder_r(A, R)
+        if not scale[q] > singular_det:
+            continue
+        for r in range(6):
+            for i in range(m):
+                T[r, i] = Jq[r, i]
+            for j in range(6):
+                T[r, m + j] = 1.0 if j == r else 0.0
+                T[r, m + 7 + j] = L[r, j]
+            T[r, m + 6] = w0[r]
+        if not _gauss_jordan(T, m, pivcol, rowof):
+            continue
+        best_n, best_r = np.inf, np.inf
+        for k in range(K):
+            S = subsets[k]
+            nx = 0
+            for s in range(5):
+                inS[S[s]] = True
+                if rowof[S[s]] < 0:
+                    xcol[nx] = S[s]
+                    nx += 1
+            nz = 0
+            for r in range(6):
+                if not inS[pivcol[r]]:
+                    zrow[nz], zpos[r] = r, nz
+                    nz += 1
+            if not _subset_normal(T, zrow, xcol, nx, M, y, perm):
+                for s in range(5):
+                    inS[S[s]] = False
+                continue  # rank 4: no facet
+            # p_i = c.J_i = y.N_i for the cables off S (0 on S: exactly)
+            hp, hm, width = 0.0, 0.0, 0.0
+            up, down = 0, 0
+            for i in range(m):
+                if inS[i]:
+                    continue
+                if rowof[i] >= 0:
+                    p = y[zpos[rowof[i]]]
+                else:
+                    p = 0.0
+                    for b in range(nz):
+                        p += y[b] * T[zrow[b], i]
+                lo, hi = p * tmin[i], p * tmax[i]
+                if lo > hi:
+                    hp += lo
+                    hm -= hi
+                    down |= 1 << i
+                else:
+                    hp += hi
+                    hm -= lo
+                    up |= 1 << i
+                width += abs(p) * (tmax[i] - tmin[i])
+            for s in range(5):
+                inS[S[s]] = False
+            cw, cc, lt = 0.0, 0.0, 0.0
+            for j in range(6):
+                cj, gj = 0.0, 0.0
+                for b in range(nz):
+                    cj += y[b] * T[zrow[b], m + j]
+                    gj += y[b] * T[zrow[b], m + 7 + j]
+                cc += cj * cj
+                lt += gj * gj
+            for b in range(nz):
+                cw += y[b] * T[zrow[b], m + 6]
+            lt, norm = np.sqrt(lt), np.sqrt(cc)
+            for sign in range(2):
+                slack = (hp - cw - lt) if sign == 0 else (hm + cw - lt)
+                if slack / norm < best_n:
+                    best_n = slack / norm
+                sr = slack / width if width > 0.0 else (-np.inf if slack < 0.0 else np.inf)
+                if sr < best_r:
+                    best_r, arg_r[q] = sr, 2 * k + sign
+                    hi_r[q] = up if sign == 0 else down
+        out_n[q], out_r[q] = best_n, best_r
+        # the tension rule: R from K^T = D^(1/2) J^T = Q R, so J D J^T = R^T R
+        for i in range(m):
+            for r in range(6):
+                A[i, r] = sqd[i] * Jq[r, i]
+        _householder_r(A, R)
+        for j in range(6):  # Y = R^-T L
+            for r in range(6):
+                col[r] = L[r, j]
+            _forward(R, col, a)
+            for r in range(6):
+                Y[r, j] = a[r]
+        for r in range(6):  # col = R^-T (w0 - J mid)
+            s = w0[r]
+            for i in range(m):
+                s -= Jq[r, i] * mid[i]
+            a[r] = s
+        _forward(R, a, col)
+        for i in range(m):
+            for r in range(6):
+                a[r] = Jq[r, i]
+            _forward(R, a, y)  # y = R^-T J_i
+            d = sqd[i] * sqd[i]
+            s = 0.0
+            for r in range(6):
+                s += y[r] * col[r]
+            t0[q, i] = mid[i] + d * s
+            vv = 0.0
+            for j in range(6):
+                s = 0.0
+                for r in range(6):
+                    s += y[r] * Y[r, j]
+                vv += s * s
+            v[q, i] = d * np.sqrt(vv)
+    return scale, out_n, out_r, arg_r, hi_r, t0, v
+
+
 @dataclass
 class WrenchFeasibility(Feasibility):
     """Feasibility of N poses of an m-cable robot (``Feasibility`` with m columns).
@@ -186,15 +495,10 @@ class WrenchFeasibility(Feasibility):
         return self.tension_status == STATUS_OK
 
 
-def jacobian_scale(J):
-    """sqrt(det(J J^T)) (N,): |det J| for m = 6, 0 iff rank J < 6 (Cauchy-Binet)."""
-    with np.errstate(invalid="ignore", over="ignore"):
-        d = np.linalg.det(J @ np.swapaxes(J, -1, -2))
-    return np.sqrt(np.maximum(d, 0.0))
-
-
 def tension_rule(robot, J, w0, L):
-    """The weighted closed-form rule (module doc) at N poses: t0 (N, m) N, v (N, m) N."""
+    """The weighted closed-form rule (module doc) at N poses, by numpy: t0 (N, m) N, v (N, m) N.
+    The reference the tests compare ``evaluate_kernel`` with (it solves with J D J^T, whose
+    condition number is J's squared)."""
     tmin, tmax = robot.tension_min, robot.tension_max
     mid, D = 0.5 * (tmin + tmax), (tmax - tmin) ** 2
     JD = J * D  # J D, (N, 6, m)
@@ -241,16 +545,13 @@ def evaluate(robot, p, tau=None, R=None):
     dvec = cable_vectors(robot, p, R)
     lengths = np.linalg.norm(dvec, axis=-1)
     u = dvec / np.where(lengths > 0, lengths, 1.0)[..., None]
-    J = screw_jacobian(robot, u)
-    scale = jacobian_scale(J)
-    singular = ~(scale > SINGULAR_DET) | (lengths.min(axis=1) <= 0)
-    J = np.where(singular[:, None, None], _regular_jacobian(m), J)
+    J = np.ascontiguousarray(screw_jacobian(robot, u))
     c = load_point(robot, p, R)
-    w0 = nominal_wrench(robot, c)
-    L = np.ascontiguousarray(np.broadcast_to(inverse_ellipsoid_factor(robot, c), (n, 6, 6)))
-    mn, mr, arg, hi = facet_margins(np.ascontiguousarray(J), np.ascontiguousarray(w0), L,
-                                    robot.tension_min, robot.tension_max, facet_subsets(m))
-    t0, v = tension_rule(robot, J, w0, L)
+    L3 = np.linalg.cholesky(np.linalg.inv(robot.ellipsoid_matrix))
+    scale, mn, mr, arg, hi, t0, v = evaluate_kernel(
+        J, c, robot.wrench_center_local, L3, robot.ellipsoid_frame == "load", robot.tension_min,
+        robot.tension_max, facet_subsets(m), SINGULAR_DET)
+    singular = ~(scale > SINGULAR_DET) | (lengths.min(axis=1) <= 0)
     span_l = robot.length_max - robot.length_min
     span_t = robot.tension_max - robot.tension_min
     margins = np.stack([(lengths - robot.length_min) / span_l, (robot.length_max - lengths) / span_l,
@@ -273,12 +574,3 @@ def evaluate(robot, p, tau=None, R=None):
                              tension_spread=v, margins=margins, margin=margin, binding=binding,
                              margin_newtons=mn, wrench_margin=mr, tension_status=status.astype(str))
 
-
-@lru_cache(maxsize=None)
-def _regular_jacobian(m):
-    """A rank-6 stand-in (6, m) for singular poses, so that no solve fails (their results
-    are replaced)."""
-    J = np.zeros((6, m))
-    J[:, :6] = np.eye(6)
-    J[:, 6:] = 1.0
-    return J
