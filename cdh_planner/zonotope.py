@@ -483,10 +483,13 @@ class WrenchFeasibility(Feasibility):
     the bound they sit at on it; for m = 6 the closed form's name) or "singular".
     ``tension_nominal`` / ``tension_spread``: the rule's t0 and v (module doc);
     ``tension_status`` (N,): STATUS_OK, STATUS_EXCEEDS, STATUS_INFEASIBLE or STATUS_SINGULAR.
+    ``det_j``: sqrt(det(J J^T)) >= 0 (|det J| for m = 6), singular at or below SINGULAR_DET.
     """
 
     margin_newtons: np.ndarray  # (N,) N
     wrench_margin: np.ndarray  # (N,) normalised facet margin alone (no lengths)
+    wrench_facet: np.ndarray  # (N,) int: the subset of the facet attaining it, -1 if none
+    wrench_facet_up: np.ndarray  # (N,) int: bit i set if cable i is at t_max on that facet
     tension_status: np.ndarray  # (N,) str
 
     @cached_property
@@ -572,5 +575,21 @@ def evaluate(robot, p, tau=None, R=None):
     v = np.where(singular[:, None], np.inf, v)
     return WrenchFeasibility(lengths=lengths, unit_vectors=u, det_j=scale, tension_nominal=t0,
                              tension_spread=v, margins=margins, margin=margin, binding=binding,
-                             margin_newtons=mn, wrench_margin=mr, tension_status=status.astype(str))
+                             margin_newtons=mn, wrench_margin=mr, wrench_facet=np.where(singular | (arg < 0), -1, arg // 2),
+                             wrench_facet_up=hi,
+                             tension_status=status.astype(str))
 
+
+
+def facet_normal(J, subset, up):
+    """The outward unit normal n (6,) of a facet at a pose with Jacobian J (6, m): the one
+    of subset ``subset`` (an index into facet_subsets(m)) whose cables at t_max are the bit
+    mask ``up`` (as ``WrenchFeasibility.wrench_facet`` / ``wrench_facet_up`` give it), so
+    that its slack is h(n) - n.w0 - |L^T n|."""
+    m = J.shape[1]
+    S = facet_subsets(m)[subset]
+    c = np.empty(6)
+    _normal_of(np.ascontiguousarray(J), S, np.empty((5, 6)), c, np.empty(6, np.int64))
+    off = [i for i in range(m) if i not in S]
+    agree = sum(np.sign(c @ J[:, i]) * (1.0 if up >> i & 1 else -1.0) for i in off)
+    return (1.0 if agree >= 0 else -1.0) * c / np.linalg.norm(c)
