@@ -31,8 +31,7 @@ from itertools import combinations
 import numpy as np
 from numba import njit
 
-from .feasibility import CONSTRAINTS, SINGULAR_DET, Feasibility, cable_vectors, load_point, \
-    screw_jacobian
+from .feasibility import CONSTRAINTS, SINGULAR_DET, Feasibility
 from .model.pose import rotation_tt
 
 MIN_CABLES = 6
@@ -308,6 +307,37 @@ def _subset_normal(T, zrow, xcol, nx, M, y, perm):
 
 
 @njit(cache=True)
+def pose_geometry(p, R, a, b, g):
+    """Per pose (p (N, 3) m, R (N, 3, 3)) of a robot with base anchors a (m, 3), platform
+    anchors b (m, 3) and load point g (3,): cable lengths (N, m) m, unit vectors u (N, m, 3)
+    from base to platform anchor, J (N, 6, m) with columns [u_i; a_i x u_i] (as
+    ``feasibility.screw_jacobian``) and the load point c = p + R g (N, 3) m."""
+    n, m = p.shape[0], a.shape[0]
+    lengths = np.empty((n, m))
+    u = np.empty((n, m, 3))
+    J = np.empty((n, 6, m))
+    c = np.empty((n, 3))
+    d = np.empty(3)
+    for q in range(n):
+        Rq = R[q]
+        for r in range(3):
+            c[q, r] = p[q, r] + Rq[r, 0] * g[0] + Rq[r, 1] * g[1] + Rq[r, 2] * g[2]
+        for i in range(m):
+            for r in range(3):
+                d[r] = p[q, r] + Rq[r, 0] * b[i, 0] + Rq[r, 1] * b[i, 1] + Rq[r, 2] * b[i, 2] - a[i, r]
+            length = np.sqrt(d[0] * d[0] + d[1] * d[1] + d[2] * d[2])
+            lengths[q, i] = length
+            s = 1.0 / length if length > 0.0 else 1.0
+            for r in range(3):
+                u[q, i, r] = d[r] * s
+                J[q, r, i] = d[r] * s
+            J[q, 3, i] = a[i, 1] * u[q, i, 2] - a[i, 2] * u[q, i, 1]
+            J[q, 4, i] = a[i, 2] * u[q, i, 0] - a[i, 0] * u[q, i, 2]
+            J[q, 5, i] = a[i, 0] * u[q, i, 1] - a[i, 1] * u[q, i, 0]
+    return lengths, u, J, c
+
+
+@njit(cache=True)
 def evaluate_kernel(J, c, w_local, L3, load_frame, tmin, tmax, subsets, singular_det):
     """Per pose: J (N, 6, m), load point c (N, 3). Returns sqrt(det J J^T) (N,), the facet
     margins (N, normalised, facet, cables at t_max: as ``facet_margins``) and the tension
@@ -524,15 +554,22 @@ def facet_name(k, hi, m):
                     + ([f"tension_min[{','.join(down)}]"] if down else []))
 
 
+@lru_cache(maxsize=64)
+def _inverse_factor(E_bytes):
+    """L3 with L3 L3^T = E^-1 for the 6 x 6 matrix E given by its bytes (one per robot)."""
+    E = np.frombuffer(E_bytes).reshape(6, 6)
+    return np.linalg.cholesky(np.linalg.inv(E))
+
+
 def _binding_names(ml, kl, mr, arg, hi, m):
     """The binding constraint per pose: a length bound or a facet (named once per kind)."""
     names = np.array([f"{CONSTRAINTS[j // m]}[{j % m + 1}]" for j in range(2 * m)], dtype=object)
     binding = names[kl]
     facet = (mr < ml) & (arg >= 0)
     if facet.any():
-        keys, inverse = np.unique(np.stack([arg[facet] // 2, hi[facet]], axis=1), axis=0,
-                                  return_inverse=True)
-        facet_names = np.array([facet_name(int(k), int(h), m) for k, h in keys], dtype=object)
+        keys, inverse = np.unique((arg[facet] // 2) << m | hi[facet], return_inverse=True)
+        facet_names = np.array([facet_name(int(k) >> m, int(k) & ((1 << m) - 1), m) for k in keys],
+                               dtype=object)
         binding[facet] = facet_names[inverse.ravel()]
     return binding
 
@@ -545,15 +582,12 @@ def evaluate(robot, p, tau=None, R=None):
         R = rotation_tt(np.atleast_2d(tau))
     R = np.asarray(R, dtype=float).reshape(-1, 3, 3)
     n, m = p.shape[0], len(robot.base_anchors)
-    dvec = cable_vectors(robot, p, R)
-    lengths = np.linalg.norm(dvec, axis=-1)
-    u = dvec / np.where(lengths > 0, lengths, 1.0)[..., None]
-    J = np.ascontiguousarray(screw_jacobian(robot, u))
-    c = load_point(robot, p, R)
-    L3 = np.linalg.cholesky(np.linalg.inv(robot.ellipsoid_matrix))
+    lengths, u, J, c = pose_geometry(np.ascontiguousarray(p), np.ascontiguousarray(R),
+                                     robot.base_anchors, robot.platform_anchors, robot.load_point)
     scale, mn, mr, arg, hi, t0, v = evaluate_kernel(
-        J, c, robot.wrench_center_local, L3, robot.ellipsoid_frame == "load", robot.tension_min,
-        robot.tension_max, facet_subsets(m), SINGULAR_DET)
+        J, c, robot.wrench_center_local, _inverse_factor(robot.ellipsoid_matrix.tobytes()),
+        robot.ellipsoid_frame == "load", robot.tension_min, robot.tension_max, facet_subsets(m),
+        SINGULAR_DET)
     singular = ~(scale > SINGULAR_DET) | (lengths.min(axis=1) <= 0)
     span_l = robot.length_max - robot.length_min
     span_t = robot.tension_max - robot.tension_min
