@@ -29,7 +29,7 @@ from functools import cached_property, lru_cache
 from itertools import combinations
 
 import numpy as np
-from numba import njit
+from numba import njit, prange
 
 from .feasibility import CONSTRAINTS, SINGULAR_DET, Feasibility
 from .model.pose import rotation_tt
@@ -38,6 +38,8 @@ MIN_CABLES = 6
 # a 5-subset whose last pivot is below this fraction of its first one is rank 4: it spans
 # no facet (every facet hyperplane is spanned by some 5 independent columns)
 RANK_TOL = 1e-12
+PARALLEL_CHUNK = 512  # poses per task of the threaded kernel
+PARALLEL_MIN = 4096  # fewer poses than this: the serial kernel (thread start-up costs more)
 STATUS_OK, STATUS_EXCEEDS, STATUS_INFEASIBLE, STATUS_SINGULAR = \
     "ok", "rule_exceeds_limits", "infeasible", "singular"
 
@@ -342,15 +344,37 @@ def evaluate_kernel(J, c, w_local, L3, load_frame, tmin, tmax, subsets, singular
     """Per pose: J (N, 6, m), load point c (N, 3). Returns sqrt(det J J^T) (N,), the facet
     margins (N, normalised, facet, cables at t_max: as ``facet_margins``) and the tension
     rule's t0, v (N, m) (module doc); margins -inf, t0 nan, v inf where singular."""
-    n, m = J.shape[0], J.shape[2]
+    out = _outputs(J.shape[0], J.shape[2])
+    _evaluate_poses(0, J.shape[0], J, c, w_local, L3, load_frame, tmin, tmax, subsets, singular_det,
+                    *out)
+    return out
+
+
+@njit(cache=True, parallel=True)
+def evaluate_kernel_parallel(J, c, w_local, L3, load_frame, tmin, tmax, subsets, singular_det):
+    """``evaluate_kernel`` over chunks of PARALLEL_CHUNK poses on numba's threads."""
+    n = J.shape[0]
+    out = _outputs(n, J.shape[2])
+    chunks = (n + PARALLEL_CHUNK - 1) // PARALLEL_CHUNK
+    for k in prange(chunks):
+        _evaluate_poses(k * PARALLEL_CHUNK, min(n, (k + 1) * PARALLEL_CHUNK), J, c, w_local, L3,
+                        load_frame, tmin, tmax, subsets, singular_det, *out)
+    return out
+
+
+@njit(cache=True)
+def _outputs(n, m):
+    """The kernel's output arrays, filled as for singular poses."""
+    return (np.zeros(n), np.full(n, -np.inf), np.full(n, -np.inf), np.full(n, -1, np.int64),
+            np.zeros(n, np.int64), np.full((n, m), np.nan), np.full((n, m), np.inf))
+
+
+@njit(cache=True)
+def _evaluate_poses(q0, q1, J, c, w_local, L3, load_frame, tmin, tmax, subsets, singular_det,
+                    scale, out_n, out_r, arg_r, hi_r, t0, v):
+    """``evaluate_kernel`` for poses q0 <= q < q1, into its output arrays."""
+    m = J.shape[2]
     K = subsets.shape[0]
-    scale = np.zeros(n)
-    out_n = np.full(n, -np.inf)
-    out_r = np.full(n, -np.inf)
-    arg_r = np.full(n, -1, np.int64)
-    hi_r = np.zeros(n, np.int64)
-    t0 = np.full((n, m), np.nan)
-    v = np.full((n, m), np.inf)
     T = np.empty((6, m + 13))  # [J | I | w0 | L] -> [N | E | E w0 | E L]
     pivcol = np.empty(6, np.int64)
     rowof = np.empty(m, np.int64)
@@ -366,11 +390,13 @@ def evaluate_kernel(J, c, w_local, L3, load_frame, tmin, tmax, subsets, singular
     w0 = np.empty(6)
     L = np.empty((6, 6))
     Y = np.empty((6, 6))
+    EE = np.empty((6, 6))
+    GG = np.empty((6, 6))
     col = np.empty(6)
     a = np.empty(6)
     mid = 0.5 * (tmin + tmax)
     sqd = tmax - tmin  # D^(1/2)
-    for q in range(n):
+    for q in range(q0, q1):
         Jq = J[q]
         # w0 and L (L L^T = E^-1) in the base frame; a load-frame ellipsoid moves with c
         for r in range(6):
@@ -401,6 +427,13 @@ def evaluate_kernel(J, c, w_local, L3, load_frame, tmin, tmax, subsets, singular
             T[r, m + 6] = w0[r]
         if not _gauss_jordan(T, m, pivcol, rowof):
             continue
+        for r in range(6):  # Grams of E and E L: |c|^2 = y^T EE y, |L^T c|^2 = y^T GG y
+            for r2 in range(r, 6):
+                se, sg = 0.0, 0.0
+                for j in range(6):
+                    se += T[r, m + j] * T[r2, m + j]
+                    sg += T[r, m + 7 + j] * T[r2, m + 7 + j]
+                EE[r, r2], EE[r2, r], GG[r, r2], GG[r2, r] = se, se, sg, sg
         best_n, best_r = np.inf, np.inf
         for k in range(K):
             S = subsets[k]
@@ -444,16 +477,16 @@ def evaluate_kernel(J, c, w_local, L3, load_frame, tmin, tmax, subsets, singular
             for s in range(5):
                 inS[S[s]] = False
             cw, cc, lt = 0.0, 0.0, 0.0
-            for j in range(6):
-                cj, gj = 0.0, 0.0
-                for b in range(nz):
-                    cj += y[b] * T[zrow[b], m + j]
-                    gj += y[b] * T[zrow[b], m + 7 + j]
-                cc += cj * cj
-                lt += gj * gj
             for b in range(nz):
-                cw += y[b] * T[zrow[b], m + 6]
-            lt, norm = np.sqrt(lt), np.sqrt(cc)
+                rb = zrow[b]
+                cw += y[b] * T[rb, m + 6]
+                se, sg = 0.0, 0.0
+                for b2 in range(nz):
+                    se += EE[rb, zrow[b2]] * y[b2]
+                    sg += GG[rb, zrow[b2]] * y[b2]
+                cc += y[b] * se
+                lt += y[b] * sg
+            lt, norm = np.sqrt(max(lt, 0.0)), np.sqrt(cc)
             for sign in range(2):
                 slack = (hp - cw - lt) if sign == 0 else (hm + cw - lt)
                 if slack / norm < best_n:
@@ -496,7 +529,6 @@ def evaluate_kernel(J, c, w_local, L3, load_frame, tmin, tmax, subsets, singular
                     s += y[r] * Y[r, j]
                 vv += s * s
             v[q, i] = d * np.sqrt(vv)
-    return scale, out_n, out_r, arg_r, hi_r, t0, v
 
 
 @dataclass
@@ -584,7 +616,8 @@ def evaluate(robot, p, tau=None, R=None):
     n, m = p.shape[0], len(robot.base_anchors)
     lengths, u, J, c = pose_geometry(np.ascontiguousarray(p), np.ascontiguousarray(R),
                                      robot.base_anchors, robot.platform_anchors, robot.load_point)
-    scale, mn, mr, arg, hi, t0, v = evaluate_kernel(
+    kernel = evaluate_kernel_parallel if n >= PARALLEL_MIN else evaluate_kernel
+    scale, mn, mr, arg, hi, t0, v = kernel(
         J, c, robot.wrench_center_local, _inverse_factor(robot.ellipsoid_matrix.tobytes()),
         robot.ellipsoid_frame == "load", robot.tension_min, robot.tension_max, facet_subsets(m),
         SINGULAR_DET)

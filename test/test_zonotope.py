@@ -245,3 +245,14 @@ def test_fewer_than_six_or_degenerate_anchors_are_refused():
     doc["base_anchors"] = [v for i in range(8) for v in (0.5 * i, 0.0, 3.0)]  # on one line
     with pytest.raises(InputError, match="robot.base_anchors = .*collinear"):
         robot_from_dict(doc)
+
+
+def test_threaded_kernel_gives_the_serial_answers():
+    """Above PARALLEL_MIN poses evaluate runs the kernel on threads: the same numbers."""
+    rng = np.random.default_rng(400)
+    robot = robot_from_dict(random_robot(rng, 8))
+    p, tau = random_poses(rng, zt.PARALLEL_MIN + 100, spread=0.3)
+    whole = zt.evaluate(robot, p, tau)
+    parts = [zt.evaluate(robot, p[k:k + 1000], tau[k:k + 1000]) for k in range(0, len(p), 1000)]
+    for name in ("margin", "margin_newtons", "tension_nominal", "tension_spread", "binding"):
+        np.testing.assert_array_equal(getattr(whole, name), np.concatenate([getattr(f, name) for f in parts]))
