@@ -14,13 +14,18 @@ t_min_i), before the minimum. With m = 6 the facet test is the paper's closed fo
 normalised margin its margin, exactly (docs/more-cables.md).
 
 Tensions are not unique when m > 6. The envelope published per cable comes from one rule
-a winch controller can run, the closed-form method weighted by the tension ranges
-(Pott, Bruckmann & Mikelsons 2009): the least-squares tensions toward the middle of the range,
-    t(w) = t_mid + P (w - J t_mid),   P = D J^T (J D J^T)^-1,   D = diag(t_max - t_min)^2,
-so J t(w) = w. It is affine in w: over the ellipsoid its tensions are exactly
-t0 +- v, t0 = t(w0), v_i = |row i of P L|. With m = 6, P = J^-1: the paper's envelope. The
-rule may leave [t_min, t_max] at a pose Z holds: ``tension_status`` then says
-"rule_exceeds_limits" (the band is still the rule's, but no controller should use it).
+a winch controller can run, affine in the wrench at each pose:
+    t(w) = t0 + P (w - w0),   P = D J^T (J D J^T)^-1,   D = diag(t_max - t_min)^2,
+P the range-weighted pseudo-inverse of the closed-form method (Pott, Bruckmann & Mikelsons
+2009), so J t(w) = w, and t0 the *centred nominal*: the closed form's tensions toward the
+middle of the range, t_mid + P (w0 - J t_mid), shifted in the null space of J to centre
+the band (``_centre``: the maximiser of s + CENTRE_MU sum log(slacks - s), unique and smooth
+in the pose). Over the ellipsoid the rule's tensions are exactly t0 +- v,
+v_i = |row i of P L|; a controller applies t0 (published per waypoint) plus P (w - w0). With
+m = 6, P = J^-1 and there is no null space: the paper's envelope. The rule may leave
+[t_min, t_max] at a pose Z holds (an affine rule is a stronger demand than Z containing the
+ellipsoid): ``tension_status`` then says "rule_exceeds_limits" (the band is still the
+rule's, but no controller should use it).
 Units: m, N, N m.
 """
 
@@ -38,6 +43,12 @@ MIN_CABLES = 6
 # a 5-subset whose last pivot is below this fraction of its first one is rank 4: it spans
 # no facet (every facet hyperplane is spanned by some 5 independent columns)
 RANK_TOL = 1e-12
+# barrier weight of the centred nominal (normalised tensions): its least band slack is within
+# 2 m CENTRE_MU of the best any null-space shift achieves. Numba freezes these constants into
+# the cached machine code: after changing one, delete cdh_planner/__pycache__/zonotope*.nb*.
+CENTRE_MU = 1e-4
+CENTRE_TOL = 1e-9  # Newton decrement^2 / mu at which the centring stops
+CENTRE_ITERATIONS = 50  # Newton steps at most (bounded work)
 PARALLEL_CHUNK = 512  # poses per task of the threaded kernel
 PARALLEL_MIN = 4096  # fewer poses than this: the serial kernel (thread start-up costs more)
 STATUS_OK, STATUS_EXCEEDS, STATUS_INFEASIBLE, STATUS_SINGULAR = \
@@ -243,9 +254,11 @@ def _null_vector(M, k, y, perm):
 
 
 @njit(cache=True)
-def _householder_r(A, R):
-    """R (6, 6), upper triangular, of the QR factorisation of A (m, 6) (A is overwritten).
-    Returns |det R| (= sqrt(det(A^T A)))."""
+def _householder_r(A, R, hv0, hvv):
+    """R (6, 6), upper triangular, of the QR factorisation of A (m, 6); A keeps the
+    reflectors below its diagonal, their first entries in hv0 (6,) and |v|^2 in hvv (6,)
+    (``_null_basis`` forms Q's last m - 6 columns from them). Returns |det R|
+    (= sqrt(det(A^T A)))."""
     m = A.shape[0]
     det = 1.0
     for j in range(6):
@@ -259,6 +272,7 @@ def _householder_r(A, R):
         v0 = A[j, j] - alpha
         vv = s - A[j, j] * A[j, j] + v0 * v0  # |v|^2, v = (v0, A[j+1:, j])
         A[j, j] = alpha
+        hv0[j], hvv[j] = v0, vv
         for k in range(j + 1, 6):
             d = v0 * A[j, k]
             for i in range(j + 1, m):
@@ -272,6 +286,128 @@ def _householder_r(A, R):
         for j in range(6):
             R[i, j] = A[i, j] if j >= i else 0.0
     return det
+
+
+@njit(cache=True)
+def _null_basis(A, hv0, hvv, Q2):
+    """Q2 (m, m - 6): the last columns of Q = H_0 ... H_5 from ``_householder_r``'s
+    reflectors: an orthonormal basis of the null space of A^T."""
+    m = A.shape[0]
+    for c in range(m - 6):
+        for i in range(m):
+            Q2[i, c] = 0.0
+        Q2[6 + c, c] = 1.0
+        for j in range(5, -1, -1):
+            d = hv0[j] * Q2[j, c]
+            for i in range(j + 1, m):
+                d += A[i, j] * Q2[i, c]
+            f = 2.0 * d / hvv[j]
+            Q2[j, c] -= f * hv0[j]
+            for i in range(j + 1, m):
+                Q2[i, c] -= f * A[i, j]
+
+
+@njit(cache=True)
+def _cholesky_solve(H, g, n, x):
+    """x = H^-1 g for the symmetric positive definite H[:n, :n] (H is overwritten)."""
+    for j in range(n):
+        s = H[j, j]
+        for k in range(j):
+            s -= H[j, k] * H[j, k]
+        H[j, j] = np.sqrt(max(s, 1e-300))
+        for i in range(j + 1, n):
+            s = H[i, j]
+            for k in range(j):
+                s -= H[i, k] * H[j, k]
+            H[i, j] = s / H[j, j]
+    for i in range(n):
+        s = g[i]
+        for k in range(i):
+            s -= H[i, k] * x[k]
+        x[i] = s / H[i, i]
+    for i in range(n - 1, -1, -1):
+        s = x[i]
+        for k in range(i + 1, n):
+            s -= H[k, i] * x[k]
+        x[i] = s / H[i, i]
+
+
+@njit(cache=True)
+def _centre(lo, hi, Q2, z):
+    """The null-space shift z (k,) of the centred nominal (module doc): the maximiser of
+    s + CENTRE_MU sum_j log(r_j) over (z, s), r the 2m slacks lo_i + Q2_i z - s and
+    hi_i - Q2_i z - s (lo, hi: the normalised room below and above the band at z = 0), by
+    Newton's method with an Armijo line search that stays inside. Strictly concave, so the
+    maximiser is unique and smooth in the data; defined whether or not the band fits
+    (s < 0 then). At most CENTRE_ITERATIONS steps (about 12 for 8 cables)."""
+    m, k = Q2.shape
+    n = k + 1
+    mu = CENTRE_MU
+    x = np.zeros(n)  # (z, s)
+    x[k] = min(lo.min(), hi.min()) - mu  # strictly inside
+    r = np.empty(2 * m)
+    g = np.empty(n)
+    H = np.empty((n, n))
+    dx = np.empty(n)
+    xt = np.empty(n)
+    rt = np.empty(2 * m)
+    for _ in range(CENTRE_ITERATIONS):
+        _slacks(lo, hi, Q2, x, r)
+        g[:] = 0.0
+        H[:, :] = 0.0
+        g[k] = 1.0
+        for j in range(2 * m):  # gradient g and minus the Hessian H (lower triangle)
+            i, sg = (j, 1.0) if j < m else (j - m, -1.0)
+            w1, w2 = mu / r[j], mu / (r[j] * r[j])
+            for a in range(k):
+                g[a] += sg * w1 * Q2[i, a]
+                for b in range(a + 1):
+                    H[a, b] += w2 * Q2[i, a] * Q2[i, b]
+                H[k, a] -= sg * w2 * Q2[i, a]
+            g[k] -= w1
+            H[k, k] += w2
+        for a in range(n):
+            for b in range(a + 1, n):
+                H[a, b] = H[b, a]
+        _cholesky_solve(H, g, n, dx)
+        dec = 0.0  # the Newton decrement squared: twice the rise left, about
+        for a in range(n):
+            dec += g[a] * dx[a]
+        if dec <= CENTRE_TOL * mu:
+            break
+        phi = x[k]
+        for j in range(2 * m):
+            phi += mu * np.log(r[j])
+        step, accepted = 1.0, False
+        for _ in range(60):  # halve until inside and rising enough (Armijo)
+            for a in range(n):
+                xt[a] = x[a] + step * dx[a]
+            _slacks(lo, hi, Q2, xt, rt)
+            if rt.min() > 0.0:
+                phit = xt[k]
+                for j in range(2 * m):
+                    phit += mu * np.log(rt[j])
+                if phit >= phi + 0.25 * step * dec:
+                    accepted = True
+                    break
+            step *= 0.5
+        if not accepted:
+            break  # no rise left above rounding
+        x[:] = xt
+    for a in range(k):
+        z[a] = x[a]
+
+
+@njit(cache=True)
+def _slacks(lo, hi, Q2, x, r):
+    """r (2m,): lo_i + Q2_i z - s, then hi_i - Q2_i z - s, at x = (z, s)."""
+    m, k = Q2.shape
+    for i in range(m):
+        d = 0.0
+        for a in range(k):
+            d += Q2[i, a] * x[a]
+        r[i] = lo[i] + d - x[k]
+        r[m + i] = hi[i] - d - x[k]
 
 
 @njit(cache=True)
@@ -340,25 +476,26 @@ def pose_geometry(p, R, a, b, g):
 
 
 @njit(cache=True)
-def evaluate_kernel(J, c, w_local, L3, load_frame, tmin, tmax, subsets, singular_det):
+def evaluate_kernel(J, c, w_local, L3, load_frame, tmin, tmax, subsets, singular_det, centre=True):
     """Per pose: J (N, 6, m), load point c (N, 3). Returns sqrt(det J J^T) (N,), the facet
     margins (N, normalised, facet, cables at t_max: as ``facet_margins``) and the tension
     rule's t0, v (N, m) (module doc); margins -inf, t0 nan, v inf where singular."""
     out = _outputs(J.shape[0], J.shape[2])
     _evaluate_poses(0, J.shape[0], J, c, w_local, L3, load_frame, tmin, tmax, subsets, singular_det,
-                    *out)
+                    centre, *out)
     return out
 
 
 @njit(cache=True, parallel=True)
-def evaluate_kernel_parallel(J, c, w_local, L3, load_frame, tmin, tmax, subsets, singular_det):
+def evaluate_kernel_parallel(J, c, w_local, L3, load_frame, tmin, tmax, subsets, singular_det,
+                             centre=True):
     """``evaluate_kernel`` over chunks of PARALLEL_CHUNK poses on numba's threads."""
     n = J.shape[0]
     out = _outputs(n, J.shape[2])
     chunks = (n + PARALLEL_CHUNK - 1) // PARALLEL_CHUNK
     for k in prange(chunks):
         _evaluate_poses(k * PARALLEL_CHUNK, min(n, (k + 1) * PARALLEL_CHUNK), J, c, w_local, L3,
-                        load_frame, tmin, tmax, subsets, singular_det, *out)
+                        load_frame, tmin, tmax, subsets, singular_det, centre, *out)
     return out
 
 
@@ -371,7 +508,7 @@ def _outputs(n, m):
 
 @njit(cache=True)
 def _evaluate_poses(q0, q1, J, c, w_local, L3, load_frame, tmin, tmax, subsets, singular_det,
-                    scale, out_n, out_r, arg_r, hi_r, t0, v):
+                    centre, scale, out_n, out_r, arg_r, hi_r, t0, v):
     """``evaluate_kernel`` for poses q0 <= q < q1, into its output arrays."""
     m = J.shape[2]
     K = subsets.shape[0]
@@ -392,6 +529,12 @@ def _evaluate_poses(q0, q1, J, c, w_local, L3, load_frame, tmin, tmax, subsets, 
     Y = np.empty((6, 6))
     EE = np.empty((6, 6))
     GG = np.empty((6, 6))
+    hv0 = np.empty(6)
+    hvv = np.empty(6)
+    Q2 = np.empty((m, max(m - 6, 0)))
+    room_lo = np.empty(m)
+    room_hi = np.empty(m)
+    zc = np.empty(max(m - 6, 0))
     col = np.empty(6)
     a = np.empty(6)
     mid = 0.5 * (tmin + tmax)
@@ -415,7 +558,7 @@ def _evaluate_poses(q0, q1, J, c, w_local, L3, load_frame, tmin, tmax, subsets, 
         for i in range(m):
             for r in range(6):
                 A[i, r] = Jq[r, i]
-        scale[q] = _householder_r(A, R)
+        scale[q] = _householder_r(A, R, hv0, hvv)
         if not scale[q] > singular_det:
             continue
         for r in range(6):
@@ -500,7 +643,7 @@ def _evaluate_poses(q0, q1, J, c, w_local, L3, load_frame, tmin, tmax, subsets, 
         for i in range(m):
             for r in range(6):
                 A[i, r] = sqd[i] * Jq[r, i]
-        _householder_r(A, R)
+        _householder_r(A, R, hv0, hvv)
         for j in range(6):  # Y = R^-T L
             for r in range(6):
                 col[r] = L[r, j]
@@ -529,6 +672,17 @@ def _evaluate_poses(q0, q1, J, c, w_local, L3, load_frame, tmin, tmax, subsets, 
                     s += y[r] * Y[r, j]
                 vv += s * s
             v[q, i] = d * np.sqrt(vv)
+        if m > 6 and centre and best_r > 0.0:  # the centred nominal: t0 + D^(1/2) Q2 z, Q2 spanning null(J D^(1/2))
+            _null_basis(A, hv0, hvv, Q2)
+            for i in range(m):
+                room_lo[i] = (t0[q, i] - v[q, i] - tmin[i]) / sqd[i]
+                room_hi[i] = (tmax[i] - v[q, i] - t0[q, i]) / sqd[i]
+            _centre(room_lo, room_hi, Q2, zc)
+            for i in range(m):
+                d = 0.0
+                for kk in range(m - 6):
+                    d += Q2[i, kk] * zc[kk]
+                t0[q, i] += sqd[i] * d
 
 
 @dataclass

@@ -172,35 +172,42 @@ def test_compiled_kernel_matches_the_direct_facet_test(m):
     columns, as written) and tension_rule (numpy), to 1e-9."""
     rng = np.random.default_rng(200 + m)
     robot = robot_from_dict(random_robot(rng, m))
-    J, w0, L, f = pose_pieces(robot, *random_poses(rng, 200))
+    J, w0, L, f = pose_pieces(robot, *random_poses(np.random.default_rng(200 + m), 200))
     mn, mr, arg, hi = zt.facet_margins(np.ascontiguousarray(J), w0, np.ascontiguousarray(L),
                                        robot.tension_min, robot.tension_max, zt.facet_subsets(m))
     np.testing.assert_allclose(f.margin_newtons, mn, rtol=1e-9, atol=1e-9)
     np.testing.assert_allclose(f.wrench_margin, mr, rtol=1e-9, atol=1e-12)
+    p, tau = random_poses(np.random.default_rng(200 + m), 200)  # the same poses again
+    R = rotation_tt(tau)
+    out = zt.evaluate_kernel(J, fz.load_point(robot, p, R), robot.wrench_center_local,
+                             zt._inverse_factor(robot.ellipsoid_matrix.tobytes()), True,
+                             robot.tension_min, robot.tension_max, zt.facet_subsets(m), fz.SINGULAR_DET,
+                             False)  # the rule before centring
     t0, v = zt.tension_rule(robot, J, w0, L)
-    np.testing.assert_allclose(f.tension_nominal, t0, rtol=1e-9, atol=1e-9)
-    np.testing.assert_allclose(f.tension_spread, v, rtol=1e-9, atol=1e-9)
+    np.testing.assert_allclose(out[5], t0, rtol=1e-9, atol=1e-9)
+    np.testing.assert_allclose(out[6], v, rtol=1e-9, atol=1e-9)
+    np.testing.assert_allclose(f.tension_spread, v, rtol=1e-9, atol=1e-9)  # centring keeps v
 
 
 # ---------------------------------------------------------------- the tension rule's band
 
 @pytest.mark.parametrize("m", [7, 8, 12])
 def test_tension_band_is_exact_for_the_rule(m):
-    """t(w) = t_mid + P (w - J t_mid) with P = D J^T (J D J^T)^-1: J t0 = w0 to 1e-9; over
-    random wrenches of the ellipsoid every t(w) lies in t0 +- v, and each bound is attained
-    (at w0 + L (P L)_i^T / v_i); where the status is ok, t0 +- v lies in the limits and the
-    zonotope holds the ellipsoid (a rule that holds every wrench proves it)."""
+    """t(w) = t0 + P (w - w0) with P = D J^T (J D J^T)^-1 and t0 the centred nominal:
+    J t0 = w0 to 1e-9; over random wrenches of the ellipsoid every t(w) lies in t0 +- v,
+    and each bound is attained (at w0 + L (P L)_i^T / v_i); where the status is ok, t0 +- v
+    lies in the limits and the zonotope holds the ellipsoid (a rule that holds every wrench
+    proves it)."""
     rng = np.random.default_rng(300 + m)
     robot = robot_from_dict(random_robot(rng, m))
     J, w0, L, f = pose_pieces(robot, *random_poses(rng, 60, spread=0.3))
     t0, v = f.tension_nominal, f.tension_spread
     np.testing.assert_allclose(np.einsum("nij,nj->ni", J, t0), w0, rtol=0, atol=1e-9 * np.abs(w0).max())
     D = (robot.tension_max - robot.tension_min) ** 2
-    mid = 0.5 * (robot.tension_min + robot.tension_max)
     for q in range(len(w0)):
         P = D[:, None] * J[q].T @ np.linalg.inv(J[q] * D @ J[q].T)
         u = rng.normal(size=(6, 50))
-        t = mid[:, None] + P @ (w0[q][:, None] + L[q] @ (u / np.linalg.norm(u, axis=0)) - (J[q] @ mid)[:, None])
+        t = t0[q][:, None] + P @ L[q] @ (u / np.linalg.norm(u, axis=0))
         assert np.all(np.abs(t - t0[q][:, None]) <= v[q][:, None] * (1 + 1e-9))
         PL = P @ L[q]
         attained = t0[q] + np.einsum("ij,ij->i", PL, PL / v[q][:, None])
@@ -211,6 +218,56 @@ def test_tension_band_is_exact_for_the_rule(m):
     assert np.all((t0 - v >= robot.tension_min)[ok]) and np.all((t0 + v <= robot.tension_max)[ok])
     exceeds = f.tension_status == zt.STATUS_EXCEEDS
     assert np.all(f.wrench_margin[exceeds] > 0)
+
+
+def _best_shift(robot, J, t0, v):
+    """The oracle for the centring: the largest least normalised band slack any null-space
+    shift of the nominal reaches (an LP over (z, s), scipy HiGHS)."""
+    D = robot.tension_max - robot.tension_min
+    m = len(D)
+    N = np.linalg.svd(J)[2][6:].T  # null space of J (m, m - 6)
+    A = np.vstack([np.column_stack([-N / D[:, None], np.ones(m)]), np.column_stack([N / D[:, None], np.ones(m)])])
+    b = np.concatenate([(t0 - robot.tension_min - v) / D, (robot.tension_max - v - t0) / D])
+    res = linprog(np.r_[np.zeros(m - 6), -1.0], A_ub=A, b_ub=b,
+                  bounds=[(None, None)] * (m - 6) + [(None, 1.0)], method="highs")
+    assert res.status == 0, res.message
+    return res.x[-1]
+
+
+@pytest.mark.parametrize("name", ["cogiro", "robot2_8"])
+def test_centred_nominal_holds_every_pose_a_shift_can_hold(name):
+    """The centring's guarantee (docs/more-cables.md): where some null-space shift fits the
+    band with normalised slack above 2 m CENTRE_MU (the LP says), the centred rule's status
+    is ok; and it never reports ok where no shift fits."""
+    robot = load_robot(CONFIG / f"{name}.yaml")
+    rng = np.random.default_rng(9)
+    centre, half = ((0.0, 0.0, 2.5), (6.0, 4.5, 2.0)) if name == "cogiro" else ((0.0, 0.0, 0.3), (0.1, 0.1, 0.15))
+    p = np.asarray(centre) + rng.uniform(-1, 1, (150, 3)) * np.asarray(half)
+    tau = np.column_stack([rng.uniform(-np.pi, np.pi, 150), rng.uniform(0, 0.3, 150), rng.uniform(-0.3, 0.3, 150)])
+    J, w0, L, f = pose_pieces(robot, p, tau)
+    m, checked = len(robot.winch_names), 0
+    for q in np.flatnonzero(f.wrench_margin > 0):
+        best = _best_shift(robot, J[q], f.tension_nominal[q], f.tension_spread[q])
+        if best > 2 * m * zt.CENTRE_MU * (1 + 1e-6):
+            assert f.tension_status[q] == zt.STATUS_OK, (q, best)
+            checked += 1
+        if best < -1e-9:
+            assert f.tension_status[q] == zt.STATUS_EXCEEDS
+    assert checked > 50
+
+
+def test_centred_nominal_is_smooth_along_a_motion():
+    """The nominal a controller follows: along 2000 poses 1 mm apart on CoGiRo, no jump
+    (second differences O(step^2), not O(1))."""
+    robot = load_robot(CONFIG / "cogiro.yaml")
+    s = np.linspace(0.0, 2.0, 2001)[:, None]
+    p = np.array([-1.0, -0.5, 2.0]) + s * np.array([1.0, 0.6, 0.4])
+    tau = np.column_stack([np.full(len(s), 0.5), 0.05 + 0.05 * s[:, 0], np.zeros(len(s))])
+    f = zt.evaluate(robot, p, tau)
+    assert np.all(f.tension_status == zt.STATUS_OK)
+    second = np.abs(np.diff(f.tension_nominal, 2, axis=0)).max()
+    first = np.abs(np.diff(f.tension_nominal, axis=0)).max()
+    assert second < 0.05 * first, (first, second)
 
 
 # ---------------------------------------------------------------- robot files with random m
