@@ -5,8 +5,9 @@
 Prints microseconds per call of ``TaskConstraint(robot, task).residual_and_jacobian(x)``
 for Robot 2 in free flight at the lifted start pose of robot2_q2_q3_free_flight (and of
 ``NavigationManifold.residual_and_jacobian`` alone), the best of a few repeats, after the
-time of the first call (in a fresh process: importing numba and loading the compiled
-kernel from its cache, or compiling it when there is none). With ``--table1`` it also
+time of the first call (in a fresh process: importing the ahead-of-time kernel that
+``make`` builds, or without it importing numba and loading the JIT kernel from its cache,
+or compiling it when there is none); which kernel ran is printed. With ``--table1`` it also
 runs ``benchmarks/table1.py --only robot1_qs_qg --strategies astar`` in a fresh process
 and prints its output and wall time (process start included). ``--reference`` measures
 the numpy reference (``NavigationManifold.residual_and_jacobian_reference``) instead of
@@ -66,7 +67,13 @@ def main(argv=None):
     c.residual_and_jacobian(x)
     t_first = time.perf_counter() - t0
 
-    print(f"F, F_x by the {'numpy reference' if args.reference else 'compiled kernel'}")
+    if args.reference:
+        which = "numpy reference"
+    else:
+        from cdh_planner.manifold import kernels
+        which = ("compiled kernel, ahead of time" if c.nav._kernel is kernels.aot_kernel()
+                 else "compiled kernel, numba JIT")
+    print(f"F, F_x by the {which}")
     print(f"import cdh_planner modules               {1e3 * t_import:8.1f} ms")
     print(f"first call in this process               {1e3 * t_first:8.1f} ms")
     for name, fun, arg in [("TaskConstraint.residual_and_jacobian", c.residual_and_jacobian, x),

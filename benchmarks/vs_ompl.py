@@ -6,10 +6,18 @@
 (`make bench` installs benchmarks/requirements.txt, i.e. OMPL 2.0.1, first; without ompl
 the script says so and runs our planner only.)
 
-Queries: the seven Table 1 problems (config/problems, each run ``--repeats`` times) and
-``--queries`` random free-flight queries (io.random_queries: both ends feasible, the
-straight motion unsafe), half on Robot 1 and half on Robot 2. Every planner runs on a
-query before the next query starts (interleaved, so load changes hit all alike):
+Queries: the seven Table 1 problems (config/problems) and ``--queries`` random free-flight
+queries (io.random_queries: both ends feasible, the straight motion unsafe), half on Robot 1
+and half on Robot 2. Every planner runs on a query before the next query starts
+(interleaved, so load changes hit all alike).
+
+Table 1 rows, cold and warm: each planner on each row in ``--repeats`` fresh processes
+(this script with ``--child``), each planning the row twice: "cold" is the first call (in a
+process that has imported numpy, OMPL and the planner's modules, nothing more: whatever a
+first call loads or compiles is in it), "warm" the second (a new Planner, as a new request
+to a running node is). "start" is the process's start until it is ready to plan (imports).
+Both calls are checked. The ratios are against OMPL-fine's cold and warm medians. Random
+queries: one process, each planner on each query once (warm after the first).
 
 - ours-astar, ours-gbf: ``Planner.plan`` (lift, search, smoothing, densification, time
   parameterisation); seconds = the whole call.
@@ -34,9 +42,10 @@ p90 of seconds count a timeout as the time limit. Peak memory: the process's pea
 start after gc.collect() and malloc_trim(0), MB (what the call itself added). BLAS is
 limited to --blas-threads (default 1) with threadpoolctl when present.
 
-Time on a 2-core machine: the Table 1 part about 4 min; each random query up to 4 x
---timeout, and most reach it (10 queries at --timeout 15: 8 min), so the defaults take
-about 1.5 h. For a quick look: --queries 4 --timeout 5 --repeats 1 (about 3 min).
+Time on a 2-core machine: the Table 1 part 20 min at a load average of 7 - 9 (105 processes;
+OMPL-fine's simplification most of it); each random query up to 4 x --timeout, and most
+reach it (10 queries at --timeout 15: 8 min), so the defaults take about 1.5 h. For a
+quick look: --queries 4 --timeout 5 --repeats 1 --only robot2_q2_q3 (about 3 min).
 """
 
 import argparse
@@ -44,8 +53,10 @@ import atexit
 import ctypes
 import dataclasses
 import gc
+import json
 import os
 import re
+import subprocess
 import sys
 import time
 from dataclasses import dataclass
@@ -473,22 +484,102 @@ def random_queries(count, seed):
     return [q for pair in zip(*per_robot) for q in pair] + per_robot[0][len(per_robot[1]):]
 
 
+def run_child(args):
+    """``--child ROW PLANNER``: plan the row twice in this fresh process; print one JSON line
+    {"start_s", "runs": [cold, warm]}."""
+    ready = time.time() - args.spawned_at
+    (name, qs), = table1_queries([args.child[0]], 2)
+    plan = planners(use_atlas=True)[args.child[1]]
+    runs = [run_one(plan, q, args.timeout) for q in qs]
+    for r in runs:
+        r.right = bool(r.safe)  # the parent sets "right" for no_path answers
+    print(json.dumps({"start_s": ready, "runs": [dataclasses.asdict(r) for r in runs]}), flush=True)
+    return 0
+
+
+def child_runs(row, planner, args, repeat):
+    """(start s, cold Run, warm Run) of ``planner`` on ``row`` in a fresh process."""
+    argv = [sys.executable, __file__, "--child", row, planner, "--timeout", str(args.timeout),
+            "--seed", str(args.seed + repeat), "--blas-threads", str(args.blas_threads),
+            "--spawned-at", repr(time.time())]
+    try:
+        out = subprocess.run(argv, capture_output=True, text=True, timeout=6 * args.timeout + 300)
+        data = json.loads(out.stdout.strip().splitlines()[-1])
+    except (subprocess.TimeoutExpired, IndexError, json.JSONDecodeError) as exc:
+        err = (out.stderr.strip().splitlines() or ["no output"])[-1][:200] \
+            if not isinstance(exc, subprocess.TimeoutExpired) else "killed after its time limit"
+        failed = Run("error", float("nan"), float("nan"), error=f"child process: {err}")
+        return float("nan"), failed, failed
+    cold, warm = (Run(**r) for r in data["runs"])
+    return data["start_s"], cold, warm
+
+
+FRESH_HEAD = (f"  {'planner':11s} {'answered':>8s} {'right':>6s} {'start s':>7s} {'cold s':>7s} "
+              f"{'warm s':>7s} {'cold/fine':>9s} {'warm/fine':>9s} {'unsafe':>7s} {'med cost':>9s}")
+
+
+def fresh_summary(title, table):
+    """``table`` planner -> [(start s, cold Run, warm Run), ...]: medians, ratios to OMPL-fine."""
+    print(f"== {title}\n{FRESH_HEAD}", flush=True)
+    med = {n: (float(np.median([c.seconds for _, c, _ in rs])),
+               float(np.median([w.seconds for _, _, w in rs])),
+               all(r.right for _, c, w in rs for r in (c, w))) for n, rs in table.items()}
+    fine = med.get("ompl-fine", (np.nan, np.nan))
+    for name, rs in table.items():
+        runs = [r for _, c, w in rs for r in (c, w)]
+        paths = [r for r in runs if r.safe is not None]
+        answered = sum(r.status in ("path", "no_path") for r in runs)
+        cost = f"{np.median([r.cost for r in paths]):9.4f}" if paths else "        -"
+        print(f"  {name:11s} {answered:>3d}/{len(runs):<4d} {100 * np.mean([r.right for r in runs]):5.0f}% "
+              f"{np.median([s for s, _, _ in rs]):7.2f} {med[name][0]:7.2f} {med[name][1]:7.2f} "
+              f"{med[name][0] / fine[0]:9.2f} {med[name][1] / fine[1]:9.2f} "
+              f"{sum(not r.safe for r in paths):>3d}/{len(paths):<3d} {cost}", flush=True)
+        for r in runs:
+            if r.error:
+                print(f"    {name} raised {r.error}", flush=True)
+    return med
+
+
 def run_table1(args):
-    exc = {}
-    for name, qs in table1_queries(args.only or TABLE1, args.repeats):
-        plans = planners(use_atlas=True)
-        table = {n: [] for n in plans}
+    """Each Table 1 row: every planner in --repeats fresh processes, cold and warm."""
+    exc, ratios = {}, []
+    names = list(planners(use_atlas=True))
+    for row in args.only or TABLE1:
         if ob is not None:
-            print(resolution_note(qs[0]), flush=True)
-        for k, q in enumerate(qs):
-            runs = run_query(q, plans, args.timeout)
-            progress(f"{name} run {k + 1}/{len(qs)}", runs)
-            for n, r in runs.items():
-                table[n].append(r)
-        summary(f"{name} ({len(qs)} runs, timeout {args.timeout:g} s)", table)
+            print(resolution_note(next(table1_queries([row], 1))[1][0]), flush=True)
+        table = {n: [] for n in names}
+        for k in range(args.repeats):
+            for n in names:
+                table[n].append(child_runs(row, n, args, k))
+            print(f"  {row} process {k + 1}/{args.repeats}: " + " | ".join(
+                f"{n} {c.status} {c.seconds:.2f}/{w.seconds:.2f}s" for n, rs in table.items()
+                for _, c, w in rs[-1:]), flush=True)
+        all_runs = [r for rs in table.values() for _, c, w in rs for r in (c, w)]
+        any_safe = any(r.safe for r in all_runs)
+        for r in all_runs:
+            r.right = bool(r.safe) or (r.status == "no_path" and not any_safe)
+        med = fresh_summary(f"{row} ({args.repeats} processes x 2 calls, timeout {args.timeout:g} s)", table)
+        ratios.append((row, med))
         for n, rs in table.items():
-            exc[n] = exc.get(n, 0) + sum(r.status == "error" for r in rs)
+            exc[n] = exc.get(n, 0) + sum(r.status == "error" for _, c, w in rs for r in (c, w))
+    targets_table(ratios)
     return exc
+
+
+def targets_table(ratios):
+    """The issue's targets, ours against OMPL-fine: warm <= 1.0x, cold <= 2.0x."""
+    print("== ours against OMPL RRTConnect fine (targets: warm <= 1.0x, cold <= 2.0x)\n"
+          "| row | planner | cold s | OMPL-fine cold s | cold ratio | warm s | OMPL-fine warm s | warm ratio | |\n"
+          "|---|---|---|---|---|---|---|---|---|", flush=True)
+    for row, med in ratios:
+        fine = med.get("ompl-fine")
+        if fine is None:
+            continue
+        for n in (n for n in med if n.startswith("ours")):
+            (c, w, right), rc, rw = med[n], med[n][0] / fine[0], med[n][1] / fine[1]
+            ok = ("meets" if rc <= 2.0 and rw <= 1.0 else "misses") if right else "not all right"
+            print(f"| {row} | {n} | {c:.2f} | {fine[0]:.2f} | {rc:.2f} | {w:.2f} | {fine[1]:.2f} | "
+                  f"{rw:.2f} | {ok} |", flush=True)
 
 
 def run_random(args):
@@ -520,9 +611,15 @@ def main(argv=None):
     ap.add_argument("--skip-table1", action="store_true")
     ap.add_argument("--skip-random", action="store_true")
     ap.add_argument("--timeout", type=float, default=10.0, help="time limit per planner call (s)")
-    ap.add_argument("--repeats", type=int, default=3, help="runs of each Table 1 row")
+    ap.add_argument("--repeats", type=int, default=3,
+                    help="fresh processes per Table 1 row and planner (each plans twice)")
     ap.add_argument("--blas-threads", type=int, default=1, help="BLAS threads (0: leave as is)")
+    ap.add_argument("--child", nargs=2, metavar=("ROW", "PLANNER"), help=argparse.SUPPRESS)
+    ap.add_argument("--spawned-at", type=float, default=0.0, help=argparse.SUPPRESS)
     args = ap.parse_args(argv)
+    if args.child:
+        setup_libraries(args, quiet=True)
+        return run_child(args)
     setup_libraries(args)
     exc = {}
     if not args.skip_table1:
@@ -536,11 +633,11 @@ def main(argv=None):
     return 0
 
 
-def setup_libraries(args):
-    if ob is None:
+def setup_libraries(args, quiet=False):
+    if ob is None and not quiet:
         print(f"OMPL is absent ({OMPL_MISSING}): our planner only. Install it with "
               f"`.venv/bin/python -m pip install -r benchmarks/requirements.txt`.", flush=True)
-    else:
+    elif ob is not None:
         ou.setLogLevel(ou.LogLevel.LOG_ERROR)
         ou.RNG.setSeed(args.seed + 1)  # OMPL wants a seed > 0
         # nanobind lists OMPL's objects "leaked" at interpreter exit (hundreds of lines on
@@ -549,7 +646,8 @@ def setup_libraries(args):
     try:
         from threadpoolctl import threadpool_limits
     except ImportError:
-        print("threadpoolctl absent: BLAS threads left as they are", flush=True)
+        if not quiet:
+            print("threadpoolctl absent: BLAS threads left as they are", flush=True)
         return
     if args.blas_threads > 0:
         threadpool_limits(args.blas_threads)

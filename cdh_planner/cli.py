@@ -5,11 +5,13 @@ This module only builds the top-level parser, collects the subcommands that exis
 and holds the exit-code contract of every command:
 
     0  ok
-    1  no path, or not feasible (the command's answer is "no")
+    1  no path, or not feasible (the command's answer is "no"); for ``call`` and
+       ``replay --requests`` also: no node answered (one line says so)
     2  bad input: arguments, input files (unreadable, not UTF-8, beyond the limits of
-       ``cdh_planner.files``, wrong types or magnitudes), output paths that cannot be
-       written (checked before the work starts; a write that fails at the end, a full
-       disk, is exit 2 too)
+       ``cdh_planner.files``, wrong types or magnitudes, damaged), output paths that cannot
+       be written or that name an input (checked before the work starts; a write that
+       fails at the end, a full disk, is exit 2 too), ROS arguments and names that rcl
+       refuses; the library exceptions only bad input raises (``INPUT_EXCEPTIONS``) too
     3  internal error: any other exception (a bug)
     130 interrupted (Ctrl-C); 141 stdout closed by its reader (``| head``), silently
 
@@ -33,6 +35,21 @@ PROG = 'cdh-planner'
 # Order here is the order in --help. A name whose module does not exist yet is skipped.
 COMMANDS = ['verify', 'slice', 'plan', 'node', 'call', 'replay', 'recover', 'demo']
 
+# The one-line summaries of `cdh-planner --help`, the same as each module's add_parser help
+# (test_startup_imports checks). Held here so that a run imports only the module of the command it runs:
+# a module imports what its command needs (the planner, plotting, ROS), up to seconds.
+SUMMARIES = {
+    'verify': 'check poses and the motion between them for wrench feasibility',
+    'slice': 'draw a 2-D slice of the wrench-feasible C-space to a PNG',
+    'plan': 'plan a wrench-feasible path for a problem file (no ROS needed)',
+    'node': 'run the ROS 2 planner node',
+    'call': "call a running node's plan service (and execute)",
+    'replay': 'republish a recorded run, or re-send its plan requests',
+    'recover': 'complete the run file of a killed node (summary, indexes, footer)',
+    'demo': "the whole story: the paper's robots, poses and motions checked, then the ROS "
+            "node planning, streaming, recording and replaying Robot 2's sphere task",
+}
+
 EXIT_OK = 0
 EXIT_NO = 1  # no path, infeasible
 EXIT_USAGE = 2  # bad input (arguments, files)
@@ -40,9 +57,22 @@ EXIT_INTERNAL = 3  # an unexpected exception
 EXIT_INTERRUPTED = 130
 EXIT_BROKEN_PIPE = 141  # 128 + SIGPIPE, as a shell reports a process killed by it
 
+# Exception types of the libraries that only bad input raises (a name given on the command
+# line or read from a file, a damaged file's bytes), by qualified name: the commands turn
+# them into InputErrors where they arise; one that escapes is still exit 2, not 3.
+INPUT_EXCEPTIONS = frozenset({
+    'rclpy.exceptions.NameValidationException',   # topic, service, node, namespace names
+    # mcap's reading errors (not McapError, the base of its writers' errors too)
+    'mcap.exceptions.InvalidMagic', 'mcap.exceptions.EndOfFile',
+    'mcap.exceptions.RecordLengthLimitExceeded', 'mcap.exceptions.UnsupportedCompressionError',
+    'mcap.exceptions.DecoderNotFoundError', 'mcap_ros2.decoder.McapROS2DecodeError',
+    'mcap.stream_reader.CRCValidationError',       # a damaged chunk
+})
 
-def _command_module(name: str):
-    """Import ``cdh_planner.commands.<name>``, or return None if there is no such module."""
+
+def _command_module(name: str, load: bool = True):
+    """Import ``cdh_planner.commands.<name>`` (with ``load`` False: only find it), or return
+    None if there is no such module."""
     modname = f'cdh_planner.commands.{name}'
     if modname not in sys.modules:
         try:
@@ -50,11 +80,35 @@ def _command_module(name: str):
                 return None
         except (ImportError, ValueError):
             return None
-    return importlib.import_module(modname)
+    return importlib.import_module(modname) if load else modname
 
 
-def build_parser() -> argparse.ArgumentParser:
-    parser = argparse.ArgumentParser(
+def requested_command(argv: list[str]) -> str | None:
+    """The command ``argv`` runs: its first argument that is not an option, if that is a
+    command and no --help / --version comes before it; else None."""
+    for arg in argv:
+        if arg in ('-h', '--help', '--version'):
+            return None
+        if not arg.startswith('-'):
+            return arg if arg in COMMANDS else None
+    return None
+
+
+class OneLineErrors(argparse.ArgumentParser):
+    """argparse's parser whose usage errors are one line too (argparse prints the usage
+    text first: 13 lines for ``plan --max-cable-speed fast``), pointing at --help; the
+    subcommands' parsers are of this class as well (``add_subparsers`` uses the parent's)."""
+
+    def error(self, message):
+        hint = f" (see {self.prog} --help)"
+        text = clip(message, max(20, MAX_MESSAGE_CHARS - len(hint))) + hint
+        self.exit(EXIT_USAGE, f'{PROG}: error: {text}\n')
+
+
+def build_parser(commands: list[str] | None = None) -> argparse.ArgumentParser:
+    """The parser with the full subparsers of ``commands`` (default: every command; their
+    modules are imported) and, for the others, a one-line entry (not imported)."""
+    parser = OneLineErrors(
         prog=PROG,
         description='Wrench-feasible path planning for cable-driven hexapods.',
     )
@@ -64,9 +118,14 @@ def build_parser() -> argparse.ArgumentParser:
                              'path / infeasible, 2 bad input, 3 internal error)')
     subparsers = parser.add_subparsers(dest='command', required=True, metavar='COMMAND')
     for name in COMMANDS:
-        module = _command_module(name)
-        if module is not None:
+        full = commands is None or name in commands
+        module = _command_module(name, load=full)
+        if module is None:
+            continue
+        if full:
             module.add_parser(subparsers)
+        else:
+            subparsers.add_parser(name, help=SUMMARIES.get(name), add_help=False)
     return parser
 
 
@@ -86,7 +145,8 @@ def main(argv: list[str] | None = None) -> int:
         argv = sys.argv[1:]
     debug = '--debug' in argv  # until the arguments are parsed
     try:
-        parser = build_parser()
+        command = requested_command(argv)
+        parser = build_parser([command] if command else [])
         try:
             args = parser.parse_args(argv)
         except SystemExit as exc:  # --help, --version, usage errors: argparse already printed
@@ -115,12 +175,23 @@ def main(argv: list[str] | None = None) -> int:
         print(f'{PROG}: interrupted', file=sys.stderr)
         return EXIT_INTERRUPTED
     except (Exception, RecursionError, MemoryError) as exc:
-        try:
-            text = str(exc)
-        except Exception:
-            text = '?'
-        return _error(f'internal error: {type(exc).__name__}: {text} (run with --debug for '
-                      'the traceback)', EXIT_INTERNAL, debug)
+        if _caused_by_input(exc):
+            return _error(_text(exc), EXIT_USAGE, debug)
+        return _error(f'internal error: {type(exc).__name__}: {_text(exc)} (run with --debug '
+                      'for the traceback)', EXIT_INTERNAL, debug)
+
+
+def _caused_by_input(exc) -> bool:
+    """Whether ``exc`` is of one of INPUT_EXCEPTIONS (or derived from one)."""
+    return any(f'{c.__module__}.{c.__qualname__}' in INPUT_EXCEPTIONS for c in type(exc).__mro__)
+
+
+def _text(exc) -> str:
+    """str(exc), or '?' if even that fails."""
+    try:
+        return str(exc)
+    except Exception:
+        return '?'
 
 
 if __name__ == '__main__':  # python -m cdh_planner.cli

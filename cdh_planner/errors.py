@@ -16,7 +16,20 @@ MAX_VALUE_CHARS = 80  # an error line shows at most this much of the value
 MAX_FIELD_CHARS = 60  # ... and of the field's name
 MAX_MESSAGE_CHARS = 200  # an InputError's whole message, whatever its parts
 
-_REPR = reprlib.Repr()
+class _Repr(reprlib.Repr):
+    """reprlib's bounded repr, with a huge integer (``int(1e308)``, a 309-digit number)
+    shown as a float is (``1e+308``), not as its digits cut in the middle."""
+
+    def repr_int(self, x, level):
+        if abs(x) < 10 ** 16:
+            return repr(x)
+        try:
+            return f"{x:.6g}"
+        except OverflowError:  # beyond a float: its order of magnitude
+            return f"{'-' if x < 0 else ''}~1e{int((x.bit_length() - 1) * math.log10(2))}"
+
+
+_REPR = _Repr()
 _REPR.maxlevel, _REPR.maxdict, _REPR.maxlist, _REPR.maxtuple = 3, 4, 6, 6
 _REPR.maxset = _REPR.maxfrozenset = _REPR.maxdeque = _REPR.maxarray = 6
 _REPR.maxstring, _REPR.maxlong, _REPR.maxother = MAX_VALUE_CHARS, 40, MAX_VALUE_CHARS
@@ -60,6 +73,19 @@ class InputError(ValueError):
         self.reason = reason
         text = f"{clip(field, MAX_FIELD_CHARS)} = {short_repr(value)}: {clip(reason, MAX_MESSAGE_CHARS)}"
         super().__init__(clip(text, MAX_MESSAGE_CHARS))
+
+
+def check_text(field: str, text) -> str:
+    """``text`` if it is UTF-8 text; an InputError naming ``field`` if it holds bytes of the
+    command line that were not UTF-8 (Python keeps them as lone surrogates, which no
+    drawing or ROS message can take). File names are not checked with it: any bytes are a
+    file name."""
+    try:
+        text.encode("utf-8")
+    except UnicodeEncodeError as exc:
+        raise InputError(field, text, f"not UTF-8 text (byte "
+                                      f"0x{ord(text[exc.start]) & 0xFF:02x} at {exc.start})") from None
+    return text
 
 
 def is_number(value) -> bool:

@@ -8,6 +8,8 @@ returns plain Python data or raises an InputError naming the file and what is wr
   ``max_bytes`` of it (1 MiB for YAML, 16 MiB for a pose file); an OSError while reading
   (EIO, EACCES, ...) is an InputError;
 - the text must be UTF-8 without NUL characters (a binary file is refused);
+- a key given twice in one mapping (YAML or JSON) is refused, naming the key: both
+  parsers would silently keep the last one;
 - YAML anchors and aliases are refused (a 300-byte "billion laughs" file would expand to
   billions of nodes), and so is a document nested deeper than ``max_depth`` levels, a list
   or mapping of more than ``max_items`` entries or more than ``max_nodes`` values in all.
@@ -40,6 +42,29 @@ _Loader.add_implicit_resolver(
     "tag:yaml.org,2002:float",
     re.compile(r"^[-+]?(?:\.[0-9]+|[0-9]+(?:\.[0-9]*)?)(?:[eE][-+]?[0-9]+)?$"),
     list("-+0123456789."))
+
+
+def _construct_unique_mapping(loader, node, deep=False):
+    """SafeConstructor's mapping, refusing a key given twice (merge keys ``<<`` aside):
+    PyYAML keeps the last one silently."""
+    seen = set()
+    for key_node, _ in node.value:
+        if key_node.tag == "tag:yaml.org,2002:merge":
+            continue
+        key = loader.construct_object(key_node, deep=deep)
+        try:
+            duplicate = key in seen
+            seen.add(key)
+        except TypeError:  # an unhashable key: SafeConstructor refuses it itself
+            continue
+        if duplicate:
+            raise yaml.constructor.ConstructorError(
+                "while constructing a mapping", node.start_mark,
+                f"duplicate key {key!r}", key_node.start_mark)
+    return yaml.constructor.SafeConstructor.construct_mapping(loader, node, deep=deep)
+
+
+_Loader.construct_mapping = _construct_unique_mapping
 _LOADER = _Loader
 
 
@@ -168,7 +193,9 @@ def read_json(path, where, limits=JSON_LIMITS):
     text = read_text(path, where, limits.max_bytes)
     label = str(path)
     try:
-        doc = json.loads(text)
+        doc = json.loads(text, object_pairs_hook=_unique_keys)
+    except _DuplicateKey as exc:
+        raise InputError(where, label, f"duplicate key {exc.args[0]!r} in one object") from None
     except json.JSONDecodeError as exc:
         raise InputError(where, label, f"not valid JSON: {exc.msg} (line {exc.lineno}, "
                                        f"column {exc.colno})") from None
@@ -178,6 +205,19 @@ def read_json(path, where, limits=JSON_LIMITS):
         raise InputError(where, label, f"not valid JSON: {exc}") from None
     check_structure(doc, where, label, limits)
     return doc
+
+
+class _DuplicateKey(Exception):
+    """A JSON object with a key given twice (the key is args[0])."""
+
+
+def _unique_keys(pairs):
+    """A JSON object's dict, refusing a key given twice (json keeps the last silently)."""
+    out = dict(pairs)
+    if len(out) != len(pairs):
+        seen = set()
+        raise _DuplicateKey(next(k for k, _ in pairs if k in seen or seen.add(k)))
+    return out
 
 
 def check_structure(doc, where, label, limits):

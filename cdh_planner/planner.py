@@ -28,6 +28,7 @@ from .manifold.constraint import TaskConstraint
 from .model.pose import (Pose, quaternion_from_tau, rotation_angle_between, rotation_tt,
                          tau_from_rotation, wrap_angle)
 from .model.task import COORDINATES, end_taus
+from .scene.collision import COLLISION_UNIT_M, CollisionModel, combine
 from .search.search import MB, Stop, run
 from .settings import COSTS, PlannerSettings, check_setting  # noqa: F401  (PlannerSettings: API)
 from .status import Status
@@ -55,6 +56,10 @@ class PlanResult:
     # over the waypoints and the motion between them (trajectory.clearance.path_margins)
     least_margin: float = math.nan  # normalised (feasibility.evaluate)
     least_tension_margin: float = math.nan  # N: min over cables of f - v - fmin, fmax - f - v
+
+    def __post_init__(self):  # one closed vocabulary: a member, never a loose string
+        if not isinstance(self.reason, Status):
+            raise TypeError(f"PlanResult.reason must be a Status, not {self.reason!r}")
 
 
 ProgressCallback = Callable[[dict], None]  # called with {"charts": int, "time_s": float, "best_h": float}
@@ -95,10 +100,15 @@ def default_radius(dim):
 class Planner:
     """Wrench-feasible paths for one robot and task (module docstring)."""
 
-    def __init__(self, robot, task, settings: Optional[PlannerSettings] = None):
+    def __init__(self, robot, task, settings: Optional[PlannerSettings] = None, scene=None):
         self.robot = robot
         self.task = task
         self.settings = (settings or PlannerSettings()).check()
+        # a scene (scene.schema.Scene): collisions join validity everywhere wrench
+        # feasibility is checked, and a chart centre in collision costs inf (paper, Sec. 6)
+        self.scene = scene
+        self.collision = CollisionModel(robot, scene) if scene is not None else None
+        self._clear_cache = {}
         s = self.settings
         self.constraint = TaskConstraint(robot, task, margin_floor=s.margin_floor)
         self.radius = s.radius or default_radius(self.constraint.dim)
@@ -112,7 +122,7 @@ class Planner:
         self.strategy, self.heuristic = self._search_strategy(s.strategy)  # the settings'
         # the task metric, or the clearance cost (trajectory.clearance), whose A* heuristic
         # is the metric (a lower bound): _search_strategy
-        self.cost = self.length if self.clearance_weight == 0 else self._clearance_cost
+        self.cost = self._blocked(self.length if self.clearance_weight == 0 else self._clearance_cost)
         self._edge_costs = {}  # (i, j), i < j -> cost between the chart centres
 
     # ----- the query -------------------------------------------------------------------
@@ -141,7 +151,7 @@ class Planner:
             strategy = default_strategy(self.constraint.dim, self.clearance_weight)
         if self.clearance_weight == 0:
             return strategy, None
-        return strategy, self.length if strategy == "astar" else self._greedy_heuristic
+        return strategy, self._blocked(self.length if strategy == "astar" else self._greedy_heuristic)
 
     def _plan(self, start, goal, progress, cancel, tolerance, s):
         t0 = time.perf_counter()
@@ -163,8 +173,12 @@ class Planner:
         if self._direct_ok(ys[0], ys[1]):
             y, charts, direct = self._direct_points(ys[0], ys[1]), 0, True
         else:
+            det = self._det_j([points["start"], points["goal"]])
+            if det[0] * det[1] < 0:
+                return answer(False, Status.NO_PATH, _SINGULAR_BETWEEN.format(*det))
             out = run(self.atlas, points["start"], points["goal"], self.cost, stop, strategy,
-                      self._direct_x, progress, self._edge_costs, self._link_ok, heuristic)
+                      self._direct_x, progress, self._edge_costs, self._link_ok, heuristic,
+                      self._route_unsafe)
             if out.status != Status.OK:
                 return answer(False, out.status, _failure_message(out.status, len(self.atlas.charts),
                                                                   s, self.radius),
@@ -186,9 +200,15 @@ class Planner:
                          for k in range(len(path) - 1)))
         how = "the direct motion" if direct else f"{charts} charts"
         least = clearance.path_margins(self.robot, path.p, path.quaternion)
-        path, timing = timed_path(self.robot, path, s.dynamics, s.max_cable_speed, s.max_cable_accel)
+        extra = self._least_clearance(path)
+        path, timing, executed = timed_path(self.robot, path, s.dynamics, s.max_cable_speed,
+                                            s.max_cable_accel)
+        if not executed.ok:  # bounded: never hand out a trajectory that was not checked
+            return answer(False, Status.NOT_EXECUTABLE, "no trajectory a JointTrajectory"
+                          f"Controller executes within the limits: {executed.reason}")
         out = answer(True, Status.OK, f"path of {len(path)} waypoints over {how}", cost=cost,
-                     path=path, chart_path=charts, direct=direct, timing=timing or "quasi-static")
+                     path=path, chart_path=charts, direct=direct, timing=timing or "quasi-static",
+                     executed=executed.describe(), points_added=executed.added, **extra)
         out.least_margin, out.least_tension_margin = least
         return out
 
@@ -226,7 +246,7 @@ class Planner:
         seg = np.repeat(np.arange(motion.n_segments), n)
         s = np.tile(np.linspace(0.0, 1.0, n), motion.n_segments)
         p, R = motion(seg, s)
-        return bool(np.all(evaluate(self.robot, p, R=R).margin >= self.settings.margin_floor))
+        return bool(np.all(self._valid(p, R=R)[0] >= self.settings.margin_floor))
 
     def _direct_ok(self, ya, yb):
         """Is the direct motion ya -> yb dense-feasible with margin above the floor? A few
@@ -234,8 +254,15 @@ class Planner:
         y = np.array([ya, yb])
         if not (self._probe(y, COARSE_SAMPLES) and self._probe(y, 8 * COARSE_SAMPLES)):
             return False
-        seg = check_path(self.robot, self._direct_motion(y))[0]
+        seg = check_path(self.robot, self._direct_motion(y), collision=self.collision)[0]
         return seg.feasible and seg.unresolved == 0 and seg.worst.margin >= self.settings.margin_floor
+
+    def _det_j(self, xs):
+        """det J (the cables' screw Jacobian) at points of M. J is never singular on C (a
+        singular J makes the tension set of the wrench ellipsoid unbounded: math.md, Sec. 3),
+        so its sign is the same all along any path: ends of opposite signs have none."""
+        p, tau = self._pose_arrays(xs)
+        return evaluate(self.robot, p, tau).det_j
 
     def _direct_x(self, xa, xb):
         ya, yb = self._task_coords([xa, xb])
@@ -261,6 +288,21 @@ class Planner:
         (the dense check of the whole path comes later)."""
         return self._probe(self._task_coords(xs), CHORD_SAMPLES)
 
+    def _route_unsafe(self, xs, direct):
+        """The first motion k (xs[k] -> xs[k + 1]; not the direct motions in ``direct``,
+        checked densely already) that densification cannot make dense-feasible, or None.
+        One dense check of the route finds the walls thinner than _link_ok's probe (Robot
+        2: 6 mrad wide, margin -52 inside, between two link points 0.06 rad apart); the
+        search cuts that link instead of answering with a route that cannot be a path."""
+        y = self._task_coords(xs)
+        p, tau = self.task.pose(y)
+        for k, seg in enumerate(check_motion(self.robot, p, quaternion_from_tau(tau))):
+            if k in direct or (seg.feasible and seg.unresolved == 0):
+                continue
+            if not self._densify(y[k:k + 2])[1]:
+                return k
+        return None
+
     # ----- clearance (trajectory.clearance) ------------------------------------------------
     def _clearance_cost(self, xa, xb):
         """Clearance cost between two points of M: their task-metric length times
@@ -275,7 +317,7 @@ class Planner:
         else:
             motion = self._direct_motion(self._task_coords([xa, xb]))
             p, R = motion(np.zeros(n - 1, dtype=int), np.arange(1, n) / n)
-            inner = clearance.phi(evaluate(self.robot, p, R=R).margin)
+            inner = clearance.phi(self._valid(p, R=R)[0])
             mean = (0.5 * float(ends.sum()) + float(inner.sum())) / n  # trapezoid
         return self.length(xa, xb) * (1.0 + self.clearance_weight * mean)
 
@@ -312,24 +354,64 @@ class Planner:
         own task coordinates)."""
         off = float(self.task.residual(p[None], tau[None])[0])
         if off > max(tolerance, TASK_TOL):
-            return None, ("invalid", f"{label} pose is off the {self.task.type} task by "
+            return None, (Status.INVALID, f"{label} pose is off the {self.task.type} task by "
                                      f"{off:.3g} (m or rad), beyond the tolerance {tolerance:g}: "
                                      f"{_describe(p, tau)}")
         p, tau = (a[0] for a in self.task.pose(self.task.coords(p[None], tau[None])))
         if float(self.task.residual(p[None], tau[None])[0]) > TASK_TOL:  # e.g. an implicit task
-            return None, ("invalid", f"{label} pose is off the {self.task.type} task by "
+            return None, (Status.INVALID, f"{label} pose is off the {self.task.type} task by "
                                      f"{off:.3g} (m or rad) and cannot be projected onto it: "
                                      f"{_describe(p, tau)}")
         f = evaluate(self.robot, p[None], tau[None])
         if not f.feasible[0]:
-            return None, (f"{label}_infeasible", f"{label} pose is not wrench-feasible: "
+            return None, (Status.infeasible(label), f"{label} pose is not wrench-feasible: "
                           f"{f.binding[0]} violated (margin {f.margin[0]:.3g}) at {_describe(p, tau)}")
+        if self.collision is not None:
+            c = self.collision.clearance(p, rotation_tt(tau))
+            if not c.ok:
+                return None, (Status.in_collision(label), f"{label} pose is in collision: "
+                              f"{c.binding} {c.distance * 1e3:.3g} mm apart (clearance "
+                              f"{self.scene.clearance * 1e3:g} mm) at {_describe(p, tau)}")
         x = self.constraint.lift(p, tau)
         if not self.atlas.in_domain(x):
-            return None, (f"{label}_infeasible", f"{label} pose is feasible but closer to the "
+            return None, (Status.infeasible(label), f"{label} pose is feasible but closer to the "
                           f"boundary of C than the planner's margin floor "
                           f"({self.settings.margin_floor:g}): {_describe(p, tau)}")
         return x, None
+
+    # ----- collision (scene) ----------------------------------------------------------------
+    def _valid(self, p, tau=None, R=None):
+        """Margins (N,) and bindings of poses: wrench feasibility's (normalised) and, with a
+        scene, the least of it and the collision margin (scene.collision.combine)."""
+        f = evaluate(self.robot, p, tau, R)
+        if self.collision is None:
+            return f.margin, f.binding
+        return combine(f.margin, f.binding, self.collision, p, rotation_tt(tau) if R is None else R)
+
+    def _clear(self, x):
+        """Is the pose of the point x of M clear of collision by the margin floor? (cached)"""
+        key = x.tobytes()
+        if key not in self._clear_cache:
+            p, tau = self.constraint.pose(x)
+            c = self.collision.clearance(p, rotation_tt(tau))
+            self._clear_cache[key] = c.margin / COLLISION_UNIT_M >= self.settings.margin_floor
+        return self._clear_cache[key]
+
+    def _blocked(self, cost):
+        """``cost`` between points of M, inf when either is in collision: chart transitions
+        into collision cost inf (the paper's Sec. 6), so A* never takes them and GBF tries
+        them last; the search's lazy link check cuts any that are still used."""
+        if self.collision is None:
+            return cost
+        return lambda xa, xb: cost(xa, xb) if self._clear(xa) and self._clear(xb) else math.inf
+
+    def _least_clearance(self, path):
+        """{least_clearance_m, clearance_binding} over the path's waypoints (with a scene)."""
+        if self.collision is None:
+            return {}
+        cs = [self.collision.clearance(p, R) for p, R in zip(path.p, rotation_tt(path.tau))]
+        c = min(cs, key=lambda c: c.distance)
+        return {"least_clearance_m": c.distance, "clearance_binding": c.binding}
 
     # ----- smoothing and densification in task coordinates ------------------------------
     # M is the graph of the (closed-form) lift over the feasible poses of the task, so a
@@ -345,7 +427,7 @@ class Planner:
     def _feasible(self, y):
         """Which task coordinate rows (N, k) are feasible with margin above the floor."""
         p, tau = self.task.pose(y)
-        return evaluate(self.robot, p, tau).margin >= self.settings.margin_floor
+        return self._valid(p, tau)[0] >= self.settings.margin_floor
 
     def _smooth(self, y):
         """Laplacian smoothing of the interior points (Jacobi, half steps); a moved point
@@ -450,7 +532,7 @@ class Planner:
     def _margins(self, y):
         """Normalised margins of task coordinate rows (N, k)."""
         p, tau = self.task.pose(y)
-        return evaluate(self.robot, p, tau).margin
+        return self._valid(p, tau)[0]
 
     def _lengths(self, ya, yb):
         """Task-metric lengths between task coordinate rows ya, yb (N, k) (the path cost)."""
@@ -464,7 +546,7 @@ class Planner:
         per = self._periodic_mask()
         for _ in range(DENSIFY_ROUNDS):
             p, tau = self.task.pose(y)
-            segs = check_motion(self.robot, p, quaternion_from_tau(tau))
+            segs = check_motion(self.robot, p, quaternion_from_tau(tau), collision=self.collision)
             bad = np.array([k for k, seg in enumerate(segs) if not seg.feasible], dtype=int)
             if bad.size == 0 and all(seg.unresolved == 0 for seg in segs):
                 return y, True
@@ -487,10 +569,11 @@ class Planner:
         p, tau = self.task.pose(y)
         q = quaternion_from_tau(tau)
         f = evaluate(self.robot, p, tau)
-        if not np.all(f.feasible):
+        if not np.all(f.feasible) or not np.all(self._valid(p, tau)[0] > 0):
             return None
         if not verified and not all(seg.feasible and seg.unresolved == 0
-                                    for seg in check_motion(self.robot, p, q)):
+                                    for seg in check_motion(self.robot, p, q,
+                                                            collision=self.collision)):
             return None
         n = len(y)
         zeros = np.zeros((n, 6))
@@ -550,8 +633,14 @@ def _finite_vector(name, v, n):
 
 
 def _describe(p, tau):
-    return (f"p = [{', '.join(f'{v:.4f}' for v in p)}] m, "
-            f"tau = [{', '.join(f'{v:.4f}' for v in tau)}] rad")
+    # 6 significant digits: a position of 1e308 (a node's goal) is not 309 digits long
+    return (f"p = [{', '.join(f'{v:.6g}' for v in p)}] m, "
+            f"tau = [{', '.join(f'{v:.6g}' for v in tau)}] rad")
+
+
+_SINGULAR_BETWEEN = ("no path: start and goal lie on opposite sides of the singularity det J = 0 "
+                     "(det J = {:.3g} and {:.3g}); every motion between them passes a pose where the "
+                     "cable Jacobian is singular, which no tension in range can hold (at any resolution)")
 
 
 def _failure_message(status, charts, s, radius):

@@ -259,7 +259,11 @@ def test_outputs_are_checked_before_the_work(tmp_path, capsys, poses, monkeypatc
     assert "directory does not exist" in run_cli(
         capsys, ["verify", ROBOT2, poses, "--json", tmp_path / "no" / "out.json"])
     assert "is a directory" in run_cli(capsys, ["plan", "--quiet", PROBLEM, "--json", tmp_path])
-    assert "is a directory" in run_cli(capsys, ["plan", "--quiet", PROBLEM, "--plot", tmp_path])
+    (tmp_path / "d.png").mkdir()
+    assert "is a directory" in run_cli(capsys, ["plan", "--quiet", PROBLEM, "--plot",
+                                                tmp_path / "d.png"])
+    assert "expected a .png file" in run_cli(capsys, ["plan", "--quiet", PROBLEM, "--plot",
+                                                      tmp_path / "out.txt"])
     (tmp_path / "p_tensions.png").mkdir()
     assert "p_tensions.png" in run_cli(capsys, ["plan", "--quiet", PROBLEM, "--plot", tmp_path / "p.png"])
     (tmp_path / "dir.png").mkdir()
@@ -514,3 +518,302 @@ def test_a_closed_stdout_stops_quietly(tmp_path):
     err = proc.stderr.read()
     assert proc.wait(timeout=60) == cli.EXIT_BROKEN_PIPE
     assert err == b""
+
+
+# ----------------------------------------------------------------------------- outputs vs inputs
+
+def _problem_copy(tmp_path):
+    """A problem file in tmp_path naming a robot file copied beside it: (problem, robot)."""
+    robot = tmp_path / "robot.yaml"
+    robot.write_text(ROBOT2.read_text())
+    problem = tmp_path / "problem.yaml"
+    problem.write_text(PROBLEM.read_text().replace("../robot2.yaml", "robot.yaml"))
+    return problem, robot
+
+
+def test_plan_json_onto_its_problem_file_is_refused_as_a_process(tmp_path):
+    """Issue 19, item 3: ``plan P.yaml --json P.yaml`` replaced P.yaml with its JSON."""
+    problem, _ = _problem_copy(tmp_path)
+    before = problem.read_bytes()
+    rc, err, _ = run_process(["plan", "--quiet", problem, "--json", problem])
+    assert rc == 2 and len(err) == 1, err
+    assert "--json" in err[0] and "the problem file" in err[0] and str(problem) in err[0]
+    assert problem.read_bytes() == before
+
+
+def test_no_output_names_an_input(tmp_path, capsys, poses, monkeypatch):
+    """Every output option of every command, against every input of the command: the
+    same name, a symbolic link, a hard link, a path through ``..``; refused before the
+    work, the input unchanged."""
+    def no_work(*args, **kwargs):
+        raise AssertionError("worked before checking the outputs")
+
+    monkeypatch.setattr("cdh_planner.commands.plan.Planner", no_work)
+    monkeypatch.setattr("cdh_planner.commands.verify.check_motion", no_work)
+    monkeypatch.setattr("cdh_planner.commands.slice.render_slice", no_work)
+    problem, robot = _problem_copy(tmp_path)
+    (tmp_path / "sub").mkdir()
+    (tmp_path / "link.yaml").symlink_to(problem)
+    os.link(robot, tmp_path / "hard.yaml")
+    png = tmp_path / "robot.png"   # a robot file under a picture's name
+    png.write_text(ROBOT2.read_text())
+    task = tmp_path / "task.png"
+    task.write_text("task: {type: sphere, center: [0.0, 0.0, 0.306], radius: 0.13}\n")
+    before = {f: f.read_bytes() for f in (problem, robot, poses, png, task)}
+    cases = [
+        (["plan", "--quiet", problem, "--json", problem], "the problem file"),
+        (["plan", "--quiet", problem, "--json", tmp_path / "link.yaml"], "the problem file"),
+        (["plan", "--quiet", problem, "--json", tmp_path / "sub" / ".." / "problem.yaml"],
+         "the problem file"),
+        (["plan", "--quiet", problem, "--json", robot], "the robot file"),
+        (["plan", "--quiet", problem, "--json", tmp_path / "hard.yaml"], "the robot file"),
+        (["plan", "--quiet", problem, "--json", tmp_path / "o.png", "--plot",
+          tmp_path / "o.png"], "the --json output"),
+        (["plan", "--quiet", problem, "--json", tmp_path / "o_tensions.png", "--plot",
+          tmp_path / "o.png"], "the --json output"),
+        (["verify", robot, poses, "--json", poses], "the poses file"),
+        (["verify", robot, poses, "--json", tmp_path / "hard.yaml"], "the robot file"),
+        (["slice", png, "--sphere", "0,0,0.306,0.13", "-o", png], "the robot file"),
+        (["slice", ROBOT2, "--task-file", task, "-o", task], "the --task-file"),
+    ]
+    for argv, label in cases:
+        line = run_cli(capsys, argv)
+        assert label in line, (argv, line)
+    assert {f: f.read_bytes() for f in before} == before
+
+
+def test_recover_onto_its_run_file_is_refused(tmp_path, capsys):
+    run = tmp_path / "run.mcap"
+    _write_recording(run)
+    before = run.read_bytes()
+    (tmp_path / "link.mcap").symlink_to(run)
+    for out in (run, tmp_path / "link.mcap"):
+        assert "the run file" in run_cli(capsys, ["recover", run, "-o", out])
+    assert run.read_bytes() == before
+
+
+def test_demo_out_dir_may_not_overwrite_its_robot_files(tmp_path, capsys):
+    """``demo --out D --config-dir C``: none of the demo's files in D may be one of C's
+    robot files (here C/robot1.yaml is a link to D/node.log, which the demo writes)."""
+    out, config = tmp_path / "out", tmp_path / "config"
+    out.mkdir(), config.mkdir()
+    (config / "robot2.yaml").write_text(ROBOT2.read_text())
+    (out / "node.log").write_text(ROBOT1.read_text())
+    (config / "robot1.yaml").symlink_to(out / "node.log")
+    line = run_cli(capsys, ["demo", "--out", out, "--config-dir", config])
+    assert "node.log" in line and "robot1.yaml" in line
+
+
+def _write_recording(path, n=3):
+    """A small complete run file (RunRecorder; needs the ROS 2 message packages)."""
+    pytest.importorskip("mcap_ros2")
+    JointState = pytest.importorskip("sensor_msgs.msg").JointState
+    from cdh_planner.io.mcap_log import RunRecorder
+    with RunRecorder(path) as rec:
+        for i in range(n):
+            rec.write("/cmd", JointState(name=["w"], position=[float(i)]), 1000 + i)
+    return path
+
+
+# ----------------------------------------------------------------------------- duplicate keys
+
+def test_a_duplicate_json_key_is_refused_as_a_process(tmp_path):
+    """Issue 19, item 7: json keeps the last of two equal keys; a pose file with two
+    positions was accepted silently."""
+    path = tmp_path / "dup.json"
+    path.write_text('[{"position": [1e308, 0, 0.35], "position": [0, 0, 0.35], '
+                    '"tau": [0, 0.1, 0]}]')
+    rc, err, _ = run_process(["verify", ROBOT2, path])
+    assert rc == 2 and len(err) == 1, err
+    assert "duplicate key 'position'" in err[0] and str(path) in err[0]
+
+
+@pytest.mark.parametrize("text, key", [
+    ('{"poses": [{"position": [0, 0, 0.35], "tau": [0, 0.1, 0], "tau": [0, 0.2, 0]}]}', "tau"),
+    ('{"poses": [], "poses": [{"position": [0, 0, 0.35], "tau": [0, 0.1, 0]}]}', "poses"),
+])
+def test_duplicate_json_keys_are_refused_at_any_depth(tmp_path, capsys, text, key):
+    path = tmp_path / "dup.json"
+    path.write_text(text)
+    assert f"duplicate key {key!r}" in run_cli(capsys, ["verify", ROBOT2, path])
+    json.loads(text.replace(f'"{key}": [0, 0.2, 0]', '"x": 1'))  # valid JSON otherwise
+
+
+def test_duplicate_yaml_keys_are_refused(tmp_path, capsys, poses):
+    """In a problem file (top level), a robot file (nested): the key and its line named;
+    1 and 1.0 are one key (equal in Python); a merge key's entries may be overridden."""
+    text = PROBLEM.read_text().replace("../robot2.yaml", str(ROBOT2))
+    problem = tmp_path / "p.yaml"
+    problem.write_text(text + "goal: {lambda: [2.63, 0.7]}\n")
+    line = run_cli(capsys, ["plan", "--quiet", problem])
+    assert "duplicate key 'goal'" in line and f"line {len(text.splitlines()) + 1}," in line
+    robot = tmp_path / "r.yaml"
+    robot.write_text(ROBOT2.read_text().replace("robot:\n", "robot:\n      name: a\n      name: b\n", 1))
+    assert "duplicate key 'name'" in run_cli(capsys, ["verify", robot, poses])
+    with pytest.raises(InputError, match="duplicate key 1.0"):
+        files.parse_yaml("{1: a, 1.0: b}", "x")
+    assert files.parse_yaml("a: {<<: {b: 1, c: 2}, b: 3}", "x") == {"a": {"b": 3, "c": 2}}
+
+
+# ----------------------------------------------------------------------------- huge numbers in messages
+
+def test_huge_numbers_are_shown_short(capsys):
+    """Issue 19, item 7: a position of 1e308 was printed as a 309-digit number. An error
+    shows a huge integer as a float is shown; the planner's pose text has 6 digits."""
+    from cdh_planner.errors import short_repr
+    from cdh_planner.planner import _describe
+    assert short_repr(int(1e308)) == "1e+308" and short_repr(-10 ** 400) == "-~1e399"
+    assert short_repr(10 ** 15) == "1000000000000000"
+    line = run_cli(capsys, ["plan", "--quiet", PROBLEM, "--max-charts", "1e308"])
+    assert "--max-charts = 1e+308: must be <=" in line
+    text = _describe(np.array([1e308, 0.081092, -0.2]), np.array([0.5, 1.25, -np.pi]))
+    assert text == "p = [1e+308, 0.081092, -0.2] m, tau = [0.5, 1.25, -3.14159] rad"
+
+
+# ----------------------------------------------------------------------------- call, replay: ROS input
+
+START, GOAL = "0 0 0.176 0 0 0 1", "0.081092 0.049718 0.217387 0.208539 -0.340136 0 0.916962"
+
+
+@pytest.fixture
+def ros_domain(monkeypatch):
+    """A claimed ROS domain (ros_harness) set for this process and its children."""
+    pytest.importorskip("rclpy")
+    from ros_harness import claimed_domain
+    with claimed_domain() as domain:
+        monkeypatch.setenv("ROS_DOMAIN_ID", str(domain))
+        monkeypatch.setenv("ROS_AUTOMATIC_DISCOVERY_RANGE", "LOCALHOST")
+        yield domain
+
+
+@pytest.mark.parametrize("argv, text", [
+    # issue 19, item 5: poses the node refused (292) are checked as a pose file's are
+    (["--start", "nan 0 0.176 0 0 0 1"], "--start.position[0] = nan: expected a finite number"),
+    (["--start", "0 inf 0.176 0 0 0 1"], "--start.position[1] = inf: expected a finite number"),
+    (["--start", "0 0 0.176 0 0 0 0"], "--start.quaternion = [0.0, 0.0, 0.0, 0.0]: zero"),
+    (["--start", "0 0 0.176 0 0 0 2"], "not normalised (norm 2"),
+    (["--start", "0 0 0.176 0 0 nan 1"], "--start.quaternion[2] = nan: expected a finite"),
+    (["--start", "1e308 0 0.176 0 0 0 1"], "--start.position[0] = 1e+308: must be within"),
+    (["--start", "0 0 0.176 0 0 0"], "expected 7 numbers"),
+    (["--start", START, "--goal", "0 0 0.2 0.7 0.7 0.7 0.7"], "--goal.quaternion"),
+    # issue 19, item 4: InvalidServiceNameException and RCLError were exit 3
+    (["--start", START, "--node", "bad name!!"], "--node = 'bad name!!': not a valid ROS"),
+    (["--start", START, "--node", "/9lives"], "not a valid ROS node name"),
+    (["--start", START, "--ros-args", "-r", "::::"],
+     "--ros-args = '-r ::::': ROS 2 cannot start with them: failed to initialize rcl: "
+     "Couldn't parse remap rule"),
+    (["--start", START, "--ros-args", "-p", "x:=[1"], "--ros-args = '-p x:=[1'"),
+    (["--start", START, "--ros-args", "--params-file", "/no/such.yaml"], "--ros-args = '--p"),
+    (["--start", START, "--timeout", "nan"], "--timeout = nan"),
+])
+def test_call_refuses_bad_input_before_joining_ros(capsys, ros_domain, argv, text):
+    argv = ["call", "--goal", GOAL, *argv] if "--goal" not in argv else ["call", *argv]
+    line = run_cli(capsys, argv)
+    assert text in line, line
+
+
+def test_a_bad_ros_environment_is_bad_input(capsys, ros_domain, monkeypatch):
+    monkeypatch.setenv("ROS_DOMAIN_ID", "abc")
+    line = run_cli(capsys, ["call", "--start", START, "--goal", GOAL])
+    assert "ROS environment = " in line and "ROS_DOMAIN_ID is not an integral number" in line
+
+
+def test_call_refusals_as_processes_are_one_line(ros_domain):
+    """Issue 19 items 4, 5: as the campaign ran them, rcl's own log line included."""
+    for argv, text in ((["--ros-args", "-r", "::::"], "--ros-args"),
+                       (["--node", "bad name!!"], "--node")):
+        rc, err, _ = run_process(["call", "--start", START, "--goal", GOAL, *argv])
+        assert rc == 2 and len(err) == 1 and text in err[0], (argv, err)
+
+
+def test_call_without_a_node_says_so_in_one_line_exit_1(ros_domain):
+    """Issue 19, item 5: with no node it waited for --timeout and exited 3 (internal
+    error); now it waits at most call.NODE_WAIT_S for the node's services."""
+    from cdh_planner.commands.call import NODE_WAIT_S
+    rc, err, _ = run_process(["call", "--start", START, "--goal", GOAL])
+    assert rc == 1 and len(err) == 1, err
+    assert f"no service /cdh_planner/plan after {NODE_WAIT_S:g} s" in err[0]
+
+
+def test_replay_refuses_bad_ros_input(tmp_path, capsys, ros_domain):
+    run = _write_recording(tmp_path / "run.mcap")
+    line = run_cli(capsys, ["replay", run, "--delay", "0", "--ros-args", "-r", "::::"])
+    assert "--ros-args = '-r ::::'" in line
+
+
+def test_recover_and_replay_refuse_a_damaged_chunk(tmp_path, capsys):
+    """Issue 19, item 4: recover on a bad chunk CRC was exit 3; replay gave exit 2."""
+    run = _write_recording(tmp_path / "run.mcap")
+    data = bytearray(run.read_bytes())
+    data[data.index(b"/cmd", 200) + 40] ^= 0xFF   # inside the chunk of a message
+    damaged = tmp_path / "damaged.mcap"
+    damaged.write_bytes(bytes(data))
+    for argv in (["recover", damaged, "-o", tmp_path / "out.mcap"], ["replay", damaged]):
+        line = run_cli(capsys, argv)
+        assert "damaged MCAP data" in line and "CRCValidationError" in line, line
+    assert not (tmp_path / "out.mcap").exists()
+    rc, err, _ = run_process(["recover", damaged, "-o", tmp_path / "out.mcap"])
+    assert rc == 2 and len(err) == 1 and "damaged MCAP data" in err[0], err
+
+
+def test_replay_refuses_a_recorded_topic_name_rclpy_refuses(tmp_path, capsys, ros_domain):
+    """A file written by another tool with a topic named '/bad topic!!': rclpy's
+    InvalidTopicNameException on its publisher was exit 3."""
+    JointState = pytest.importorskip("sensor_msgs.msg").JointState
+    from cdh_planner.io.mcap_log import RunRecorder
+    path = tmp_path / "bad.mcap"
+    with RunRecorder(path) as rec:
+        rec.write("/bad topic!!", JointState(name=["w"], position=[1.0]), 1000)
+    line = run_cli(capsys, ["replay", path, "--delay", "0"])
+    assert "RUN = '/bad topic!!': a recorded topic whose name is not a valid ROS" in line
+
+
+def test_command_line_text_that_is_not_utf8_is_refused(tmp_path, capsys, ros_domain):
+    """Bytes of argv that are not UTF-8 reach Python as lone surrogates: matplotlib raised
+    TypeError on a --title holding one (exit 3); a ROS message cannot carry one either."""
+    bad = b"q\xff".decode("utf-8", "surrogateescape")
+    for argv, field in ((["slice", ROBOT2, "--title", bad, "-o", tmp_path / "s.png"], "--title"),
+                        (["slice", ROBOT2, "--point", f"{bad}=1,1", "-o", tmp_path / "s.png"],
+                         "--point"),
+                        (["call", "--start", START, "--goal", GOAL, "--frame", bad], "--frame")):
+        line = run_cli(capsys, argv)
+        assert f"{field} = " in line and "not UTF-8 text (byte 0xff at 1)" in line, line
+
+
+def test_recover_tells_a_summary_cut_short_from_none(tmp_path, capsys):
+    """Issue 19, item 7: a disk that fills while the node closes its file leaves a summary
+    cut short, and recover said 'the node was killed'. A file cut after the writer's
+    DataEnd record (its summary begun) is told apart from one that just stops."""
+    import io
+    from mcap.records import DataEnd
+    from mcap.stream_reader import StreamReader
+    data = _write_recording(tmp_path / "run.mcap").read_bytes()
+    stream = io.BytesIO(data)
+    next(r for r in StreamReader(stream, emit_chunks=True).records if isinstance(r, DataEnd))
+    data_end = stream.tell()
+    for cut, says in ((data_end + 1, "summary was cut short"), (len(data) - 9, "cut short"),
+                      (data_end - 20, "did not end normally")):
+        path = tmp_path / f"cut{cut}.mcap"
+        path.write_bytes(data[:cut])
+        assert cli.main(["recover", str(path), "-o", str(tmp_path / f"out{cut}.mcap")]) == 0
+        out = capsys.readouterr().out
+        assert "3 messages" in out and says in out and "was killed" not in out, out
+
+
+def test_replay_requests_refuses_a_request_that_does_not_decode(tmp_path, capsys, ros_domain):
+    """A file (of another tool) whose GetPlan event holds bytes that are not one: rclpy's
+    RMWError on deserializing it was exit 3."""
+    from mcap.writer import CompressionType, Writer
+    from cdh_planner.io.ros_schemas import full_definition, recorded_type
+    name = recorded_type("nav_msgs/srv/GetPlan_Event")
+    path = tmp_path / "garbage.mcap"
+    with open(path, "wb") as f:
+        writer = Writer(f, compression=CompressionType.NONE)
+        writer.start(profile="ros2", library="test")
+        schema = writer.register_schema(name, "ros2msg", full_definition(name).encode())
+        channel = writer.register_channel("/cdh_planner/plan/_service_event", "cdr", schema)
+        writer.add_message(channel, log_time=1000, data=b"\x00\x01\x00\x00" + b"\xff" * 40,
+                           publish_time=1000)
+        writer.finish()
+    line = run_cli(capsys, ["replay", path, "--requests", "--timeout", "1"])
+    assert "a recorded request or parameter event does not decode" in line, line

@@ -1,4 +1,5 @@
 """The CLI registry: --help, subcommand discovery, one-line user errors."""
+import importlib
 import subprocess
 import sys
 import types
@@ -55,7 +56,40 @@ def test_version(capsys):
 
 def test_no_command_is_usage_error(capsys):
     assert cli.main([]) == 2
-    assert 'usage' in capsys.readouterr().err
+    err = capsys.readouterr().err
+    assert err == 'cdh-planner: error: the following arguments are required: COMMAND (see ' \
+                  'cdh-planner --help)\n'
+
+
+@pytest.mark.parametrize('argv, text', [
+    (['plan', 'p.yaml', '--max-cable-speed', 'fast'], "invalid float value: 'fast'"),
+    (['plan', 'p.yaml', '--strategy', 'best'], "invalid choice: 'best'"),
+    (['plan'], 'required: problem'),
+    (['plan', 'p.yaml', '--no-such-flag'], 'unrecognized arguments: --no-such-flag'),
+    (['slice', 'r.yaml', '-o', 'x.png', '--resolution', '1.5'], "invalid int value: '1.5'"),
+    (['call', '--goal', '0 0 0 0 0 0 1'], 'one of the arguments --start --current-start'),
+    (['call', '--start', '1', '--current-start', '--goal', '1'], 'not allowed with'),
+    (['no-such-command'], "invalid choice: 'no-such-command'"),
+])
+def test_usage_errors_are_one_line(capsys, argv, text):
+    """argparse's errors without its usage text (13 lines for --max-cable-speed fast):
+    exit 2, one line naming the argument, pointing at the command's --help."""
+    assert cli.main(argv) == 2
+    captured = capsys.readouterr()
+    assert captured.out == ''
+    lines = captured.err.splitlines()
+    assert len(lines) == 1 and lines[0].startswith('cdh-planner: error: '), captured.err
+    assert text in lines[0] and lines[0].endswith('--help)')
+
+
+def test_usage_error_as_a_process_is_one_line():
+    """Issue 19, item 7: ``plan P --max-cable-speed fast`` printed 13 lines."""
+    proc = subprocess.run([sys.executable, '-m', 'cdh_planner.cli', 'plan', 'p.yaml',
+                           '--max-cable-speed', 'fast'], capture_output=True, text=True,
+                          timeout=60)
+    assert proc.returncode == 2 and proc.stdout == ''
+    assert proc.stderr == "cdh-planner: error: argument --max-cable-speed: invalid float " \
+                          "value: 'fast' (see cdh-planner plan --help)\n"
 
 
 def test_handler_return_code_is_passed_through(fake):
@@ -102,3 +136,45 @@ def test_console_script_help_runs():
                           capture_output=True, text=True, timeout=60)
     assert proc.returncode == 0, proc.stderr
     assert 'usage: cdh-planner' in proc.stdout
+
+
+def _raise_name_error():
+    from rclpy.exceptions import InvalidTopicNameException
+    raise InvalidTopicNameException('/bad topic!!', 'must not contain spaces', 4)
+
+
+def _raise_crc_error():
+    from mcap.exceptions import RecordLengthLimitExceeded
+    raise RecordLengthLimitExceeded(6, 1 << 40, 1000)
+
+
+@pytest.mark.parametrize('raise_it, module', [(_raise_name_error, 'rclpy'),
+                                              (_raise_crc_error, 'mcap')])
+def test_library_exceptions_of_bad_input_are_exit_2(fake, capsys, raise_it, module):
+    """rclpy's name errors and mcap's read errors that escape a command are bad input
+    (cli.INPUT_EXCEPTIONS, by qualified name, subclasses included), not internal errors."""
+    pytest.importorskip(module)
+    fake('fakelib', lambda args: raise_it())
+    assert cli.main(['fakelib']) == 2
+    lines = capsys.readouterr().err.splitlines()
+    assert len(lines) == 1 and lines[0].startswith('cdh-planner: error: ')
+    assert 'internal error' not in lines[0]
+
+
+def test_other_library_exceptions_stay_internal(fake, capsys):
+    class McapError(Exception):   # same name, another module: not the library's
+        pass
+
+    fake('fakeother', lambda args: (_ for _ in ()).throw(McapError('x')))
+    assert cli.main(['fakeother']) == 3
+    assert 'internal error: McapError: x' in capsys.readouterr().err
+
+
+def test_input_exception_names_are_the_libraries_own():
+    """cli.INPUT_EXCEPTIONS names classes that exist under those names (a rename in rclpy
+    or mcap would silently make them exit 3 again)."""
+    for qualified in cli.INPUT_EXCEPTIONS:
+        module, _, name = qualified.rpartition('.')
+        pytest.importorskip(module.split('.')[0])
+        cls = getattr(importlib.import_module(module), name)
+        assert issubclass(cls, Exception) and cls.__module__ == module, qualified

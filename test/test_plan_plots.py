@@ -14,6 +14,7 @@ from cdh_planner.io.plan_plots import axis_range, chart_polygons, order_by_angle
     split_at_wraps, unwrap_about, wrap, wrap_copies, zoom
 from cdh_planner.io.problem import load_problem
 from cdh_planner.model.task import SphereTask
+from cdh_planner.status import Status
 from cdh_planner.planner import Planner
 
 from conftest import REPO as ROOT
@@ -123,7 +124,7 @@ def test_plot_plan_writes_both_pictures(query, tmp_path):
 
 def test_plot_plan_without_path_draws_the_atlas_only(query, tmp_path):
     planner, problem, result = query
-    failed = replace(result, success=False, reason="timeout", path=None)
+    failed = replace(result, success=False, reason=Status.TIMEOUT, path=None)
     written = plot_plan(planner, problem, failed, tmp_path / "fail.png", resolution=40)
     assert written == [str(tmp_path / "fail.png")]
     _check_png(written[0], 1000, 800)

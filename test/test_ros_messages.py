@@ -2,6 +2,7 @@
 and strides by the std_msgs/MultiArrayLayout rule, frames, joint names, SI units, nav2 error
 codes, interpolation mathematics and pose round trips. No ROS graph: messages only."""
 
+import re
 
 import numpy as np
 import pytest
@@ -209,15 +210,17 @@ def test_margin_colours():
 # ----------------------------------------------------------------------------- plan result
 
 def _result(reason, success=False, message="what happened"):
-    return PlanResult(success=success, reason=reason, message=message, strategy="astar", n=2, m=8,
-                      charts=123, time_s=0.1 + 0.2, cost=float("inf") if not success else 0.4321)
+    return PlanResult(success=success, reason=Status(reason), message=message, strategy="astar",
+                      n=2, m=8, charts=123, time_s=0.1 + 0.2,
+                      cost=float("inf") if not success else 0.4321)
 
 
 @pytest.mark.parametrize("reason, code", [
-    ("start_infeasible", 205), ("goal_infeasible", 206), ("no_path", 208), ("timeout", 207),
-    ("chart_limit", 208), ("invalid", 292), ("canceled", 290), ("busy", 291),
-    ("output_limit", 294), ("no_current_state", 293), ("bad_strategy", 201),
-    ("internal_error", 200)])
+    ("start_infeasible", 205), ("goal_infeasible", 206), ("start_in_collision", 205),
+    ("goal_in_collision", 206), ("no_path", 208), ("timeout", 207),
+    ("chart_limit", 208), ("resource_limit", 208), ("invalid", 292), ("canceled", 290),
+    ("busy", 291), ("output_limit", 294), ("no_current_state", 293), ("bad_strategy", 201),
+    ("bad_frame", 202), ("internal_error", 200)])
 def test_plan_status_failure_codes(reason, code):
     msg = M.plan_status(_result(reason), run_id="run-7", log_file="/tmp/run-7.mcap")
     assert msg.level == DiagnosticStatus.ERROR
@@ -237,11 +240,46 @@ def test_plan_status_success_and_code_table():
     assert msg.level == DiagnosticStatus.OK and msg.message == "plan found"
     assert values["error_code"] == "0" and values["error_msg"] == ""
     assert float(values["cost"]) == 0.4321
-    # every planner reason has a code; the constants are nav2 ComputePathToPose's (Jazzy)
-    assert set(Status) <= set(M.ERROR_CODES)
+    # the constants are nav2 ComputePathToPose's (Jazzy)
     assert (M.NONE, M.UNKNOWN, M.TF_ERROR, M.START_OCCUPIED, M.GOAL_OCCUPIED, M.TIMEOUT,
             M.NO_VALID_PATH) == (0, 200, 202, 205, 206, 207, 208)
-    assert M.error_code("bad_frame") == 202 and M.error_code("something else") == 200
+    assert M.error_code("bad_frame") == M.error_code(Status.BAD_FRAME) == 202
+    with pytest.raises(ValueError, match="something else"):   # the vocabulary is closed
+        M.error_code("something else")
+
+
+def _action_result_codes():
+    """{name: (value, comment)} of the int32 constants of PlanPath.action's result."""
+    text = (REPO / "interfaces" / "cdh_planner_interfaces" / "action" / "PlanPath.action")
+    result = text.read_text().split("---")[1]
+    found = re.findall(r"^int32 ([A-Z_]+)=(\d+)[ \t]*(?:#(.*))?$", result, flags=re.M)
+    return {name: (int(value), comment) for name, value, comment in found}
+
+
+def test_every_status_has_an_action_code_and_every_code_is_used_or_reserved():
+    """Both directions: each Status member has one PlanPath error code, only OK has NONE,
+    and each code of the action is some member's or reserved with a reason, the .action
+    file saying "not used" for exactly the reserved ones."""
+    from cdh_planner_interfaces.action import PlanPath
+    declared = _action_result_codes()
+    generated = {k: getattr(PlanPath.Result, k) for k in dir(PlanPath.Result)
+                 if k.isupper() and isinstance(getattr(PlanPath.Result, k), int)}
+    assert {k: v for k, (v, _) in declared.items()} == generated and len(generated) == 15
+    assert set(M.ERROR_CODES) == set(Status)
+    assert [s for s, code in M.ERROR_CODES.items() if code == M.NONE] == [Status.OK]
+    used, reserved = set(M.ERROR_CODES.values()), set(M.RESERVED_CODES)
+    assert used.isdisjoint(reserved) and used | reserved == set(generated.values())
+    assert all(M.RESERVED_CODES.values())                    # each with its reason
+    assert {v for v, comment in declared.values() if "not used" in comment} == reserved
+
+
+def test_the_docs_table_of_reasons_is_error_codes():
+    """docs/ros-node.md's table (reason | code NAME | when) says what ERROR_CODES says."""
+    text = (REPO / "docs" / "ros-node.md").read_text()
+    rows = re.findall(r"^\| `([a-z_]+)` \| (\d+) ([A-Z_]+) \|", text, flags=re.M)
+    assert {Status(r): int(code) for r, code, _ in rows} == M.ERROR_CODES
+    assert len(rows) == len(Status) and all(getattr(M, name) == int(code)
+                                            for _, code, name in rows)
 
 
 # ----------------------------------------------------------------------------- sampling

@@ -24,6 +24,7 @@ from cdh_planner.model.robot import FIELDS as ROBOT_FIELDS, OPTIONAL_GROUPS  # n
 from cdh_planner.ros import params  # noqa: E402
 from cdh_planner.ros.params import SPEC, SPECS, node_config  # noqa: E402
 from cdh_planner.ros.streaming import Stream  # noqa: E402
+from cdh_planner.status import Status  # noqa: E402
 from cdh_planner.trajectory.path import PlannedPath  # noqa: E402
 from cdh_planner.trajectory.timing import time_path  # noqa: E402
 from ros_harness import Q1, Q2, REPO, ROBOT2, file_parameters, sphere_pose_msg  # noqa: E402
@@ -172,12 +173,32 @@ def test_refusal_reasons_and_codes():
     with pytest.raises(InputError) as err:
         planning.request_poses(request, "cdh_base")
     result = planning.input_refusal(err.value)
-    assert result.reason == "bad_frame" and not result.success
+    assert result.reason is Status.BAD_FRAME and result.reason == "bad_frame"
+    assert not result.success
     robot = load_robot(ROBOT2)
     status = planning.result_status(result, robot, "r#1", "", sphere_pose_msg(Q1).header.stamp)
     values = {kv.key: kv.value for kv in status.values}
     assert values["error_code"] == "202" and "map" in values["error_msg"]
     assert values["path_stamp"] == "0"
+
+
+@pytest.mark.parametrize("fault, reason, code", [
+    (None, None, None), ("frame", Status.BAD_FRAME, 202), ("strategy", Status.BAD_STRATEGY, 201),
+    ("timeout", Status.INVALID, 292), ("nan", Status.INVALID, 292)])
+def test_a_goals_own_faults_are_refused_with_their_member(fault, reason, code):
+    from cdh_planner.ros.client import plan_path_goal
+    from cdh_planner.ros import messages as M
+    goal = plan_path_goal(None, sphere_pose_msg(Q2, frame="map" if fault == "frame"
+                                                else "cdh_base"), use_current_start=True)
+    goal.strategy = "dijkstra" if fault == "strategy" else ""
+    goal.timeout_s = -1.0 if fault == "timeout" else 0.0
+    goal.goal.pose.position.x = math.nan if fault == "nan" else goal.goal.pose.position.x
+    refused = planning.goal_refusal(goal, "cdh_base", "astar")
+    if fault is None:
+        assert refused is None
+    else:
+        assert refused.reason is reason and M.error_code(refused.reason) == code
+        assert refused.message.startswith("invalid request: ") and refused.strategy == "astar"
 
 
 class Exploding:
@@ -190,7 +211,8 @@ class Exploding:
 def test_planner_exception_becomes_an_answer():
     lines = []
     result = planning.run_planner(Exploding(), None, None, logger=lines.append)
-    assert not result.success and result.reason == "internal_error"
+    assert not result.success and result.reason is Status.INTERNAL_ERROR
+    assert result.reason == "internal_error"
     assert "ZeroDivisionError: boom" in result.message and "Traceback" in lines[0]
 
 

@@ -11,16 +11,24 @@ tension margin and the run's log file; Ctrl-C cancels the plan. With ``--execute
 calls ``~/execute`` and waits for ``~/execution_result`` (Ctrl-C calls ``~/stop``). The frame
 defaults to the node's ``base_frame``.
 
-Exit codes: 0 planned (and executed to the last waypoint); 1 no plan, or execution refused
-or cut short; 2 bad input; 3 the node did not answer.
+The poses are checked here as a pose file's are (finite, within +-1e3 m, a unit quaternion)
+and so are ``--node`` and the ROS arguments, before joining ROS. The node must be there
+within NODE_WAIT_S (or ``--timeout`` if shorter): ``call`` does not wait for one to start.
+
+Exit codes: 0 planned (and executed to the last waypoint); 1 no plan: the node answered
+none, refused the execution or cut it short, or no node answered (not running, another
+ROS_DOMAIN_ID or name; one line saying so); 2 bad input.
 """
 
 import argparse
+import math
 import sys
 
 from ..io.progress import chart_progress
 
-EXIT_OK, EXIT_NO_PLAN, EXIT_NO_NODE = 0, 1, 3
+EXIT_OK, EXIT_NO_PLAN = 0, 1
+EXIT_NO_NODE = EXIT_NO_PLAN   # no node, no plan: not bad input, and not a bug (3)
+NODE_WAIT_S = 5.0   # s to wait for the node's services (a DDS announcement period is ~3 s)
 
 
 def add_parser(subparsers):
@@ -50,25 +58,28 @@ def add_parser(subparsers):
                                                           "%(default)s)")
     p.add_argument("--frame", help="frame_id of the poses (default: the node's base_frame)")
     p.add_argument("--timeout", type=float, default=120.0, metavar="S",
-                   help="seconds to wait for the node and for its answer (default: "
-                        "%(default)g)")
+                   help=f"seconds to wait for the answer (default: %(default)g; for the node "
+                        f"itself at most {NODE_WAIT_S:g})")
     p.add_argument("--ros-args", dest="ros_args", nargs=argparse.REMAINDER, default=[],
                    metavar="ARGS", help="ROS arguments for this client (e.g. remapping)")
     p.set_defaults(func=run)
 
 
 def run(args):
-    from ..errors import InputError
-    from ..ros.client import ClientError, PlannerClient, plan_path_goal, pose_stamped
-    if not args.timeout > 0:
+    from ..errors import InputError, check_text
+    from ..io.poses import pose_values
+    if not (args.timeout > 0 and math.isfinite(args.timeout)):
         raise InputError("--timeout", args.timeout, "must be a positive number of seconds")
-    if args.start is not None:
-        pose_stamped(args.start, "", "--start")  # refuse malformed input before joining ROS
-    pose_stamped(args.goal, "", "--goal")
-    with PlannerClient(args.node, args=["cdh-planner-call", "--ros-args", *args.ros_args]) \
-            as client:
+    if args.start is not None:   # bad input refused before importing ROS (seconds)
+        pose_values(args.start, "--start")
+    pose_values(args.goal, "--goal")
+    if args.frame is not None:
+        check_text("--frame", args.frame)
+    from ..ros.client import ClientError, PlannerClient, plan_path_goal, pose_stamped
+    with PlannerClient(args.node, args=["cdh-planner-call", "--ros-args", *args.ros_args],
+                       node_field="--node") as client:
         try:
-            client.wait_for_node(min(args.timeout, 30.0))
+            client.wait_for_node(min(args.timeout, NODE_WAIT_S))
             frame = args.frame or client.get_parameters(["base_frame"])["base_frame"]
             start = None if args.start is None else pose_stamped(args.start, frame, "--start")
             goal = plan_path_goal(start, pose_stamped(args.goal, frame, "--goal"),

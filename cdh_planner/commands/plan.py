@@ -14,7 +14,9 @@ or goal), 2 for bad input
 
 ``--json OUT`` writes the plan JSON contract (README, the plan command): success, reason, message, strategy,
 n, m, charts, time_s, cost, least_margin, least_tension_margin_n, and path: [{p, quaternion,
-tau, lengths, tension_min, tension_nominal, tension_max, margin, t}] (m, rad, N, s).
+tau, lengths, tension_min, tension_nominal, tension_max, margin, t, velocities,
+accelerations}] (m, rad, N, s; cable rates m/s and m/s^2: a JointTrajectoryController's
+quintic through these points is the motion that was checked, ``trajectory.executed``).
 """
 
 import json
@@ -26,8 +28,12 @@ from ..io.problem import load_problem
 from ..io.progress import chart_progress
 from ..planner import Planner
 from ..settings import SETTINGS, check_setting
+from ..status import Status
 
-EXIT_OK, EXIT_NO_PLAN = 0, 1
+EXIT_OK, EXIT_NO_PLAN, EXIT_INTERNAL = 0, 1, 3  # cdh_planner.cli's contract
+# every way a plan ends has its exit code: a path, an answer without one, a bug
+EXIT_CODES = {s: EXIT_OK if s is Status.OK else EXIT_INTERNAL if s is Status.INTERNAL_ERROR
+              else EXIT_NO_PLAN for s in Status}
 
 
 def add_parser(subparsers):
@@ -63,12 +69,8 @@ def run(args):
     overrides = {name: check_setting(name, getattr(args, name), s.flag)
                  for name, (_, _, s) in SETTINGS.items() if getattr(args, name) is not None}
     settings = replace(settings, **overrides)
-    if args.json is not None:
-        check_output("--json", args.json)
-    if args.plot is not None:
-        plot = check_output("--plot", args.plot)
-        check_output("--plot", plot.with_name(plot.stem + "_tensions.png"))
-    planner = Planner(problem.robot, problem.task, settings)
+    check_outputs(args, problem)
+    planner = Planner(problem.robot, problem.task, settings, scene=problem.scene)
     result = plan_with_progress(planner, problem.start, problem.goal, quiet=args.quiet)
     print_result(result, problem)
     if args.json:
@@ -80,7 +82,20 @@ def run(args):
             outs = plot_plan(planner, problem, result, args.plot)
         for out in outs:
             print(f"picture: {out}")
-    return EXIT_OK if result.success else EXIT_NO_PLAN
+    return EXIT_CODES[result.reason]
+
+
+def check_outputs(args, problem):
+    """Refuse, before planning, an output that cannot be written or that names an input
+    (the problem or robot file) or another output."""
+    files = [("the problem file", args.problem), ("the robot file", problem.robot.source)]
+    if args.json is not None:
+        check_output("--json", args.json, inputs=files)
+        files.append(("the --json output", args.json))
+    if args.plot is not None:
+        plot = check_output("--plot", args.plot, suffixes=(".png",), inputs=files)
+        tensions = plot.with_name(plot.stem + "_tensions.png")
+        check_output("--plot", tensions, inputs=files + [("the --plot picture", plot)])
 
 
 def plan_with_progress(planner, start, goal, quiet=False):
@@ -101,6 +116,10 @@ def print_result(result, problem):
               f"{path.length_m():.4f} m, duration {path.t[-1]:.2f} s, least margin "
               f"{result.least_margin:.4f} ({result.least_tension_margin:.3g} N)")
         print(f"  timing: {result.stats.get('timing', 'quasi-static')}")
+        print(f"  executed: {result.stats.get('executed', '')}")
+        if "least_clearance_m" in result.stats:  # a scene: the least distance at a waypoint
+            print(f"  least clearance {1e3 * result.stats['least_clearance_m']:.3g} mm "
+                  f"({result.stats['clearance_binding']})")
 
 
 def result_dict(result):
@@ -110,7 +129,11 @@ def result_dict(result):
            "time_s": result.time_s, "cost": _num(result.cost),
            "least_margin": _num(result.least_margin),
            "least_tension_margin_n": _num(result.least_tension_margin),
-           "timing": result.stats.get("timing", ""), "path": []}
+           "timing": result.stats.get("timing", ""), "executed": result.stats.get("executed", ""),
+           "path": []}
+    if "least_clearance_m" in result.stats:  # with a scene (m, and what binds there)
+        out["least_clearance_m"] = _num(result.stats["least_clearance_m"])
+        out["clearance_binding"] = result.stats["clearance_binding"]
     path = result.path
     if path is not None:
         for k in range(len(path)):
@@ -120,7 +143,8 @@ def result_dict(result):
                 "tension_min": path.tension_min[k].tolist(),
                 "tension_nominal": path.tension_nominal[k].tolist(),
                 "tension_max": path.tension_max[k].tolist(), "margin": float(path.margin[k]),
-                "t": float(path.t[k])})
+                "t": float(path.t[k]), "velocities": path.velocities[k].tolist(),
+                "accelerations": path.accelerations[k].tolist()})
     return out
 
 

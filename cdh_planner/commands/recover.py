@@ -12,8 +12,8 @@ output is written in full or not at all; the input is never changed. A complete 
 copied the same way. Do not point it at the file of a node still running: it copies what
 is there so far.
 
-Exit codes: 0 recovered; 2 bad input (not a recording, no complete message, an output that
-exists or cannot be written).
+Exit codes: 0 recovered; 2 bad input (not a recording, damaged data in a complete file (a
+chunk CRC), no complete message, an output that exists, is the input or cannot be written).
 """
 
 import argparse
@@ -53,7 +53,8 @@ def run(args):
     except NotARecording as exc:
         raise InputError("RUN", str(src), str(exc)) from None
     # the output, checked before the work
-    out = check_output("--output", args.output if args.output else default_output(src))
+    out = check_output("--output", args.output if args.output else default_output(src),
+                       inputs=[("the run file RUN", src)])
     if out.exists():
         raise InputError("--output", str(out), "exists already: give another -o, or remove "
                                                "it first")
@@ -62,9 +63,18 @@ def run(args):
             result = recover(src, out)
     except NotARecording as exc:
         raise InputError("RUN", str(src), str(exc)) from None
-    state = ("it was complete already" if result.complete else
-             f"it had no summary (the node was killed); "
-             f"{result.dropped_bytes} bytes after the last complete message dropped")
+    # the file tells a summary cut short (closing, a write failed) from none at all (a
+    # kill, a power cut, or a write that failed before: no cause is certain)
+    if result.complete:
+        state = "it was complete already"
+    elif result.summary_begun:
+        state = (f"its summary was cut short: the recording was being closed when a write "
+                 f"failed (a full disk?); {result.dropped_bytes} bytes after the last "
+                 f"complete message dropped")
+    else:
+        state = (f"it had no summary: its recording did not end normally (the node killed, "
+                 f"or a write failed, e.g. a full disk); {result.dropped_bytes} bytes after "
+                 f"the last complete message dropped")
     print(f"{src}: {result.messages} messages on {result.topics} topics written to {out} "
           f"({state})")
     if result.renamed_schemas:

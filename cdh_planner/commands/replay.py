@@ -30,8 +30,8 @@ from: a freshly started node. A node that has already planned may answer with ot
 A file that is not a recording (missing, empty, not MCAP, no complete message) is refused
 with the reason (exit 2); a killed run's file is read (``cdh-planner recover`` completes it).
 
-Exit codes: 0 done (every answer matches); 1 an answer differs; 2 bad input; 3 the node
-did not answer.
+Exit codes: 0 done (every answer matches); 1 an answer differs, or no node answered (one
+line saying so); 2 bad input (a file that is not a recording, damaged data, bad --ros-args).
 """
 
 import argparse
@@ -39,7 +39,8 @@ import math
 import sys
 from collections import Counter
 
-EXIT_OK, EXIT_DIFFERS, EXIT_NO_NODE = 0, 1, 3
+EXIT_OK, EXIT_DIFFERS = 0, 1
+EXIT_NO_NODE = EXIT_DIFFERS   # no node: nothing matched; not bad input, and not a bug (3)
 MAX_GAP_S = 5.0     # = ros.replay.MAX_GAP_S (not imported: --help needs no rclpy)
 
 
@@ -112,7 +113,8 @@ def run(args):
         print(f"  {topic}: {n}")
     for path in args.run:
         if not check_recording(path)[1]:
-            print(f"  ({path} has no summary: the recording node was killed; cdh-planner "
+            print(f"  ({path} has no summary: its recording did not end normally (the "
+                  f"node killed, or a write failed, e.g. a full disk); cdh-planner "
                   f"recover {path} writes a complete copy)")
     if args.requests:
         return replay_requests(args, records)
@@ -124,9 +126,10 @@ def replay_topics(args, records):
     from rclpy.node import Node
 
     from ..ros import replay as R
+    from ..ros.context import init_context
     chosen = R.select_topics(records, args.topics, args.commands)
-    context = rclpy.Context()
-    rclpy.init(args=["cdh-planner-replay", "--ros-args", *args.ros_args], context=context)
+    _check_topic_names(chosen)
+    context = init_context(["cdh-planner-replay", "--ros-args", *args.ros_args])
     try:
         node = Node("cdh_planner_replay", context=context)
         offsets, capped, skipped = R.schedule(chosen, args.rate, args.max_gap)
@@ -145,10 +148,33 @@ def replay_topics(args, records):
     return EXIT_OK
 
 
+def _check_topic_names(records):
+    """InputError naming a recorded topic that is not a valid ROS name (a file written by
+    another tool): rclpy would refuse its publisher mid-replay."""
+    from rclpy.exceptions import NameValidationException
+    from rclpy.validate_full_topic_name import validate_full_topic_name
+
+    from ..errors import InputError
+    for topic in sorted({r.topic for r in records}):
+        try:
+            validate_full_topic_name(topic if topic.startswith("/") else "/" + topic)
+        except NameValidationException:
+            raise InputError("RUN", topic, "a recorded topic whose name is not a valid ROS "
+                                           "topic name: it cannot be republished") from None
+
+
 def replay_requests(args, records):
+    from rclpy.impl.implementation_singleton import rclpy_implementation
+
+    from ..errors import InputError, exception_line
     from ..ros import replay as R
     from ..ros.client import ClientError, PlannerClient
-    plans = R.recorded_plans(records)
+    try:
+        plans = R.recorded_plans(records)
+    except rclpy_implementation.RMWError as exc:  # bytes that are not the recorded type
+        raise InputError("RUN", " ".join(args.run), f"a recorded request or parameter event "
+                                                    f"does not decode: "
+                                                    f"{exception_line(exc, 100)}") from None
     if not plans:
         print("no recorded plan requests in this file")
         return EXIT_OK
@@ -158,8 +184,8 @@ def replay_requests(args, records):
               "own are used")
     differs = 0
     first_call = None
-    with PlannerClient(node, args=["cdh-planner-replay", "--ros-args", *args.ros_args]) \
-            as client:
+    with PlannerClient(node, args=["cdh-planner-replay", "--ros-args", *args.ros_args],
+                       node_field="--node" if args.node else "the recorded node") as client:
         try:
             client.wait_for_node(min(args.timeout, 30.0))
             setter = R.ParameterSetter(client, min(args.timeout, 30.0))

@@ -29,7 +29,7 @@ from dataclasses import dataclass
 from pathlib import Path
 from typing import Optional
 
-from ..errors import InputError
+from ..errors import InputError, check_text
 from ..feasibility import evaluate
 from ..io.outputs import check_output, writing
 from ..io.plots import FEASIBLE, Marker, SegmentOverlay, SliceGrid, SliceView, \
@@ -93,7 +93,8 @@ def add_parser(subparsers):
 def run(args):
     """Compute, draw and summarise the slice; 0 when the picture was written."""
     robot = load_robot(args.robot)
-    out = _check_output(args.output)
+    out = _check_output(args.output, [("the robot file ROBOT", args.robot),
+                                      ("the --task-file", args.task_file)])
     for option, text in (("--title", args.title), ("--start-label", args.start_label),
                          ("--goal-label", args.goal_label)):
         _check_label(option, text)
@@ -285,9 +286,11 @@ def _parse_point(text, view):
 
 
 def _check_label(option, text):
-    """A title or label is drawn: at most MAX_LABEL_CHARS characters."""
+    """A title or label is drawn: UTF-8 text of at most MAX_LABEL_CHARS characters."""
     if text is not None and len(text) > MAX_LABEL_CHARS:
         raise InputError(option, text, f"at most {MAX_LABEL_CHARS} characters")
+    if text is not None:
+        check_text(option, text)
 
 
 def _parse_size(text):
@@ -307,10 +310,10 @@ def _check_resolution(n):
     return n
 
 
-def _check_output(path):
+def _check_output(path, inputs):
     if Path(path).suffix.lower() != ".png":
         raise InputError("--output", path, "must be a .png file")
-    return check_output("--output", path)
+    return check_output("--output", path, inputs=inputs)
 
 
 def _print_segment(check, start_label, goal_label):

@@ -48,12 +48,13 @@ from pathlib import Path
 
 from mcap.exceptions import EndOfFile, RecordLengthLimitExceeded
 from mcap.reader import NonSeekingReader
-from mcap.records import Schema
-from mcap.stream_reader import CRCValidationError
+from mcap.records import DataEnd, Schema
+from mcap.stream_reader import CRCValidationError, StreamReader
 from mcap.writer import CompressionType, Writer
 from mcap_ros2._dynamic import serialize_dynamic
 from mcap_ros2.decoder import DecoderFactory
 
+from ..errors import exception_line
 from .ros_schemas import encodable, full_definition, mcap_ros2_alias, recorded_type, \
     rosidl_type, split_type_name, type_name_of
 
@@ -295,8 +296,10 @@ def scan_records(path, decode: bool):
 
     A killed writer leaves a torn last record: the scan stops there quietly (chunk CRCs are
     checked, so a torn chunk is dropped whole, never half-decoded). The same errors in a
-    complete file (one that ends with the MCAP magic) are real damage and are raised. No
-    record is read beyond the file's size (a corrupt length cannot make it allocate more).
+    complete file (one that ends with the MCAP magic) are real damage, raised as
+    NotARecording ("damaged MCAP data: ..."), as is any other error of mcap or mcap_ros2
+    reading the file's bytes (the file is the cause, whatever the type). No record is read
+    beyond the file's size (a corrupt length cannot make it allocate more).
     """
     with open(path, "rb") as f:
         size = f.seek(0, os.SEEK_END)
@@ -311,9 +314,11 @@ def _scan_file(f, size, decode):
                (r + (None,) for r in reader.iter_messages(log_time_order=False)))
     try:
         yield from records
-    except (EndOfFile, CRCValidationError, RecordLengthLimitExceeded, struct.error):
-        if _ends_with_magic(f):
-            raise
+    except (EndOfFile, CRCValidationError, RecordLengthLimitExceeded, struct.error) as exc:
+        if _ends_with_magic(f):   # not a torn tail: damage
+            raise NotARecording(f"damaged MCAP data: {exception_line(exc, 120)}") from exc
+    except Exception as exc:  # noqa: BLE001 - mcap's and mcap_ros2's many error types
+        raise NotARecording(f"damaged MCAP data: {exception_line(exc, 120)}") from exc
 
 
 def _ends_with_magic(f) -> bool:
@@ -343,13 +348,18 @@ def read_run(path) -> list[tuple[str, str, object, int]]:
 class Recovery:
     """What ``recover`` did: messages and topics copied, whether the source was complete
     already, bytes of the source after its last readable message (a torn tail, or the
-    summary of a complete file), schemas renamed to the current service names."""
+    summary of a complete file), schemas renamed to the current service names, and for
+    an incomplete source whether its writer had begun the summary (``summary_begun``: a
+    DataEnd record follows the messages, so the recording was being closed when a write
+    failed, e.g. a full disk; without it the file just stops: a kill, a power cut, or a
+    write that failed earlier)."""
 
     messages: int
     topics: int
     complete: bool
     dropped_bytes: int
     renamed_schemas: tuple
+    summary_begun: bool = False
 
 
 def recover(src, dst) -> Recovery:
@@ -394,6 +404,7 @@ def recover(src, dst) -> Recovery:
                                        sequence=message.sequence)
                     count += 1
                     end = f.tell()
+                begun = not complete and _data_end_after(f, end, size)
             if count == 0:
                 raise NotARecording("no complete message (an MCAP file cut off before its "
                                     "first message, or an empty recording): nothing to recover")
@@ -404,7 +415,22 @@ def recover(src, dst) -> Recovery:
     finally:
         tmp.unlink(missing_ok=True)
     return Recovery(messages=count, topics=len(channel_ids), complete=complete,
-                    dropped_bytes=max(0, size - end), renamed_schemas=tuple(renamed))
+                    dropped_bytes=max(0, size - end), renamed_schemas=tuple(renamed),
+                    summary_begun=begun)
+
+
+def _data_end_after(f, offset, size) -> bool:
+    """Whether a DataEnd record follows ``offset`` in ``f`` (before the torn end, if any):
+    the writer's ``finish`` had begun."""
+    f.seek(offset)
+    try:
+        for record in StreamReader(f, skip_magic=True, emit_chunks=True,
+                                   record_size_limit=max(size, 1)).records:
+            if isinstance(record, DataEnd):
+                return True
+    except Exception:  # noqa: BLE001 - the torn end, whatever mcap makes of it
+        pass
+    return False
 
 
 def recover_run(src, dst) -> int:

@@ -1,6 +1,8 @@
 """Output files of the commands (``--json``, ``--plot``, ``-o``): checked before the work
 starts, and a failure to write them (a full disk, EIO) is an InputError naming the
-option, i.e. one line and exit 2, never a traceback after minutes of planning.
+option, i.e. one line and exit 2, never a traceback after minutes of planning. An output
+is never one of the command's inputs (nor another of its outputs): ``plan P.yaml --json
+P.yaml`` is refused before the work, through symbolic and hard links too.
 """
 
 import os
@@ -10,17 +12,23 @@ from pathlib import Path
 from ..errors import InputError
 
 
-def check_output(option, path, suffixes=()):
+def check_output(option, path, suffixes=(), inputs=()):
     """``path`` as a Path if a file can be written there: its directory exists and is
     writable, and the path is not a directory itself (nor a name with a NUL character);
     an existing file must be writable (``/dev/null`` is fine). ``suffixes``: the
-    extensions allowed (e.g. ``(".png",)``), any when empty."""
+    extensions allowed (e.g. ``(".png",)``), any when empty. ``inputs``: (label, path)
+    pairs of the other files of the command, read or written (label e.g. "the problem
+    file", "the --json output"; a None path is skipped); ``path`` must be none of them."""
     text = os.fspath(path)
     if not text or "\x00" in text:
         raise InputError(option, text, "expected the path of a file to write")
     out = Path(text)
     if suffixes and out.suffix.lower() not in suffixes:
         raise InputError(option, text, f"expected a {' or '.join(suffixes)} file")
+    for label, other in inputs:
+        if other is not None and same_file(out, other):
+            raise InputError(option, text, f"is {label} ({os.fspath(other)}): it would be "
+                                           f"overwritten; give another name")
     try:
         if out.is_dir():
             raise InputError(option, text, "is a directory: give a file name")
@@ -35,6 +43,18 @@ def check_output(option, path, suffixes=()):
     except OSError as exc:  # a name too long, a loop of links
         raise InputError(option, text, f"cannot write: {exc.strerror or exc}") from None
     return out
+
+
+def same_file(a, b):
+    """Whether paths ``a`` and ``b`` name one file: the same path once symbolic links,
+    ``..`` and ``.`` are resolved (whether it exists or not), or two names (hard links)
+    of one existing file."""
+    try:
+        if os.path.realpath(a) == os.path.realpath(b):
+            return True
+        return os.path.exists(a) and os.path.exists(b) and os.path.samefile(a, b)
+    except (OSError, ValueError):  # a name too long, a NUL: names no file another names
+        return False
 
 
 @contextmanager

@@ -101,6 +101,34 @@ def _pose_fields(d, where):
     return p, "tau", check_tau(number_list(f"{where}.tau", d["tau"], 3), f"{where}.tau")
 
 
+def pose_values(values, where):
+    """The 7 numbers ``x y z qx qy qz qw`` of a pose given on a command line
+    (``cdh-planner call --start "..."``: a string, spaces or commas between the numbers, or
+    7 numbers), as floats, checked as a pose file's pose is (``pose_from_values``)."""
+    if isinstance(values, str):
+        parts = values.replace(",", " ").split()
+        try:
+            values = [float(v) for v in parts]
+        except ValueError:
+            raise InputError(where, " ".join(parts), "expected 7 numbers: x y z qx qy qz qw "
+                                                     "(m, quaternion)") from None
+    values = list(values)
+    pose_from_values(values, where)
+    return [float(v) for v in values]
+
+
+def pose_from_values(values, where):
+    """A pose given as 7 numbers ``x y z qx qy qz qw`` (``cdh-planner call --start``):
+    (position (3,) m, quaternion (4,) x y z w with w >= 0), checked as a pose file's pose
+    (finite, positions within +-MAX_POSITION_M, a unit quaternion); InputError naming
+    ``where.position[i]`` or ``where.quaternion``."""
+    values = list(values)
+    if len(values) != 7:
+        raise InputError(where, values, "expected 7 numbers: x y z qx qy qz qw (m, quaternion)")
+    p, q, _ = pose_from_dict({"position": values[:3], "quaternion": values[3:]}, where)
+    return p, q
+
+
 def number_list(where, value, n, limit=None):
     """A list of exactly ``n`` finite numbers (JSON NaN/Infinity, booleans and strings
     rejected), each within +-``limit`` when given."""

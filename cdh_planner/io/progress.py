@@ -1,21 +1,64 @@
-"""The atlas' growth as a progress bar on stderr (tqdm), for the command line.
+"""The atlas' growth on stderr, for the command line (``plan``, ``call``).
 
     with chart_progress(quiet=False) as update:
         update(charts, best_h)          # each progress report: charts so far, heuristic
+
+On a terminal: a tqdm bar, cleared when done. Anywhere else (a log file, a CI log, a pipe)
+the bar's carriage-return frames would pile up as lines, so it writes one plain line at
+most every ``LINE_INTERVAL_S`` seconds (none for a plan shorter than that).
 """
 
+import sys
+import time
 from contextlib import contextmanager
 
-from tqdm import tqdm
+LINE_INTERVAL_S = 5.0  # s between two lines when the stream is not a terminal
+
+
+def _is_terminal(stream):
+    try:
+        return stream.isatty()
+    except (AttributeError, ValueError):  # no isatty, or a closed stream
+        return False
 
 
 @contextmanager
-def chart_progress(quiet=False):
-    """A tqdm bar counting charts, with the search's best remaining distance estimate
-    (task units); yields ``update(charts, best_h)``. Cleared when done."""
-    with tqdm(total=None, unit="chart", desc="atlas", disable=quiet, leave=False) as bar:
+def chart_progress(quiet=False, stream=None, interval_s=LINE_INTERVAL_S, clock=time.monotonic):
+    """Yield ``update(charts, best_h)`` that shows the chart count and the search's best
+    remaining distance estimate (task units) on ``stream`` (default: stderr): a bar on a
+    terminal, else a line at most every ``interval_s`` s of ``clock``; nothing if ``quiet``."""
+    stream = sys.stderr if stream is None else stream
+    if quiet:
+        yield lambda charts, best_h: None
+    elif _is_terminal(stream):
+        with _bar(stream) as update:
+            yield update
+    else:
+        yield _lines(stream, interval_s, clock)
+
+
+@contextmanager
+def _bar(stream):
+    from tqdm import tqdm  # only for a terminal
+
+    with tqdm(total=None, unit="chart", desc="atlas", leave=False, file=stream) as bar:
         def update(charts, best_h):
             bar.n = int(charts)
             bar.set_postfix(best_h=f"{best_h:.3g}", refresh=False)
             bar.refresh()
         yield update
+
+
+def _lines(stream, interval_s, clock):
+    start = clock()
+    last = start
+
+    def update(charts, best_h):
+        nonlocal last
+        now = clock()
+        if now - last < interval_s:
+            return
+        last = now
+        print(f"atlas: {int(charts)} charts, best_h {best_h:.3g}, {now - start:.0f} s",
+              file=stream, flush=True)
+    return update

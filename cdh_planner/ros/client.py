@@ -37,7 +37,9 @@ from cdh_planner_interfaces.action import PlanPath
 from cdh_planner_interfaces.msg import TensionEnvelope
 
 from ..errors import InputError
+from ..io.poses import pose_values
 from . import messages as M
+from .context import init_context
 from .interface import ACTION_QOS, CABLE_COMMAND, EXECUTE, EXECUTION_RESULT, LATCHED, \
     NODE_NAME, PLAN, PLAN_PATH, PLAN_RESULT, PLANNED_TRAJECTORY, SERVICE_QOS, STOP, \
     TENSION_ENVELOPE
@@ -143,19 +145,27 @@ class ClientError(RuntimeError):
     """The node did not answer (not running, wrong name, timeout)."""
 
 
+def check_node_name(name, field="--node"):
+    """The absolute name of the node ``name`` (``cdh_planner`` -> ``/cdh_planner``), if its
+    services can have names (letters, digits, ``_``, ``/``; a part not starting with a
+    digit); InputError naming ``field`` otherwise (rclpy would raise
+    InvalidServiceNameException on creating the first client)."""
+    from rclpy.exceptions import NameValidationException
+    from rclpy.validate_full_topic_name import validate_full_topic_name
+    target = "/" + str(name).strip("/")
+    try:
+        validate_full_topic_name(f"{target}/{PLAN}", is_service=True)
+    except NameValidationException:
+        raise InputError(field, name, "not a valid ROS node name (letters, digits, '_' and "
+                                      "'/', a part not starting with a digit)") from None
+    return target
+
+
 def pose_stamped(values, frame_id, field="pose"):
-    """PoseStamped of "x y z qx qy qz qw" (a string or 7 numbers; m, quaternion x y z w);
-    InputError naming ``field`` if malformed (finite / normalised are checked by the node)."""
-    if isinstance(values, str):
-        parts = values.replace(",", " ").split()
-        try:
-            values = [float(v) for v in parts]
-        except ValueError:
-            raise InputError(field, " ".join(parts), "expected 7 numbers: x y z qx qy qz qw "
-                                                     "(m, quaternion)") from None
-    values = list(values)
-    if len(values) != 7:
-        raise InputError(field, values, "expected 7 numbers: x y z qx qy qz qw (m, quaternion)")
+    """PoseStamped of "x y z qx qy qz qw" (a string or 7 numbers; m, quaternion x y z w),
+    checked as a pose file's pose is (``io.poses.pose_values``: finite, within +-1e3 m, a
+    unit quaternion); InputError naming ``field`` if not. The quaternion is sent as given."""
+    values = pose_values(values, field)
     msg = PoseStamped()
     msg.header.frame_id = frame_id
     p, o = msg.pose.position, msg.pose.orientation
@@ -167,12 +177,10 @@ class PlannerClient:
     """A small rclpy node talking to one planner node (``node_name``, absolute)."""
 
     def __init__(self, node_name=DEFAULT_NODE, args=None, name="cdh_planner_client",
-                 context=None, domain_id=None):
-        self.target = "/" + node_name.strip("/")
+                 context=None, domain_id=None, node_field="node"):
+        self.target = check_node_name(node_name, node_field)
         self._own_context = context is None
-        self.context = context if context is not None else rclpy.Context()
-        if self._own_context:
-            rclpy.init(args=args, context=self.context, domain_id=domain_id)
+        self.context = context if context is not None else init_context(args, domain_id)
         self.node = Node(name, context=self.context)
         self.executor = SingleThreadedExecutor(context=self.context)
         self.executor.add_node(self.node)

@@ -227,24 +227,32 @@ TIMEOUT, NO_VALID_PATH, CANCELED, BUSY = _R.TIMEOUT, _R.NO_VALID_PATH, _R.CANCEL
 INVALID_REQUEST, NO_CURRENT_STATE, OUTPUT_LIMIT = (_R.INVALID_REQUEST, _R.NO_CURRENT_STATE,
                                                     _R.OUTPUT_LIMIT)
 
+# Every way a plan ends (status.Status, closed) has one code; every code of PlanPath is one
+# of these or reserved: nav2's *_OUTSIDE_MAP ("not used" in the .action file), as a pose off
+# the task is INVALID_REQUEST. test_ros_messages checks both directions.
 ERROR_CODES = {
     Status.OK: NONE,
-    Status.START_INFEASIBLE: START_OCCUPIED,  # start not wrench-feasible (or off the task)
-    Status.GOAL_INFEASIBLE: GOAL_OCCUPIED,    # goal not wrench-feasible (or off the task)
+    Status.START_INFEASIBLE: START_OCCUPIED,  # start not wrench-feasible
+    Status.GOAL_INFEASIBLE: GOAL_OCCUPIED,    # goal not wrench-feasible
+    Status.START_IN_COLLISION: START_OCCUPIED,  # start in collision (the scene)
+    Status.GOAL_IN_COLLISION: GOAL_OCCUPIED,    # goal in collision (the scene)
     Status.NO_PATH: NO_VALID_PATH,            # a component exhausted
     Status.TIMEOUT: TIMEOUT,
     Status.CHART_LIMIT: NO_VALID_PATH,        # no path found within max_charts
     Status.RESOURCE_LIMIT: NO_VALID_PATH,     # no path found within max_memory_mb
     Status.CANCELED: CANCELED,                # the caller cancelled the plan
     Status.INVALID: INVALID_REQUEST,          # request inconsistent with the task / malformed
+    Status.NOT_EXECUTABLE: NO_VALID_PATH,     # no trajectory executes as checked (bounded)
     # refusals by the node, before or after planning:
-    "bad_frame": TF_ERROR,                # frame_id is not the base frame
-    "bad_strategy": INVALID_PLANNER,      # a strategy the planner does not have
-    "busy": BUSY,                         # too many plans queued
-    "no_current_state": NO_CURRENT_STATE,  # use_current_start without measured lengths
-    "output_limit": OUTPUT_LIMIT,         # the plan is beyond the node's output bounds
-    "internal_error": UNKNOWN,
+    Status.BAD_FRAME: TF_ERROR,               # frame_id is not the base frame
+    Status.BAD_STRATEGY: INVALID_PLANNER,     # a strategy the planner does not have
+    Status.BUSY: BUSY,                        # too many plans queued
+    Status.NO_CURRENT_STATE: NO_CURRENT_STATE,  # use_current_start without measured lengths
+    Status.OUTPUT_LIMIT: OUTPUT_LIMIT,        # the plan is beyond the node's output bounds
+    Status.INTERNAL_ERROR: UNKNOWN,           # an exception while answering
 }
+RESERVED_CODES = {START_OUTSIDE_MAP: "nav2's; a start pose off the task is INVALID_REQUEST",
+                  GOAL_OUTSIDE_MAP: "nav2's; a goal pose off the task is INVALID_REQUEST"}
 
 STATUS_NAME = "cdh_planner: plan"
 STATUS_KEYS = ("error_code", "error_msg", "planning_time_s", "charts", "cost", "strategy",
@@ -252,9 +260,9 @@ STATUS_KEYS = ("error_code", "error_msg", "planning_time_s", "charts", "cost", "
 
 
 def error_code(reason):
-    """PlanPath error code of a planner reason (a Status) or of a node refusal
-    (``bad_frame``, ``busy``, ...); UNKNOWN for anything else."""
-    return ERROR_CODES.get(reason, UNKNOWN)
+    """PlanPath error code of a plan's reason: a Status, or its string (``"busy"``); a
+    ValueError for anything else (the vocabulary is closed)."""
+    return ERROR_CODES[Status(reason)]
 
 
 def plan_status(result, run_id="", log_file="", name=STATUS_NAME, hardware_id=""):

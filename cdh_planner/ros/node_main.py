@@ -13,6 +13,7 @@ import rclpy
 import rclpy.signals
 
 from ..errors import InputError, clip
+from .context import init_context
 from .node import EXECUTOR_THREADS, PlannerNode, default_planner_factory
 
 SHUTDOWN_JOIN_S = 5.0
@@ -27,12 +28,11 @@ def main(ros_args=(), planner_factory=default_planner_factory, log=print):
     stop = threading.Event()
     for signum in (signal.SIGINT, signal.SIGTERM):
         signal.signal(signum, lambda *_: stop.set())
-    context = rclpy.Context()
     try:
-        rclpy.init(args=["cdh-planner", "--ros-args", *ros_args], context=context,
-                   signal_handler_options=rclpy.signals.SignalHandlerOptions.NO)
-    except Exception as exc:  # noqa: BLE001 - rcl's argument errors
-        log(f"cdh-planner node: error: bad --ros-args: {clip(exc, 400)}")
+        context = init_context(["cdh-planner", "--ros-args", *ros_args],
+                               signal_handler_options=rclpy.signals.SignalHandlerOptions.NO)
+    except InputError as exc:  # rcl's refusal of the arguments or the environment
+        log(f"cdh-planner node: error: {exc}")
         return 2
     try:
         node = PlannerNode(planner_factory, context=context)

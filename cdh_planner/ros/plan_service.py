@@ -110,7 +110,7 @@ class PlanService:
 
     def answer(self, call, run_id, log_file, turn, refused=None):
         """The Answer to one PlanCall holding ``turn`` (None: the queue was full), never
-        raising (an exception: ``internal_error``); ``refused``: a PlanResult refusing the
+        raising (an exception: INTERNAL_ERROR); ``refused``: a PlanResult refusing the
         call before planning, answered as it is. ``~/plan_result`` is published."""
         config = self._config
         try:
@@ -118,8 +118,8 @@ class PlanService:
         except Exception as exc:  # noqa: BLE001 - never take the node down: answer no plan
             self._queue.drop(turn)
             self._outlet.error(f"[{run_id}] plan call failed: {traceback.format_exc()}")
-            result = planning.refusal("internal_error", f"internal error: {exception_line(exc)}",
-                                      config.settings.strategy)
+            result = planning.refusal(Status.INTERNAL_ERROR, f"internal error: "
+                                      f"{exception_line(exc)}", config.settings.strategy)
             answer = Answer(result, None, self._no_path(config))
             self._publish_result(result, config, run_id, log_file, answer.path)
         self._outlet.answered(answer.result.success,
@@ -133,9 +133,9 @@ class PlanService:
             result = refused
         elif turn is None:
             result = planning.refusal(
-                "busy", f"busy: {len(self._queue)} plan requests are being computed or wait "
-                        f"(at most 1 + {self._queue.depth}); call again when one is answered",
-                config.settings.strategy)
+                Status.BUSY, f"busy: {len(self._queue)} plan requests are being computed or "
+                             f"wait (at most 1 + {self._queue.depth}); call again when one is "
+                             f"answered", config.settings.strategy)
         elif not self._queue.wait(turn, call.cancel):
             why = "the node is shutting down" if self.shutting_down else "cancelled while queued"
             result = planning.refusal(Status.CANCELED, f"canceled: {why}", config.settings.strategy)
@@ -156,7 +156,7 @@ class PlanService:
         result = planning.output_refusal(result) or result
         if result.success:
             out = planning.plan_outputs(result, config.robot, config.base_frame,
-                                        self._outlet.stamp())
+                                        self._outlet.stamp(), getattr(config, "scene", None))
             self._commit(result, config, out, run_id, log_file)
             return Answer(result, out, out.path)
         path = self._no_path(config)

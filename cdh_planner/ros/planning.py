@@ -36,6 +36,7 @@ from cdh_planner_interfaces.action import PlanPath
 from ..errors import InputError, exception_line
 from ..planner import PlanResult
 from ..settings import check_setting
+from ..status import Status
 from . import messages as M
 from .markers import markers_msg
 
@@ -50,7 +51,7 @@ PROGRESS_NAME = "cdh_planner: planning"
 PUBLISHED, DEFERRED = "published", "deferred until the running execution ends"
 
 # The node's outputs of one plan are bounded (messages, recording, streaming): a plan beyond
-# either bound is refused (``output_limit``), never published nor executable.
+# either bound is refused (OUTPUT_LIMIT), never published nor executable.
 MAX_DURATION_S = 86_400.0   # one day of motion
 MAX_WAYPOINTS = 50_000      # ~25 MB of messages (path, trajectory, envelope)
 PLAN_QUEUE_DEPTH = 4        # requests waiting behind the one being planned; more: ``busy``
@@ -124,14 +125,14 @@ def _singular(pose):
 
 
 def refusal(reason, message, strategy=""):
-    """A PlanResult for a request refused before planning (``bad_frame``, ``invalid``,
-    ``busy``): no path, no charts, no time."""
+    """A PlanResult for a request the node refuses (``reason``, a Status: BAD_FRAME, INVALID,
+    BUSY, ...): no path, no charts, no time."""
     return PlanResult(success=False, reason=reason, message=message, strategy=strategy, n=0,
                       m=0, charts=0, time_s=0.0, cost=math.nan, path=None)
 
 
 def output_refusal(result):
-    """The refusal (``output_limit``) for a successful PlanResult whose path the node must not
+    """The refusal (OUTPUT_LIMIT) for a successful PlanResult whose path the node must not
     publish: longer than MAX_DURATION_S, more than MAX_WAYPOINTS waypoints, or times that are
     not finite and increasing from 0. None when the path is within the bounds (or there is
     no path)."""
@@ -151,7 +152,7 @@ def output_refusal(result):
         why = "trajectory times that are not finite and increasing from 0"
     else:
         return None
-    return refusal("output_limit", f"refused: the plan has {why}", result.strategy)
+    return refusal(Status.OUTPUT_LIMIT, f"refused: the plan has {why}", result.strategy)
 
 
 class PlanQueue:
@@ -237,9 +238,12 @@ class PlanQueue:
 
 
 def input_refusal(exc, strategy=""):
-    """The refusal for an InputError from ``request_poses``: a frame_id that is not the base
-    frame is ``bad_frame`` (nav2 TF_ERROR), anything else ``invalid``."""
-    reason = "bad_frame" if exc.field.endswith("frame_id") else "invalid"
+    """The refusal for an InputError about a request: a frame_id that is not the base frame
+    is BAD_FRAME (nav2 TF_ERROR), the strategy BAD_STRATEGY, anything else INVALID."""
+    if exc.field.endswith("frame_id"):
+        reason = Status.BAD_FRAME
+    else:
+        reason = Status.BAD_STRATEGY if exc.field == "strategy" else Status.INVALID
     return refusal(reason, f"invalid request: {exc}", strategy)
 
 
@@ -269,17 +273,14 @@ def goal_refusal(goal, base_frame, strategy=""):
         if goal.timeout_s != 0.0:
             check_setting("timeout_s", float(goal.timeout_s), "timeout_s")
     except InputError as exc:
-        if exc.field in ("strategy", "timeout_s"):
-            reason = "bad_strategy" if exc.field == "strategy" else "invalid"
-            return refusal(reason, f"invalid request: {exc}", strategy)
         return input_refusal(exc, strategy)
     return None
 
 
 def run_planner(planner, start, goal, call=None, progress=None, logger=None):
     """``planner.plan(start, goal, ...)`` with a PlanCall's overrides (None: none), never
-    raising: an InputError becomes ``invalid`` (``bad_strategy`` if it names the strategy);
-    any other exception ``internal_error`` (error code UNKNOWN) with its message, the
+    raising: an InputError becomes ``input_refusal``'s (INVALID, BAD_STRATEGY); any other
+    exception INTERNAL_ERROR (error code UNKNOWN) with its message, the
     traceback going to ``logger`` (a callable taking a string) if given."""
     call = call or PlanCall(None, None)
     strategy = call.strategy or getattr(getattr(planner, "settings", None), "strategy", "")
@@ -289,29 +290,28 @@ def run_planner(planner, start, goal, call=None, progress=None, logger=None):
         result = planner.plan(start, goal, progress=progress, cancel=call.cancel,
                               tolerance=call.tolerance, **overrides)
     except InputError as exc:
-        reason = "bad_strategy" if exc.field == "strategy" else "invalid"
-        return refusal(reason, f"invalid request: {exc}", strategy)
+        return input_refusal(exc, strategy)
     except Exception as exc:  # noqa: BLE001 - the node must keep serving
         if logger is not None:
             logger(traceback.format_exc())
-        return refusal("internal_error", f"internal error: {exception_line(exc)}",
+        return refusal(Status.INTERNAL_ERROR, f"internal error: {exception_line(exc)}",
                        strategy)
     if result.success and (result.path is None or len(result.path) == 0):
-        return refusal("internal_error", "internal error: the planner reported success "
-                                         "without a path", strategy)
+        return refusal(Status.INTERNAL_ERROR, "internal error: the planner reported success "
+                                              "without a path", strategy)
     return result
 
 
-def plan_outputs(result, robot, base_frame, stamp):
+def plan_outputs(result, robot, base_frame, stamp, scene=None):
     """The messages of a successful PlanResult: path (stamp = ``stamp``, poses at stamp +
     t), cable trajectory (header stamp 0: start on receipt), tension envelope (stamp =
-    ``stamp``), markers."""
+    ``stamp``), markers (with the ``scene``'s obstacles, if any)."""
     path = result.path
     return PlanOutputs(
         path=M.path_msg(path, base_frame, stamp),
         cable_trajectory=M.cable_trajectory_msg(path, robot.winch_names, base_frame),
         tension_envelope=M.tension_envelope_msg(path, robot.winch_names, base_frame, stamp),
-        markers=markers_msg(path, robot, base_frame, stamp))
+        markers=markers_msg(path, robot, base_frame, stamp, scene=scene))
 
 
 def action_result(result, out=None, path=None):

@@ -1,12 +1,15 @@
 """Streaming a planned trajectory as cable commands in real time (no graph: the node's
 timer calls ``command``, its stop service ``hold``).
 
-    stream = Stream(path, joint_names, method="linear", start=time.monotonic())
+    stream = Stream(path, joint_names, method="quintic", start=time.monotonic())
     msg, finished = stream.command(time.monotonic(), stamp)   # each timer tick
     msg = stream.hold(stamp)                                   # on stop
 
 The command at wall-clock time ``now`` is the trajectory sampled at ``now - start`` s
-(``trajectory.sampling.sample_cable_state``: linear or quintic between waypoints). Past the end the
+(``trajectory.sampling.sample_cable_state``): by default the quintic a JointTrajectoryController
+interpolates between the same points, the motion the planner checked
+(``trajectory.executed``); ``linear`` is kept for winches that want straight segments
+(not checked: its velocity steps at every point). Past the end the
 last waypoint is sent with zero velocity and the stream is finished. ``hold`` repeats the
 last command sent with zero velocity: the winches stay where they were last told to be.
 Commands are built by ``messages.winch_command``.
@@ -21,7 +24,7 @@ from . import messages as M
 class Stream:
     """One execution of a PlannedPath (``path.t`` from 0 to its duration, s)."""
 
-    def __init__(self, path, joint_names, method="linear", start=0.0):
+    def __init__(self, path, joint_names, method="quintic", start=0.0):
         self.path = path
         self.joint_names = M.check_joint_names(joint_names)
         self.method = method

@@ -36,16 +36,18 @@ dynamically feasible timing exists (a zero static margin, or more rounds than
 """
 
 from dataclasses import dataclass, replace
+from functools import partial
 
 import numpy as np
-import toppra
-import toppra.algorithm
-import toppra.constraint
 from scipy.interpolate import CubicSpline
 from scipy.spatial.transform import Rotation, RotationSpline
 
 from ..errors import InputError, check_finite
-from ..feasibility import cable_vectors, inverse_ellipsoid_factor, nominal_wrench, screw_jacobian
+from ..feasibility import (cable_vectors, evaluate, inverse_ellipsoid_factor, nominal_wrench,
+                           screw_jacobian)
+from ..model.pose import tau_from_rotation
+from ._toppra import toppra  # toppra without matplotlib (0.25 s of start-up)
+from .executed import executable, spline_rates
 from .path import PlannedPath
 
 GRID_POINTS = 400       # toppra gridpoints along the path (at least one per waypoint)
@@ -301,16 +303,46 @@ def _dense_check(robot, geo, s, sd, mass, inertia, vmax, amax, dt):
 
 
 def _retimed(robot, path, geo, s, sd, t_grid, mass, inertia):
-    """The PlannedPath with t, cable rates and dynamic tensions at its waypoints."""
+    """The PlannedPath with t, cable rates and dynamic tensions at its waypoints. A waypoint
+    is a gridpoint, where s'' may switch: it gets the mean of its two intervals' s'' (a
+    controller's quintic through it then overshoots either side by half as much as with
+    one side's value; the tensions there are a mean of two feasible ones)."""
     t_wp = np.interp(geo.s_wp, s, t_grid)
     sdot = np.interp(geo.s_wp, s, sd)
-    k = np.clip(np.searchsorted(s, geo.s_wp, side="right") - 1, 0, len(s) - 2)
-    sddot = (sd[k + 1] ** 2 - sd[k] ** 2) / (2 * (s[k + 1] - s[k]))
+    u = (sd[1:] ** 2 - sd[:-1] ** 2) / (2 * np.diff(s))                  # per interval
+    g = np.clip(np.searchsorted(s, geo.s_wp), 0, len(s) - 1)            # s[g] = the waypoint's
+    sddot = 0.5 * (u[np.maximum(g - 1, 0)] + u[np.minimum(g, len(u) - 1)])
     L, L_s, L_ss, f0, v, a_f, b_f = _terms(robot, geo, geo.s_wp, mass, inertia)
     f = f0 + a_f * sddot[:, None] + b_f * (sdot ** 2)[:, None]
     return replace(path, t=t_wp, velocities=L_s * sdot[:, None],
                    accelerations=L_s * sddot[:, None] + L_ss * (sdot ** 2)[:, None],
                    tension_nominal=f, tension_min=f - v, tension_max=f + v)
+
+
+def motion_rows(robot, timing, t, mass, inertia, scale=1.0):
+    """The timed motion of a feasible DynamicTiming, slowed ``scale`` (>= 1) times, at
+    times ``t`` (M,) s of the slowed motion, as PlannedPath rows: pose, lengths, cable
+    rates and accelerations, dynamic tensions (f -+ the ellipsoid's spread) and the static
+    margin. Slowing scales s' by 1 / scale and s'' by 1 / scale^2 (the same path)."""
+    t = np.clip(np.asarray(t, dtype=float) / scale, 0.0, timing.duration)
+    ss, sdot, sddot = _state_at(t, timing.s, timing.sd, _grid_times(timing.s, timing.sd))
+    sdot, sddot = sdot / scale, sddot / scale ** 2
+    L, L_s, L_ss, f0, v, a_f, b_f = _terms(robot, timing.geometry, ss, mass, inertia)
+    f = f0 + a_f * sddot[:, None] + b_f * (sdot ** 2)[:, None]
+    p, rot = timing.geometry.p(ss), timing.geometry.R(ss)
+    q = rot.as_quat()
+    q = np.where(q[:, 3:] < 0, -q, q)
+    R = rot.as_matrix()
+    return PlannedPath(p=p, quaternion=q, tau=tau_from_rotation(R), lengths=L,
+                       tension_min=f - v, tension_nominal=f, tension_max=f + v,
+                       margin=evaluate(robot, p, R=R).margin, t=t * scale,
+                       velocities=L_s * sdot[:, None],
+                       accelerations=L_s * sddot[:, None] + L_ss * (sdot ** 2)[:, None])
+
+
+def _load_rows(robot, timing, t, scale):
+    """motion_rows with the robot's own load (what ``executable`` samples)."""
+    return motion_rows(robot, timing, t, robot.mass, robot.inertia, scale)
 
 
 def check_dynamics(robot, dynamics):
@@ -321,18 +353,31 @@ def check_dynamics(robot, dynamics):
 
 
 def timed_path(robot, path, dynamics, max_cable_speed, max_cable_accel):
-    """(PlannedPath, note): ``path`` (quasi-statically timed) re-timed by ``dynamics``
-    ("auto": dynamic when the robot has a load mass; "dynamic"; "quasi_static"). The note
-    says what was done ("" for quasi-static); when no dynamically feasible timing exists
-    the quasi-static one is kept and the note says so."""
+    """(PlannedPath, note, ExecutionCheck): ``path`` (quasi-statically timed) re-timed by
+    ``dynamics`` ("auto": dynamic when the robot has a load mass; "dynamic";
+    "quasi_static"), then given the points a JointTrajectoryController needs to execute
+    the motion that was checked (``trajectory.executed.executable``; the check counts the
+    load's inertia unless the timing is quasi-static by choice). The note says what was
+    done ("" for quasi-static); when no dynamically feasible timing exists the quasi-static
+    one is kept and the note says so. The check's ``ok`` False: no executable trajectory
+    within the bounds (its ``reason`` says why)."""
     check_dynamics(robot, dynamics)
-    if dynamics == "quasi_static" or (dynamics == "auto" and robot.mass is None):
-        return path, ""
-    try:
-        timing = dynamic_timing(robot, path, robot.mass, robot.inertia, max_cable_speed, max_cable_accel)
-    except (np.linalg.LinAlgError, ValueError) as exc:  # e.g. J singular between waypoints
-        return path, f"dynamic timing failed ({exc}): quasi-static timing kept"
-    if not timing.feasible:
-        return path, f"dynamic timing impossible ({timing.reason}): quasi-static timing kept"
-    return timing.path, (f"dynamic timing {timing.duration:.3f} s (least tension slack "
-                         f"{timing.least_tension_margin_n:.3g} N, checked every {CHECK_DT * 1e3:g} ms)")
+    note, motion, load = "", None, (None, None)
+    if not (dynamics == "quasi_static" or (dynamics == "auto" and robot.mass is None)):
+        load = (robot.mass, robot.inertia)
+        try:
+            timing = dynamic_timing(robot, path, robot.mass, robot.inertia, max_cable_speed,
+                                    max_cable_accel)
+        except (np.linalg.LinAlgError, ValueError) as exc:  # e.g. J singular between waypoints
+            timing, note = None, f"dynamic timing failed ({exc}): quasi-static timing kept"
+        if timing is not None and not timing.feasible:
+            note = f"dynamic timing impossible ({timing.reason}): quasi-static timing kept"
+        elif timing is not None:
+            path = timing.path
+            motion = partial(_load_rows, robot, timing)
+            note = (f"dynamic timing {timing.duration:.3f} s (least tension slack "
+                    f"{timing.least_tension_margin_n:.3g} N, checked every {CHECK_DT * 1e3:g} ms)")
+    if motion is None:  # the quasi-static timing: hand out the C2 spline through its points
+        path = spline_rates(path)
+    path, check = executable(robot, path, motion, *load, max_cable_speed, max_cable_accel)
+    return path, note, check

@@ -11,6 +11,7 @@ import numpy as np
 
 from ..errors import InputError
 from ..model.robot import N_CABLES
+from .executed import quintic
 
 
 def check_timed_path(path):
@@ -44,10 +45,11 @@ def sample_cable_state(path, t, method="quintic"):
 
     ``method``: ``quintic`` interpolates each segment with the quintic through position,
     velocity and acceleration at both ends, as ros2_control's JointTrajectoryController
-    does with the same points (so streaming and the controller agree; at a waypoint it
-    returns that waypoint); ``linear`` moves on the straight cable-space segment at its mean
-    velocity (L_{k+1} - L_k) / h_k, which never exceeds the speed limit. Effort is linear in
-    t. Outside [t_0, t_end] the path is clamped to its end and held (velocity 0).
+    does with the same points (``trajectory.executed.quintic``: so streaming and the
+    controller agree, and both execute what the planner checked; at a waypoint it returns
+    that waypoint); ``linear`` moves on the straight cable-space segment at its mean
+    velocity (L_{k+1} - L_k) / h_k (its velocity steps at every point: not what was
+    checked). Effort is linear in t. Outside [t_0, t_end] the path is clamped to its end and held (velocity 0).
     """
     check_timed_path(path)
     t = float(t)
@@ -71,27 +73,5 @@ def sample_cable_state(path, t, method="quintic"):
         rate = (path.lengths[k + 1] - path.lengths[k]) / h
         return CableSample(lengths=path.lengths[k] + rate * (t - T[k]), velocities=rate,
                            effort=np.asarray(effort, dtype=float))
-    pos, vel = quintic_hermite(s, h, path.lengths[k], path.velocities[k], path.accelerations[k],
-                               path.lengths[k + 1], path.velocities[k + 1],
-                               path.accelerations[k + 1])
-    return CableSample(lengths=pos, velocities=vel, effort=np.asarray(effort, dtype=float))
-
-
-def quintic_hermite(s, h, p0, v0, a0, p1, v1, a1):
-    """Position and velocity at fraction ``s`` in [0, 1] of a segment of duration ``h`` (s)
-    of the quintic matching position, velocity and acceleration at both ends."""
-    s2, s3, s4, s5 = s * s, s ** 3, s ** 4, s ** 5
-    basis = np.array([1 - 10 * s3 + 15 * s4 - 6 * s5,            # p0
-                      s - 6 * s3 + 8 * s4 - 3 * s5,               # v0 h
-                      0.5 * s2 - 1.5 * s3 + 1.5 * s4 - 0.5 * s5,  # a0 h^2
-                      0.5 * s3 - s4 + 0.5 * s5,                   # a1 h^2
-                      -4 * s3 + 7 * s4 - 3 * s5,                  # v1 h
-                      10 * s3 - 15 * s4 + 6 * s5])                # p1
-    slope = np.array([-30 * s2 + 60 * s3 - 30 * s4,
-                      1 - 18 * s2 + 32 * s3 - 15 * s4,
-                      s - 4.5 * s2 + 6 * s3 - 2.5 * s4,
-                      1.5 * s2 - 4 * s3 + 2.5 * s4,
-                      -12 * s2 + 28 * s3 - 15 * s4,
-                      30 * s2 - 60 * s3 + 30 * s4])
-    terms = np.array([p0, v0 * h, a0 * h * h, a1 * h * h, v1 * h, p1], dtype=float)
-    return basis @ terms, (slope @ terms) / h
+    pos, vel, _ = quintic(T, path.lengths, path.velocities, path.accelerations, np.array([t]))
+    return CableSample(lengths=pos[0], velocities=vel[0], effort=np.asarray(effort, dtype=float))

@@ -66,9 +66,9 @@ the same (t_k, L_k) overshoots near a switch. Measured with the quintic of
 JointTrajectoryController (every 1e-5 of the duration): on 300 to 1000 waypoints of a
 curved Robot 2 path, speed up to 1.006 x the limit and acceleration up to 1.4 x, during
 under 0.5 % of the time; 1.8 x at a sharp corner; with only 2 waypoints the quintic's speed
-peaks at 1.67 x. A controller that must never exceed the limits should be given derated
-limits, or sample the straight segments at their mean velocities (never above the speed
-limit: ``trajectory.sampling.sample_cable_state(..., method="linear")``).
+peaks at 1.67 x. The planner's output stage therefore checks the quintic itself
+(``trajectory.executed``) and slows a quasi-static trajectory uniformly until the quintic
+keeps the limits (exact: the same curve with rates / c and accelerations / c^2).
 """
 
 from dataclasses import dataclass, replace

@@ -17,15 +17,17 @@ import numpy as np
 from cdh_planner.feasibility import evaluate
 from cdh_planner.model.pose import quaternion_from_tau
 from cdh_planner.planner import PlanResult
+from cdh_planner.status import Status
 from cdh_planner.trajectory.path import PlannedPath
 from cdh_planner.trajectory.timing import time_path
+from cdh_planner.trajectory.dynamics import timed_path
 
 WAYPOINTS = 40
 
 
 class FakePlanner:
-    def __init__(self, robot, task, settings):
-        self.robot, self.task, self.settings = robot, task, settings
+    def __init__(self, robot, task, settings, scene=None):
+        self.robot, self.task, self.settings, self.scene = robot, task, settings, scene
         self.delay_file = os.environ.get("FAKE_PLANNER_DELAY_FILE", "")
 
     def _result(self, ok, reason, message, path=None, t0=0.0):
@@ -43,7 +45,7 @@ class FakePlanner:
             delay = 0.0
         while time.perf_counter() - t0 < delay:
             if cancel is not None and cancel.is_set():
-                return self._result(False, "canceled", "canceled (test double)", t0=t0)
+                return self._result(False, Status.CANCELED, "canceled (test double)", t0=t0)
             if progress is not None:
                 progress({"charts": 1, "time_s": time.perf_counter() - t0, "best_h": 1.0})
             time.sleep(0.01)
@@ -52,20 +54,24 @@ class FakePlanner:
         for label, pose in (("start", start), ("goal", goal)):
             f = evaluate(self.robot, pose.p[None], pose.tau[None])
             if not f.feasible[0]:
-                return self._result(False, f"{label}_infeasible",
+                return self._result(False, Status.infeasible(label),
                                     f"{label} pose is not wrench-feasible", t0=t0)
         y = a + np.linspace(0.0, 1.0, WAYPOINTS)[:, None] * (b - a)
         p, tau = self.task.pose(y)
         f = evaluate(self.robot, p, tau)
         if not np.all(f.feasible):
-            return self._result(False, "no_path", "the straight line leaves C", t0=t0)
+            return self._result(False, Status.NO_PATH, "the straight line leaves C", t0=t0)
         zeros = np.zeros((WAYPOINTS, 6))
         path = PlannedPath(p=p, quaternion=quaternion_from_tau(tau), tau=tau, lengths=f.lengths,
                            tension_min=f.tension_min, tension_nominal=f.tension_nominal,
                            tension_max=f.tension_max, margin=f.margin, t=np.zeros(WAYPOINTS),
                            velocities=zeros, accelerations=zeros)
         path = time_path(path, self.settings.max_cable_speed, self.settings.max_cable_accel)
-        return self._result(True, "ok", "straight line (test double)", path, t0)
+        # the real planner's output stage: the points a controller's quintic executes within
+        # the limits (quasi-static: the C2 spline through them, slowed to the limits)
+        path, _, _ = timed_path(self.robot, path, "quasi_static", self.settings.max_cable_speed,
+                                self.settings.max_cable_accel)
+        return self._result(True, Status.OK, "straight line (test double)", path, t0)
 
 
 def main():

@@ -16,6 +16,7 @@ import time
 from pathlib import Path
 
 from ...errors import InputError
+from ...io.outputs import same_file
 from . import paper, ros_story
 
 PACKAGE = "cdh_planner"
@@ -57,7 +58,8 @@ def run(args):
 def run_demo(out_dir=DEFAULT_OUT, config_dir=None, steps=None):
     """Run ``steps`` (default ``STEPS``) in order, printing as they go; return the Demo."""
     t0 = time.perf_counter()
-    demo = paper.Demo(out_dir=prepare_out_dir(out_dir), config_dir=find_config_dir(config_dir))
+    config = find_config_dir(config_dir)
+    demo = paper.Demo(out_dir=prepare_out_dir(out_dir, config), config_dir=config)
     for i, step in enumerate(STEPS if steps is None else steps, 1):
         print(f"\n== {i}. {step.title}")
         step.run(demo)
@@ -73,11 +75,19 @@ def run_demo(out_dir=DEFAULT_OUT, config_dir=None, steps=None):
     return demo
 
 
-def prepare_out_dir(path):
-    """The output directory, created if missing."""
+def prepare_out_dir(path, config_dir=None):
+    """The output directory, created if missing; none of the files the demo writes there
+    may be one of the robot files it reads from ``config_dir``."""
     out = Path(path)
     if out.exists() and not out.is_dir():
         raise InputError("--out", str(path), "exists and is not a directory")
+    if config_dir is not None:
+        outputs = [spec.file for spec in paper.PICTURES] + list(ros_story.OUTPUTS)
+        for name, robot_file in ((o, config_dir / f) for o in outputs
+                                 for f in paper.ROBOT_FILES.values()):
+            if same_file(out / name, robot_file):
+                raise InputError("--out", str(path), f"its {name} would overwrite the input "
+                                                     f"{robot_file}")
     try:
         out.mkdir(parents=True, exist_ok=True)
     except OSError as exc:

@@ -41,6 +41,11 @@ PARAMETERS = ("base_frame", "task.type", "planner.strategy", "trajectory.max_cab
               "trajectory.max_cable_accel", "stream_rate_hz", "execution.mode",
               "execution.controller_action", "execution.joint_states_topic")
 CONTROLLER_READY_S = 30.0
+# what this part writes in the demo's --out directory (checked against the inputs first)
+RUN_DIR, NODE_LOG, FRESH_NODE_LOG, CONTROLLER_LOG = "runs", "node.log", "node_fresh.log", \
+    "controller.log"
+PLANS_PICTURE, EXECUTION_PICTURE = "robot2_plans.png", "robot2_execution.png"
+OUTPUTS = (RUN_DIR, NODE_LOG, FRESH_NODE_LOG, CONTROLLER_LOG, PLANS_PICTURE, EXECUTION_PICTURE)
 
 
 class NodeFailed(RuntimeError):
@@ -105,11 +110,11 @@ def start_node(demo):
                          f"wheels") from None
     stack = contextlib.ExitStack()
     atexit.register(stack.close)
-    run_dir = demo.out_dir / "runs"
+    run_dir = demo.out_dir / RUN_DIR
     run_dir.mkdir(parents=True, exist_ok=True)
     args = _node_args(demo, f"log_dir:={run_dir}")
     t0 = time.perf_counter()
-    domain, process, node_log = _spawn_node(demo, stack, args, "node.log")
+    domain, process, node_log = _spawn_node(demo, stack, args, NODE_LOG)
     client = PlannerClient(domain_id=domain, name="cdh_planner_demo")
     stack.callback(client.close)
     client.watch_execution()  # before the first plan, so that no streamed command is missed
@@ -241,7 +246,7 @@ def start_controller(demo):
             "--action", params["execution.controller_action"],
             "--joint-states", params["execution.joint_states_topic"],
             "--initial", *(repr(float(x)) for x in first.run.goal)]
-    log = demo.out_dir / "controller.log"
+    log = demo.out_dir / CONTROLLER_LOG
     out = story.stack.enter_context(open(log, "w"))
     process = subprocess.Popen([sys.executable, *args], env=isolated_env(story.domain),
                                stdout=out, stderr=subprocess.STDOUT)
@@ -289,7 +294,7 @@ def replay(demo):
     print(f"run file: {story.run_file}")
     # a fresh node for the recorded requests, starting while the commands are republished
     fresh_args = _node_args(demo, "log_enabled:=false")
-    fresh_domain, fresh, _ = _spawn_node(demo, story.stack, fresh_args, "node_fresh.log")
+    fresh_domain, fresh, _ = _spawn_node(demo, story.stack, fresh_args, FRESH_NODE_LOG)
     # republish the recorded commands at REPLAY_RATE and compare with the originals
     topic = client.topic(CABLE_COMMAND)
     recorded = [rec for rec in read_records(story.run_file) if rec.topic == topic]
@@ -372,7 +377,7 @@ def ros_pictures(demo):
     marks = {label: paper_pose("robot2", label).coords for label in spec.points}
     leaves = [m.leaves_at for m in demo.motions if m.motion.interpolation == "task"
               and (m.motion.robot, m.motion.start, m.motion.goal) == ("robot2", *spec.segment)]
-    path = demo.out_dir / "robot2_plans.png"
+    path = demo.out_dir / PLANS_PICTURE
     plot_paths(robot, SliceView(task=task, axes=spec.axes, ranges=spec.ranges),
                {f"planned {_plain(leg.start)} -> {_plain(leg.goal)} ({len(leg.coords)} "
                 f"waypoints)": _off_pole(leg.coords) for leg in legs}, path,
@@ -399,7 +404,7 @@ def ros_pictures(demo):
             executed[f"{_plain(leg.start)} -> {_plain(leg.goal)}"] = ExecutedMotion(
                 t, lengths, M.envelope_from_msg(leg.run.envelope), stamps - stamps[:1], done,
                 how)
-    path = demo.out_dir / "robot2_execution.png"
+    path = demo.out_dir / EXECUTION_PICTURE
     plot_execution(robot, executed, path)
     demo.files.append(path)
     print(f"wrote {path}")

@@ -1,0 +1,119 @@
+"""Start-up: whole processes timed from outside (issue 18, item 2).
+
+    .venv/bin/python benchmarks/startup.py [--runs 5] [--skip-node]
+
+Rows, each a median over --runs fresh processes (wall seconds, and the CPU seconds the
+process used, user + system, which a loaded machine inflates less):
+
+- ``cdh-planner --help``;
+- ``cdh-planner plan config/problems/robot2_q1_q2.yaml`` (a query one direct motion
+  answers, dynamically timed);
+- the floor under that plan: a bare interpreter importing only the libraries a
+  dynamically timed plan cannot do without (numpy; scipy's Rotation, which every pose
+  conversion uses; scipy.interpolate, which toppra imports at its top and which brings
+  scipy.optimize, sparse and special with it);
+- the node: ``cdh-planner node --ros-args --params-file config/robot2.yaml`` started, timed
+  until its ``/cdh_planner/plan`` service (nav_msgs/GetPlan) is seen from this process
+  (rclpy initialised here before the node starts, so only the node's start-up is timed;
+  its own ROS domain, discovery on localhost), then stopped with SIGINT. Its CPU seconds
+  are the node's whole life, the short stop included.
+
+Targets (issue 18): under 0.15 s, 0.4 s and 2 s. Exit code 0 always (a benchmark).
+"""
+
+import argparse
+import os
+import resource
+import signal
+import statistics
+import subprocess
+import sys
+import tempfile
+import time
+from pathlib import Path
+
+ROOT = Path(__file__).resolve().parents[1]
+CLI = Path(sys.executable).with_name("cdh-planner")
+TARGETS = {"--help": 0.15, "plan robot2_q1_q2": 0.4, "node to serving ~/plan": 2.0}
+FLOOR = "import numpy, scipy.spatial.transform, scipy.interpolate"
+
+
+def cli(*args):
+    return [str(CLI), *args] if CLI.exists() else [sys.executable, "-m", "cdh_planner.cli", *args]
+
+
+def children_cpu():
+    r = resource.getrusage(resource.RUSAGE_CHILDREN)
+    return r.ru_utime + r.ru_stime
+
+
+def timed_run(argv):
+    """(wall s, CPU s) of one process run to its end; output discarded."""
+    cpu0, t0 = children_cpu(), time.perf_counter()
+    subprocess.run(argv, cwd=ROOT, stdout=subprocess.DEVNULL, stderr=subprocess.DEVNULL, check=True)
+    return time.perf_counter() - t0, children_cpu() - cpu0
+
+
+def node_to_serving(runs):
+    """[(wall s until ~/plan is seen, CPU s of the node process)] over ``runs`` starts."""
+    import rclpy
+    from nav_msgs.srv import GetPlan
+
+    from cdh_planner.ros.domains import claimed_domain, isolated_env, stop_process
+
+    out = []
+    with claimed_domain() as domain, tempfile.TemporaryDirectory() as logs:
+        env = isolated_env(domain)
+        os.environ.update(ROS_DOMAIN_ID=str(domain), ROS_AUTOMATIC_DISCOVERY_RANGE="LOCALHOST")
+        rclpy.init()
+        try:
+            node = rclpy.create_node("startup_probe")
+            client = node.create_client(GetPlan, "/cdh_planner/plan")
+            for _ in range(runs):
+                argv = cli("node", "--ros-args", "--params-file", str(ROOT / "config" / "robot2.yaml"),
+                           "-p", f"log_dir:={logs}")
+                cpu0, t0 = children_cpu(), time.perf_counter()
+                proc = subprocess.Popen(argv, cwd=ROOT, env=env, stdout=subprocess.DEVNULL,
+                                        stderr=subprocess.DEVNULL)
+                while not client.service_is_ready() and time.perf_counter() - t0 < 60.0:
+                    time.sleep(0.01)  # finer than wait_for_service's polling
+                served, wall = client.service_is_ready(), time.perf_counter() - t0
+                stop_process(proc, signal.SIGINT)
+                out.append((wall if served else float("nan"), children_cpu() - cpu0))
+                while client.service_is_ready():  # the stopped node's service leaves the graph
+                    time.sleep(0.05)
+            node.destroy_node()
+        finally:
+            rclpy.shutdown()
+    return out
+
+
+def row(name, samples):
+    walls, cpus = [w for w, _ in samples], [c for _, c in samples]
+    target = TARGETS.get(name)
+    med = statistics.median(walls)
+    verdict = "" if target is None else "meets" if med < target else "misses"
+    print(f"| {name} | {med:.3f} | {min(walls):.3f} - {max(walls):.3f} | "
+          f"{statistics.median(cpus):.3f} | {'' if target is None else f'< {target:g}'} | {verdict} |",
+          flush=True)
+
+
+def main(argv=None):
+    ap = argparse.ArgumentParser(description=__doc__, formatter_class=argparse.RawDescriptionHelpFormatter)
+    ap.add_argument("--runs", type=int, default=5, help="fresh processes per row (median)")
+    ap.add_argument("--skip-node", action="store_true", help="no ROS node row")
+    args = ap.parse_args(argv)
+    print(f"load average {os.getloadavg()[0]:.2f} on {os.cpu_count()} CPUs; PYTHONDONTWRITEBYTECODE="
+          f"{os.environ.get('PYTHONDONTWRITEBYTECODE', '')!r}", flush=True)
+    print("| command | median wall s | range s | median CPU s | target s | |\n|---|---|---|---|---|---|")
+    row("--help", [timed_run(cli("--help")) for _ in range(args.runs)])
+    plan = cli("plan", "config/problems/robot2_q1_q2.yaml")
+    row("plan robot2_q1_q2", [timed_run(plan) for _ in range(args.runs)])
+    row(f"floor: python -c '{FLOOR}'", [timed_run([sys.executable, "-c", FLOOR]) for _ in range(args.runs)])
+    if not args.skip_node:
+        row("node to serving ~/plan", node_to_serving(args.runs))
+    return 0
+
+
+if __name__ == "__main__":
+    sys.exit(main())

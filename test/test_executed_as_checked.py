@@ -1,0 +1,282 @@
+"""Executed as checked (trajectory/executed.py, issue 18): the JointTrajectory the node
+publishes, executed here as a ros2_control JointTrajectoryController does (one quintic per
+segment through positions, velocities and accelerations, solved here from its six end
+conditions), driven through forward kinematics (Newton, its steps between samples shown to
+be small), differentiated at 1 ms and its tensions recomputed with the inertial wrench and the
+wrench ellipsoid, keeps every tension, length and winch limit: at fast winches (1 m/s,
+20 m/s^2) and at the defaults (0.05 m/s, 0.2 m/s^2). The checker catches the sparse TOPP-RA
+points that broke this, agrees with the dynamic timing on the motion it checked, and a plan
+it cannot make executable within its bounds is refused with a reason."""
+
+from dataclasses import replace
+
+import numpy as np
+import pytest
+
+from conftest import PROBLEMS
+from cdh_planner.commands.plan import result_dict
+from cdh_planner.feasibility import evaluate, screw_jacobian
+from cdh_planner.io.problem import load_problem
+from cdh_planner.model.forward_kinematics import forward_kinematics_many
+from cdh_planner.model.kinematics import cable_lengths
+from cdh_planner.planner import Planner
+from cdh_planner.status import Status
+from cdh_planner.trajectory import dynamics as D
+from cdh_planner.trajectory import executed as E
+from cdh_planner.trajectory.timing import time_path
+
+INERTIA = np.diag([2e-3, 2e-3, 3.5e-3])  # kg m^2: issue 18's load on Robot 2 (0.6 kg)
+DT = 1e-3                                # s
+FAST, DEFAULT = (1.0, 20.0), (0.05, 0.2)  # winch limits (m/s, m/s^2)
+
+
+@pytest.fixture(scope="module")
+def problem():
+    pr = load_problem(PROBLEMS / "robot2_q2_q3.yaml")
+    return replace(pr, robot=replace(pr.robot, inertia=INERTIA))
+
+
+@pytest.fixture(scope="module")
+def route(problem):
+    """One search: q2 -> q3 planned quasi-statically (at the fast limits)."""
+    s = replace(problem.settings, dynamics="quasi_static", max_cable_speed=FAST[0],
+                max_cable_accel=FAST[1])
+    result = Planner(problem.robot, problem.task, s).plan(problem.start, problem.goal)
+    assert result.success, result.message
+    return result
+
+
+@pytest.fixture(scope="module")
+def outputs(problem, route):
+    """limits -> the planner's output stage on that route (Planner.plan's last steps: the
+    quasi-static timing, the dynamic timing, made executable): (path, note, check)."""
+    return {limits: D.timed_path(problem.robot, time_path(route.path, *limits), "auto", *limits)
+            for limits in (FAST, DEFAULT)}
+
+
+# ----------------------------------------------------------------------------- an independent JTC
+
+def jtc_quintic(t_wp, L, V, A, t):
+    """Positions (M, J) of the JTC's quintic at times t, its coefficients solved per segment
+    from p, p', p'' at both ends (a 6 x 6 system in the segment's own time)."""
+    out = np.empty((len(t), L.shape[1]))
+    k_of = np.clip(np.searchsorted(t_wp, t, side="right") - 1, 0, len(t_wp) - 2)
+    for k in np.unique(k_of):
+        h = t_wp[k + 1] - t_wp[k]
+        M = np.array([[1, 0, 0, 0, 0, 0], [0, 1, 0, 0, 0, 0], [0, 0, 2, 0, 0, 0],
+                      [1, h, h ** 2, h ** 3, h ** 4, h ** 5],
+                      [0, 1, 2 * h, 3 * h ** 2, 4 * h ** 3, 5 * h ** 4],
+                      [0, 0, 2, 6 * h, 12 * h ** 2, 20 * h ** 3]])
+        coef = np.linalg.solve(M, np.stack([L[k], V[k], A[k], L[k + 1], V[k + 1], A[k + 1]]))
+        tau = t[k_of == k] - t_wp[k]
+        out[k_of == k] = np.vander(tau, 6, increasing=True) @ coef
+    return out
+
+
+def executed_margins(robot, msg, p0, R0):
+    """Execute the JointTrajectory ``msg`` as a JTC (every DT), forward kinematics of its
+    lengths (from the poses p0 (N, 3), R0 (N, 3, 3) of its points), differences at DT: per
+    interior sample the tension
+    margin (N, ellipsoid around the dynamic wrench), lengths (m), winch speed and
+    acceleration (m/s, m/s^2, differences of the lengths)."""
+    t_wp = np.array([p.time_from_start.sec + 1e-9 * p.time_from_start.nanosec for p in msg.points])
+    L, V, A = (np.array([getattr(pt, f) for pt in msg.points]) for f in
+               ("positions", "velocities", "accelerations"))
+    t = np.arange(0.0, t_wp[-1], DT)
+    lengths = jtc_quintic(t_wp, L, V, A, t)
+    # Newton from the nearest published point's pose: converged to rounding, and every step
+    # between samples small, so each is the pose reached from the previous one
+    k = np.clip(np.searchsorted(t_wp, t), 0, len(t_wp) - 1)
+    fk = forward_kinematics_many(robot, lengths, p0[k], R0[k])
+    assert np.all(fk.ok) and np.max(fk.residual) < 1e-12
+    p, R = fk.p, fk.R
+    assert np.max(np.linalg.norm(np.diff(p, axis=0), axis=1)) < 1e-3      # m per DT
+    assert np.max(np.abs(np.diff(R, axis=0))) < 1e-2
+    c = p + np.einsum("nij,j->ni", R, robot.load_point)
+    acc = (c[2:] - 2 * c[1:-1] + c[:-2]) / DT ** 2
+    Rt = np.swapaxes(R[1:-1], 1, 2)
+    W = (R[2:] - R[:-2]) / (2 * DT) @ Rt                      # [w]x = R' R^T, base frame
+    w = np.stack([W[:, 2, 1], W[:, 0, 2], W[:, 1, 0]], axis=1)
+    Acc = (R[2:] - 2 * R[1:-1] + R[:-2]) / DT ** 2 @ Rt - W @ W  # R'' R^T = [alpha]x + [w]x^2
+    alpha = 0.5 * np.stack([Acc[:, 2, 1] - Acc[:, 1, 2], Acc[:, 0, 2] - Acc[:, 2, 0],
+                            Acc[:, 1, 0] - Acc[:, 0, 1]], axis=1)
+    Rm = R[1:-1]
+    I_w = Rm @ robot.inertia @ np.swapaxes(Rm, 1, 2)
+    moment = (np.cross(c[1:-1], robot.mass * acc) + np.einsum("nij,nj->ni", I_w, alpha)
+              + np.cross(w, np.einsum("nij,nj->ni", I_w, w)))
+    f = evaluate(robot, p[1:-1], R=Rm)
+    J = screw_jacobian(robot, f.unit_vectors)
+    w_in = np.concatenate([robot.mass * acc, moment], axis=1)
+    tension = f.tension_nominal - np.linalg.solve(J, w_in[..., None])[..., 0]
+    margin = np.minimum(tension - f.tension_spread - robot.tension_min,
+                        robot.tension_max - tension - f.tension_spread)
+    speed = np.abs(lengths[2:] - lengths[:-2]) / (2 * DT)
+    accel = np.abs(lengths[2:] - 2 * lengths[1:-1] + lengths[:-2]) / DT ** 2
+    return margin, f.lengths, speed, accel
+
+
+def published(path, robot):
+    """The JointTrajectory the node publishes (FollowJointTrajectory goal and
+    ~/planned_cable_trajectory) for ``path``."""
+    M = pytest.importorskip("cdh_planner.ros.messages")
+    return M.cable_trajectory_msg(path, robot.winch_names, "cdh_base")
+
+
+# ----------------------------------------------------------------------------- the quintic
+
+def test_quintic_matches_its_ends_and_its_derivatives():
+    rng = np.random.default_rng(7)
+    t_wp = np.cumsum(rng.uniform(0.05, 0.4, 6)) - 0.05
+    L, V, A = rng.normal(size=(6, 3)), rng.normal(size=(6, 3)), rng.normal(size=(6, 3))
+    pos, vel, acc = E.quintic(t_wp, L, V, A, t_wp)   # at the points: the points
+    assert np.allclose(pos, L, atol=1e-12) and np.allclose(vel, V, atol=1e-10)
+    assert np.allclose(acc, A, atol=1e-9)
+    end = t_wp[1:] - 1e-13                            # the left limit at each point too
+    pos, vel, acc = E.quintic(t_wp, L, V, A, end)
+    assert np.allclose(pos, L[1:], atol=1e-9) and np.allclose(vel, V[1:], atol=1e-8)
+    assert np.allclose(acc, A[1:], atol=1e-6)
+    t = np.linspace(t_wp[0] + 0.01, t_wp[-1] - 0.01, 200)
+    h = 1e-6
+    p_plus, v_plus, _ = E.quintic(t_wp, L, V, A, t + h)
+    p_minus, v_minus, _ = E.quintic(t_wp, L, V, A, t - h)
+    pos, vel, acc = E.quintic(t_wp, L, V, A, t)
+    assert np.allclose((p_plus - p_minus) / (2 * h), vel, atol=1e-6)
+    assert np.allclose((v_plus - v_minus) / (2 * h), acc, atol=1e-5)
+    assert np.allclose(pos, jtc_quintic(t_wp, L, V, A, t), atol=1e-12)
+    held, v_held, _ = E.quintic(t_wp, L, V, A, np.array([t_wp[-1] + 1.0]))
+    assert np.allclose(held, L[-1]) and np.all(v_held == 0)
+
+
+def test_many_poses_forward_kinematics_agrees_with_one_at_a_time(problem):
+    robot = problem.robot
+    rng = np.random.default_rng(3)
+    p = np.array([0.0, 0.0, 0.3]) + rng.uniform(-0.03, 0.03, (20, 3))
+    R = np.array([E.Rotation.from_rotvec(w).as_matrix() for w in rng.uniform(-0.2, 0.2, (20, 3))])
+    L = np.array([cable_lengths(robot, a, b) for a, b in zip(p, R)])
+    p_seed = p + rng.uniform(-2e-3, 2e-3, p.shape)
+    fk = forward_kinematics_many(robot, L, p_seed, R)
+    assert np.all(fk.ok) and np.max(fk.residual) < 1e-12
+    assert np.allclose(fk.p, p, atol=1e-9) and np.allclose(fk.R, R, atol=1e-9)
+
+
+# ----------------------------------------------------------------------------- what leaves
+
+def poses(path):
+    return path.p, E.Rotation.from_quat(path.quaternion).as_matrix()
+
+
+@pytest.mark.parametrize("limits", [FAST, DEFAULT], ids=["fast-1mps-20mps2", "default"])
+def test_the_published_trajectory_executes_within_every_limit(problem, outputs, limits):
+    robot, (path, note, check) = problem.robot, outputs[limits]
+    assert check.ok and note.startswith("dynamic timing")
+    margin, lengths, speed, accel = executed_margins(robot, published(path, robot), *poses(path))
+    assert np.min(margin) > 0, f"{np.min(margin):.4g} N"
+    assert np.all(lengths > robot.length_min) and np.all(lengths < robot.length_max)
+    assert np.max(speed) <= limits[0] * (1 + 1e-6)
+    assert np.max(accel) <= limits[1] * (1 + 1e-3)  # second differences of a quintic: O(DT^2)
+    # points added; at the defaults also slowed a little (the winch limits near TOPP-RA's
+    # acceleration switches, module docstring of trajectory.executed)
+    assert check.added > 0 and check.slowdown < 1.2
+
+
+def test_the_checker_catches_the_sparse_points_and_agrees_with_this_test(problem, route):
+    robot = problem.robot
+    timing = D.dynamic_timing(robot, time_path(route.path, *FAST), robot.mass, robot.inertia, *FAST)
+    assert timing.feasible and timing.least_tension_margin_n > 0  # the spline motion: inside
+    check = E.check_path(robot, timing.path, robot.mass, robot.inertia, *FAST)
+    assert not check.ok and check.least_margin < -0.01 and "tension margin" in check.reason
+    assert check.bad_segments.size > 0
+    margin, *_ = executed_margins(robot, published(timing.path, robot), *poses(timing.path))
+    assert np.min(margin) < -0.1                                 # N: this test sees it too
+    # the checker samples 4 times as often, each with its own 1 ms stencil: never more lenient
+    assert check.least_tension_margin_n <= np.min(margin) + 1e-3
+    # the checked motion itself, sampled densely, checks as the dynamic timing says
+    t = np.linspace(0.0, timing.duration, 10001)
+    rows = D.motion_rows(robot, timing, t, robot.mass, robot.inertia)
+    dense = E.check_path(robot, rows, robot.mass, robot.inertia, *FAST)
+    assert dense.ok
+    assert abs(dense.least_tension_margin_n - timing.least_tension_margin_n) < 2e-4
+
+
+def test_slowing_down_scales_the_winch_ratios_exactly(problem, outputs):
+    robot, (path, _, _) = problem.robot, outputs[FAST]
+    before = E.check_path(robot, path, None, None, *FAST)
+    slow = E.slow_down(robot, path, 2.0)
+    after = E.check_path(robot, slow, None, None, *FAST)
+    assert after.speed_ratio == pytest.approx(before.speed_ratio / 2, rel=1e-3)
+    assert after.accel_ratio == pytest.approx(before.accel_ratio / 4, rel=1e-2)
+    f0 = evaluate(robot, path.p, R=poses(path)[1]).tension_nominal
+    assert np.allclose(slow.tension_nominal - f0, (path.tension_nominal - f0) / 4)
+
+
+def test_beyond_its_bounds_the_plan_is_refused_with_a_reason(problem, monkeypatch):
+    monkeypatch.setattr(E, "MAX_ROUNDS", 0)
+    monkeypatch.setattr(E, "SLOWDOWNS", 0)
+    s = replace(problem.settings, max_cable_speed=FAST[0], max_cable_accel=FAST[1])
+    result = Planner(problem.robot, problem.task, s).plan(problem.start, problem.goal)
+    assert not result.success and result.reason == Status.NOT_EXECUTABLE
+    assert "JointTrajectoryController" in result.message and "tension margin" in result.message
+    assert result.path is None
+
+
+# ----------------------------------------------------------------------------- JSON and stream
+
+def test_the_plan_and_its_json_carry_what_was_checked(problem):
+    s = replace(problem.settings, max_cable_speed=FAST[0], max_cable_accel=FAST[1])
+    result = Planner(problem.robot, problem.task, s).plan(problem.start, problem.goal)
+    assert result.success and "points added" in result.stats["executed"]
+    path = result.path
+    assert E.check_path(problem.robot, path, problem.robot.mass, problem.robot.inertia, *FAST).ok
+    doc = result_dict(result)
+    keys = {"p", "quaternion", "tau", "lengths", "tension_min", "tension_nominal",
+            "tension_max", "margin", "t", "velocities", "accelerations"}
+    assert all(set(w) == keys for w in doc["path"])
+    assert np.array_equal([w["velocities"] for w in doc["path"]], path.velocities)
+    assert np.array_equal([w["accelerations"] for w in doc["path"]], path.accelerations)
+    assert doc["executed"] == result.stats["executed"]
+
+
+def test_the_stream_sends_the_checked_quintic(problem, outputs):
+    streaming = pytest.importorskip("cdh_planner.ros.streaming")
+    robot, (path, _, _) = problem.robot, outputs[FAST]
+    stream = streaming.Stream(path, robot.winch_names, start=0.0)
+    stamp = published(path, robot).header.stamp
+    t = np.linspace(0.0, path.t[-1], 97)
+    pos, vel, _ = E.quintic(path.t, path.lengths, path.velocities, path.accelerations, t)
+    for j, now in enumerate(t[:-1]):
+        msg, finished = stream.command(now, stamp)
+        assert not finished
+        assert np.allclose(msg.position, pos[j], atol=1e-12)
+        assert np.allclose(msg.velocity, vel[j], atol=1e-12)
+
+
+def test_quintic_bounds_are_the_extremes_of_the_quintic():
+    rng = np.random.default_rng(11)
+    t_wp = np.concatenate([[0.0], np.cumsum(rng.uniform(1e-3, 0.3, 30))])
+    L, V, A = (rng.normal(size=(31, 6)) * x for x in (0.1, 0.5, 5.0))
+    V[3] = A[3] = 0.0                      # a segment of lower degree
+    lo, hi, vel, acc = E.quintic_bounds(t_wp, L, V, A)
+    for k in range(30):
+        t = np.linspace(t_wp[k], t_wp[k + 1], 20001)
+        p, v, a = E.quintic(t_wp, L, V, A, t)
+        assert np.all(lo[k] <= p.min(axis=0) + 1e-12) and np.all(hi[k] >= p.max(axis=0) - 1e-12)
+        assert np.allclose(lo[k], p.min(axis=0), rtol=1e-6, atol=1e-9)
+        assert np.allclose(hi[k], p.max(axis=0), rtol=1e-6, atol=1e-9)
+        assert np.allclose(vel[k], np.abs(v).max(axis=0), rtol=1e-6)
+        assert np.allclose(acc[k], np.abs(a).max(axis=0), rtol=1e-6)
+
+
+def test_a_quasi_static_timing_is_handed_out_as_its_spline_and_slowed_to_the_limits(problem, route):
+    robot = replace(problem.robot, mass=None, inertia=None)   # no load mass: quasi-static
+    timed = time_path(route.path, *DEFAULT)
+    path, note, check = D.timed_path(robot, timed, "auto", *DEFAULT)
+    assert note == "" and check.ok and check.added == 0 and 1 < check.slowdown < 1.2
+    assert np.allclose(path.t, timed.t * check.slowdown) and np.array_equal(path.lengths, timed.lengths)
+    # the JTC's quintic through these points is the clamped cubic spline through them
+    from scipy.interpolate import CubicSpline
+    spline = CubicSpline(path.t, path.lengths, bc_type="clamped")
+    t = np.linspace(0.0, path.t[-1], 5001)
+    pos, vel, acc = E.quintic(path.t, path.lengths, path.velocities, path.accelerations, t)
+    assert np.allclose(pos, spline(t), atol=1e-12) and np.allclose(acc, spline(t, 2), atol=1e-9)
+    assert np.max(np.abs(vel)) <= DEFAULT[0] * (1 + 1e-6)
+    assert np.max(np.abs(acc)) <= DEFAULT[1] * (1 + 1e-6)

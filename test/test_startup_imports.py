@@ -1,0 +1,80 @@
+"""Start-up imports only what a command uses (issue 18, item 2): checked in fresh
+interpreters through sys.modules, not by timing."""
+
+import json
+import subprocess
+import sys
+
+import pytest
+
+from cdh_planner import cli
+from conftest import REPO
+
+HEAVY = ("toppra", "matplotlib", "matplotlib.pyplot", "rclpy", "scipy.spatial", "numba", "numpy")
+
+
+def _modules_after(code):
+    """The subset of HEAVY in sys.modules after running ``code`` in a fresh interpreter."""
+    probe = f"import sys, json\n{code}\nprint(json.dumps([m for m in {HEAVY!r} if m in sys.modules]))"
+    out = subprocess.run([sys.executable, "-c", probe], capture_output=True, text=True, check=True)
+    return set(json.loads(out.stdout.strip().splitlines()[-1]))
+
+
+def test_importing_the_cli_loads_no_heavy_library():
+    assert _modules_after("import cdh_planner.cli") == set()
+
+
+def test_help_imports_no_command_module():
+    code = ("import contextlib, io\nfrom cdh_planner import cli\n"
+            "with contextlib.redirect_stdout(io.StringIO()):\n    assert cli.main(['--help']) == 0\n"
+            "assert not [m for m in sys.modules if m.startswith('cdh_planner.commands.')]")
+    assert _modules_after(code) == set()
+
+
+def test_plan_command_parser_loads_no_plotting_and_no_ros():
+    code = "from cdh_planner import cli\ncli.build_parser(['plan'])"
+    loaded = _modules_after(code)
+    assert not loaded & {"matplotlib", "matplotlib.pyplot", "rclpy", "numba"}
+
+
+def test_a_direct_motion_plan_loads_no_plotting_ros_or_numba():
+    """robot2_q1_q2: one direct motion, dynamically timed (toppra runs), no chart."""
+    problem = REPO / "config" / "problems" / "robot2_q1_q2.yaml"
+    code = ("import contextlib, io\nfrom cdh_planner import cli\n"
+            "with contextlib.redirect_stdout(io.StringIO()) as out:\n"
+            f"    assert cli.main(['plan', {str(problem)!r}, '--quiet']) == 0\n"
+            "assert 'dynamic timing' in out.getvalue()")
+    loaded = _modules_after(code)
+    assert "toppra" in loaded
+    assert not loaded & {"matplotlib", "matplotlib.pyplot", "rclpy", "numba"}
+
+
+def test_toppra_is_imported_without_matplotlib_and_its_plt_still_works():
+    code = ("import cdh_planner.trajectory.dynamics\n"
+            "import toppra.algorithm.algorithm as a\n"
+            "assert 'matplotlib' not in sys.modules\n"
+            "import matplotlib\nmatplotlib.use('Agg')\nimport matplotlib.pyplot as plt\n"
+            "assert a.plt.figure is plt.figure")
+    assert "toppra" in _modules_after(code)
+
+
+@pytest.mark.parametrize("argv, expected", [
+    (["plan", "x.yaml"], "plan"), (["--debug", "node"], "node"), (["--help", "plan"], None),
+    (["plan", "--help"], "plan"), ([], None), (["--version"], None), (["nonsense"], None),
+])
+def test_requested_command(argv, expected):
+    assert cli.requested_command(argv) == expected
+
+
+def test_summaries_are_the_commands_own_help():
+    sub = next(a for a in cli.build_parser()._actions if a.dest == "command")
+    helps = {a.dest: a.help for a in sub._choices_actions}
+    assert helps == {name: cli.SUMMARIES[name] for name in helps}
+    assert set(helps) == set(cli.COMMANDS)
+
+
+def test_top_level_help_lists_every_summary(capsys):
+    assert cli.main(["--help"]) == 0
+    out = " ".join(capsys.readouterr().out.split())
+    for name, summary in cli.SUMMARIES.items():
+        assert name in out and " ".join(summary.split()) in out
