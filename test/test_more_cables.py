@@ -87,3 +87,19 @@ def test_forward_kinematics_of_noisy_lengths_is_the_least_squares_pose():
 def test_forward_kinematics_wants_one_length_per_cable():
     with pytest.raises(InputError, match=r"lengths = .*expected shape \(8,\)"):
         forward_kinematics(COGIRO, np.ones(6), np.zeros(3), np.eye(3))
+
+
+def test_slice_of_cogiro(tmp_path, capsys):
+    """`cdh-planner slice` on the 8-cable robot (the facet test per cell): the level
+    platform at z = 2.5 m is feasible over the middle of the room, not at its walls."""
+    from cdh_planner import cli
+    out = tmp_path / "cogiro.png"
+    rc = cli.main(["slice", str(CONFIG / "cogiro.yaml"), "--fixed", "z=2.5", "phi=0", "theta=0", "sigma=0",
+                   "--free", "x", "y", "--range", "x=-7.5:7.5", "y=-5.5:5.5", "--resolution", "21",
+                   "-o", str(out)])
+    text = capsys.readouterr().out
+    assert rc == 0 and out.stat().st_size > 0, text
+    share = float(text.split("classified in")[1].split(";")[1].split("%")[0])
+    assert 30.0 < share < 90.0, text
+    inside = zt.evaluate(COGIRO, np.array([[0.0, 0.0, 2.5], [7.0, 5.0, 2.5]]), np.zeros((2, 3)))
+    assert inside.feasible.tolist() == [True, False]
