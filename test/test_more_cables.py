@@ -103,3 +103,23 @@ def test_slice_of_cogiro(tmp_path, capsys):
     assert 30.0 < share < 90.0, text
     inside = zt.evaluate(COGIRO, np.array([[0.0, 0.0, 2.5], [7.0, 5.0, 2.5]]), np.zeros((2, 3)))
     assert inside.feasible.tolist() == [True, False]
+
+
+def test_verify_an_8_cable_robot(tmp_path, capsys):
+    """`cdh-planner verify` on CoGiRo: per-pose answers, 8 lengths and tensions, the
+    envelope's status in the JSON, and the dense check of the segments (the straight motion
+    toward the corner leaves the feasible set: exit 1)."""
+    import json
+    from cdh_planner import cli
+    poses = tmp_path / "poses.json"
+    poses.write_text(json.dumps([{"position": p, "quaternion": [1, 0, 0, 0]}
+                                 for p in ([0, 0, 2], [3, 1, 2.5], [7, 5, 2.5])]))
+    out = tmp_path / "v.json"
+    assert cli.main(["verify", str(CONFIG / "cogiro.yaml"), str(poses), "--json", str(out)]) == 1
+    doc = json.loads(out.read_text())
+    assert [p["feasible"] for p in doc["poses"]] == [True, True, False]
+    assert [p["tension_status"] for p in doc["poses"]] == ["ok", "ok", "infeasible"]
+    assert all(len(p["lengths"]) == len(p["tension_nominal"]) == 8 for p in doc["poses"])
+    assert [s["feasible"] for s in doc["segments"]] == [True, False]
+    assert 0 < doc["segments"][1]["first_unsafe"]["s"] < 1
+    capsys.readouterr()
