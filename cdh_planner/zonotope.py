@@ -107,7 +107,8 @@ def _normal_of(J, S, A, c, perm):
 @njit(cache=True)
 def facet_margins(J, w0, L, tmin, tmax, subsets):
     """The facet test as written (a normal per subset from J's columns): the reference
-    ``evaluate_kernel`` is tested against. Least facet slack of each pose: J (N, 6, m), w0 (N, 6), L (N, 6, 6), tension bounds
+    ``evaluate_kernel`` is tested against. Least facet slack of each pose: J (N, 6, m),
+    w0 (N, 6), L (N, 6, 6), tension bounds
     (m,), subsets (K, 5). Returns (margin in N, normalised margin, its facet, its cables at
     t_max): facet = 2 k + (0 for +c, 1 for -c), k the subset, -1 (margins +inf) when no
     subset has rank 5; the last is a bit mask (bit i: cable i sits at t_max_i on that facet,
@@ -673,7 +674,9 @@ def _evaluate_poses(q0, q1, J, c, w_local, L3, load_frame, tmin, tmax, subsets, 
                     s += y[r] * Y[r, j]
                 vv += s * s
             v[q, i] = d * np.sqrt(vv)
-        if m > 6 and centre and best_r > 0.0:  # the centred nominal: t0 + D^(1/2) Q2 z, Q2 spanning null(J D^(1/2))
+        # the centred nominal (wrench-feasible poses): t0 + D^(1/2) Q2 z, Q2 spanning
+        # null(J D^(1/2))
+        if m > 6 and centre and best_r > 0.0:
             _null_basis(A, hv0, hvv, Q2)
             for i in range(m):
                 room_lo[i] = (t0[q, i] - v[q, i] - tmin[i]) / sqd[i]
@@ -805,7 +808,8 @@ def evaluate(robot, p, tau=None, R=None):
     v = np.where(singular[:, None], np.inf, v)
     return WrenchFeasibility(lengths=lengths, unit_vectors=u, det_j=scale, tension_nominal=t0,
                              tension_spread=v, margins=margins, margin=margin, binding=binding,
-                             margin_newtons=mn, wrench_margin=mr, wrench_facet=np.where(singular | (arg < 0), -1, arg // 2),
+                             margin_newtons=mn, wrench_margin=mr,
+                             wrench_facet=np.where(singular | (arg < 0), -1, arg // 2),
                              wrench_facet_up=hi,
                              tension_status=status.astype(str))
 
