@@ -27,9 +27,10 @@ $(VENV)/bin/python:
 	  echo "venv creation failed: on Debian, apt-get install python3-venv (or python3.11-venv)" >&2; exit 1; }
 
 # Always use the venv's own python (ros-wheels-bootstrapper re-execs it).
-$(STAMP): $(VENV)/bin/python requirements.txt setup.py setup.cfg package.xml cdh_planner/manifold/kernels.py \
+$(STAMP): $(VENV)/bin/python requirements.txt test/requirements-urdf.txt setup.py setup.cfg package.xml cdh_planner/manifold/kernels.py \
           cdh_planner/manifold/layout.py cdh_planner/manifold/aot.py
 	$(PY) -m pip install -r requirements.txt
+	$(PY) -m pip install --no-deps -r test/requirements-urdf.txt
 	$(PY) -m pip install -e .
 	@# the F / F_x kernel compiled ahead of time (first call ~10 ms instead of 0.4 - 0.5 s;
 	@# without a C compiler this warms numba's JIT cache instead), and the package's bytecode

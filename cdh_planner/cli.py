@@ -33,7 +33,7 @@ from cdh_planner.errors import MAX_MESSAGE_CHARS, InputError, clip
 PROG = 'cdh-planner'
 
 # Order here is the order in --help. A name whose module does not exist yet is skipped.
-COMMANDS = ['verify', 'slice', 'plan', 'node', 'call', 'replay', 'recover', 'demo']
+COMMANDS = ['verify', 'slice', 'plan', 'node', 'call', 'replay', 'recover', 'urdf', 'demo']
 
 # The one-line summaries of `cdh-planner --help`, the same as each module's add_parser help
 # (test_startup_imports checks). Held here so that a run imports only the module of the command it runs:

@@ -12,8 +12,9 @@ does both). Installs into that venv (``sys.prefix``):
 2. Builds each package with plain CMake (``cmake -S interfaces/<pkg> -B <build-dir>/<pkg>``,
    install prefix the venv) and installs it:
    - ``cdh_planner_interfaces`` always;
-   - ``control_msgs`` (a partial copy: FollowJointTrajectory) only when this python cannot
-     import a real ``control_msgs`` from outside the venv.
+   - ``control_msgs`` (a partial copy: FollowJointTrajectory) and ``tf2_msgs`` (a partial
+     copy: TFMessage) each only when this python cannot import the real package from
+     outside the venv.
 
 Afterwards ``AMENT_PREFIX_PATH=<venv>`` is all the generated types need at run time. Each
 package's CMake output goes to ``<build-dir>/<pkg>.log``; its tail is printed on failure.
@@ -32,7 +33,8 @@ import time
 from pathlib import Path
 
 HERE = Path(__file__).resolve().parent
-PACKAGES = ("cdh_planner_interfaces", "control_msgs")
+PACKAGES = ("cdh_planner_interfaces", "control_msgs", "tf2_msgs")
+COPIES = ("control_msgs", "tf2_msgs")   # partial copies: built only without the real one
 # an include folder of another Python (python3.X) or of another numpy, in an
 # INTERFACE_INCLUDE_DIRECTORIES list
 PYTHON_INCLUDE = re.compile(r'(?<=[";])/[^";]*/include/python3\.\d+(?=[";])')
@@ -58,14 +60,14 @@ def patch_export_files(prefix):
     return changed
 
 
-def real_control_msgs(prefix):
-    """The folder of a control_msgs package this python imports from outside ``prefix`` (a
-    real ROS install), or None (none, or only the copy built into ``prefix``)."""
+def real_package(name, prefix):
+    """The folder of a package ``name`` this python imports from outside ``prefix`` (a real
+    ROS install), or None (none, or only the copy built into ``prefix``)."""
     saved = sys.path[:]
-    # not interfaces/control_msgs itself (the script's folder is first on sys.path)
+    # not interfaces/<name> itself (the script's folder is first on sys.path)
     sys.path[:] = [p for p in sys.path if Path(p or ".").resolve() != HERE]
     try:
-        spec = importlib.util.find_spec("control_msgs")
+        spec = importlib.util.find_spec(name)
     finally:
         sys.path[:] = saved
     if spec is None or spec.origin is None:   # none, or a folder without __init__.py
@@ -126,8 +128,8 @@ def main(argv=None):
     print(f"interfaces: include folders patched in {len(changed)} "
           f"*_rosidl_generator_pyExport.cmake files")
     for package in PACKAGES:
-        if package == "control_msgs" and (real := real_control_msgs(prefix)) is not None:
-            print(f"interfaces: control_msgs not built: the real one is at {real}")
+        if package in COPIES and (real := real_package(package, prefix)) is not None:
+            print(f"interfaces: {package} not built: the real one is at {real}")
             continue
         t0 = time.monotonic()
         try:

@@ -1,14 +1,19 @@
 """Start the cdh_planner node with a robot file.
 
     ros2 launch cdh_planner cdh_planner.launch.py [robot:=/path/to/robot.yaml]
-        [execution_mode:=stream|follow_joint_trajectory]
+        [execution_mode:=stream|forward_command|follow_joint_trajectory]
+        [namespace:=NS] [use_sim_time:=false|true] [log_level:=info]
 
 ``robot``: the robot file, a ROS 2 parameters file whose ``cdh_planner: ros__parameters:``
 hold the robot, its task and the planner settings (default: the installed
 ``config/robot2.yaml``, the paper's Robot 2). ``execution_mode``: the node's
-``execution.mode`` (stream: JointState setpoints on ~/cable_command; follow_joint_trajectory:
-a ros2_control controller's FollowJointTrajectory action). The node runs as ``cdh-planner
-node --ros-args --params-file <robot> -p execution.mode:=<mode>``, as started by hand.
+``execution.mode`` (stream: JointState setpoints on ~/cable_command for a custom driver;
+forward_command: Float64MultiArray to a JointGroupPositionController; follow_joint_trajectory:
+a JointTrajectoryController's action). ``namespace``: the node's namespace (its topics,
+services and action follow it; /tf, /tf_static and /diagnostics stay absolute).
+``use_sim_time``: the node's clock from /clock. ``log_level``: rcl's (debug, info, warn,
+error, fatal). The node runs as ``cdh-planner node --ros-args --params-file <robot>
+-p execution.mode:=<mode> ...``, as started by hand.
 """
 
 from launch import LaunchDescription
@@ -27,16 +32,29 @@ def generate_launch_description():
                     "planner settings)")
     mode = DeclareLaunchArgument(
         "execution_mode", default_value="stream",
-        choices=["stream", "follow_joint_trajectory"],
-        description="how ~/execute moves the winches: stream (setpoints on ~/cable_command) or "
-                    "follow_joint_trajectory (a ros2_control controller's action)")
+        choices=["stream", "forward_command", "follow_joint_trajectory"],
+        description="how ~/execute moves the winches: stream (JointState setpoints on "
+                    "~/cable_command), forward_command (a JointGroupPositionController's "
+                    "~/commands) or follow_joint_trajectory (a JointTrajectoryController's "
+                    "action)")
+    namespace = DeclareLaunchArgument("namespace", default_value="",
+                                      description="the node's namespace")
+    sim_time = DeclareLaunchArgument("use_sim_time", default_value="false",
+                                     choices=["true", "false"],
+                                     description="use the /clock topic's time")
+    log_level = DeclareLaunchArgument(
+        "log_level", default_value="info", choices=["debug", "info", "warn", "error", "fatal"],
+        description="the node's log level")
     node = Node(
         package="cdh_planner",
         executable="cdh-planner",
         arguments=["node"],
+        namespace=LaunchConfiguration("namespace"),
         parameters=[LaunchConfiguration("robot"),
-                    {"execution.mode": LaunchConfiguration("execution_mode")}],
+                    {"execution.mode": LaunchConfiguration("execution_mode"),
+                     "use_sim_time": LaunchConfiguration("use_sim_time")}],
+        ros_arguments=["--log-level", LaunchConfiguration("log_level")],
         output="screen",
         emulate_tty=True,
     )
-    return LaunchDescription([robot, mode, node])
+    return LaunchDescription([robot, mode, namespace, sim_time, log_level, node])

@@ -28,6 +28,9 @@ from conftest import REPO
 ROBOT2 = REPO / "config" / "robot2.yaml"
 FAKE_NODE = REPO / "test" / "doubles" / "fake_planner.py"
 FRAME = "cdh_base"
+# No winches in most node tests: ~/execute would be refused without a measured start (the
+# node's default). Their fixtures allow it; tests of the refusal set it back to false.
+UNCHECKED = "execution.allow_unchecked_start:=true"
 
 # Robot 2's sphere task (config/robot2.yaml, paper Eq. 17): (alpha1, alpha2) in rad
 Q1, Q2, Q3 = (0.55, math.pi / 2), (0.55, 0.75), (2.63, 0.75)
@@ -55,7 +58,8 @@ def in_process_nodes(log_dir):
         def make(factory=None, params=()):
             context = rclpy.Context()
             rclpy.init(context=context, domain_id=domain)
-            args = ["--ros-args", "--params-file", str(ROBOT2), "-p", f"log_dir:={log_dir}"]
+            args = ["--ros-args", "--params-file", str(ROBOT2), "-p", f"log_dir:={log_dir}",
+                    "-p", UNCHECKED]
             for p in params:
                 args += ["-p", p]
             node = PlannerNode(factory or fake_planner_class(), context=context,
@@ -69,6 +73,17 @@ def in_process_nodes(log_dir):
                 node.close()
                 node.destroy_node()
                 rclpy.try_shutdown(context=context)
+
+
+def until(condition, timeout_s=10.0):
+    """Whether ``condition()`` held within ``timeout_s`` (s), polled every 10 ms. The
+    timeout only bounds a hang: tests wait for events with it, they do not time them."""
+    end = time.monotonic() + timeout_s
+    while not condition():
+        if time.monotonic() > end:
+            return False
+        time.sleep(0.01)
+    return True
 
 
 def ros_env(domain):
@@ -95,7 +110,7 @@ class NodeProcess:
         self.log_dir = Path(log_dir)
         self.log_dir.mkdir(parents=True, exist_ok=True)
         ros_args = ["--ros-args", "--params-file", str(params_file or ROBOT2),
-                    "-p", f"log_dir:={self.log_dir}"]
+                    "-p", f"log_dir:={self.log_dir}", "-p", UNCHECKED]
         for p in params:
             ros_args += ["-p", p]
         cmd = ([sys.executable, str(FAKE_NODE), *ros_args] if fake
@@ -203,12 +218,13 @@ class ControllerDouble:
     def __init__(self, domain, *args):
         import json
         import threading
-        self._json = json
+        self._json = json    # also a JointGroupPositionController with --commands TOPIC
         self.proc = subprocess.Popen([sys.executable, str(CONTROLLER_DOUBLE), *map(str, args)],
                                      env=ros_env(domain), stdout=subprocess.PIPE,
                                      stderr=subprocess.STDOUT, text=True, cwd=REPO)
         self.lines, self.ready = [], threading.Event()
-        threading.Thread(target=self._read, daemon=True).start()
+        self._reader = threading.Thread(target=self._read, daemon=True)
+        self._reader.start()
 
     def __enter__(self):
         return self
@@ -235,7 +251,7 @@ class ControllerDouble:
     def stop(self):
         """(exit code, everything it printed)."""
         rc = stop_process(self.proc)
-        time.sleep(0.05)   # the reader thread takes the last lines
+        self._reader.join(5.0)   # it ends at the end of the output: every line is in
         return rc, "\n".join(self.lines)
 
 

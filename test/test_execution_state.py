@@ -210,6 +210,9 @@ class ScriptedController:
         self.cancels += 1
         return self.cancel_answer
 
+    def destroy(self):
+        pass
+
 
 def scripted(node, **kwargs):
     controller = ScriptedController(**kwargs)

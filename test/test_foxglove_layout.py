@@ -115,16 +115,17 @@ def test_every_panel_in_the_layout_has_a_config_and_vice_versa(layout):
 
 def test_every_topic_is_one_the_node_publishes_or_joint_states(layout):
     published = {f"/{interface.NODE_NAME}/{getattr(interface, c)}" for c in TOPIC_CONSTANTS}
-    allowed = published | {"/joint_states"}
+    from cdh_planner.ros.live_state import LIVE_MARKERS     # measured, beside the planned
+    allowed = published | {"/joint_states", f"/{interface.NODE_NAME}/{LIVE_MARKERS}"}
     topics = {topic_of(s) for s in strings(layout) if s.startswith("/")}
     assert topics <= allowed, sorted(topics - allowed)
     # every output the brief lists is shown somewhere
     assert topics == allowed
 
 
-def test_the_3d_panel_renders_markers_and_path_in_the_default_base_frame(layout):
+def test_the_3d_panel_renders_markers_and_path_in_the_default_fixed_frame(layout):
     (scene,) = [c for i, c in layout["configById"].items() if i.startswith("3D!")]
-    assert scene["followTf"] == SPEC["base_frame"].default
+    assert scene["followTf"] == SPEC["fixed_frame"].default
     for name in (interface.MARKERS, interface.PATH):
         assert scene["topics"][f"/{interface.NODE_NAME}/{name}"]["visible"] is True
 
@@ -159,3 +160,16 @@ def test_setup_py_installs_the_layout(monkeypatch):
     runpy.run_path(str(REPO / "setup.py"), run_name="__main__")
     installed = dict(captured["data_files"])["share/cdh_planner/config"]
     assert "config/cdh_planner.foxglove.json" in installed
+
+
+def test_rviz_and_foxglove_agree_z_up_seen_from_above(layout):
+    """Both viewers render in the z-up fixed frame (REP 103), looking down at the platform
+    hanging below the base (z = -0.25 m in world): RViz's orbit pitch > 0 is a camera above
+    its focal point; Foxglove's phi < 90 degrees is a camera above its target."""
+    import yaml
+    rviz = yaml.safe_load((CONFIG / "cdh_planner.rviz").read_text())["Visualization Manager"]
+    (scene,) = [c for i, c in layout["configById"].items() if i.startswith("3D!")]
+    assert rviz["Global Options"]["Fixed Frame"] == scene["followTf"] == "world"
+    view = rviz["Views"]["Current"]
+    assert view["Pitch"] > 0 and scene["cameraState"]["phi"] < 90
+    assert view["Focal Point"]["Z"] == scene["cameraState"]["targetOffset"][2] < 0

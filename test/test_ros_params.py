@@ -107,7 +107,7 @@ def test_integers_are_accepted_for_numbers():
     ("planner.margin_floor", 1.0, "planner.margin_floor = 1.0: must be < 1"),
     ("planner.max_charts", 1, "planner.max_charts = 1: must be >= 2"),
     ("execution.mode", "topic", "execution.mode = 'topic': expected one of stream, "
-                                "follow_joint_trajectory"),
+                                "forward_command, follow_joint_trajectory"),
     ("execution.joint_states_topic", "bad name", "execution.joint_states_topic = 'bad name': "
                                                  "not a ROS name"),
     ("execution.controller_action", "/1abc/follow", "execution.controller_action = "

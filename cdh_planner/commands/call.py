@@ -33,7 +33,7 @@ NODE_WAIT_S = 5.0   # s to wait for the node's services (a DDS announcement peri
 
 def add_parser(subparsers):
     p = subparsers.add_parser(
-        "call", help="call a running node's plan service (and execute)",
+        "call", help="plan through a running node's ~/plan_path action (and execute)",
         description="Plan with a running cdh_planner node (its ~/plan_path action) from a "
                     "start pose (or the measured one) to a goal pose, print the outcome, path "
                     "length, duration, lowest tension margin and the log file; --execute then "

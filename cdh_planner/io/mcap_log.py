@@ -13,10 +13,11 @@ nor rosbags (nor ``rosbags-convert``) decodes (``ros_schemas`` explains).
 Every record decodes with mcap_ros2's stock ``DecoderFactory`` and rosbags' ``AnyReader``,
 and ``rosbags-convert`` turns a file into a rosbag2 directory.
 
-Messages are CDR-encoded from the schema text by mcap_ros2's encoder, never by
-``rclpy.serialization`` (its buffers can carry rmw's padding, which rosbags rejects).
-``mcap_ros2.writer.Writer`` wraps that same encoder but can neither attach channel metadata
-nor finish a chunk on demand, so the container is written with ``mcap.writer.Writer``.
+Messages are CDR-encoded from the schema text by rosbags' public typestore (``io/cdr.py``),
+never by ``rclpy.serialization`` (its buffers can carry rmw's padding, which rosbags
+rejects), nor by mcap_ros2's encoder (private: ``mcap_ros2._dynamic``). ``mcap_ros2.writer.Writer``
+can neither attach channel metadata nor finish a chunk on demand, so the container is
+written with ``mcap.writer.Writer``.
 
 Durability: every ``write`` finishes its chunk (one message per chunk, uncompressed) and
 flushes the file, so after ``write`` returns the message is in the OS page cache and survives
@@ -51,10 +52,10 @@ from mcap.reader import NonSeekingReader
 from mcap.records import DataEnd, Schema
 from mcap.stream_reader import CRCValidationError, StreamReader
 from mcap.writer import CompressionType, Writer
-from mcap_ros2._dynamic import serialize_dynamic
 from mcap_ros2.decoder import DecoderFactory
 
 from ..errors import exception_line
+from .cdr import CdrEncoders
 from .ros_schemas import encodable, full_definition, mcap_ros2_alias, recorded_type, \
     rosidl_type, split_type_name, type_name_of
 
@@ -113,6 +114,7 @@ class RunRecorder:
         self._writer.start(profile="ros2", library=LIBRARY)
         self._writer.flush()
         self._schemas: dict[str, tuple[int, object]] = {}   # type -> (schema id, encoder)
+        self._cdr = CdrEncoders()
         self._channels: dict[str, tuple[int, str]] = {}     # topic -> (channel id, type)
         self._lock = threading.Lock()
         self._closed = False
@@ -236,7 +238,7 @@ class RunRecorder:
             return channel_id, self._schemas[type_name][1]
         if type_name not in self._schemas:
             text = full_definition(type_name)
-            encoder = serialize_dynamic(type_name, text)[type_name]   # before registering
+            encoder = self._cdr.encoder(type_name, text)   # before registering
             schema_id = self._writer.register_schema(type_name, "ros2msg", text.encode())
             self._schemas[type_name] = (schema_id, encoder)
         schema_id, encoder = self._schemas[type_name]

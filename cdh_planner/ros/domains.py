@@ -39,6 +39,33 @@ def claimed_domain():
     raise RuntimeError(f"no free ROS domain id in {DOMAINS.start}..{DOMAINS.stop - 1}")
 
 
+MAX_DOMAIN_ID = 232       # rcl's limit with the default DDS port mapping
+
+
+@contextlib.contextmanager
+def chosen_domain(environ=None):
+    """The domain to watch a demo in: ``ROS_DOMAIN_ID`` when it is set (held like a claimed
+    one when nobody else holds it; used anyway, as asked, when somebody does), else
+    ``claimed_domain()``. InputError naming ROS_DOMAIN_ID when it is not 0..232."""
+    from ..errors import InputError
+    text = (os.environ if environ is None else environ).get("ROS_DOMAIN_ID", "").strip()
+    if not text:
+        with claimed_domain() as d:
+            yield d
+        return
+    if not text.isdigit() or int(text) > MAX_DOMAIN_ID:
+        raise InputError("ROS_DOMAIN_ID", text, f"expected an integer 0..{MAX_DOMAIN_ID}")
+    sock = socket.socket(socket.AF_INET, socket.SOCK_STREAM)
+    try:
+        sock.bind(("127.0.0.1", PORT_BASE + int(text)))
+    except OSError:
+        pass
+    try:
+        yield int(text)
+    finally:
+        sock.close()
+
+
 def isolated_env(domain, base=None):
     """A copy of ``base`` (default os.environ) for a process in ``domain``, discovery on
     localhost only, message definitions found in this interpreter's prefix."""

@@ -110,6 +110,17 @@ def obstacle_markers(scene, frame_id, stamp):
     return out
 
 
+def pose_markers(robot, p, R, margins, frame_id, stamp, ns_suffix="", line_width=LINE_WIDTH_M):
+    """The platform outline and the cables (each coloured by its margin, ``margins`` (6,))
+    at one pose (p m, R): two markers, ns ``platform<suffix>`` and ``cables<suffix>``, id 0."""
+    attach = np.asarray(p, dtype=float) + robot.platform_anchors @ np.asarray(R).T
+    platform = _platform_marker(frame_id, stamp, 0, attach, robot, line_width)
+    cables = _cables_marker(frame_id, stamp, 0, robot.base_anchors, attach, margins, line_width)
+    platform.ns += ns_suffix
+    cables.ns += ns_suffix
+    return [platform, cables]
+
+
 def drawn_waypoints(n, count=POSES_DRAWN):
     """Indexes of the waypoints (of n) where platform and cables are drawn: ``count``
     evenly spaced, the first and the last included, none twice."""

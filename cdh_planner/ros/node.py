@@ -9,6 +9,13 @@ outputs; no rclpy), ``plan_execution.PlanExecution`` (``~/execute``, ``~/stop``,
 ``recording.NodeRecording`` (the run file). Names and QoS: ``interface.py``; parameters:
 ``params.py`` (declared by ``node_parameters.py``); the whole interface: docs/ros-node.md.
 Running it as a process (signals, executor, shutdown): ``node_main.py``.
+
+A lifecycle node (``rclpy.lifecycle``, the standard ``~/change_state`` services): configure
+checks the parameters, loads the robot, warms the planner and opens the run file; activate
+serves (inactive, plan calls and goals are refused and ``~/execute`` too); deactivate stops
+an execution (holding); cleanup and shutdown close the run file. With ``autostart`` (the
+default) it configures and activates at start, as nav2's lifecycle_manager does, and a bad
+parameter stops it there. ``/diagnostics``: ``node_diagnostics.py``, in every state.
 """
 
 from diagnostic_msgs.msg import DiagnosticStatus
@@ -17,7 +24,7 @@ from nav_msgs.srv import GetPlan
 from rcl_interfaces.msg import SetParametersResult
 from rclpy.action import ActionServer, CancelResponse, GoalResponse
 from rclpy.callback_groups import ReentrantCallbackGroup
-from rclpy.node import Node
+from rclpy.lifecycle import LifecycleNode
 from std_srvs.srv import Trigger
 from trajectory_msgs.msg import JointTrajectory
 from visualization_msgs.msg import MarkerArray
@@ -33,7 +40,11 @@ from .interface import ACTION_QOS, CABLE_COMMAND, EXECUTE, EXECUTION_RESULT, LAT
     NODE_NAME, PATH, PLAN, PLAN_PATH, PLAN_PROGRESS, PLAN_RESULT, PLANNED_TRAJECTORY, \
     SERVICE_QOS, STOP, TENSION_ENVELOPE
 from .messages import WINCH_COMMAND_TYPE
-from .node_parameters import declare_parameters
+from .node_diagnostics import NodeDiagnostics
+from .node_frames import NodeFrames
+from .node_lifecycle import LifecycleMixin
+from .node_outlet import GoalCancel, Outlet, run_stem
+from .node_parameters import declare_parameters, refuse_unknown
 from .params import needs_new_planner, node_config, parameter_error
 from .plan_execution import PlanExecution
 from .plan_service import PlanService
@@ -49,46 +60,30 @@ def default_planner_factory(robot, task, settings, scene=None):
     return Planner(robot, task, settings, scene=scene)
 
 
-class _GoalCancel:
-    """``is_set``: a cancel of this PlanPath goal was requested."""
-
-    def __init__(self, goal_handle):
-        self.goal_handle = goal_handle
-
-    def is_set(self):
-        return self.goal_handle.is_cancel_requested
-
-
-class PlannerNode(Node):
+class PlannerNode(LifecycleMixin, LifecycleNode):
 
     def __init__(self, planner_factory=default_planner_factory, **kwargs):
         super().__init__(NODE_NAME, **kwargs)
         self._factory = planner_factory
         self._values = declare_parameters(self, self._parameter_overrides)
-        config = node_config(self._values)          # InputError: the node cannot start
+        self.configured = self.active = False
+        self.plans = None
+        self._configure_error = None
         self.add_on_set_parameters_callback(self._on_set_parameters)
-        self.runlog = RunLog(config.log_dir, config.log_enabled,
-                             warn=self.get_logger().warning, info=self.get_logger().info,
-                             node_name=self.get_fully_qualified_name(), **log_limits(config.values))
-        self.record = NodeRecording(self, self.runlog)
-        self.record.parameters(self.get_parameters_by_prefix("").values(), initial=True)
-        log_file = self.record(self.runlog.open) or ""
         self._make_publishers()
-        self.plans = PlanService(config, self._new_planner(config), _Outlet(self))
-        self._execution = PlanExecution(self, config, self.pub_command, self.pub_execution,
-                                        self.record.publish, self.plans.execution_ended,
-                                        callback_group=ReentrantCallbackGroup())
-        self.plans.executing = lambda: self._execution.running
         self._make_servers()
-        self.get_logger().info(
-            f"ready: robot {config.robot.name}, task {config.task.type}, strategy "
-            f"{config.settings.strategy}, base frame {config.base_frame}, "
-            + (f"recording to {log_file}; if the node is killed: cdh-planner recover {log_file}"
-               if log_file else "recording " + ("off" if not config.log_enabled else "failed")))
+        self.diagnostics = NodeDiagnostics(self, ReentrantCallbackGroup())
+        self.frames = NodeFrames(self, ReentrantCallbackGroup())
+        if self._values["autostart"]:
+            self.start()
 
     @property
     def config(self):
         return self.plans.config
+
+    @property
+    def execution(self):
+        return self._execution
 
     def _make_publishers(self):
         pub = self.create_publisher
@@ -107,7 +102,7 @@ class PlannerNode(Node):
                                             callback_group=ReentrantCallbackGroup())
         self.plan_path_server = ActionServer(
             self, PlanPath, f"~/{PLAN_PATH}", execute_callback=self._plan_path,
-            goal_callback=lambda goal: GoalResponse.ACCEPT,   # busy goals end with BUSY
+            goal_callback=self._goal_response,   # busy goals end with BUSY
             cancel_callback=lambda handle: CancelResponse.ACCEPT,
             callback_group=ReentrantCallbackGroup(), **ACTION_QOS)
         self.srv_execute = self.create_service(Trigger, f"~/{EXECUTE}", self._execute,
@@ -115,17 +110,36 @@ class PlannerNode(Node):
         self.srv_stop = self.create_service(Trigger, f"~/{STOP}", self._stop,
                                             qos_profile=SERVICE_QOS)
 
+    # ------------------------------------------------------------------ lifecycle
+
+    def _configure(self, config):
+        planner = self._new_planner(config)     # first: nothing to undo if it fails
+        self.runlog = RunLog(config.log_dir, config.log_enabled,
+                             warn=self.get_logger().warning, info=self.get_logger().info,
+                             node_name=self.get_fully_qualified_name(), **log_limits(config.values))
+        self.record = NodeRecording(self, self.runlog)
+        self.record.parameters(self.get_parameters_by_prefix("").values(), initial=True)
+        log_file = self.record(self.runlog.open) or ""
+        self.outlet = Outlet(self)
+        self.plans = PlanService(config, planner, self.outlet)
+        self._execution = PlanExecution(self, config, self.pub_command, self.pub_execution,
+                                        self.record.publish, self.plans.execution_ended,
+                                        callback_group=ReentrantCallbackGroup())
+        self.plans.executing = lambda: self._execution.running
+        self.frames.configure(config)
+        self.configured = True
+        self.get_logger().info(
+            f"configured: robot {config.robot.name}, task {config.task.type}, strategy "
+            f"{config.settings.strategy}, base frame {config.base_frame}, "
+            + (f"recording to {log_file}; if the node is killed: cdh-planner recover {log_file}"
+               if log_file else "recording " + ("off" if not config.log_enabled else "failed")))
+
     # ------------------------------------------------------------------ parameters
 
     def set_parameters_atomically(self, parameter_list):
-        """rclpy's, but a parameter this node does not have is refused naming it (rclpy 7.1
-        names none: "Invalid access to undeclared parameter(s): []")."""
-        unknown = [p for p in parameter_list if not self.has_parameter(p.name)]
-        if unknown:
-            return SetParametersResult(successful=False, reason=str(InputError(
-                unknown[0].name, unknown[0].value,
-                "not a parameter of this node (ros2 param list shows them)")))
-        return super().set_parameters_atomically(parameter_list)
+        """rclpy's, but a parameter this node does not have is refused naming it."""
+        return (refuse_unknown(self, parameter_list)
+                or super().set_parameters_atomically(parameter_list))
 
     def _on_set_parameters(self, params):
         values = dict(self._values)
@@ -133,12 +147,16 @@ class PlannerNode(Node):
         try:
             config = node_config(values)
             planner = None
-            if needs_new_planner([p.name for p in params], self.config.values, config.values):
+            if self.configured and needs_new_planner([p.name for p in params],
+                                                     self.config.values, config.values):
                 planner = self._new_planner(config)
         except InputError as exc:
             return SetParametersResult(successful=False, reason=str(exc))
         self._values = values
+        if not self.configured:   # configure uses them
+            return SetParametersResult(successful=True)
         self.plans.configure(config, planner)
+        self.frames.configure(config)
         self._execution.configure(config)
         self.record(self.runlog.configure, config.log_dir, config.log_enabled,
                     **log_limits(config.values))
@@ -147,23 +165,37 @@ class PlannerNode(Node):
         return SetParametersResult(successful=True)
 
     def _new_planner(self, config):
-        """A Planner for ``config`` (a fresh atlas); InputError naming the parameter."""
+        """A Planner for ``config`` (a fresh atlas, its kernel warm); InputError naming the
+        parameter."""
         try:
-            return self._factory(config.robot, config.task, config.settings, scene=config.scene)
+            return planning.warm_up(self._factory(config.robot, config.task, config.settings,
+                                                  scene=config.scene))
         except InputError as exc:
             raise parameter_error(exc) from None
 
     # ------------------------------------------------------------------ plan
 
     def _plan(self, request, response):
-        """~/plan: every call is answered, and its request and response are recorded."""
+        """~/plan: every call is answered, and its request and response are recorded
+        (not active: an empty path, logged)."""
+        if not self.active:
+            self.get_logger().warning(f"~/plan refused: the node is {self.lifecycle_state}")
+            return response
         turn = self.plans.enter()   # first: the queue's order is the order calls are taken
         seq, run_id, log_file = self._new_call()
         self.record.plan(self.srv_plan, REQUEST_RECEIVED, seq, request=request)
+        refused = self.frames.to_base(request, ("start", "goal"), self.config.base_frame)
         response.plan = self.plans.answer(planning.PlanCall.of_get_plan(request), run_id,
-                                          log_file, turn).path
+                                          log_file, turn, refused).path
         self.record.plan(self.srv_plan, RESPONSE_SENT, seq, response=response)
         return response
+
+    def _goal_response(self, goal):
+        """Accept every goal while active (as nav2's servers, reject when not)."""
+        if self.active:
+            return GoalResponse.ACCEPT
+        self.get_logger().warning(f"~/plan_path goal rejected: the node is {self.lifecycle_state}")
+        return GoalResponse.REJECT
 
     def _plan_path(self, goal_handle):
         """~/plan_path: every goal ends with a result (succeeded, canceled or aborted with
@@ -188,8 +220,11 @@ class PlannerNode(Node):
     def _plan_path_call(self, goal_handle):
         """(PlanCall, None) of a goal, or (None, its refusal): a bad goal, or no measured
         start for ``use_current_start`` (after waiting for one, unless cancelled)."""
-        goal, config, cancel = goal_handle.request, self.config, _GoalCancel(goal_handle)
-        start = None
+        goal, config, cancel = goal_handle.request, self.config, GoalCancel(goal_handle)
+        start, refused = None, self.frames.to_base(
+            goal, ("goal",) if goal.use_current_start else ("start", "goal"), config.base_frame)
+        if refused is not None:
+            return None, refused
         if goal.use_current_start:
             refused = planning.goal_refusal(goal, config.base_frame, config.settings.strategy)
             if refused is not None:       # not worth waiting for a start
@@ -210,11 +245,14 @@ class PlannerNode(Node):
         """(sequence number, run id, run file) of a new plan call."""
         seq = self.plans.new_call()
         log_file = self.record(self.runlog.open) or ""
-        return seq, (f"{_stem(log_file)}#{seq}" if log_file else str(seq)), log_file
+        return seq, (f"{run_stem(log_file)}#{seq}" if log_file else str(seq)), log_file
 
     # ------------------------------------------------------------------ execute, stop
 
     def _execute(self, request, response):
+        if not self.active:
+            response.message = f"refused: the node is {self.lifecycle_state}, not active"
+            return response
         self.record.trigger(self.srv_execute, REQUEST_RECEIVED, request=request)
         try:
             response.success, response.message = self.plans.with_last(
@@ -227,6 +265,9 @@ class PlannerNode(Node):
         return response
 
     def _stop(self, request, response):
+        if not self.configured:
+            response.success, response.message = True, "not executing: nothing to stop"
+            return response
         self.record.trigger(self.srv_stop, REQUEST_RECEIVED, request=request)
         try:
             response.success, response.message = True, self._execution.stop()
@@ -241,48 +282,16 @@ class PlannerNode(Node):
     def begin_shutdown(self):
         """From now on a running plan is ended at its next progress report, and waiting
         requests are answered (canceled)."""
-        self.plans.begin_shutdown()
+        if self.plans is not None:
+            self.plans.begin_shutdown()
 
     def close(self):
-        """Stop executing (holding), end a running plan at its next progress report, and
-        close the run file. Safe to call after the context has shut down."""
+        """Stop executing (holding), end a running plan at its next progress report, close
+        the run file, release the subscriptions (lifecycle cleanup). Safe to call twice, and
+        after the context has shut down."""
+        if not self.configured:
+            return
+        self.configured = self.active = False
         self.begin_shutdown()
-        self._execution.close()
+        self._execution.release()
         self.record(self.runlog.close)
-
-
-class _Outlet:
-    """The plan service's way out to ROS: record, then publish; log."""
-
-    def __init__(self, node):
-        self._node = node
-
-    def publish_outputs(self, out):
-        n = self._node
-        for publisher, msg in ((n.pub_path, out.path), (n.pub_trajectory, out.cable_trajectory),
-                               (n.pub_envelope, out.tension_envelope),
-                               (n.pub_markers, out.markers)):
-            n.record.publish(publisher, msg, latched=True)
-
-    def publish_result(self, status):
-        self._node.record.publish(self._node.pub_result, status, latched=True)
-
-    def publish_progress(self, status):
-        self._node.record.publish(self._node.pub_progress, status)
-
-    def stamp(self):
-        return self._node.get_clock().now().to_msg()
-
-    def error(self, text):
-        self._node.get_logger().error(text)
-
-    def answered(self, ok, line):
-        if ok:
-            self._node.get_logger().info(line)
-        else:
-            self._node.get_logger().warning(line)
-
-
-def _stem(path):
-    name = path.rsplit("/", 1)[-1]
-    return name[:-5] if name.endswith(".mcap") else name

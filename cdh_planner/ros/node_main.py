@@ -64,7 +64,7 @@ def main(ros_args=(), planner_factory=default_planner_factory, log=print):
     # exception", exit 134 instead of 0).
     spinner.join(timeout=SHUTDOWN_JOIN_S)
     node.close()                          # hold the winches, close the run file
-    abandoned = node.plans.planning
+    abandoned = node.plans is not None and node.plans.planning
     stuck = spinner.is_alive()
     node.destroy_node()
     rclpy.try_shutdown(context=context)

@@ -4,11 +4,12 @@ not have is refused naming it."""
 
 import sys
 
-from rcl_interfaces.msg import FloatingPointRange, IntegerRange, ParameterDescriptor
+from rcl_interfaces.msg import FloatingPointRange, IntegerRange, ParameterDescriptor, \
+    SetParametersResult
 from rclpy.parameter import Parameter
 
 from ..errors import InputError
-from .params import BOOL, DOUBLE, DOUBLES, INT, PLANNER_PREFIXES, REQUIRED, SPECS, START_ONLY, \
+from .params import BOOL, DOUBLE, DOUBLES, INT, PLANNER_PREFIXES, READ_ONLY, REQUIRED, SPECS, \
     STRING, STRINGS
 
 STATIC_TYPES = {STRING: Parameter.Type.STRING, BOOL: Parameter.Type.BOOL,
@@ -29,12 +30,12 @@ def declare_parameters(node, overrides):
 
 def _default_and_descriptor(spec):
     descriptor = ParameterDescriptor(description=spec.description,
-                                     read_only=spec.name in START_ONLY)
+                                     read_only=spec.name in READ_ONLY)
     if spec.choices:
         descriptor.additional_constraints = f"one of: {', '.join(spec.choices)}"
     if spec.kind in STATIC_TYPES:
-        return (spec.default if spec.default is not REQUIRED else STATIC_TYPES[spec.kind],
-                descriptor)
+        unset = spec.default is REQUIRED or spec.default is None   # typed, no value
+        return (STATIC_TYPES[spec.kind] if unset else spec.default), descriptor
     # numbers: dynamically typed (ints accepted), ranges shown and checked
     descriptor.dynamic_typing = True
     if spec.kind == DOUBLE and spec.low is not None:
@@ -47,3 +48,15 @@ def _default_and_descriptor(spec):
     if spec.kind == DOUBLES and spec.default is REQUIRED:
         descriptor.additional_constraints = "required (robot file)"
     return (None if spec.default in (REQUIRED, None) else spec.default), descriptor
+
+
+def refuse_unknown(node, parameter_list):
+    """SetParametersResult refusing the first parameter ``node`` does not have, naming it
+    (rclpy 7.1 names none: "Invalid access to undeclared parameter(s): []"); None if all
+    are known."""
+    unknown = [p for p in parameter_list if not node.has_parameter(p.name)]
+    if not unknown:
+        return None
+    return SetParametersResult(successful=False, reason=str(InputError(
+        unknown[0].name, unknown[0].value,
+        "not a parameter of this node (ros2 param list shows them)")))

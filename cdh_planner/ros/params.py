@@ -42,10 +42,13 @@ REQUIRED = rs.REQUIRED  # default of a parameter that must come from the robot f
 # the groups whose change means a new Planner (the others only affect the node)
 PLANNER_PREFIXES = ("robot.", "task.", "planner.", "trajectory.", "scene_file")
 INTERPOLATIONS = ("linear", "quintic")
-EXECUTION_MODES = ("stream", "follow_joint_trajectory")
+EXECUTION_MODES = ("stream", "forward_command", "follow_joint_trajectory")
 # read once at start, read-only afterwards: the subscription and action client they name
 # are made then
-START_ONLY = ("execution.controller_action", "execution.joint_states_topic")
+START_ONLY = ("execution.controller_action", "execution.joint_states_topic",
+              "execution.forward_command_topic")
+READ_ONLY = START_ONLY + ("autostart",)
+FRAMES = ("base_frame", "fixed_frame", "platform_frame")
 # a ROS 2 topic or action name: tokens of letters, digits and _ (not starting with a digit)
 # between slashes, absolute or relative, or private (~/)
 ROS_NAME = re.compile(r"(~/|/)?[A-Za-z_][A-Za-z0-9_]*(/[A-Za-z_][A-Za-z0-9_]*)*")
@@ -111,8 +114,18 @@ def _task_specs():
 
 
 SPECS = (
-    [Spec("base_frame", STRING, "cdh_base",
-          "frame_id that plan requests must use and every output carries (REP 103, m)")]
+    [Spec("autostart", BOOL, True,
+          "configure and activate at start, as nav2's lifecycle_manager autostart; false: "
+          "the node waits unconfigured for lifecycle calls (~/change_state)"),
+     Spec("base_frame", STRING, "cdh_base",
+          "the paper's frame (z down, gravity +z; m): every output carries it; a request in "
+          "another frame is transformed into it through TF"),
+     Spec("fixed_frame", STRING, "world",
+          "the z-up fixed frame (REP 103 / 105); base_frame is its child, turned by pi "
+          "about x (a static transform on /tf_static)"),
+     Spec("platform_frame", STRING, "cdh_platform",
+          "the platform's frame: base_frame -> platform_frame on /tf, from the forward "
+          "kinematics of the measured cable lengths")]
     + [_robot_spec(f) for f in ROBOT_FIELDS]
     + _task_specs()
     + [_setting_spec(name) for name in SETTINGS]
@@ -125,9 +138,21 @@ SPECS = (
             "which the check does not cover)", choices=INTERPOLATIONS),
        Spec("execution.mode", STRING, "stream",
             "how ~/execute moves the winches: stream (sensor_msgs/JointState setpoints on "
-            "~/cable_command at stream_rate_hz) or follow_joint_trajectory (the cable "
-            "trajectory, without effort, to a ros2_control controller's action)",
-            choices=EXECUTION_MODES),
+            "~/cable_command at stream_rate_hz, for a custom winch driver: no stock "
+            "ros2_control controller reads it), forward_command (std_msgs/Float64MultiArray "
+            "cable lengths on execution.forward_command_topic at stream_rate_hz, in "
+            "execution.joint_order: a JointGroupPositionController) or "
+            "follow_joint_trajectory (the cable trajectory, without effort, to a "
+            "JointTrajectoryController's action)", choices=EXECUTION_MODES),
+       Spec("execution.forward_command_topic", STRING, "/cable_controller/commands",
+            "forward_command mode: the JointGroupPositionController's ~/commands "
+            "(std_msgs/Float64MultiArray, set at start)"),
+       Spec("execution.joint_order", STRINGS, None,
+            "forward_command mode: the controller's joints parameter, the order of the "
+            "command's data; the robot's winch names, each once (empty: robot.winch_names)"),
+       Spec("execution.allow_unchecked_start", BOOL, False,
+            "~/execute without measured cable lengths to compare with the trajectory's "
+            "start: refused when false (the default), executed unchecked when true"),
        Spec("execution.controller_action", STRING, "/cable_controller/follow_joint_trajectory",
             "follow_joint_trajectory mode: the controller's control_msgs/FollowJointTrajectory "
             "action (set at start)"),
@@ -155,7 +180,13 @@ SPECS = (
        Spec("log_max_file_mb", DOUBLE, 100.0, "rotation: a run file that has reached this "
             "size (MiB) is closed and the next record starts a new one; 0: no limit", low=0.0),
        Spec("log_max_file_s", DOUBLE, 0.0, "rotation: a run file open this long (s) is "
-            "closed and the next record starts a new one; 0: no limit", low=0.0)]
+            "closed and the next record starts a new one; 0: no limit", low=0.0),
+       Spec("log_max_files", INT, 100, "pruning: when a run file is opened, only the newest "
+            "this many run files (cdh_planner_*.mcap) in log_dir are kept; 0: no limit",
+            low=0, high=1_000_000),
+       Spec("log_max_age_days", DOUBLE, 0.0, "pruning: when a run file is opened, run files "
+            "in log_dir last written longer ago than this (days) are removed; 0: no limit",
+            low=0.0)]
 )
 SPEC = {s.name: s for s in SPECS}
 
@@ -193,7 +224,7 @@ def check_value(spec, value):
             raise InputError(name, value, "expected a string")
         if spec.choices and value not in spec.choices:
             raise InputError(name, value, f"expected one of {', '.join(spec.choices)}")
-        if name in ("base_frame",) + START_ONLY and not value:
+        if name in FRAMES + START_ONLY and not value:
             raise InputError(name, value, "must not be empty")
         if name in START_ONLY and not ROS_NAME.fullmatch(value):
             raise InputError(name, value, "not a ROS name: letters, digits and _ between "
@@ -249,6 +280,8 @@ def node_config(values, source="ROS parameters"):
     robot = robot_from_dict(_robot_dict(checked), source=source)
     task = task_from_dict(_task_dict(checked), where="task")
     settings = PlannerSettings(**{name: checked[s.parameter] for name, (_, _, s) in SETTINGS.items()})
+    check_joint_order(checked["execution.joint_order"], robot.winch_names)
+    _check_frames(checked)
     try:
         task_cost(robot, task, settings.cost)   # e.g. great_circle needs the sphere task
     except InputError as exc:
@@ -264,6 +297,31 @@ def node_config(values, source="ROS parameters"):
                       stream_interpolation=checked["stream_interpolation"],
                       log_dir=os.path.expanduser(log_dir), log_enabled=checked["log_enabled"],
                       values=checked, scene=scene)
+
+
+def _check_frames(checked):
+    """The three frames are three: InputError naming the second of two alike."""
+    seen = {}
+    for name in FRAMES:
+        if checked[name] in seen:
+            raise InputError(name, checked[name], f"must differ from {seen[checked[name]]}")
+        seen[checked[name]] = name
+
+
+def check_joint_order(order, winch_names, name="execution.joint_order"):
+    """The command order of forward_command mode: ``order`` (None or empty:
+    ``winch_names``), else every winch name exactly once; InputError naming ``name``."""
+    if not order:
+        return list(winch_names)
+    if len(order) != len(winch_names) or set(order) != set(winch_names):
+        missing = [n for n in winch_names if n not in order]
+        unknown = [n for n in order if n not in winch_names]
+        twice = sorted({n for n in order if list(order).count(n) > 1})
+        why = "; ".join(f"{what} {', '.join(names)}" for what, names in
+                        (("missing", missing), ("not a winch", unknown), ("twice", twice))
+                        if names)
+        raise InputError(name, list(order), f"must list robot.winch_names, each once: {why}")
+    return list(order)
 
 
 def _robot_dict(checked):

@@ -8,14 +8,19 @@ how it ended (the node's part behind ``~/execute``, ``~/stop`` and ``use_current
     start = run.current_start(config, plan, cancelled)  # MeasuredStart: the pose of the
                                                          # measured lengths, or why not
     run.close()                               # shutting down: hold, end as stopped
+    run.release()                             # lifecycle cleanup: close, then destroy
 
 - ``stream``: the plan's cable lengths sampled in real time (``streaming.Stream``) and sent
-  on the command topic at ``stream_rate_hz`` from a node timer.
+  on the command topic (sensor_msgs/JointState, for a custom driver) at ``stream_rate_hz``
+  from a node timer.
+- ``forward_command``: the same samples' lengths as std_msgs/Float64MultiArray in
+  ``execution.joint_order`` on ``execution.forward_command_topic`` (a ros2_control
+  JointGroupPositionController's ``~/commands``).
 - ``follow_joint_trajectory``: the cable trajectory sent to a ros2_control controller's
   FollowJointTrajectory action (``execution.TrajectoryExecutor``); its result ends the run.
 
-Either way ``start`` first compares the measured lengths (``execution.joint_states_topic``)
-with the plan's first point. Each run is a token of the state machine ``runs``
+Every mode ``start`` first compares the measured lengths (``execution.joint_states_topic``)
+with the plan's first point; with none it refuses unless ``execution.allow_unchecked_start``. Each run is a token of the state machine ``runs``
 (``execution_runs.ExecutionRuns``: starting, running, stopping, idle) and ends exactly once,
 whatever fails inside: the transition to idle first, then the result published latched
 (diagnostic_msgs/DiagnosticStatus: completed, stopped or failed, and why) and ``on_end``.
@@ -26,14 +31,21 @@ import time
 import traceback
 from dataclasses import dataclass
 
+from std_msgs.msg import Float64MultiArray
+
 from ..errors import InputError, exception_line
 from ..model.pose import rotation_from_quaternion
 from . import execution
 from . import messages as M
 from .execution_runs import ExecutionRuns, Phase
+from .params import check_joint_order
 from .streaming import Stream
 
-STREAM, FOLLOW = "stream", "follow_joint_trajectory"
+STREAM, FORWARD, FOLLOW = "stream", "forward_command", "follow_joint_trajectory"
+STREAMING = (STREAM, FORWARD)     # sampled on the node's timer
+# as forward_command_controller's subscription (rclcpp::SystemDefaultsQoS): reliable,
+# volatile; never latched (a controller that starts gets nothing old)
+FORWARD_QOS = 10
 
 
 @dataclass
@@ -64,21 +76,28 @@ class PlanExecution:
             node, values["execution.joint_states_topic"], config.robot.winch_names)
         self.controller = execution.TrajectoryExecutor(
             node, values["execution.controller_action"], callback_group=callback_group)
+        self.forward = node.create_publisher(
+            Float64MultiArray, values["execution.forward_command_topic"], FORWARD_QOS)
+        self.joint_order = check_joint_order(values["execution.joint_order"],
+                                             config.robot.winch_names)
 
     @property
     def running(self):
         return self.runs.current is not None
 
     def configure(self, config):
-        """A new configuration (parameters changed): the winch names to measure."""
+        """A new configuration (parameters changed): the winch names to measure and the
+        forward_command order."""
         self.joints.winch_names = list(config.robot.winch_names)
+        self.joint_order = check_joint_order(config.values["execution.joint_order"],
+                                             config.robot.winch_names)
 
     # ------------------------------------------------------------------ start, stop
 
     def start(self, plan, config):
         """(started, message): ``plan`` (PlannedPath, Robot, PlanOutputs) executed in
         ``execution.mode``, or why not (executing already, no plan, the winches away from
-        its start). Measured lengths are checked when there are any. A refusal here is
+        its start, or not measured unless allowed: ``_check_start``). A refusal here is
         only in the answer: ``~/execution_result`` reports runs that started."""
         values = config.values
         if self.running:
@@ -86,14 +105,9 @@ class PlanExecution:
         if plan is None:
             return False, "refused: no plan to execute; call ~/plan first"
         path, robot, out = plan
-        lengths, why = self.joints.lengths(values["execution.joint_states_max_age_s"])
-        if lengths is not None:
-            mismatch = execution.start_mismatch(lengths, path.lengths[0],
-                                                values["execution.start_tolerance"],
-                                                robot.winch_names)
-            if mismatch:
-                return False, f"refused: {mismatch}"
-        note = "" if lengths is not None else f" (start not checked: {why})"
+        refused, note = self._check_start(values, path, robot)
+        if refused:
+            return False, refused
         what = f"{len(path)} waypoints, {float(path.t[-1]):.3f} s"
         run = self.runs.begin(values["execution.mode"])
         if run is None:
@@ -114,7 +128,21 @@ class PlanExecution:
         if run.outcome:    # ended already: the first tick failed
             return False, f"refused: execution {run.outcome}: {run.message}"
         return True, (f"executing: {what} at {config.stream_rate_hz:g} Hz on "
-                      f"{self._commands.topic_name}{note}")
+                      f"{self._publisher(run).topic_name}{note}")
+
+    def _check_start(self, values, path, robot):
+        """(refusal or "", note): the measured lengths against the path's first point; with
+        none, refused unless ``execution.allow_unchecked_start`` (then noted)."""
+        lengths, why = self.joints.lengths(values["execution.joint_states_max_age_s"])
+        if lengths is not None:
+            mismatch = execution.start_mismatch(lengths, path.lengths[0],
+                                                values["execution.start_tolerance"],
+                                                robot.winch_names)
+            return (f"refused: {mismatch}" if mismatch else ""), ""
+        if not values["execution.allow_unchecked_start"]:
+            return (f"refused: the start is not measured ({why}); set "
+                    f"execution.allow_unchecked_start to execute unchecked"), ""
+        return "", f" (start not checked: {why})"
 
     def _start_following(self, run, out, what):
         self.controller.start(out.cable_trajectory,
@@ -137,9 +165,9 @@ class PlanExecution:
         if run is None:
             return "not executing: nothing to stop"
         stream = self._stream
-        if run.mode == STREAM:
+        if run.mode in STREAMING:
             if stream is not None:
-                self._publish(self._commands, stream.hold(self._stamp()))
+                self._send(run, stream.hold(self._stamp()))
             message = (f"stopped at {stream.t:.3f} s of {stream.duration:.3f} s; "
                        f"holding the last setpoint" if stream is not None else "stopped")
             self._end(run, execution.STOPPED, message)
@@ -159,14 +187,27 @@ class PlanExecution:
         if run is None:
             return
         try:
-            if run.mode == STREAM and self._stream is not None:
-                self._publish(self._commands, self._stream.hold(self._stamp()))
+            if run.mode in STREAMING and self._stream is not None:
+                self._send(run, self._stream.hold(self._stamp()))
             elif run.mode == FOLLOW:
                 self.controller.cancel()
         except Exception:  # noqa: BLE001 - context already gone: nothing to tell
             pass
         self._end(run, execution.STOPPED, "shutting down while executing: held the last setpoint",
                   publish_pending=False)
+
+    def release(self):
+        """Lifecycle cleanup: ``close``, then the joint-state subscription, the action
+        client and the stream timer destroyed (a new configure makes new ones)."""
+        self.close()
+        for what, step in (("the joint-state subscription", lambda: self.joints.destroy()),
+                           ("the action client", lambda: self.controller.destroy()),
+                           ("the forward_command publisher",
+                            lambda: self._node.destroy_publisher(self.forward)),
+                           ("the stream timer", lambda: self._timer is not None
+                            and self._node.destroy_timer(self._timer))):
+            self._quietly(f"destroying {what}", step)
+        self._timer = None
 
     # ------------------------------------------------------------------ the stream
 
@@ -182,11 +223,11 @@ class PlanExecution:
 
     def _tick(self):
         run, stream = self.runs.current, self._stream
-        if run is None or run.mode != STREAM or stream is None:
+        if run is None or run.mode not in STREAMING or stream is None:
             return
         try:
             msg, finished = stream.command(time.monotonic(), self._stamp())
-            self._publish(self._commands, msg)
+            self._send(run, msg)
         except Exception as exc:  # noqa: BLE001 - never take the node down
             self._node.get_logger().error(f"streaming failed: {traceback.format_exc()}")
             self._end(run, execution.FAILED,
@@ -195,6 +236,17 @@ class PlanExecution:
         if finished:
             self._end(run, execution.COMPLETED, f"execution finished: {stream.sent} "
                                                 f"commands over {stream.duration:.3f} s")
+
+    def _publisher(self, run):
+        return self.forward if run.mode == FORWARD else self._commands
+
+    def _send(self, run, joint_state):
+        """Publish (and record) one streamed setpoint: the JointState itself (stream), or
+        its positions in ``joint_order`` (forward_command)."""
+        if run.mode == FORWARD:
+            self._publish(self.forward, forward_command(joint_state, self.joint_order))
+        else:
+            self._publish(self._commands, joint_state)
 
     # ------------------------------------------------------------------ the end
 
@@ -248,15 +300,22 @@ class PlanExecution:
         if lengths is None:
             return MeasuredStart(why=why)
         try:
-            guess = execution.nearest_pose(config.robot, lengths, self._known_poses(plan))
-            p, R = execution.current_pose(config.robot, lengths, guess)
+            p, R = self.forward_kinematics(config.robot, lengths, plan)
         except InputError as exc:
             return MeasuredStart(why=str(exc))
         except Exception as exc:  # noqa: BLE001 - the goal still gets a result, with why
             self._node.get_logger().error(f"forward kinematics failed: {traceback.format_exc()}")
             return MeasuredStart(why=f"forward kinematics failed: {exception_line(exc)}")
-        self._last_pose = (p, R)
         return MeasuredStart(pose=M.pose_stamped_msg(p, R, config.base_frame, self._stamp()))
+
+    def forward_kinematics(self, robot, lengths, plan=None):
+        """The pose (p (3,) m, R (3, 3)) of cable lengths ``lengths`` (m): Newton from the
+        nearest known pose (the last forward kinematics, the ends of ``plan``), kept as the
+        next one's guess. InputError when Newton finds none."""
+        guess = execution.nearest_pose(robot, lengths, self._known_poses(plan))
+        p, R = execution.current_pose(robot, lengths, guess)
+        self._last_pose = (p, R)
+        return p, R
 
     def _known_poses(self, plan):
         """Platform poses (p, R): the last forward kinematics and the ends of ``plan``."""
@@ -268,3 +327,11 @@ class PlanExecution:
 
     def _stamp(self):
         return self._node.get_clock().now().to_msg()
+
+
+def forward_command(joint_state, order):
+    """std_msgs/Float64MultiArray of a JointState's positions (m) in the joint ``order``
+    (a JointGroupPositionController's ``joints``): data only, no layout (the controller
+    reads data and checks its size)."""
+    by_name = dict(zip(joint_state.name, joint_state.position))
+    return Float64MultiArray(data=[float(by_name[n]) for n in order])

@@ -26,6 +26,9 @@ and response (a goal and its result) stay in one file: an answer never starts a 
 while a call is open the other records wait for rotation up to twice the limits. A file
 thus holds at least one record after its parameter snapshot.
 
+Pruning: each time a file is opened, older run files in ``log_dir`` beyond ``max_files``
+or ``max_age_days`` are removed (``run_pruning``), each removal logged.
+
 Recording never raises into the node. A failure of the file (disk full, directory gone) is
 reported once through ``warn`` and recording stops until the configuration changes; a
 message that cannot be encoded (e.g. a number beyond its field's type) is dropped with a
@@ -42,6 +45,7 @@ from rcl_interfaces.msg import ParameterEvent
 from ..errors import exception_line
 from ..io.mcap_log import REQUEST_RECEIVED, REQUEST_SENT, RESPONSE_RECEIVED, RESPONSE_SENT, \
     RunRecorder
+from .run_pruning import prune
 
 PARAMETER_EVENTS = "/parameter_events"
 MIB = 1024 * 1024
@@ -57,13 +61,14 @@ class RunLog:
     """
 
     def __init__(self, log_dir, enabled, warn=print, info=print, max_bytes=0, max_s=0.0,
-                 node_name="/cdh_planner"):
+                 node_name="/cdh_planner", max_files=0, max_age_days=0.0):
         self._lock = threading.Lock()
         self._recorder = None
         self._dir = log_dir
         self._enabled = enabled
         self._max_bytes = max_bytes
         self._max_s = max_s
+        self._keep = (max_files, max_age_days)    # run_pruning's limits
         self._failed = False
         self._warn = warn
         self._info = info
@@ -83,10 +88,21 @@ class RunLog:
         recorder = self._recorder
         return str(recorder.path) if recorder is not None else ""
 
-    def configure(self, log_dir, enabled, max_bytes=None, max_s=None):
+    @property
+    def state(self):
+        """The open file, or "failed", "off", "on, no file open" (for /diagnostics)."""
+        return self.path or ("failed" if self._failed else
+                             "on, no file open" if self._enabled else "off")
+
+    def configure(self, log_dir, enabled, max_bytes=None, max_s=None, max_files=None,
+                  max_age_days=None):
         """New settings: a change of directory or on/off closes the current file; new limits
-        apply to it from the next record (``None``: unchanged)."""
+        apply to it from the next record, new pruning limits from the next file opened
+        (``None``: unchanged)."""
         with self._lock:
+            if max_files is not None or max_age_days is not None:
+                self._keep = (self._keep[0] if max_files is None else max_files,
+                              self._keep[1] if max_age_days is None else max_age_days)
             if max_bytes is not None:
                 self._max_bytes = max_bytes
             if max_s is not None:
@@ -212,11 +228,23 @@ class RunLog:
                 self._warn(f"the parameters could not be recorded in {path}: "
                            f"{exception_line(exc)}")
             self._written = 0
+            self._prune(path)
             rotated, self._rotated = self._rotated, ""
             if announce:
                 self._info(f"recording to {path}" + (f" ({rotated})" if rotated else "")
                            + f"; if the node is killed: cdh-planner recover {path}")
         return str(self._recorder.path)
+
+    def _prune(self, current):
+        """Old run files beyond the limits removed (never ``current``), each said."""
+        removed, failed = prune(self._dir, *self._keep, current=current)
+        if removed:
+            self._info(f"removed {len(removed)} old run file(s) (log_max_files "
+                       f"{self._keep[0]}, log_max_age_days {self._keep[1]:g}): "
+                       + ", ".join(p.name for p in removed[:5])
+                       + (", ..." if len(removed) > 5 else ""))
+        for path, exc in failed[:1]:
+            self._warn(f"cannot remove old run file {path}: {exc}")
 
     def _close_locked(self):
         if self._recorder is not None:
@@ -245,10 +273,13 @@ def _stamped(event, log_time_ns):
 
 
 def log_limits(values):
-    """RunLog's rotation limits (``max_bytes``, ``max_s``) from the node's parameter values
-    ``log_max_file_mb`` and ``log_max_file_s``."""
+    """RunLog's rotation limits (``max_bytes``, ``max_s``) and pruning limits
+    (``max_files``, ``max_age_days``) from the node's parameter values ``log_max_file_mb``,
+    ``log_max_file_s``, ``log_max_files`` and ``log_max_age_days``."""
     return {"max_bytes": int(float(values.get("log_max_file_mb") or 0.0) * MIB),
-            "max_s": float(values.get("log_max_file_s") or 0.0)}
+            "max_s": float(values.get("log_max_file_s") or 0.0),
+            "max_files": int(values.get("log_max_files") or 0),
+            "max_age_days": float(values.get("log_max_age_days") or 0.0)}
 
 
 class NodeRecording:

@@ -6,7 +6,15 @@ tolerances; the joints move exactly as commanded.
 
     python -m cdh_planner.ros.sim_controller JOINT [JOINT ...] [--action NAME]
         [--joint-states TOPIC] [--initial X [X ...]] [--time-scale K]
-        [--effort-interface] [--allow-nonzero-velocity-at-end]
+        [--effort-interface] [--allow-nonzero-velocity-at-end] [--commands TOPIC]
+
+With ``--commands TOPIC`` it is also a JointGroupPositionController (forward_command_controller,
+jazzy branch): std_msgs/Float64MultiArray on TOPIC (the controller's ``~/commands``) sets the
+JOINTs' positions, data[i] to JOINT i. As the real controller's ``update`` does, a command
+whose data size is not the number of JOINTs is not applied and reported
+({"event": "command_rejected", "reason": its log message}); beyond it, a non-finite value is
+rejected too (mock hardware would pass it to the winches). An applied command prints
+{"event": "command", "data": [...]}.
 
 Before accepting a goal it checks what the real controller's goal callback checks
 (``validate_trajectory_msg``, with the controller's defaults: no partial joint goals, no
@@ -58,6 +66,7 @@ from rclpy.callback_groups import ReentrantCallbackGroup
 from rclpy.executors import ExternalShutdownException, MultiThreadedExecutor
 from rclpy.qos import DurabilityPolicy, QoSProfile, ReliabilityPolicy
 from sensor_msgs.msg import JointState
+from std_msgs.msg import Float64MultiArray
 from trajectory_msgs.msg import JointTrajectoryPoint
 
 from .interface import ACTION_QOS
@@ -141,6 +150,23 @@ class SimulatedController:
             goal_callback=self.goal_received, handle_accepted_callback=self.goal_accepted,
             cancel_callback=lambda handle: CancelResponse.ACCEPT, callback_group=group,
             **ACTION_QOS)
+        if args.commands:   # the controller's subscription: rclcpp::SystemDefaultsQoS
+            node.create_subscription(Float64MultiArray, args.commands, self.command, 10,
+                                     callback_group=group)
+
+    def command(self, msg):
+        """A JointGroupPositionController's update with this command."""
+        data = list(msg.data)
+        if len(data) != len(self.joints):
+            say("command_rejected", reason=f"command size ({len(data)}) does not match "
+                                           f"number of interfaces ({len(self.joints)})")
+            return
+        if not np.all(np.isfinite(data)):
+            say("command_rejected", reason=f"non-finite command {data}")
+            return
+        with self.lock:
+            self.positions = np.array(data, dtype=float)
+        say("command", data=data)
 
     def now_s(self):
         return self.node.get_clock().now().nanoseconds * 1e-9
@@ -252,6 +278,8 @@ def parse(argv):
                         help="run trajectories this many times faster than real time")
     parser.add_argument("--effort-interface", action="store_true")
     parser.add_argument("--allow-nonzero-velocity-at-end", action="store_true")
+    parser.add_argument("--commands", default="",
+                        help="also a JointGroupPositionController: its ~/commands topic")
     args = parser.parse_args(argv)
     if args.initial is None:
         args.initial = [0.0] * len(args.joints)

@@ -28,7 +28,7 @@ import numpy as np
 
 from ...io.plan_plots import ExecutedMotion, plot_execution, plot_paths
 from ...io.plots import Marker, SegmentOverlay, SliceView
-from ...ros.domains import claimed_domain, isolated_env, stop_process
+from ...ros.domains import chosen_domain, claimed_domain, isolated_env, stop_process
 from .paper import PICTURES, paper_pose
 from .steps import Step, table
 
@@ -85,14 +85,15 @@ def _cli(*args):
 
 
 def _node_args(demo, parameter):
+    # the first leg streams with no winches measured yet: allowed explicitly
     return ["node", "--ros-args", "--params-file", str(demo.config_dir / "robot2.yaml"), "-p",
-            parameter]
+            parameter, "-p", "execution.allow_unchecked_start:=true"]
 
 
-def _spawn_node(demo, stack, args, log_name):
+def _spawn_node(demo, stack, args, log_name, domains=claimed_domain):
     """Start ``cdh-planner ARGS`` in a domain of its own (held by ``stack``, which also
-    stops the process); (domain, process, log path)."""
-    domain = stack.enter_context(claimed_domain())
+    stops the process); (domain, process, log path). ``domains``: how it is chosen."""
+    domain = stack.enter_context(domains())
     node_log = demo.out_dir / log_name
     out = stack.enter_context(open(node_log, "w"))
     process = subprocess.Popen(_cli(*args), env=isolated_env(domain), stdout=out,
@@ -114,7 +115,8 @@ def start_node(demo):
     run_dir.mkdir(parents=True, exist_ok=True)
     args = _node_args(demo, f"log_dir:={run_dir}")
     t0 = time.perf_counter()
-    domain, process, node_log = _spawn_node(demo, stack, args, NODE_LOG)
+    # ROS_DOMAIN_ID when set, so that it can be watched (ros2 topic echo, RViz, Foxglove)
+    domain, process, node_log = _spawn_node(demo, stack, args, NODE_LOG, chosen_domain)
     client = PlannerClient(domain_id=domain, name="cdh_planner_demo")
     stack.callback(client.close)
     client.watch_execution()  # before the first plan, so that no streamed command is missed

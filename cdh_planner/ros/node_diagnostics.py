@@ -1,0 +1,44 @@
+"""The node's ``/diagnostics`` publisher: a 1 Hz timer that gathers ``diagnostics.Health``
+from the node (lifecycle state, plan service, execution, recording) in every lifecycle
+state, so that an aggregator sees an unconfigured node too."""
+
+import time
+
+from diagnostic_msgs.msg import DiagnosticArray, DiagnosticStatus
+
+from .diagnostics import PERIOD_S, TOPIC, Health, diagnostic_array
+
+
+class NodeDiagnostics:
+
+    def __init__(self, node, callback_group=None):
+        self._node = node
+        self.publisher = node.create_publisher(DiagnosticArray, TOPIC, 10)
+        self.timer = node.create_timer(PERIOD_S, self.publish, callback_group=callback_group)
+
+    def publish(self):
+        node = self._node
+        config = node.config if node.configured else None
+        msg = diagnostic_array(self.health(), f"{node.get_fully_qualified_name()}: planner",
+                               config.robot.name if config is not None else "",
+                               node.get_clock().now().to_msg())
+        self.publisher.publish(msg)
+
+    def health(self):
+        """diagnostics.Health of the node now."""
+        node = self._node
+        state = node.lifecycle_state
+        if not node.configured:
+            return Health(state=state)
+        plans, execution, now = node.plans, node.execution, time.monotonic()
+        activity = ("executing" if execution.running else
+                    "planning" if plans.planning else "idle")
+        last = node.outlet.last_result
+        latest = execution.joints.latest
+        return Health(state=state, activity=activity, queued=plans.queued(),
+                      last_plan=last[0].message if last else "",
+                      last_plan_ok=last[0].level == DiagnosticStatus.OK if last else True,
+                      last_plan_age_s=now - last[1] if last else None,
+                      recording=node.runlog.state,
+                      joint_states_age_s=now - latest[1] if latest else None,
+                      joint_states_max_age_s=node.config.values["execution.joint_states_max_age_s"])
