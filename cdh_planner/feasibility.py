@@ -12,6 +12,7 @@ from functools import cached_property
 
 import numpy as np
 
+from .errors import InputError
 from .model.pose import rotation_tt
 
 CONSTRAINTS = ("length_min", "length_max", "tension_min", "tension_max")
@@ -30,13 +31,13 @@ def skew(v):
 
 
 def cable_vectors(robot, p, R):
-    """d_i = p + R b_i - a_i (from base anchor to platform anchor), shape (N, 6, 3), m."""
+    """d_i = p + R b_i - a_i (from base anchor to platform anchor), shape (N, m, 3), m."""
     return p[:, None, :] + np.einsum("nij,kj->nki", R, robot.platform_anchors) - robot.base_anchors
 
 
 def screw_jacobian(robot, u):
-    """J with column i = [u_i; a_i x u_i] (moments about the base origin), shape (N, 6, 6)."""
-    J = np.empty(u.shape[:-2] + (6, 6))
+    """J with column i = [u_i; a_i x u_i] (moments about the base origin), shape (N, 6, m)."""
+    J = np.empty(u.shape[:-2] + (6, u.shape[-2]))
     J[..., :3, :] = np.swapaxes(u, -1, -2)
     J[..., 3:, :] = np.swapaxes(np.cross(robot.base_anchors, u), -1, -2)
     return J
@@ -122,7 +123,14 @@ class Feasibility:
 
 
 def evaluate(robot, p, tau=None, R=None):
-    """Feasibility of poses: positions p (N, 3) m and either tau (N, 3) rad or R (N, 3, 3)."""
+    """Feasibility of poses: positions p (N, 3) m and either tau (N, 3) rad or R (N, 3, 3).
+
+    Six cables only (J square); ``zonotope.evaluate`` handles any m >= 6. An m-cable robot
+    here is refused naming its winch names: the callers not yet ported to ``zonotope``."""
+    if len(robot.base_anchors) != 6:
+        raise InputError("robot.winch_names", list(robot.winch_names),
+                         f"{len(robot.winch_names)} cables: this command handles 6-cable robots "
+                         "for now (issue 21: cdh_planner.zonotope tests any m >= 6)")
     p = np.atleast_2d(np.asarray(p, dtype=float))
     if R is None:
         R = rotation_tt(np.atleast_2d(tau))

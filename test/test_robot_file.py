@@ -191,22 +191,25 @@ def _robot_block():
     return ros_parameters(read_yaml(ROBOT1, "robot"), str(ROBOT1))["robot"]
 
 
-def test_winch_names_give_the_cable_count_and_only_six_is_accepted():
+def test_winch_names_give_the_cable_count_from_six_to_sixteen():
     doc = _robot_block()
+    for m in (5, 17):
+        doc["winch_names"] = [f"w{i}" for i in range(m)]
+        with pytest.raises(InputError) as exc:
+            robot_from_dict(doc)
+        assert exc.value.field == "robot.winch_names" and "expected 6 to 16 distinct" in str(exc.value)
     doc["winch_names"] = [f"w{i}" for i in range(7)]
-    with pytest.raises(InputError) as exc:
+    with pytest.raises(InputError, match=r"robot.base_anchors = .*expected 21 numbers, got 18"):
         robot_from_dict(doc)
-    assert exc.value.field == "robot.winch_names" and "expected 6 distinct" in str(exc.value)
     doc["winch_names"] = ["a", "b", "c", "d", "e", "a"]
     with pytest.raises(InputError, match="robot.winch_names = .*distinct"):
         robot_from_dict(doc)
 
 
-def test_per_cable_sizes_follow_the_number_of_winches(monkeypatch):
-    """Issue 21's groundwork: with the one m != 6 refusal lifted, an 8-winch robot block is
-    read with 24 anchor coordinates and 8 limits per side (a single number broadcast to 8),
-    and 18 anchor coordinates are then refused naming the count."""
-    monkeypatch.setattr(robot_schema, "N_CABLES", 8)
+def test_per_cable_sizes_follow_the_number_of_winches():
+    """Issue 21: an 8-winch robot block is read with 24 anchor coordinates and 8 limits per
+    side (a single number broadcast to 8), and 18 anchor coordinates are then refused naming
+    the count."""
     doc = _robot_block()
     doc["winch_names"] = [f"w{i}" for i in range(8)]
     doc["base_anchors"] = doc["base_anchors"] + doc["base_anchors"][:6]

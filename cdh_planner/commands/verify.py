@@ -33,7 +33,7 @@ import math
 import numpy as np
 
 from ..errors import InputError
-from ..feasibility import evaluate
+from ..zonotope import feasibility_of as evaluate  # 6 cables: the closed form
 from ..io.outputs import check_output, write_text
 from ..io.poses import load_poses, parse_angle, parse_length
 from ..model.robot import load_robot
@@ -106,6 +106,8 @@ def result_dict(robot, poses, feas, segments, ok, step_m, step_rad):
                "feasible": feas.feasible, "margin": feas.margin, "binding": feas.binding,
                "lengths": feas.lengths, "tension_min": feas.tension_min,
                "tension_nominal": feas.tension_nominal, "tension_max": feas.tension_max}
+    if hasattr(feas, "tension_status"):  # m > 6: whether the band is controller-usable
+        columns["tension_status"] = feas.tension_status
     columns = {k: _finite_list(v) for k, v in columns.items()}  # Python types, once
     pose_rows = [{k: v[i] for k, v in columns.items()} for i in range(len(poses))]
     seg_rows = [{

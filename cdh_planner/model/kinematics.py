@@ -1,7 +1,7 @@
 """Cable lengths of a pose (inverse kinematics) and the pose of measured cable lengths
 (forward kinematics). SI units: m, rad. numpy only.
 
-    lengths = cable_lengths(robot, p, R)                      # (6,) m
+    lengths = cable_lengths(robot, p, R)                      # (m,) m
     fk = forward_kinematics(robot, lengths, p0, R0)           # Newton from (p0, R0)
     if fk.ok:
         p, R, residual = fk                                   # residual: max |l_i - L_i|, m
@@ -13,6 +13,10 @@ hexapod's forward kinematics has several solutions; Newton from the last known p
 the one the platform is on, as long as it moved little since. The step is taken on SE(3):
 p <- p + dp and R <- exp([w]x) R (w a rotation vector in the base frame), with the length
 Jacobian d l_i = u_i . dp + ((R b_i) x u_i) . w (u_i the unit cable vector).
+
+With m > 6 cables the lengths over-determine the pose: the step is Gauss-Newton (least
+squares on the m lengths), converged when it no longer moves the pose, and the residual
+(the largest |l_i - L_i| left, m) says how consistent the measured lengths are.
 """
 
 from dataclasses import dataclass
@@ -21,10 +25,11 @@ import numpy as np
 
 from ..errors import MAX_POSITION_M, InputError
 
-N_CABLES = 6
 TOL_M = 1e-12          # converged when every cable length is within this of its target
                        # (m, per m of the longest cable: rounding allows ~1e-15 of it)
 MAX_ITERATIONS = 50
+LSQ_RTOL = 1e-6  # m > 6: |J^T e| / (|J| |e|) at which the least-squares pose is reached
+                 # (the pose then within ~1e-6 of the residual of it, times cond J)
 # 1 / condition number of the length Jacobian below this: the pose is not determined by
 # the lengths (a singular configuration)
 MIN_RCOND = 1e-12
@@ -50,12 +55,12 @@ class ForwardKinematics:
 
 
 def cable_lengths(robot, p, R):
-    """Inverse kinematics: the six cable lengths (m) of pose (p (3,), R (3, 3))."""
+    """Inverse kinematics: the m cable lengths (m) of pose (p (3,), R (3, 3))."""
     return np.linalg.norm(_cable_vectors(robot, np.asarray(p, float), np.asarray(R, float)), axis=1)
 
 
 def length_jacobian(robot, p, R):
-    """d lengths / d(p, w), shape (6, 6): row i = [u_i, (R b_i) x u_i], w the rotation
+    """d lengths / d(p, w), shape (m, 6): row i = [u_i, (R b_i) x u_i], w the rotation
     vector of R <- exp([w]x) R (base frame)."""
     d = _cable_vectors(robot, p, R)
     u = d / np.linalg.norm(d, axis=1)[:, None]
@@ -74,14 +79,17 @@ def rotation_vector_exp(w):
 
 
 def forward_kinematics(robot, lengths, p0, R0, tol=TOL_M, max_iterations=MAX_ITERATIONS):
-    """The pose whose cable lengths are ``lengths`` (6,) m, by damped Newton from the pose
+    """The pose whose cable lengths are ``lengths`` (m,) m, by damped Newton from the pose
     (``p0`` (3,) m, ``R0`` (3, 3)) the platform was last known at, to ``tol`` m (per m of
-    the longest cable) on every cable. A ForwardKinematics:
+    the longest cable) on every cable; with m > 6, the least-squares pose (Gauss-Newton,
+    converged when the length errors are orthogonal to J's columns to LSQ_RTOL), its
+    residual the largest length error left. A ForwardKinematics:
     never raises for a pose it cannot find (``ok`` False and ``message``: the Jacobian is
     singular, or the lengths are not reached in ``max_iterations``); InputError for
     lengths, p0 or R0 that are not finite numbers of the right shape (or R0 not a
     rotation)."""
-    L = _checked("lengths", lengths, (N_CABLES,))
+    m = len(robot.base_anchors)
+    L = _checked("lengths", lengths, (m,))
     if np.any(L <= 0):
         raise InputError("lengths", L.tolist(), "cable lengths must be > 0 m")
     p = _checked("p0", p0, (3,))
@@ -105,7 +113,9 @@ def forward_kinematics(robot, lengths, p0, R0, tol=TOL_M, max_iterations=MAX_ITE
                                      f"forward kinematics: singular cable Jacobian at "
                                      f"iteration {it} (1/cond {rcond:.2g}); cable length "
                                      f"error {residual:.3g} m")
-        step = np.linalg.solve(J, -error)
+        if m > 6 and _stationary(J, error):
+            return ForwardKinematics(p, R, residual, it, True)  # the least-squares pose
+        step = np.linalg.solve(J, -error) if m == 6 else np.linalg.lstsq(J, -error, rcond=None)[0]
         # backtracking: the largest fraction of the Newton step that lowers the error
         t = 1.0
         while True:
@@ -127,8 +137,14 @@ def forward_kinematics(robot, lengths, p0, R0, tol=TOL_M, max_iterations=MAX_ITE
                              f"iterations; cable length error {residual:.3g} m")
 
 
+def _stationary(J, error):
+    """True at a least-squares minimum: the length errors (m,) orthogonal to the columns of
+    the length Jacobian J (m, 6), relative to LSQ_RTOL."""
+    return np.linalg.norm(J.T @ error) <= LSQ_RTOL * np.linalg.norm(J) * np.linalg.norm(error)
+
+
 def _cable_vectors(robot, p, R):
-    """d_i = p + R b_i - a_i, shape (6, 3)."""
+    """d_i = p + R b_i - a_i, shape (m, 3)."""
     return p + robot.platform_anchors @ R.T - robot.base_anchors
 
 

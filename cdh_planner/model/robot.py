@@ -7,7 +7,7 @@ A robot file is a ROS 2 parameters file, so the same file configures the node:
         robot: {name, winch_names, base_anchors, platform_anchors, length_min, ...}
 
 Arrays are flat because ROS 2 parameters cannot nest lists: ``base_anchors`` holds
-A_1..A_m, x y z each (metres, base frame F1; m cables, one per winch name, 6 for now),
+A_1..A_m, x y z each (metres, base frame F1; m cables, one per winch name, 6 to 16),
 ``platform_anchors`` B_1..B_m (metres, platform frame F2); a 6x6 matrix is 36 numbers
 row-major, or 6 numbers for a diagonal. Every field is declared once, on ``Robot``
 (key, unit, size, bounds, description: ``robot_schema.RobotField``); the table of them

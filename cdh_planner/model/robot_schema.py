@@ -8,8 +8,9 @@ parameters (``ros/params.py``: ``robot.<key>``) and their table (docs/parameters
 built from it too, so a new robot field is one ``Robot`` field.
 
 Sizes per cable follow the number of winches, m = len(winch_names): a per-cable field
-holds ``count`` numbers per cable (``count * m`` in all). ``cable_count`` is the one place
-that refuses m != 6 (issue 21: the feasibility maths is for six cables).
+holds ``count`` numbers per cable (``count * m`` in all). ``cable_count`` bounds m:
+MIN_CABLES <= m <= MAX_CABLES (issue 21: the wrench-feasibility test of ``zonotope`` holds
+for any m >= 6).
 """
 
 from dataclasses import dataclass, field, fields
@@ -22,7 +23,10 @@ NAME, NAMES, CHOICE, NUMBER, NUMBERS, MATRIX = "name", "names", "choice", "numbe
     "matrix"
 REQUIRED = object()  # the default of a field the file must give
 MAX_NAME_CHARS = 64
-N_CABLES = 6  # the only cable count the feasibility maths handles (issue 21: m >= 6)
+N_CABLES = 6  # the default number of winches (the default winch names)
+MIN_CABLES = 6  # fewer cables cannot hold a 6-D wrench ellipsoid: J (6 x m) has rank < 6
+# the facet test visits C(m, 5) cable subsets per pose: 4368 for 16 cables (bounded work)
+MAX_CABLES = 16
 
 
 @dataclass(frozen=True)
@@ -79,15 +83,14 @@ def schema_of(cls):
 
 
 def cable_count(names):
-    """m, the number of cables: one per winch name.
+    """m, the number of cables: one per winch name, MIN_CABLES <= m <= MAX_CABLES.
 
-    ISSUE 21 -- the one place that refuses m != 6: the wrench-feasibility maths (J is 6 x 6,
-    the closed-form tension envelope) is written for six cables. The schema's per-cable
-    sizes already follow m."""
-    if len(names) != N_CABLES:
+    Fewer than 6 cables make J (6 x m) rank-deficient at every pose: no wrench ellipsoid
+    is ever feasible. The per-cable sizes of the schema follow m."""
+    if not MIN_CABLES <= len(names) <= MAX_CABLES:
         raise InputError("robot.winch_names", list(names),
-                         f"expected {N_CABLES} distinct non-empty names (one per cable: the planner "
-                         f"handles {N_CABLES}-cable robots)")
+                         f"expected {MIN_CABLES} to {MAX_CABLES} distinct non-empty names (one per "
+                         f"cable: fewer than {MIN_CABLES} cannot hold a 6-D wrench), got {len(names)}")
     return len(names)
 
 
@@ -211,7 +214,7 @@ def size_text(f):
         return f"a name of 1 to {MAX_NAME_CHARS} characters"
     if f.kind == NAMES:
         return (f"one distinct name per winch (their number is the number of cables, "
-                f"{N_CABLES} for now)")
+                f"{MIN_CABLES} to {MAX_CABLES})")
     if f.kind == CHOICE:
         return "one of " + ", ".join(f.choices)
     if f.kind == NUMBER:
