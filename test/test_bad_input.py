@@ -535,7 +535,7 @@ def test_plan_json_onto_its_problem_file_is_refused_as_a_process(tmp_path):
     """Issue 19, item 3: ``plan P.yaml --json P.yaml`` replaced P.yaml with its JSON."""
     problem, _ = _problem_copy(tmp_path)
     before = problem.read_bytes()
-    rc, err, _ = run_process(["plan", "--quiet", problem, "--json", problem])
+    rc, err = run_process(["plan", "--quiet", problem, "--json", problem])
     assert rc == 2 and len(err) == 1, err
     assert "--json" in err[0] and "the problem file" in err[0] and str(problem) in err[0]
     assert problem.read_bytes() == before
@@ -623,7 +623,7 @@ def test_a_duplicate_json_key_is_refused_as_a_process(tmp_path):
     path = tmp_path / "dup.json"
     path.write_text('[{"position": [1e308, 0, 0.35], "position": [0, 0, 0.35], '
                     '"tau": [0, 0.1, 0]}]')
-    rc, err, _ = run_process(["verify", ROBOT2, path])
+    rc, err = run_process(["verify", ROBOT2, path])
     assert rc == 2 and len(err) == 1, err
     assert "duplicate key 'position'" in err[0] and str(path) in err[0]
 
@@ -722,7 +722,7 @@ def test_call_refusals_as_processes_are_one_line(ros_domain):
     """Issue 19 items 4, 5: as the campaign ran them, rcl's own log line included."""
     for argv, text in ((["--ros-args", "-r", "::::"], "--ros-args"),
                        (["--node", "bad name!!"], "--node")):
-        rc, err, _ = run_process(["call", "--start", START, "--goal", GOAL, *argv])
+        rc, err = run_process(["call", "--start", START, "--goal", GOAL, *argv])
         assert rc == 2 and len(err) == 1 and text in err[0], (argv, err)
 
 
@@ -730,7 +730,7 @@ def test_call_without_a_node_says_so_in_one_line_exit_1(ros_domain):
     """Issue 19, item 5: with no node it waited for --timeout and exited 3 (internal
     error); now it waits at most call.NODE_WAIT_S for the node's services."""
     from cdh_planner.commands.call import NODE_WAIT_S
-    rc, err, _ = run_process(["call", "--start", START, "--goal", GOAL])
+    rc, err = run_process(["call", "--start", START, "--goal", GOAL])
     assert rc == 1 and len(err) == 1, err
     assert f"no service /cdh_planner/plan after {NODE_WAIT_S:g} s" in err[0]
 
@@ -752,7 +752,7 @@ def test_recover_and_replay_refuse_a_damaged_chunk(tmp_path, capsys):
         line = run_cli(capsys, argv)
         assert "damaged MCAP data" in line and "CRCValidationError" in line, line
     assert not (tmp_path / "out.mcap").exists()
-    rc, err, _ = run_process(["recover", damaged, "-o", tmp_path / "out.mcap"])
+    rc, err = run_process(["recover", damaged, "-o", tmp_path / "out.mcap"])
     assert rc == 2 and len(err) == 1 and "damaged MCAP data" in err[0], err
 
 
