@@ -29,12 +29,16 @@ and its ``search`` of the shared ``Bidirectional`` state, which stops on ``Stop`
 registry drives the settings' choices, the CLI, the node parameter, the action's check, the
 benchmarks and the pictures. The two built-in strategies:
 
-- A* (``AStar``): each side pops least g + h and grows the chart until closed. Direct motions to the
-  other root are edges of their cost (h itself when h is the cost), so the answer is the
-  least-cost route of the chart graph (Pohl's stopping rule: the best meeting cost
-  mu <= the larger of the two least f).
-- Greedy Best-First (``GreedyBestFirst``): each side pops least h and grows the chart one child at a time,
-  towards its target, until a child beats its parent; the first meeting is the answer.
+- A* (``AStar``): each side pops least g + h and grows the chart until closed. Direct
+  motions to the other root are edges of their cost (h itself when h is the cost), so the
+  answer is the least-cost route of the chart graph (Pohl's stopping rule: the best
+  meeting cost mu <= the larger of the two least f).
+- Greedy Best-First (``GreedyBestFirst``): each side pops least h and grows the chart one
+  child at a time, towards its target, until a child beats its parent; the first meeting
+  is the answer.
+
+A new strategy that only reorders A* (weighted A*: g + w h) overrides ``priority``; one
+with its own loop overrides ``search`` too (test/test_strategies.py).
 
 "No path" (``Status.NO_PATH``): one side has no chart left to pop, so the component of
 its end (at this resolution, see ``atlas.domain``) holds no path to the other end.
