@@ -35,7 +35,7 @@ from cdh_planner.io.random_queries import random_free_queries
 from cdh_planner.model.robot import load_robot
 from cdh_planner.model.task import FreeTask
 from cdh_planner.planner import Planner, PlannerSettings
-from cdh_planner.search.search import Stop, run
+from cdh_planner.search.search import STRATEGIES, Stop, run
 
 ROOT = Path(__file__).resolve().parents[1]
 
@@ -90,7 +90,7 @@ def main(argv=None):
     ap.add_argument("--count", type=int, default=25, help="queries drawn for the robot (seed 0)")
     ap.add_argument("--index", type=int, default=21, help="which of them")
     ap.add_argument("--radius", type=float, default=0.5, help="chart radius (scaled units)")
-    ap.add_argument("--strategy", choices=("gbf", "astar"), default="gbf")
+    ap.add_argument("--strategy", choices=list(STRATEGIES), default="gbf")
     ap.add_argument("--timeout", type=float, default=60.0, help="s")
     ap.add_argument("--batch", type=int, default=250, help="charts per printed line")
     args = ap.parse_args(argv)

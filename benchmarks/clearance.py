@@ -24,6 +24,7 @@ import numpy as np
 from cdh_planner.feasibility import evaluate
 from cdh_planner.io.problem import load_problem
 from cdh_planner.planner import Planner
+from cdh_planner.settings import STRATEGY_CHOICES
 from cdh_planner.trajectory.verify import SlerpPath
 
 PROBLEMS = Path(__file__).resolve().parents[1] / "config" / "problems"
@@ -99,7 +100,7 @@ def main():
     ap = argparse.ArgumentParser(description=__doc__, formatter_class=argparse.RawDescriptionHelpFormatter)
     ap.add_argument("--weights", nargs="+", type=float, default=[0.0, 0.5, 1.0, 2.0, 5.0])
     ap.add_argument("--only", nargs="+", help="problem names (default: the seven Table 1 rows)")
-    ap.add_argument("--strategy", default="auto", choices=["auto", "astar", "gbf"])
+    ap.add_argument("--strategy", default="auto", choices=STRATEGY_CHOICES)
     ap.add_argument("--picture", default=None, metavar="OUT.png", help="write the trade-off picture")
     args = ap.parse_args()
     head = (f"{'query':26} {'w':>4} {'strategy':8} {'charts':>6} {'seconds':>7} {'cost':>8} "

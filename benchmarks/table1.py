@@ -1,6 +1,6 @@
 """The paper's Table 1 on this machine: all seven queries with A* and Greedy Best-First.
 
-    python benchmarks/table1.py [--only NAME ...] [--strategies astar gbf] [--timeout-free S]
+    python benchmarks/table1.py [--only NAME ...] [--strategies astar gbf ...] [--timeout-free S]
 
 Prints per row: success (or the reason), n, m, charts, seconds, cost, the paper's seconds
 and our target, the seconds of the atlas search alone from both ends without direct
@@ -19,11 +19,13 @@ import numpy as np
 
 from cdh_planner.io.problem import load_problem
 from cdh_planner.planner import Planner
-from cdh_planner.search.search import Stop, run
+from cdh_planner.search.search import STRATEGIES, Stop, run
 from cdh_planner.trajectory.verify import check_task_motion
 
 PROBLEMS = Path(__file__).resolve().parents[1] / "config" / "problems"
-# name, paper seconds (gbf, astar), our targets (gbf, astar), straight line shown in the paper
+# name, paper seconds (gbf, astar), our targets (gbf, astar), straight line shown in the paper;
+# a strategy the paper did not run (registered since) is held to the looser target
+PAPER_COLUMN = {"gbf": 0, "astar": 1}
 ROWS = [
     ("robot1_qs_qg", (29, 62), (2, 2), True),
     ("robot1_qs1_qg", (6, 12), (2, 2), False),
@@ -54,7 +56,7 @@ def search_only(pr, settings):
 def main(argv=None):
     ap = argparse.ArgumentParser(description=__doc__, formatter_class=argparse.RawDescriptionHelpFormatter)
     ap.add_argument("--only", nargs="+", help="problem names (default: all seven)")
-    ap.add_argument("--strategies", nargs="+", default=["gbf", "astar"], choices=["gbf", "astar"])
+    ap.add_argument("--strategies", nargs="+", default=["gbf", "astar"], choices=list(STRATEGIES))
     ap.add_argument("--timeout-free", type=float, default=None,
                     help="time limit (s) of the free-flight rows (default: their target)")
     args = ap.parse_args(argv)
@@ -68,19 +70,21 @@ def main(argv=None):
         pr = load_problem(PROBLEMS / f"{name}.yaml")
         straight = straight_verdict(pr) if show_straight else ""
         for strategy in args.strategies:
-            k = 0 if strategy == "gbf" else 1
+            k = PAPER_COLUMN.get(strategy)
+            paper_s = "-" if k is None else f"{'>' if paper[k] == 6000 and k else ''}{paper[k]}"
+            target_s = max(target) if k is None else target[k]
             s = pr.settings
             s.strategy = strategy
-            s.timeout_s = float(target[k]) * 2 if "free" not in name else (args.timeout_free or float(target[k]))
+            s.timeout_s = float(target_s) * 2 if "free" not in name else (args.timeout_free or float(target_s))
             t = time.perf_counter()
             res = Planner(pr.robot, pr.task, s).plan(pr.start, pr.goal)
             wall = time.perf_counter() - t
             verdict = "ok" if res.success else res.reason
-            miss = "" if res.success and wall <= target[k] else "  MISS"
+            miss = "" if res.success and wall <= target_s else "  MISS"
             status, charts, search_s = search_only(pr, s)
             search = f"{search_s:.2f} ({charts})" if status == "ok" else status
             print(f"{name:26s} {strategy:8s} {verdict:12s} {res.n:2d} {res.m:3d} {res.charts:7d} "
-                  f"{wall:8.2f} {'>' if paper[k] == 6000 and k else ' '}{paper[k]:7d} {target[k]:7g} "
+                  f"{wall:8.2f} {paper_s:>8s} {target_s:7g} "
                   f"{res.cost:8.4f} {search:>9s}  {straight}{miss}", flush=True)
     return 0
 

@@ -29,7 +29,7 @@ from .model.pose import (Pose, quaternion_from_tau, rotation_angle_between, rota
                          tau_from_rotation, wrap_angle)
 from .model.task import COORDINATES, end_taus
 from .scene.margin import COLLISION_UNIT_M, combine
-from .search.search import MB, Stop, run
+from .search.search import AUTO, MB, STRATEGIES, Stop, run
 from .settings import COSTS, PlannerSettings, check_setting  # noqa: F401  (PlannerSettings: API)
 from .status import Status
 from .trajectory import clearance
@@ -146,12 +146,15 @@ class Planner:
             return self._plan(start, goal, progress, cancel, tolerance, s)
 
     def _search_strategy(self, strategy):
-        """(strategy, heuristic) of a call's ``strategy`` setting (auto, astar, gbf)."""
-        if strategy == "auto":
+        """(strategy, heuristic) of a call's ``strategy`` setting (auto or a registered
+        strategy): under a clearance cost, the task metric (a lower bound) for a strategy
+        whose heuristic must be admissible, else the greedy heuristic."""
+        if strategy == AUTO:
             strategy = default_strategy(self.constraint.dim, self.clearance_weight)
         if self.clearance_weight == 0:
             return strategy, None
-        return strategy, self._blocked(self.length if strategy == "astar" else self._greedy_heuristic)
+        admissible = STRATEGIES[strategy].admissible
+        return strategy, self._blocked(self.length if admissible else self._greedy_heuristic)
 
     def _plan(self, start, goal, progress, cancel, tolerance, s):
         t0 = time.perf_counter()

@@ -4,15 +4,18 @@ Each ``PlannerSettings`` field carries its metadata (``Setting``: node parameter
 flag, unit, range or choices, description) and ``check_setting`` validates a value
 against it. The node's parameter descriptors (``ros/params.py``), the problem file's keys
 (``io/problem.py``) and the ``plan`` command's flags (``commands/plan.py``) are built from
-``SETTINGS``, so a new setting is one field here.
+``SETTINGS``, so a new setting is one field here. The strategy's choices are the search's
+registry (``search.search.STRATEGIES``) read when used, so a strategy registered later is a
+choice of every edge too.
 """
 
 import math
+from collections.abc import Sequence
 from dataclasses import dataclass, field, fields
 from typing import Optional
 
 from .errors import InputError
-from .search.search import STRATEGIES
+from .search.search import AUTO, STRATEGIES
 
 COSTS = ("auto", "so3", "great_circle", "se3")
 
@@ -27,7 +30,7 @@ class Bounds:
     high: Optional[float] = None
     open_low: bool = False
     open_high: bool = False
-    choices: tuple = ()
+    choices: tuple = ()  # or LiveChoices (a registry's names)
 
 
 @dataclass(frozen=True)
@@ -43,6 +46,41 @@ class Setting(Bounds):
     top_level: bool = False
 
 
+class LiveChoices(Sequence):
+    """Choices read from a registry whenever they are used (``names()``: a tuple), so
+    the schema, the node parameter and the CLI see what is registered now; equal to the
+    tuple of the same names."""
+
+    def __init__(self, names):
+        self.names = names
+
+    def __getitem__(self, k):
+        return self.names()[k]
+
+    def __len__(self):
+        return len(self.names())
+
+    def __eq__(self, other):
+        return isinstance(other, Sequence) and tuple(self) == tuple(other)
+
+    def __hash__(self):  # as the tuple it equals now
+        return hash(tuple(self))
+
+    def __repr__(self):
+        return repr(self.names())
+
+
+STRATEGY_CHOICES = LiveChoices(lambda: (AUTO,) + tuple(STRATEGIES))
+
+
+def _strategy_description():
+    """The strategy setting's description, from the registry (the strategies registered
+    when this module is imported: the built-in ones)."""
+    return ("search strategy, from both ends: auto (astar up to 3-D, gbf above or with a "
+            "clearance weight), " + ", ".join(f"{name} ({cls.description})"
+                                               for name, cls in STRATEGIES.items()))
+
+
 def _setting(default, **meta):
     return field(default=default, metadata={"setting": Setting(**meta)})
 
@@ -53,10 +91,7 @@ class PlannerSettings:
 
     strategy: str = _setting(
         "auto", parameter="planner.strategy", flag="--strategy", unit="",
-        description="search strategy, from both ends: auto (astar up to 3-D, gbf above or with "
-                    "a clearance weight), astar (A*, least cost on the chart graph) or gbf "
-                    "(greedy best-first, faster)",
-        choices=("auto",) + STRATEGIES, top_level=True)
+        description=_strategy_description(), choices=STRATEGY_CHOICES, top_level=True)
     cost: str = _setting(
         "auto", parameter="planner.cost", flag="--cost", unit="",
         description="path cost: auto (the paper's for the task), so3 (rad; slices fixing x, y, "

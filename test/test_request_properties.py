@@ -22,6 +22,7 @@ from cdh_planner.errors import MAX_MESSAGE_CHARS, InputError  # noqa: E402
 from cdh_planner.io.problem import load_problem  # noqa: E402
 from cdh_planner.planner import Planner  # noqa: E402
 from cdh_planner.ros.planning import PlanCall, request_poses, run_planner  # noqa: E402
+from cdh_planner.settings import STRATEGY_CHOICES  # noqa: E402
 from cdh_planner.status import Status  # noqa: E402
 
 FRAME = "cdh_base"
@@ -73,7 +74,7 @@ def test_the_paper_request_still_plans():
 
 @settings(max_examples=40, deadline=timedelta(seconds=10), derandomize=True, database=None,
           suppress_health_check=[HealthCheck.too_slow])
-@given(st.one_of(st.sampled_from(["", "auto", "astar", "gbf"]), st.text(max_size=20)),
+@given(st.one_of(st.sampled_from(("",) + tuple(STRATEGY_CHOICES)), st.text(max_size=20)),
        numbers)
 def test_any_plan_path_goal_strategy_and_timeout_is_planned_or_refused_in_one_line(
         strategy, timeout_s):
@@ -88,7 +89,7 @@ def test_any_plan_path_goal_strategy_and_timeout_is_planned_or_refused_in_one_li
     start, goal_pose = request_poses(call, FRAME)
     result = run_planner(PLANNER, start, goal_pose, call)
     assert "\n" not in result.message and len(result.message) <= 2 * MAX_MESSAGE_CHARS
-    valid_strategy = strategy in ("", "auto", "astar", "gbf")
+    valid_strategy = strategy in ("",) + tuple(STRATEGY_CHOICES)
     valid_timeout = timeout_s == 0.0 or _valid_setting("timeout_s", timeout_s)
     if valid_strategy and valid_timeout:
         assert result.reason in (Status.OK, Status.TIMEOUT), result.message

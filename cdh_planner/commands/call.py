@@ -25,6 +25,7 @@ import math
 import sys
 
 from ..io.progress import chart_progress
+from ..settings import STRATEGY_CHOICES
 
 EXIT_OK, EXIT_NO_PLAN = 0, 1
 EXIT_NO_NODE = EXIT_NO_PLAN   # no node, no plan: not bad input, and not a bug (3)
@@ -50,7 +51,7 @@ def add_parser(subparsers):
                        help="start from the pose of the measured cable lengths (the node's "
                             "execution.joint_states_topic)")
     p.add_argument("--goal", required=True, metavar='"X Y Z QX QY QZ QW"', help="goal pose")
-    p.add_argument("--strategy", choices=("auto", "astar", "gbf"),
+    p.add_argument("--strategy", choices=STRATEGY_CHOICES,
                    help="search strategy (default: the node's planner.strategy)")
     p.add_argument("--execute", action="store_true",
                    help="after a successful plan, execute it (~/execute) and wait for the end")

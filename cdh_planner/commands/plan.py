@@ -1,6 +1,6 @@
 """``cdh-planner plan``: plan a wrench-feasible path for a problem file, without ROS.
 
-    cdh-planner plan PROBLEM.yaml [--strategy auto|astar|gbf] [--radius R] [--timeout S]
+    cdh-planner plan PROBLEM.yaml [--strategy S] [--radius R] [--timeout S]
                      [--max-charts N] [--max-memory MB] [--complete] ... [--json OUT] [--plot OUT.png]
 
 Every planner setting has a flag (settings.py: the schema the node's parameters and the

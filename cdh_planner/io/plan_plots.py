@@ -41,6 +41,7 @@ from . import plots
 from .plots import DPI, Marker, SliceView, compute_slice, plt
 from ..model.pose import wrap_angle
 from ..model.task import COORDINATES
+from ..search.search import STRATEGIES
 
 TWO_PI = 2.0 * np.pi
 CLOSED_FACE, CLOSED_EDGE = "white", "#303030"
@@ -303,7 +304,7 @@ def _draw_path(ax, path, periodic, color=PATH_COLOR):
 
 def _title(planner, problem, result):
     head = problem.description or problem.robot.name
-    strategy = {"astar": "A*", "gbf": "Greedy Best-First"}.get(result.strategy, result.strategy)
+    strategy = STRATEGIES[result.strategy].label if result.strategy in STRATEGIES else result.strategy
     outcome = "path found" if result.success else f"no path ({result.reason})"
     tail = f"{strategy}: {outcome}, {result.charts} charts, {result.time_s:.2f} s"
     if result.path is not None:

@@ -3,7 +3,7 @@
     robot: ../robot1.yaml            # relative to this file, or absolute
     task: {type: slice, fixed: {x: 0.0, y: 0.0, z: 0.35, sigma: 0.5934}}
     cost: so3                        # optional: so3 | great_circle | se3 (default by task)
-    strategy: astar                  # optional: auto | astar | gbf
+    strategy: astar                  # optional: auto or a registered one (astar, gbf)
     planner: {radius: 0.1, timeout_s: 60, max_charts: 100000, max_memory_mb: 1024, margin_floor: 0.001}
     start: {position: [x, y, z], tau: [phi, theta, sigma]}   # or quaternion: [x, y, z, w]
     goal:  {lambda: [alpha1, alpha2]}                         # or the task's own coordinates

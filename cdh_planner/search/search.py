@@ -21,12 +21,24 @@ side's chart closest to this side's root). Popping a chart that is still open fi
 it, so the same loop answers a first query, which builds the atlas, and later queries,
 which mostly walk charts that already exist (multi-query).
 
-- A*: each side pops least g + h and grows the chart until closed. Direct motions to the
-  other root are edges of their cost (h itself when h is the cost), so the answer is the
-  least-cost route of the chart graph (Pohl's stopping rule: the best meeting cost
-  mu <= the larger of the two least f).
-- Greedy Best-First: each side pops least h and grows the chart one child at a time,
-  towards its target, until a child beats its parent; the first meeting is the answer.
+A strategy is one registered class (``Strategy``, ``register``; ``STRATEGIES``: name ->
+class): its name, picture ``label``, ``description``, whether its heuristic must be
+``admissible`` (a lower bound of the cost: the planner then gives it the task metric under
+a clearance cost, not its greedy heuristic), the ``priority`` of a chart on a side's heap
+and its ``search`` of the shared ``Bidirectional`` state, which stops on ``Stop``. That
+registry drives the settings' choices, the CLI, the node parameter, the action's check, the
+benchmarks and the pictures. The two built-in strategies:
+
+- A* (``AStar``): each side pops least g + h and grows the chart until closed. Direct
+  motions to the other root are edges of their cost (h itself when h is the cost), so the
+  answer is the least-cost route of the chart graph (Pohl's stopping rule: the best
+  meeting cost mu <= the larger of the two least f).
+- Greedy Best-First (``GreedyBestFirst``): each side pops least h and grows the chart one
+  child at a time, towards its target, until a child beats its parent; the first meeting
+  is the answer.
+
+A new strategy that only reorders A* (weighted A*: g + w h) overrides ``priority``; one
+with its own loop overrides ``search`` too (test/test_strategies.py).
 
 "No path" (``Status.NO_PATH``): one side has no chart left to pop, so the component of
 its end (at this resolution, see ``atlas.domain``) holds no path to the other end.
@@ -37,11 +49,12 @@ import itertools
 import math
 import time
 from dataclasses import dataclass, field
-from typing import Callable, Optional
+from typing import Callable, ClassVar, Optional
 
 from ..status import Status
 
-STRATEGIES = ("astar", "gbf")
+AUTO = "auto"  # not a strategy: the caller's choice by dimension (planner.default_strategy)
+STRATEGIES = {}  # name -> registered Strategy class (``register``)
 PROGRESS_PERIOD_S = 0.2
 MAX_EXPANSIONS_PER_CHART = 500  # growth steps of one chart (safety: each step clips its domain)
 MB = 1 << 20
@@ -100,12 +113,13 @@ def run(atlas, x_start, x_goal, cost: Callable, stop: Stop, strategy="astar",
     dense check of a route is cheaper than one per link, and finds the walls thinner than
     link_ok's probe."""
     if strategy not in STRATEGIES:
-        raise ValueError(f"unknown strategy {strategy!r} (expected {STRATEGIES})")
+        raise ValueError(f"unknown strategy {strategy!r} (expected one of {', '.join(STRATEGIES)})")
+    strategy = STRATEGIES[strategy]()
     i_start, i_goal = atlas.chart_at(x_start), atlas.chart_at(x_goal)
     memo = _Memo({} if edge_costs is None else edge_costs)
     while True:  # lazy links: a route's links are checked once found; a bad one is cut
-        search = _Bidirectional(atlas, cost, stop, strategy, direct, progress, memo, heuristic)
-        status, route, hops = search.run(i_start, i_goal)
+        search = Bidirectional(atlas, cost, strategy, direct, progress, memo, heuristic)
+        status, route, hops = search.run(i_start, i_goal, stop)
         if status != Status.OK:
             return SearchOutcome(status, expanded=search.expanded)
         points, direct_idx, owners, bad = _route_points(atlas, route, hops, link_ok,
@@ -191,12 +205,15 @@ class _Side:
         return out[::-1]  # root -> i
 
 
-class _Bidirectional:
-    def __init__(self, atlas, cost, stop, strategy, direct, progress, memo, heuristic=None):
+class Bidirectional:
+    """The state both sides of one search share, which a ``Strategy`` searches: the atlas,
+    ``sides`` (forward from the start, backward from the goal), the costs and heuristic
+    (memoised across restarts), direct motions, chart growth and joining a route."""
+
+    def __init__(self, atlas, cost, strategy, direct, progress, memo, heuristic=None):
         self.atlas = atlas
         self.cost = cost
         self.heuristic = cost if heuristic is None else heuristic
-        self.stop = stop
         self.strategy = strategy
         self.direct = direct
         self.progress = progress
@@ -208,6 +225,7 @@ class _Bidirectional:
         self._h = memo.h
         self._hop = memo.hop
         self._count = itertools.count()
+        self.sides = ()
 
     # ----- helpers ---------------------------------------------------------------------
     def h(self, side, i):
@@ -245,23 +263,32 @@ class _Bidirectional:
             self.direct_cache[key] = bool(self.direct(self.atlas.charts[i].x, self.atlas.charts[j].x))
         return self.direct_cache[key]
 
-    def _limit(self):
+    def push(self, side, priority, i):
+        """Chart i on ``side``'s heap (ties: first pushed first)."""
+        heapq.heappush(side.heap, (priority, next(self._count), i))
+
+    def pop(self, side):
+        """The chart of least priority on ``side``'s heap."""
+        return heapq.heappop(side.heap)[2]
+
+    def limit(self, stop):
+        """The Status of ``stop`` reached now, or None; reports progress on the way."""
         now = time.perf_counter()
         if self.progress is not None and now - self._last_progress >= PROGRESS_PERIOD_S:
             self._last_progress = now
             best = min(self.h(s, s.best) for s in self.sides)
             self.progress({"charts": len(self.atlas.charts), "time_s": now - self._t0, "best_h": best})
-        return self.stop.status(self.atlas)
+        return stop.status(self.atlas)
 
-    def _grow(self, side, i, until_better):
+    def grow(self, side, i, stop, until_better):
         """Grow chart i until closed, or with ``until_better`` until a new chart has smaller
-        h than i. Returns (a limit status or None, the new charts)."""
+        h than i. Returns (a limit status of ``stop`` or None, the new charts)."""
         ch = self.atlas.charts[i]
         new = []
         for _ in range(MAX_EXPANSIONS_PER_CHART):
             if ch.closed:
                 return None, new
-            status = self._limit()
+            status = self.limit(stop)
             if status:
                 return status, new
             j = self.atlas.expand(i, toward=side.target if until_better else None)
@@ -273,7 +300,7 @@ class _Bidirectional:
         ch.frontier = True
         return None, new
 
-    def _join(self, fwd_side, i, j, hop):
+    def join(self, fwd_side, i, j, hop):
         """The route start -> goal through chart i of ``fwd_side`` and chart j of the other
         side (i == j: a chart both reached); ``hop``: i -> j is a direct motion."""
         other = self.sides[1] if fwd_side is self.sides[0] else self.sides[0]
@@ -289,95 +316,157 @@ class _Bidirectional:
             hops = {(q, p) for p, q in hops}
         return route, hops
 
-    # ----- the searches ----------------------------------------------------------------
-    def run(self, i_start, i_goal):
+    def run(self, i_start, i_goal, stop):
+        """(Status, chart route, direct hops) of the strategy's search from both roots."""
         fwd = _Side(i_start, self.atlas.charts[i_goal].x)
         bwd = _Side(i_goal, self.atlas.charts[i_start].x)
         self.sides = (fwd, bwd)
         if i_start == i_goal:
             return Status.OK, [i_start], set()
         for s in self.sides:
-            heapq.heappush(s.heap, (self.h(s, s.root), next(self._count), s.root))
-        return self._astar() if self.strategy == "astar" else self._gbf()
+            self.push(s, self.strategy.priority(0.0, self.h(s, s.root)), s.root)
+        return self.strategy.search(self, stop)
 
-    def _astar(self):
+
+# ----- the strategies -------------------------------------------------------------------
+def register(cls):
+    """Class decorator: make ``cls`` (a Strategy) a search strategy of every edge (module
+    doc). Refused (ValueError naming it): a strategy without a name, label or description,
+    one named "auto" (the caller's choice by dimension), a name registered by another class."""
+    for attr in ("name", "label", "description"):
+        if not isinstance(getattr(cls, attr), str) or not getattr(cls, attr):
+            raise ValueError(f"strategy {cls.__name__}: {attr} must be a non-empty string")
+    if cls.name == AUTO:
+        raise ValueError(f"strategy {cls.__name__}: the name {AUTO!r} is the caller's choice")
+    if cls.name in STRATEGIES and STRATEGIES[cls.name] is not cls:
+        raise ValueError(f"strategy {cls.name!r} is already registered "
+                         f"({STRATEGIES[cls.name].__name__})")
+    STRATEGIES[cls.name] = cls
+    return cls
+
+
+class Strategy:
+    """Base of every search strategy (module doc). ``search(s, stop)`` runs on the shared
+    ``Bidirectional`` state ``s`` (both roots already on their heaps with ``priority(0, h)``)
+    and returns (Status, chart route start -> goal, its direct hops (i, j)): NO_PATH when a
+    side runs out of charts, the Status of ``s.limit(stop)`` when it is reached."""
+
+    name: ClassVar[str] = ""         # the setting's value (planner.strategy, --strategy)
+    label: ClassVar[str] = ""        # in pictures
+    description: ClassVar[str] = ""  # in the settings' description (node parameter, CLI, docs)
+    admissible: ClassVar[bool] = False  # its heuristic must be a lower bound of the cost
+
+    def priority(self, g, h):
+        """Order of a chart on a side's heap: cost so far ``g``, heuristic ``h`` to the other end."""
+        raise NotImplementedError
+
+    def search(self, s, stop):
+        raise NotImplementedError
+
+
+@register
+class AStar(Strategy):
+    """A* from both ends (module doc): the least-cost route of the chart graph."""
+
+    name = "astar"
+    label = "A*"
+    description = "A*, least cost on the chart graph"
+    admissible = True
+
+    def priority(self, g, h):
+        return g + h
+
+    def search(self, s, stop):
         mu, meet = math.inf, None
         while True:
-            status = self._limit()
+            status = s.limit(stop)
             if status:
                 return status, None, None
-            fwd, bwd = self.sides
+            fwd, bwd = s.sides
             if not fwd.heap or not bwd.heap:  # a component is exhausted
                 break
             if mu <= max(fwd.heap[0][0], bwd.heap[0][0]):
                 break
             side = fwd if len(fwd.heap) <= len(bwd.heap) else bwd
             other = bwd if side is fwd else fwd
-            _, _, i = heapq.heappop(side.heap)
+            i = s.pop(side)
             if i in side.done:
                 continue
             side.done.add(i)
-            self.expanded += 1
-            closer = self.h(side, i) < self.h(side, side.best)  # direct motions are tried from here
+            s.expanded += 1
+            closer = s.h(side, i) < s.h(side, side.best)  # direct motions are tried from here
             if closer:
                 side.best = i
-            status, _ = self._grow(side, i, until_better=False)
+            status, _ = s.grow(side, i, stop, until_better=False)
             if status:
                 return status, None, None
             gi = side.g[i]
             if i in other.g and gi + other.g[i] < mu:
                 mu, meet = gi + other.g[i], (side, i, i, False)
-            if closer and gi + self.h(side, i) < mu and self.direct_ok(i, other.root) \
-                    and gi + self.hop_cost(side, i) < mu:
-                mu, meet = gi + self.hop_cost(side, i), (side, i, other.root, True)
-            for j in self.atlas.charts[i].neighbours:
+            if closer and gi + s.h(side, i) < mu and s.direct_ok(i, other.root) \
+                    and gi + s.hop_cost(side, i) < mu:
+                mu, meet = gi + s.hop_cost(side, i), (side, i, other.root, True)
+            for j in s.atlas.charts[i].neighbours:
                 if j in side.done:
                     continue
-                gj = gi + self.edge_cost(i, j)
+                gj = gi + s.edge_cost(i, j)
                 if gj < side.g.get(j, math.inf):
                     side.g[j] = gj
                     side.parent[j] = i
-                    heapq.heappush(side.heap, (gj + self.h(side, j), next(self._count), j))
+                    s.push(side, self.priority(gj, s.h(side, j)), j)
                     if j in other.g and gj + other.g[j] < mu:
                         mu, meet = gj + other.g[j], (side, j, j, False)
         if meet is None:
             return Status.NO_PATH, None, None
-        route, hops = self._join(*meet)
+        route, hops = s.join(*meet)
         return Status.OK, route, hops
 
-    def _gbf(self):
+
+@register
+class GreedyBestFirst(Strategy):
+    """Greedy Best-First from both ends (module doc): the first meeting."""
+
+    name = "gbf"
+    label = "Greedy Best-First"
+    description = "greedy best-first, faster"
+    admissible = False
+
+    def priority(self, g, h):
+        return h
+
+    def search(self, s, stop):
         turn = 0
         while True:
-            status = self._limit()
+            status = s.limit(stop)
             if status:
                 return status, None, None
-            side, other = self.sides[turn], self.sides[1 - turn]
+            side, other = s.sides[turn], s.sides[1 - turn]
             turn = 1 - turn
             if not side.heap:  # this end's component is exhausted
                 return Status.NO_PATH, None, None
-            _, _, i = heapq.heappop(side.heap)
+            i = s.pop(side)
             if i in side.done:
                 continue
-            if self.h(side, i) < self.h(side, side.best):
+            if s.h(side, i) < s.h(side, side.best):
                 side.best = i
-            status, new = self._grow(side, i, until_better=True)
+            status, new = s.grow(side, i, stop, until_better=True)
             if status:
                 return status, None, None
             for j in new:  # direct motions from the new charts to the other side
                 for k in dict.fromkeys((other.root, other.best)):
-                    if self.direct_ok(j, k):
+                    if s.direct_ok(j, k):
                         side.parent.setdefault(j, i)
-                        return (Status.OK, *self._join(side, j, k, True))
-            ch = self.atlas.charts[i]
+                        return (Status.OK, *s.join(side, j, k, True))
+            ch = s.atlas.charts[i]
             if ch.closed:
                 side.done.add(i)
-                self.expanded += 1
+                s.expanded += 1
             else:
-                heapq.heappush(side.heap, (self.h(side, i), next(self._count), i))
+                s.push(side, self.priority(0.0, s.h(side, i)), i)
             for j in sorted(ch.neighbours):
                 if j in side.parent:
                     continue
                 side.parent[j] = i
                 if j in other.parent:
-                    return (Status.OK, *self._join(side, j, j, False))
-                heapq.heappush(side.heap, (self.h(side, j), next(self._count), j))
+                    return (Status.OK, *s.join(side, j, j, False))
+                s.push(side, self.priority(0.0, s.h(side, j)), j)
