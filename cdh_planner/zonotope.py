@@ -37,7 +37,6 @@ import numpy as np
 from numba import njit, prange
 
 from .feasibility import CONSTRAINTS, SINGULAR_DET, Feasibility
-from .feasibility import evaluate as closed_form
 from .model.pose import rotation_tt
 
 MIN_CABLES = 6
@@ -762,14 +761,6 @@ def _binding_names(ml, kl, mr, arg, hi, m):
                                dtype=object)
         binding[facet] = facet_names[inverse.ravel()]
     return binding
-
-
-def feasibility_of(robot, p, tau=None, R=None):
-    """Feasibility of poses of any robot: the closed form (``feasibility.evaluate``) for six
-    cables, the facet test (``evaluate``) for more. The entry callers port to (issue 21)."""
-    if len(robot.base_anchors) == 6:
-        return closed_form(robot, p, tau=tau, R=R)
-    return evaluate(robot, p, tau=tau, R=R)
 
 
 def evaluate(robot, p, tau=None, R=None):

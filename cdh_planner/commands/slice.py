@@ -30,7 +30,7 @@ from pathlib import Path
 from typing import Optional
 
 from ..errors import InputError, check_text
-from ..zonotope import feasibility_of as evaluate  # 6 cables: the closed form
+from ..cable_feasibility import feasibility_of as evaluate  # 6 cables: the closed form
 from ..io.outputs import check_output, writing
 from ..io.plots import FEASIBLE, Marker, SegmentOverlay, SliceGrid, SliceView, \
     compute_slice, plot_slice

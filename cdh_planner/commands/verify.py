@@ -33,7 +33,7 @@ import math
 import numpy as np
 
 from ..errors import InputError
-from ..zonotope import feasibility_of as evaluate  # 6 cables: the closed form
+from ..cable_feasibility import feasibility_of as evaluate  # 6 cables: the closed form
 from ..io.outputs import check_output, write_text
 from ..io.poses import load_poses, parse_angle, parse_length
 from ..model.robot import load_robot

@@ -29,7 +29,7 @@ from matplotlib.lines import Line2D  # noqa: E402
 from matplotlib.patches import Patch  # noqa: E402
 from matplotlib.ticker import FuncFormatter, MultipleLocator  # noqa: E402
 
-from ..zonotope import feasibility_of as evaluate  # noqa: E402  (6 cables: the closed form)
+from ..cable_feasibility import feasibility_of as evaluate  # noqa: E402  (6 cables: the closed form)
 from ..model.pose import rotation_tt  # noqa: E402
 from ..model.task import COORDINATES  # noqa: E402
 

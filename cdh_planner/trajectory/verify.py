@@ -34,7 +34,7 @@ import numpy as np
 from scipy.spatial.transform import Rotation
 
 from ..errors import InputError
-from ..zonotope import feasibility_of as evaluate  # 6 cables: the closed form
+from ..cable_feasibility import feasibility_of as evaluate  # 6 cables: the closed form
 from ..model.pose import rotation_angle_between, rotation_tt
 from ..scene.margin import combine
 
