@@ -1,0 +1,76 @@
+"""Which poses and motions the planner may use: the one place every stage asks.
+
+A pose is valid when it is wrench-feasible with normalised margin at least the planner's
+margin floor (``feasibility.evaluate``); a motion between two poses when it is, densely
+(``trajectory.verify``). Poses are task coordinate rows y (N, k) (``model.task``): M is
+the graph of the closed-form lift over the feasible poses of the task, so moving y and
+checking the pose keeps every point on M.
+"""
+
+import numpy as np
+
+from ..feasibility import evaluate
+from ..model.pose import quaternion_from_tau, wrap_angle
+from ..trajectory.verify import SlerpPath, TaskLinePath, check_motion, check_path
+
+COARSE_SAMPLES = 17  # a direct motion is first checked at these few points (a cheap "no")
+
+
+class Validity:
+    """Valid poses and motions of one robot and task (module docstring)."""
+
+    def __init__(self, robot, task, margin_floor):
+        self.robot, self.task, self.margin_floor = robot, task, margin_floor
+        self.periodic = np.array(task.periodic, dtype=bool)
+
+    def margins(self, y):
+        """Normalised margins (N,) of task coordinate rows y (N, k)."""
+        p, tau = self.task.pose(y)
+        return evaluate(self.robot, p, tau).margin
+
+    def pose(self, y):
+        """Which rows of y (N, k) are valid poses: margin at least the floor (N,) bool."""
+        return self.margins(y) >= self.margin_floor
+
+    def direct_motion(self, y):
+        """The direct motion through task coordinates y (N, k): position linear and
+        orientation slerp in free flight (what a controller executes), straight lines in a
+        task's coordinates otherwise (slerp would leave the task)."""
+        y = np.array(y, dtype=float)
+        if self.task.slerp:
+            p, tau = self.task.pose(y)
+            return SlerpPath(p, quaternion_from_tau(tau))
+        per = self.periodic
+        y[1:, per] = y[0, per] + np.cumsum(wrap_angle(np.diff(y[:, per], axis=0)), axis=0)  # short arcs
+        return TaskLinePath(self.task, y)
+
+    def probe(self, y, n):
+        """Are n evenly spaced poses of every direct motion between the rows of y valid?
+        (one vectorised closed-form call)"""
+        motion = self.direct_motion(y)
+        seg = np.repeat(np.arange(motion.n_segments), n)
+        s = np.tile(np.linspace(0.0, 1.0, n), motion.n_segments)
+        p, R = motion(seg, s)
+        return bool(np.all(evaluate(self.robot, p, R=R).margin >= self.margin_floor))
+
+    def motion(self, ya, yb):
+        """Is the direct motion ya -> yb dense-valid? A few points first (most unsafe
+        motions fail there), then the dense check."""
+        y = np.array([ya, yb])
+        if not (self.probe(y, COARSE_SAMPLES) and self.probe(y, 8 * COARSE_SAMPLES)):
+            return False
+        seg = check_path(self.robot, self.direct_motion(y))[0]
+        return seg.feasible and seg.unresolved == 0 and seg.worst.margin >= self.margin_floor
+
+    def segments(self, p, q):
+        """The dense check of the waypoints p (N, 3) m, quaternions q (N, 4) and the
+        motion between them (position linear, orientation slerp): one
+        ``trajectory.verify`` segment report per pair."""
+        return check_motion(self.robot, p, q)
+
+
+def wrapped(d, periodic):
+    """Rows of task coordinates with the periodic columns wrapped to [-pi, pi)."""
+    d = d.copy()
+    d[:, periodic] = wrap_angle(d[:, periodic])
+    return d
