@@ -30,6 +30,7 @@ setup(
         ('share/' + package_name + '/launch', sorted(glob('launch/*.launch.py'))),
     ],
     install_requires=['setuptools', 'numpy', 'scipy', 'pyyaml', 'matplotlib', 'tqdm', 'threadpoolctl', 'numba', 'toppra',
+                      'coal', 'trimesh',
                       'mcap', 'mcap-ros2-support', 'rosbags'],
     zip_safe=True,
     maintainer='cdh_planner maintainers',

@@ -81,10 +81,11 @@ class Planner:
     """Wrench-feasible paths for one robot and task (module docstring), by the stages of
     ``pipeline``: lift, route (direct motion or atlas search), smooth, densify, time."""
 
-    def __init__(self, robot, task, settings: Optional[PlannerSettings] = None):
+    def __init__(self, robot, task, settings: Optional[PlannerSettings] = None, scene=None):
         self.robot = robot
         self.task = task
         self.settings = s = (settings or PlannerSettings()).check()
+        self.scene = scene  # scene.schema.Scene: collisions join validity (pipeline.validity)
         self.constraint = TaskConstraint(robot, task, margin_floor=s.margin_floor)
         self.radius = s.radius or default_radius(self.constraint.dim)
         self.clearance_weight = s.clearance_weight
@@ -95,12 +96,13 @@ class Planner:
         pose = self.constraint.pose
         self.length = lambda xa, xb: self.pose_cost(*pose(xa), *pose(xb))
         # the stages; every one asks the same Validity
-        self.validity = Validity(robot, task, s.margin_floor)
-        self.lift = Lift(robot, task, self.constraint, self.atlas.in_domain, s.margin_floor)
-        self.route = Route(self.constraint, self.atlas, self.validity, self.length,
-                           self.clearance_weight, self.radius)
-        self.smooth = Smooth(self.validity, self.pose_costs, self.clearance_weight)
+        self.validity = Validity(robot, task, s.margin_floor, scene)
+        self.collision = self.validity.collision
+        self.lift = Lift(self.validity, self.constraint, self.atlas.in_domain)
         self.densify = Densify(self.validity, s.max_cable_speed, s.max_cable_accel)
+        self.route = Route(self.constraint, self.atlas, self.validity, self.length,
+                           self.clearance_weight, self.radius, self.densify.densify)
+        self.smooth = Smooth(self.validity, self.pose_costs, self.clearance_weight)
         # the task metric, or the clearance cost (trajectory.clearance), whose A* heuristic
         # is the metric (a lower bound): Route.heuristic
         self.cost = self.route.cost
@@ -142,8 +144,9 @@ class Planner:
         stop = Stop(t0 + s.timeout_s, s.max_charts, int(s.max_memory_mb * MB), cancel)
         y, charts, direct, failed = self.route(points, stop, strategy, progress)
         if failed is not None:
-            return answer(False, failed.status, failure_message(
-                failed.status, len(self.atlas.charts), s, self.radius), expanded=failed.expanded)
+            status, message, stats = failed
+            return answer(False, status, message or failure_message(
+                status, len(self.atlas.charts), s, self.radius), **stats)
         if s.complete:
             self.atlas.chart_at(points["start"])
             self.grow_complete(stop.deadline, cancel)
@@ -152,7 +155,7 @@ class Planner:
             return answer(False, Status.NO_PATH, "the path could not be made dense-feasible "
                                                  "(a bug: please report the problem file)")
         cost = self._path_cost(path)
-        timed = time_stage(self.robot, path, s)
+        timed = time_stage(self.robot, path, s, self.collision)
         if not timed.executed.ok:  # bounded: never hand out a trajectory that was not checked
             return answer(False, Status.NOT_EXECUTABLE, "no trajectory a JointTrajectory"
                           f"Controller executes within the limits: {timed.executed.reason}")
@@ -160,7 +163,7 @@ class Planner:
         out = answer(True, Status.OK, f"path of {len(timed.path)} waypoints over {how}",
                      cost=cost, path=timed.path, chart_path=charts, direct=direct,
                      timing=timed.timing or "quasi-static", executed=timed.executed.describe(),
-                     points_added=timed.executed.added)
+                     points_added=timed.executed.added, **timed.scene_clearance)
         out.least_margin, out.least_tension_margin = timed.least
         return out
 

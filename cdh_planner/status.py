@@ -16,6 +16,8 @@ class Status(StrEnum):
     OK = "ok"                              # a path, densely verified
     START_INFEASIBLE = "start_infeasible"  # start not wrench-feasible, or under the margin floor
     GOAL_INFEASIBLE = "goal_infeasible"    # goal not wrench-feasible, or under the margin floor
+    START_IN_COLLISION = "start_in_collision"  # start hits an obstacle or cables touch (scene)
+    GOAL_IN_COLLISION = "goal_in_collision"    # goal hits an obstacle or cables touch (scene)
     NO_PATH = "no_path"                    # a component was exhausted: no path at resolution r
     TIMEOUT = "timeout"                    # the deadline passed
     CHART_LIMIT = "chart_limit"            # the atlas reached its chart limit
@@ -41,3 +43,9 @@ class Status(StrEnum):
         """START_INFEASIBLE or GOAL_INFEASIBLE: the status of an ``end`` ("start" or "goal")
         that is not wrench-feasible."""
         return {"start": cls.START_INFEASIBLE, "goal": cls.GOAL_INFEASIBLE}[end]
+
+    @classmethod
+    def in_collision(cls, end):
+        """START_IN_COLLISION or GOAL_IN_COLLISION: the status of an ``end`` ("start" or
+        "goal") closer to an obstacle or another cable than the scene's clearance."""
+        return {"start": cls.START_IN_COLLISION, "goal": cls.GOAL_IN_COLLISION}[end]

@@ -121,10 +121,12 @@ def test_route_searches_when_the_direct_motion_is_not_valid():
     points, _ = planner.lift(pr.start, pr.goal, pr.settings.task_tolerance)
     y, charts, direct, failed = planner.route(points, Stop(max_charts=5_000), "gbf")
     assert failed is None and not direct and charts > 0
-    np.testing.assert_allclose(y[[0, -1]], ends, atol=1e-9)
+    # the lifted ends: phi at theta = 0 is chosen by the other end (model.task.end_taus)
+    np.testing.assert_allclose(y[[0, -1]], planner.route.coords([points["start"], points["goal"]]),
+                               atol=1e-9)
     assert np.all(planner.validity.pose(y))
     _, _, _, failed = Planner(pr.robot, pr.task, pr.settings).route(points, Stop(max_charts=3), "gbf")
-    assert failed.status == Status.CHART_LIMIT
+    assert failed[0] == Status.CHART_LIMIT and failed[2]["expanded"] >= 0
 
 
 def test_clearance_cost_is_never_below_the_length_and_is_the_length_at_weight_zero():
@@ -133,7 +135,7 @@ def test_clearance_cost_is_never_below_the_length_and_is_the_length_at_weight_ze
     points, _ = planner.lift(pr.start, pr.goal, pr.settings.task_tolerance)
     xs, xg = points["start"], points["goal"]
     weighted = Route(planner.constraint, planner.atlas, planner.validity, planner.length, 0.5,
-                     planner.radius)
+                     planner.radius, planner.densify.densify)
     assert weighted.cost(xs, xg) >= planner.length(xs, xg) > 0
     assert weighted.heuristic("astar") is planner.length   # admissible: a lower bound
     assert weighted.heuristic("gbf")(xs, xg) >= planner.length(xs, xg)
@@ -147,11 +149,12 @@ def test_a_straight_evenly_spaced_route_is_the_fixed_point_of_smoothing():
 
 
 def test_smoothing_moves_only_to_valid_poses_and_keeps_the_ends():
-    pr, planner, ends = stages("robot2_q2_q3")
+    pr, planner, ends = stages("robot2_q1_q2")   # its straight line is valid (Table 1)
     rng = np.random.default_rng(5)
-    y = ends[0] + np.linspace(0.0, 1.0, 15)[:, None] * (ends[1] - ends[0])
-    y[1:-1] += rng.normal(scale=0.02, size=y[1:-1].shape)
-    y[1:-1] = np.where(planner.validity.pose(y[1:-1])[:, None], y[1:-1], ends[0])
+    line = ends[0] + np.linspace(0.0, 1.0, 15)[:, None] * (ends[1] - ends[0])
+    y = line.copy()
+    y[1:-1] += rng.normal(scale=0.01, size=y[1:-1].shape)
+    y[1:-1] = np.where(planner.validity.pose(y[1:-1])[:, None], y[1:-1], line[1:-1])
     out = planner.smooth(y)
     np.testing.assert_array_equal(out[[0, -1]], y[[0, -1]])
     moved = np.any(out != y, axis=1)

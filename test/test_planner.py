@@ -11,6 +11,8 @@ from cdh_planner.feasibility import evaluate
 from cdh_planner.io.problem import load_problem
 from cdh_planner.model.pose import quaternion_from_tau
 from cdh_planner.planner import Planner, PlannerSettings, Pose
+from cdh_planner.search.search import Stop, run
+from cdh_planner.status import Status
 from cdh_planner.trajectory.verify import check_motion, check_task_motion
 
 from conftest import REPO as ROOT
@@ -76,11 +78,15 @@ def test_q2_q3_path_exists_where_the_straight_line_fails():
 
 
 def test_different_components_answer_no_path(tmp_path):
-    """The island of C around (phi, theta) = (-1.3, 2.0) is not connected to q_g."""
+    """The island of C around (phi, theta) = (-1.3, 2.0) is not connected to q_g: it lies
+    across det J = 0 (J is never singular on C), known before any chart (the search alone
+    exhausts the island: test_six_d)."""
     problem = robot1_problem(tmp_path, "island", (-1.3, 2.0), (1.7, 1.7))
     _, pr, res = plan(problem, strategy="gbf")
     assert not res.success and res.reason == "no_path"
-    assert "exhausted" in res.message and res.path is None and res.charts > 10
+    assert "singularity det J = 0" in res.message and res.path is None and res.charts == 0
+    det = evaluate(pr.robot, np.array([pr.start.p, pr.goal.p]), np.array([pr.start.tau, pr.goal.tau])).det_j
+    assert det[0] * det[1] < 0
     ends = pr.task.coords(np.array([pr.start.p, pr.goal.p]), np.array([pr.start.tau, pr.goal.tau]))
     assert not check_task_motion(pr.robot, pr.task, ends)[0].feasible
 
@@ -230,11 +236,18 @@ def test_complete_atlas_closes_every_chart(tmp_path):
     planner, pr, res = plan(problem, strategy="gbf", complete=True)
     assert res.success
     assert all(ch.closed for ch in planner.atlas.charts)
-    _, _, exhausted = plan(robot1_problem(tmp_path, "island", (-1.3, 2.0), (1.7, 1.7)), strategy="gbf")
-    # the search from both ends grows the goal's side as much as the island until the
-    # island is exhausted: about twice the island's charts
+    # the search from both ends (alone: the planner answers this pair before any chart,
+    # across det J = 0) grows the goal's side as much as the island until the island is
+    # exhausted: about twice the island's charts
+    pr = load_problem(robot1_problem(tmp_path, "island", (-1.3, 2.0), (1.7, 1.7)))
+    other = Planner(pr.robot, pr.task, pr.settings)
+    c = other.constraint
+    out = run(other.atlas, c.lift(pr.start.p, pr.start.tau), c.lift(pr.goal.p, pr.goal.tau), other.cost,
+              Stop(max_charts=20_000), "gbf", other.route.direct_x, link_ok=other.route.link_ok,
+              route_check=other.route.route_unsafe)
+    assert out.status == Status.NO_PATH
     island = len(planner.atlas.charts)
-    assert 0.8 * island < exhausted.charts < 2.4 * island
+    assert 0.8 * island < len(other.atlas.charts) < 2.4 * island
 
 
 def test_a_call_may_override_the_strategy_and_the_time_limit():

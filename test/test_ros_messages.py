@@ -216,7 +216,8 @@ def _result(reason, success=False, message="what happened"):
 
 
 @pytest.mark.parametrize("reason, code", [
-    ("start_infeasible", 205), ("goal_infeasible", 206), ("no_path", 208), ("timeout", 207),
+    ("start_infeasible", 205), ("goal_infeasible", 206), ("start_in_collision", 205),
+    ("goal_in_collision", 206), ("no_path", 208), ("timeout", 207),
     ("chart_limit", 208), ("resource_limit", 208), ("invalid", 292), ("canceled", 290),
     ("busy", 291), ("output_limit", 294), ("no_current_state", 293), ("bad_strategy", 201),
     ("bad_frame", 202), ("internal_error", 200)])

@@ -95,10 +95,18 @@ def test_search_from_both_ends_finds_every_table1_path(name):
 @pytest.mark.parametrize("strategy", STRATEGIES)
 def test_no_path_across_the_components_of_a_robot1_slice(tmp_path, strategy):
     """The island around (phi, theta) = (-1.3, 2.0) is not connected to q_g: the island's
-    side is exhausted, whichever strategy."""
+    side is exhausted, whichever strategy (the search alone); the planner knows it before
+    any chart, as the island lies across det J = 0 from q_g."""
     pr = load_problem(robot1_problem(tmp_path, "island", (-1.3, 2.0), (1.7, 1.7)))
+    planner = Planner(pr.robot, pr.task, replace(pr.settings, strategy=strategy))
+    c = planner.constraint
+    xs, xg = c.lift(pr.start.p, pr.start.tau), c.lift(pr.goal.p, pr.goal.tau)
+    out = run(planner.atlas, xs, xg, planner.cost, Stop(max_charts=20_000), strategy,
+              link_ok=planner.route.link_ok)
+    assert out.status == Status.NO_PATH
     res = Planner(pr.robot, pr.task, replace(pr.settings, strategy=strategy)).plan(pr.start, pr.goal)
-    assert (res.success, res.reason) == (False, Status.NO_PATH) and "exhausted" in res.message
+    assert (res.success, res.reason, res.charts) == (False, Status.NO_PATH, 0)
+    assert "opposite sides of the singularity det J = 0" in res.message
 
 
 def test_stop_cancel_and_memory_limits_are_clean_answers():

@@ -14,7 +14,8 @@ from cdh_planner.planner import PlanResult
 from cdh_planner.status import Status
 
 # the contract: these strings are in plan JSON files and recordings already written
-CONTRACT = {"ok", "start_infeasible", "goal_infeasible", "no_path", "timeout", "chart_limit",
+CONTRACT = {"ok", "start_infeasible", "goal_infeasible", "start_in_collision",
+            "goal_in_collision", "no_path", "timeout", "chart_limit",
             "resource_limit", "canceled", "invalid", "bad_frame", "bad_strategy", "busy",
             "no_current_state", "output_limit", "internal_error", "not_executable"}
 

@@ -27,7 +27,6 @@ discrete geodesic between two points of M). ``nbytes`` counts the memory the atl
 import math
 
 import numpy as np
-from scipy.spatial import cKDTree
 
 from .domain import make_domain
 
@@ -75,6 +74,8 @@ class Atlas:
         self.charts = []
         self.periodic = np.asarray(constraint.periodic, dtype=bool)
         self._index = _KeyIndex()
+        self._centres = _Rows()  # chart centres (N, n_vars), for vectorised distances
+        self._radii = _Rows()  # chart radii (N,), kept equal to charts[i].radius
         self._edges = {}  # (i, j), i < j -> points on M from chart i to chart j, or None
         self.nbytes = 0
 
@@ -149,28 +150,69 @@ class Atlas:
         self.charts.append(ch)
         self.nbytes += x.nbytes + basis.nbytes + ch.domain.nbytes + 64 * 8
         key = self.c.key(x)
-        near = self._index.query(key, radius + self.radius)
+        near, d, dist = self._near(x, key, radius + self.radius)
+        overlap = dist < radius + self._radii.rows[near]  # the balls overlap: neighbours
         # nearest first: their planes cut most, so later clips mostly find nothing to cut
-        near.sort(key=lambda j: float(np.linalg.norm(self.diff(x, self.charts[j].x))))
-        for j in near:
-            self._link(i, j)
+        order = np.flatnonzero(overlap)[np.argsort(dist[overlap], kind="stable")]
+        self._link_new(i, near[order], d[order])
         self._index.add(key)
+        self._centres.add(x)
+        self._radii.add(radius)
         return i
 
-    def _link(self, i, j):
+    def _link_new(self, i, js, d):
+        """Link the new chart i to the charts js (their balls overlap i's; d: x_j - x_i,
+        wrapped): i is clipped by all of them at once (as one clip after another would,
+        nearest first, until closed), then each open one of them by i (a Python loop over
+        the open ones only: the cost of a chart follows its open neighbours, not the
+        atlas's size)."""
+        ci = self.charts[i]
+        rj = self._radii.rows[js]
+        for j in js.tolist():
+            ci.neighbours.add(j)
+            self.charts[j].neighbours.add(i)
+        s = d @ ci.basis
+        ds = np.linalg.norm(s, axis=1)
+        ok = ds >= 1e-12
+        beta = (ds[ok] ** 2 + ci.radius ** 2 - rj[ok] ** 2) / (2.0 * ds[ok])
+        # keep a core around the centre: a chart never loses its own centre
+        before = ci.domain.nbytes
+        ci.domain.clip_many(s[ok] / ds[ok, None], np.maximum(beta, 0.05 * ci.radius))
+        self.nbytes += ci.domain.nbytes - before
+        for k, j in enumerate(js.tolist()):
+            cj = self.charts[j]
+            if not cj.closed:  # clipping a closed chart cannot change anything the search uses
+                self._clip_by(cj, ci, -d[k])
+
+    def _near(self, x, key, bound):
+        """Charts whose centre's key lies within ``bound`` of ``key`` (a superset of those
+        within wrapped distance ``bound`` of x: the key is 1-Lipschitz): (indices, their
+        wrapped differences centre - x (k, n_vars), distances (k,))."""
+        near = np.asarray(self._index.query(key, bound), dtype=int)
+        if near.size == 0:
+            return near, np.empty((0, x.size)), np.empty(0)
+        d = self._centres.rows[near] - x
+        d[:, self.periodic] = _wrap_angle(d[:, self.periodic])
+        return near, d, np.linalg.norm(d, axis=1)
+
+    def _link(self, i, j, d=None):
+        """Link charts i and j if their balls overlap and clip each by the other; ``d``:
+        the wrapped difference x_j - x_i if known."""
         ci, cj = self.charts[i], self.charts[j]
-        d = self.diff(ci.x, cj.x)
+        d = self.diff(ci.x, cj.x) if d is None else d
         if np.linalg.norm(d) >= ci.radius + cj.radius:
             return
         ci.neighbours.add(j)
         cj.neighbours.add(i)
         for a, b, dab in ((ci, cj, d), (cj, ci, -d)):
-            if a.closed:  # clipping a closed chart cannot change anything the search uses
-                continue
-            s = a.basis.T @ dab
-            ds = np.linalg.norm(s)
-            if ds < 1e-12:
-                continue
+            if not a.closed:  # clipping a closed chart cannot change anything the search uses
+                self._clip_by(a, b, dab)
+
+    def _clip_by(self, a, b, dab):
+        """Clip chart a's domain by the half-space of its neighbour b (dab: x_b - x_a)."""
+        s = a.basis.T @ dab
+        ds = np.linalg.norm(s)
+        if ds >= 1e-12:
             beta = (ds * ds + a.radius ** 2 - b.radius ** 2) / (2.0 * ds)
             # keep a core around the centre: a chart never loses its own centre
             self._clip(a, s / ds, max(beta, 0.05 * a.radius))
@@ -216,6 +258,7 @@ class Atlas:
         ch = self.charts[i]
         before = ch.domain.nbytes
         ch.domain.set_radius(radius)
+        self._radii.rows[i] = radius
         self.nbytes += ch.domain.nbytes - before
         for j in list(ch.neighbours):  # balls that no longer overlap are no longer linked
             other = self.charts[j]
@@ -245,9 +288,8 @@ class Atlas:
 
     def closest(self, x, k_radius=None):
         """Indices of charts whose centre is within (wrapped) distance of its radius of x."""
-        key = self.c.key(x)
-        near = self._index.query(key, self.radius if k_radius is None else k_radius)
-        return [j for j in near if np.linalg.norm(self.diff(self.charts[j].x, x)) < self.charts[j].radius]
+        near, _, dist = self._near(x, self.c.key(x), self.radius if k_radius is None else k_radius)
+        return near[dist < self._radii.rows[near]].tolist()
 
     def segment(self, i, j, n_points):
         """Points on M from the centre of chart i to that of its neighbour j: the first half
@@ -349,26 +391,56 @@ class Atlas:
         return pts, False
 
 
-class _KeyIndex:
-    """Chart centres' keys: a cKDTree, rebuilt as the atlas doubles, plus a brute-force tail."""
+class _Rows:
+    """A growable array of rows (capacity doubles): ``rows`` is the filled part, a view."""
 
     def __init__(self):
-        self.keys = []
+        self._a = None
+        self.n = 0
+
+    def add(self, row):
+        row = np.asarray(row, dtype=float)
+        if self._a is None:
+            self._a = np.empty((64,) + row.shape)
+        elif self.n == self._a.shape[0]:
+            self._a = np.concatenate([self._a, np.empty_like(self._a)])
+        self._a[self.n] = row
+        self.n += 1
+
+    @property
+    def rows(self):
+        return self._a[:self.n] if self._a is not None else np.empty((0,))
+
+
+class _KeyIndex:
+    """Chart centres' keys for fixed-radius queries: a k-d tree of the keys up to the last
+    rebuild plus a brute-force tail of those added since, rebuilt when the tail passes
+    TAIL_MIN or 1/TAIL_FRACTION of the tree (a query costs O(log N + tail), an insertion
+    O(log N) amortised). The union is exact: every key within the radius, tree or tail."""
+
+    TAIL_MIN = 128
+    TAIL_FRACTION = 8
+
+    def __init__(self):
+        self.keys = _Rows()
         self.tree = None
         self.n_tree = 0
 
     def add(self, key):
-        self.keys.append(np.asarray(key, dtype=float))
-        if len(self.keys) - self.n_tree > max(64, self.n_tree):
-            self.tree = cKDTree(np.array(self.keys))
-            self.n_tree = len(self.keys)
+        self.keys.add(key)
+        if self.keys.n - self.n_tree > max(self.TAIL_MIN, self.n_tree // self.TAIL_FRACTION):
+            from scipy.spatial import cKDTree  # here, not at import: start-up time
+
+            self.tree = cKDTree(self.keys.rows.copy())
+            self.n_tree = self.keys.n
 
     def query(self, key, radius):
-        found = list(self.tree.query_ball_point(key, radius)) if self.tree is not None else []
-        if len(self.keys) > self.n_tree:
-            tail = np.array(self.keys[self.n_tree:])
-            near = np.flatnonzero(np.linalg.norm(tail - key, axis=1) <= radius)
-            found.extend((near + self.n_tree).tolist())
+        """Indices (insertion order numbers) of the keys within ``radius`` of ``key``."""
+        found = self.tree.query_ball_point(key, radius) if self.tree is not None else []
+        if self.keys.n > self.n_tree:
+            tail = self.keys.rows[self.n_tree:]
+            near = np.flatnonzero(np.linalg.norm(tail - key, axis=1) <= radius) + self.n_tree
+            found = list(found) + near.tolist()
         return found
 
 

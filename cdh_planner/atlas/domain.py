@@ -52,12 +52,16 @@ class HalfSpaces:
         self.count = 0
 
     def add(self, a, beta):
-        if self.count == self.beta.size:
+        self.add_many(np.asarray(a)[None], np.atleast_1d(beta))
+
+    def add_many(self, A, betas):
+        """Rows A (m, n), betas (m,), in order (capacity doubles as one add after another would)."""
+        while self.count + len(betas) > self.beta.size:
             self.a = np.concatenate([self.a, np.empty_like(self.a)])
             self.beta = np.concatenate([self.beta, np.empty_like(self.beta)])
-        self.a[self.count] = a
-        self.beta[self.count] = beta
-        self.count += 1
+        self.a[self.count:self.count + len(betas)] = A
+        self.beta[self.count:self.count + len(betas)] = betas
+        self.count += len(betas)
 
     def satisfied(self, S):
         """Which rows of S (m, n) satisfy every half-space."""
@@ -77,6 +81,13 @@ class _Domain:
     def __init__(self, n, radius):
         self.radius = radius
         self.halfspaces = HalfSpaces(n)
+
+    def clip_many(self, A, betas):
+        """``clip`` by each row of A (m, n) and betas (m,) in turn until the domain is closed."""
+        for a, beta in zip(A, betas):
+            if self.closed:
+                return
+            self.clip(a, beta)
 
     def contains(self, S):
         """Which rows of S (m, n) lie in the ball and satisfy every half-space."""
@@ -152,6 +163,18 @@ class SampledDomain(_Domain):
         idx = np.flatnonzero(self.alive)
         if idx.size:
             self.alive[idx[self.radius * (self.u[idx] @ a) > beta * (1 + TOL) + TOL]] = False
+
+    def clip_many(self, A, betas):
+        """What ``clip`` by each row in turn until closed does, in one product: each row's
+        cut directions, and the half-spaces up to the row that closes the domain."""
+        if len(betas) == 0 or not self.alive.any():
+            return
+        cut = (self.radius * (A @ self.u.T) > betas[:, None] * (1 + TOL) + TOL) & self.alive
+        first = np.where(cut.any(axis=0), cut.argmax(axis=0), len(betas))  # first row cutting u
+        last = int(first[self.alive].max())  # the row that closes the domain (if < m)
+        keep = len(betas) if last >= len(betas) else last + 1
+        self.halfspaces.add_many(A[:keep], betas[:keep])
+        self.alive &= first >= keep
 
     def set_radius(self, radius):
         """A smaller ball: directions cut off only beyond the new radius come back."""

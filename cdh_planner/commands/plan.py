@@ -70,7 +70,7 @@ def run(args):
                  for name, (_, _, s) in SETTINGS.items() if getattr(args, name) is not None}
     settings = replace(settings, **overrides)
     check_outputs(args, problem)
-    planner = Planner(problem.robot, problem.task, settings)
+    planner = Planner(problem.robot, problem.task, settings, scene=problem.scene)
     result = plan_with_progress(planner, problem.start, problem.goal, quiet=args.quiet)
     print_result(result, problem)
     if args.json:
@@ -117,6 +117,9 @@ def print_result(result, problem):
               f"{result.least_margin:.4f} ({result.least_tension_margin:.3g} N)")
         print(f"  timing: {result.stats.get('timing', 'quasi-static')}")
         print(f"  executed: {result.stats.get('executed', '')}")
+        if "least_clearance_m" in result.stats:  # a scene: the least distance at a waypoint
+            print(f"  least clearance {1e3 * result.stats['least_clearance_m']:.3g} mm "
+                  f"({result.stats['clearance_binding']})")
 
 
 def result_dict(result):
@@ -128,6 +131,9 @@ def result_dict(result):
            "least_tension_margin_n": _num(result.least_tension_margin),
            "timing": result.stats.get("timing", ""), "executed": result.stats.get("executed", ""),
            "path": []}
+    if "least_clearance_m" in result.stats:  # with a scene (m, and what binds there)
+        out["least_clearance_m"] = _num(result.stats["least_clearance_m"])
+        out["clearance_binding"] = result.stats["clearance_binding"]
     path = result.path
     if path is not None:
         for k in range(len(path)):

@@ -1,12 +1,16 @@
 """``cdh-planner verify``: wrench feasibility of poses and of the motion between them.
 
     cdh-planner verify ROBOT.yaml POSES.json [--json OUT] [--step S] [--angle-step A]
+                       [--scene SCENE.yaml]
 
 For every pose: feasible or not, normalised margin, binding constraint, cable lengths and
 the tension envelope (min / nominal / max over the wrench ellipsoid). For every pair of
 consecutive poses, the motion a controller executes (position linear, orientation slerp)
 is checked by dense sampling (see cdh_planner.trajectory.verify): worst point and first
-unsafe point. Exit code 0 if everything is feasible, 1 if some pose or segment is not,
+unsafe point. With ``--scene`` (a scene file, cdh_planner/scene/schema.py), a pose or
+sample is feasible only if it is also clear of the obstacles and of the other cables: its
+margin is the least of the wrench margin and the collision margin (m / 0.1 m, binding
+"collision winch_2 / ball"). Exit code 0 if everything is feasible, 1 if some pose or segment is not,
 2 for bad input (including a segment that would need more than
 ``trajectory.verify.MAX_SEGMENT_SAMPLES`` samples at the given steps). Time and memory
 are linear in the number of poses.
@@ -22,6 +26,7 @@ are linear in the number of poses.
      "all_feasible": bool}
 """
 
+import dataclasses
 import json
 import math
 
@@ -32,6 +37,8 @@ from ..feasibility import evaluate
 from ..io.outputs import check_output, write_text
 from ..io.poses import load_poses, parse_angle, parse_length
 from ..model.robot import load_robot
+from ..scene.collision import CollisionModel, combine
+from ..scene.schema import load_scene
 from ..trajectory.verify import DEFAULT_STEP_M, DEFAULT_STEP_RAD, check_motion
 
 EXIT_OK, EXIT_INFEASIBLE = 0, 1
@@ -48,6 +55,8 @@ def add_parser(subparsers):
     p.add_argument("poses", help='JSON list of {"position": [x,y,z], "quaternion": [x,y,z,w]} '
                                  'or {"position": [..], "tau": [phi,theta,sigma]} (m, rad)')
     p.add_argument("--json", metavar="OUT", help="also write the results as JSON")
+    p.add_argument("--scene", metavar="FILE", help="scene file (YAML, scene: obstacles, cable "
+                                                   "radius, platform shape): also check collisions")
     p.add_argument("--step", default=str(DEFAULT_STEP_M), metavar="S",
                    help="largest position step between samples, m or with unit (default 0.001 = 1 mm)")
     angle_default = f"{np.rad2deg(DEFAULT_STEP_RAD):g}deg"
@@ -66,8 +75,15 @@ def run(args):
         "--json", args.json, inputs=[("the robot file ROBOT", args.robot),
                                      ("the poses file POSES", args.poses)])
 
+    collision = CollisionModel(robot, load_scene(args.scene, robot)) if args.scene else None
+
     feas = evaluate(robot, poses.positions, R=poses.rotations)
-    segments = check_motion(robot, poses.positions, poses.quaternions, step_m, step_rad)
+    if collision is not None:  # margins and bindings of wrench feasibility and collision
+        margin, binding = combine(feas.margin, feas.binding, collision, poses.positions,
+                                  poses.rotations)
+        feas = dataclasses.replace(feas, margin=margin, binding=binding)
+    segments = check_motion(robot, poses.positions, poses.quaternions, step_m, step_rad,
+                            collision)
     ok = bool(np.all(feas.feasible)) and all(s.feasible for s in segments)
 
     print_report(robot, poses, feas, segments, ok)

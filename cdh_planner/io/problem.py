@@ -7,6 +7,7 @@
     planner: {radius: 0.1, timeout_s: 60, max_charts: 100000, max_memory_mb: 1024, margin_floor: 0.001}
     start: {position: [x, y, z], tau: [phi, theta, sigma]}   # or quaternion: [x, y, z, w]
     goal:  {lambda: [alpha1, alpha2]}                         # or the task's own coordinates
+    scene: {cable_radius: 0.001, obstacles: [...]}            # optional (scene/schema.py), or a scene file
 
 Units: m and rad. Every error is an InputError naming the key (``start.tau[1]``).
 """
@@ -20,12 +21,13 @@ from ..errors import MAX_POSITION_M, InputError, check_keys
 from ..model.robot import load_robot, read_yaml
 from ..model.task import COORDINATES, task_from_dict
 from ..model.pose import Pose
+from ..scene.schema import load_scene, scene_from_dict
 from ..settings import SETTINGS, PlannerSettings, check_setting
 from .poses import number_list, pose_from_dict
 
 # the settings schema decides which keys go beside ``planner:`` (strategy, cost) and which in it
 TOP_SETTINGS = tuple(k for k, (_, _, s) in SETTINGS.items() if s.top_level)
-TOP_KEYS = ("robot", "task", *TOP_SETTINGS, "planner", "start", "goal", "description")
+TOP_KEYS = ("robot", "task", *TOP_SETTINGS, "planner", "start", "goal", "description", "scene")
 SETTING_KEYS = tuple(k for k in SETTINGS if k not in TOP_SETTINGS)
 MAX_TEXT_CHARS = 4096  # the robot path and the description
 
@@ -39,6 +41,7 @@ class Problem:
     goal: Pose
     path: str = ""
     description: str = ""
+    scene: object = None  # scene.schema.Scene, or None: no collision checks
 
 
 def load_problem(path):
@@ -70,7 +73,18 @@ def problem_from_dict(doc, base_dir=".", source=""):
             settings = replace(settings, **{key: check_setting(key, doc[key])})
     start = pose_in_task(doc["start"], task, "start")
     goal = pose_in_task(doc["goal"], task, "goal")
-    return Problem(robot, task, settings, start, goal, source, description)
+    scene = _scene(doc["scene"], robot, base_dir) if doc.get("scene") is not None else None
+    return Problem(robot, task, settings, start, goal, source, description, scene)
+
+
+def _scene(value, robot, base_dir):
+    """The problem's scene: a ``scene:`` mapping, or the path of a scene file (relative to
+    the problem file)."""
+    if isinstance(value, str):
+        if not value or len(value) > MAX_TEXT_CHARS or "\x00" in value:
+            raise InputError("scene", value, "expected a scene mapping or a scene file's path")
+        return load_scene(Path(base_dir) / value, robot)
+    return scene_from_dict(value, robot, base_dir=base_dir)
 
 
 def settings_from_dict(d, where):

@@ -24,6 +24,7 @@ from ..errors import MAX_FORCE_N, MAX_POSITION_M, InputError
 from .robot_schema import CHOICE, MATRIX, N_CABLES, NAME, NAMES, NUMBER, NUMBERS, check_groups, \
     read_fields, robot_field, schema_of
 
+MAX_CABLE_RADIUS_M = 1.0  # m: a thicker "cable" is a unit mistake
 MAX_ELLIPSOID = 1e18  # largest |entry| of an ellipsoid matrix (1/N^2, 1/(N m)^2)
 MIN_SPREAD_M = 1e-6  # anchors closer than this to one line are collinear
 SINGULAR_RCOND = 1e-9  # J with smallest / largest singular value below this is singular
@@ -75,6 +76,10 @@ class Robot:
     tension_max: np.ndarray = robot_field(
         key="tension_max", kind=NUMBERS, unit="N", per_cable=True, broadcast=True,
         limit=MAX_FORCE_N, sign="positive", description="greatest cable tension")
+    cable_radius: float = robot_field(
+        key="cable_radius", kind=NUMBER, unit="m", sign="non-negative", limit=MAX_CABLE_RADIUS_M,
+        default=0.0, description="cable radius: each cable is a capsule of it in the collision "
+                                 "checks (a scene's cable_radius overrides it)")
     force: np.ndarray = robot_field(  # (3,)
         key="load.force", kind=NUMBERS, unit="N", count=3, limit=MAX_FORCE_N,
         description="load force, base frame")

@@ -51,7 +51,7 @@ class Densify:
         p, tau = v.task.pose(y)
         q = quaternion_from_tau(tau)
         f = evaluate(v.robot, p, tau)
-        if not np.all(f.feasible):
+        if not np.all(f.feasible) or not np.all(v.pose_margins(p, tau)[0] > 0):
             return None
         if not verified and not all(seg.feasible and seg.unresolved == 0
                                     for seg in v.segments(p, q)):

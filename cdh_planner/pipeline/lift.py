@@ -8,6 +8,7 @@ import numpy as np
 
 from ..errors import InputError
 from ..feasibility import evaluate
+from ..model.pose import rotation_tt
 from ..model.task import end_taus
 from ..status import Status
 
@@ -17,10 +18,10 @@ TASK_TOL = 1e-6  # m / rad: how far a start or goal may be off the task's constr
 class Lift:
     """Start and goal of one robot, task and constraint onto M (module docstring)."""
 
-    def __init__(self, robot, task, constraint, in_domain, margin_floor):
+    def __init__(self, validity, constraint, in_domain):
         """``in_domain(x)``: is x inside the atlas's domain (margin above the floor)."""
-        self.robot, self.task, self.constraint = robot, task, constraint
-        self.in_domain, self.margin_floor = in_domain, margin_floor
+        self.validity, self.constraint, self.in_domain = validity, constraint, in_domain
+        self.robot, self.task = validity.robot, validity.task
 
     def __call__(self, start, goal, tolerance):
         """({"start": x, "goal": x}, None) or (None, (Status, message)) of two Poses,
@@ -63,11 +64,18 @@ class Lift:
         if not f.feasible[0]:
             return None, (Status.infeasible(label), f"{label} pose is not wrench-feasible: "
                           f"{f.binding[0]} violated (margin {f.margin[0]:.3g}) at {describe(p, tau)}")
+        collision = self.validity.collision
+        if collision is not None:
+            c = collision.clearance(p, rotation_tt(tau))
+            if not c.ok:
+                return None, (Status.in_collision(label), f"{label} pose is in collision: "
+                              f"{c.binding} {c.distance * 1e3:.3g} mm apart (clearance "
+                              f"{self.validity.scene.clearance * 1e3:g} mm) at {describe(p, tau)}")
         x = self.constraint.lift(p, tau)
         if not self.in_domain(x):
             return None, (Status.infeasible(label), f"{label} pose is feasible but closer to the "
                           f"boundary of C than the planner's margin floor "
-                          f"({self.margin_floor:g}): {describe(p, tau)}")
+                          f"({self.validity.margin_floor:g}): {describe(p, tau)}")
         return x, None
 
 

@@ -4,7 +4,9 @@ owns the algorithm: this stage hands it the costs and the checks of direct motio
 chart links).
 
 The cost is the task metric, or under a clearance weight w > 0 the clearance cost
-(``trajectory.clearance``): length times 1 + w times the mean of phi(margin).
+(``trajectory.clearance``): length times 1 + w times the mean of phi(margin); with a
+scene, inf to or from a point in collision. Start and goal on opposite sides of det J = 0
+have no path at all (``singular_between``), answered before any chart.
 """
 
 import math
@@ -12,7 +14,7 @@ import math
 import numpy as np
 
 from ..feasibility import evaluate
-from ..model.pose import tau_from_rotation
+from ..model.pose import quaternion_from_tau, tau_from_rotation
 from ..search.search import run
 from ..status import Status
 from ..trajectory import clearance
@@ -28,11 +30,14 @@ CLEARANCE_LINK = 2.5
 class Route:
     """The route stage of one constraint, atlas and validity (module docstring)."""
 
-    def __init__(self, constraint, atlas, validity, length, clearance_weight, radius):
-        """``length(xa, xb)``: the task metric between two points of M (rad or m)."""
+    def __init__(self, constraint, atlas, validity, length, clearance_weight, radius, densify):
+        """``length(xa, xb)``: the task metric between two points of M (rad or m);
+        ``densify(y) -> (y, ok)``: the densify stage (``route_unsafe``)."""
         self.constraint, self.atlas, self.validity = constraint, atlas, validity
         self.length, self.weight, self.radius = length, clearance_weight, radius
-        self.cost = length if clearance_weight == 0 else self.clearance_cost
+        self.densify = densify
+        self._clear_cache = {}
+        self.cost = self.blocked(length if clearance_weight == 0 else self.clearance_cost)
         self._edge_costs = {}  # (i, j), i < j -> cost between the chart centres
 
     def heuristic(self, strategy):
@@ -41,20 +46,64 @@ class Route:
         GBF's the metric times the clearance density (``greedy_heuristic``)."""
         if self.weight == 0:
             return None
-        return self.length if strategy == "astar" else self.greedy_heuristic
+        return self.blocked(self.length if strategy == "astar" else self.greedy_heuristic)
+
+    def blocked(self, cost):
+        """``cost`` between points of M, inf when either is in collision: chart transitions
+        into collision cost inf (the paper's Sec. 6), so A* never takes them and GBF tries
+        them last; the search's lazy link check cuts any that are still used."""
+        if self.validity.collision is None:
+            return cost
+        return lambda xa, xb: cost(xa, xb) if self._clear(xa) and self._clear(xb) else math.inf
+
+    def _clear(self, x):
+        """Is the pose of the point x of M clear of collision by the margin floor? (cached)"""
+        key = x.tobytes()
+        if key not in self._clear_cache:
+            self._clear_cache[key] = self.validity.clear(*self.constraint.pose(x))
+        return self._clear_cache[key]
 
     def __call__(self, points, stop, strategy, progress=None):
         """(task coordinates (N, k), charts on the route, direct?, None) from
-        points["start"] to points["goal"], or (None, 0, False, SearchOutcome) of a
-        search that ended otherwise than OK."""
-        ys = self.coords([points["start"], points["goal"]])
+        points["start"] to points["goal"], or (None, 0, False, (Status, message or None, stats))
+        of a route that is not there: a search that ended otherwise than OK (message None:
+        ``failure_message``; stats {"expanded": charts}), or ends on opposite sides of
+        det J = 0."""
+        xs = [points["start"], points["goal"]]
+        ys = self.coords(xs)
         if self.validity.motion(ys[0], ys[1]):
             return self.direct_points(ys[0], ys[1]), 0, True, None
-        out = run(self.atlas, points["start"], points["goal"], self.cost, stop, strategy,
-                  self.direct_x, progress, self._edge_costs, self.link_ok, self.heuristic(strategy))
+        det = self.det_j(xs)
+        if det[0] * det[1] < 0:
+            return None, 0, False, (Status.NO_PATH, SINGULAR_BETWEEN.format(*det), {})
+        out = run(self.atlas, xs[0], xs[1], self.cost, stop, strategy, self.direct_x, progress,
+                  self._edge_costs, self.link_ok, self.heuristic(strategy), self.route_unsafe)
         if out.status != Status.OK:
-            return None, 0, False, out
+            return None, 0, False, (out.status, None, {"expanded": out.expanded})
         return self.route_coords(out), len(out.charts), False, None
+
+    def det_j(self, xs):
+        """det J (the cables' screw Jacobian) at points of M. J is never singular on C (a
+        singular J makes the tension set of the wrench ellipsoid unbounded: math.md, Sec. 3),
+        so its sign is the same all along any path: ends of opposite signs have none."""
+        poses = [self.constraint.pose(x) for x in xs]
+        return evaluate(self.validity.robot, np.array([a for a, _ in poses]),
+                        np.array([b for _, b in poses])).det_j
+
+    def route_unsafe(self, xs, direct):
+        """The first motion k (xs[k] -> xs[k + 1]; not the direct motions in ``direct``,
+        checked densely already) that densification cannot make dense-feasible, or None.
+        One dense check of the route finds the walls thinner than link_ok's probe (Robot
+        2: 6 mrad wide, margin -52 inside, between two link points 0.06 rad apart); the
+        search cuts that link instead of answering with a route that cannot be a path."""
+        y = self.coords(xs)
+        p, tau = self.validity.task.pose(y)
+        for k, seg in enumerate(self.validity.segments(p, quaternion_from_tau(tau))):
+            if k in direct or (seg.feasible and seg.unresolved == 0):
+                continue
+            if not self.densify(y[k:k + 2])[1]:
+                return k
+        return None
 
     def coords(self, xs):
         """Task coordinates (N, k) of points of M."""
@@ -108,7 +157,7 @@ class Route:
         else:
             motion = self.validity.direct_motion(self.coords([xa, xb]))
             p, R = motion(np.zeros(n - 1, dtype=int), np.arange(1, n) / n)
-            inner = clearance.phi(evaluate(self.validity.robot, p, R=R).margin)
+            inner = clearance.phi(self.validity.pose_margins(p, R=R)[0])
             mean = (0.5 * float(ends.sum()) + float(inner.sum())) / n  # trapezoid
         return self.length(xa, xb) * (1.0 + self.weight * mean)
 
@@ -118,6 +167,11 @@ class Route:
         come later)."""
         return self.length(x, target) * float(clearance.density(self.constraint.margin(x),
                                                                 self.weight))
+
+
+SINGULAR_BETWEEN = ("no path: start and goal lie on opposite sides of the singularity det J = 0 "
+                    "(det J = {:.3g} and {:.3g}); every motion between them passes a pose where the "
+                    "cable Jacobian is singular, which no tension in range can hold (at any resolution)")
 
 
 def failure_message(status, charts, settings, radius):

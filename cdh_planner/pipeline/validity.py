@@ -1,8 +1,10 @@
 """Which poses and motions the planner may use: the one place every stage asks.
 
-A pose is valid when it is wrench-feasible with normalised margin at least the planner's
-margin floor (``feasibility.evaluate``); a motion between two poses when it is, densely
-(``trajectory.verify``). Poses are task coordinate rows y (N, k) (``model.task``): M is
+A pose is valid when its margin is at least the planner's margin floor: the wrench
+feasibility margin (normalised, ``feasibility.evaluate``), with a scene the least of it
+and the collision margin (``scene.collision.combine``); a motion between two poses when
+it is, densely (``trajectory.verify``, with the same collision model). Poses are task
+coordinate rows y (N, k) (``model.task``): M is
 the graph of the closed-form lift over the feasible poses of the task, so moving y and
 checking the pose keeps every point on M.
 """
@@ -10,7 +12,8 @@ checking the pose keeps every point on M.
 import numpy as np
 
 from ..feasibility import evaluate
-from ..model.pose import quaternion_from_tau, wrap_angle
+from ..model.pose import quaternion_from_tau, rotation_tt, wrap_angle
+from ..scene.collision import COLLISION_UNIT_M, CollisionModel, combine
 from ..trajectory.verify import SlerpPath, TaskLinePath, check_motion, check_path
 
 COARSE_SAMPLES = 17  # a direct motion is first checked at these few points (a cheap "no")
@@ -19,14 +22,34 @@ COARSE_SAMPLES = 17  # a direct motion is first checked at these few points (a c
 class Validity:
     """Valid poses and motions of one robot and task (module docstring)."""
 
-    def __init__(self, robot, task, margin_floor):
+    def __init__(self, robot, task, margin_floor, scene=None):
+        """``scene`` (scene.schema.Scene or None): obstacles the poses keep clear of."""
         self.robot, self.task, self.margin_floor = robot, task, margin_floor
         self.periodic = np.array(task.periodic, dtype=bool)
+        self.scene = scene
+        self.collision = CollisionModel(robot, scene) if scene is not None else None
+
+    def pose_margins(self, p, tau=None, R=None):
+        """Margins (N,) and bindings of poses (p (N, 3) m, tau (N, 3) rad or R (N, 3, 3)):
+        wrench feasibility's (normalised) and, with a scene, the least of it and the
+        collision margin (scene.collision.combine): positive iff valid at floor 0."""
+        f = evaluate(self.robot, p, tau, R)
+        if self.collision is None:
+            return f.margin, f.binding
+        return combine(f.margin, f.binding, self.collision, p, rotation_tt(tau) if R is None else R)
 
     def margins(self, y):
-        """Normalised margins (N,) of task coordinate rows y (N, k)."""
+        """Margins (N,) of task coordinate rows y (N, k) (``pose_margins``)."""
         p, tau = self.task.pose(y)
-        return evaluate(self.robot, p, tau).margin
+        return self.pose_margins(p, tau)[0]
+
+    def clear(self, p, tau):
+        """Is the pose (p (3,) m, tau (3,) rad) clear of collision by the margin floor?
+        (True without a scene)"""
+        if self.collision is None:
+            return True
+        c = self.collision.clearance(p, rotation_tt(tau))
+        return c.margin / COLLISION_UNIT_M >= self.margin_floor
 
     def pose(self, y):
         """Which rows of y (N, k) are valid poses: margin at least the floor (N,) bool."""
@@ -51,7 +74,7 @@ class Validity:
         seg = np.repeat(np.arange(motion.n_segments), n)
         s = np.tile(np.linspace(0.0, 1.0, n), motion.n_segments)
         p, R = motion(seg, s)
-        return bool(np.all(evaluate(self.robot, p, R=R).margin >= self.margin_floor))
+        return bool(np.all(self.pose_margins(p, R=R)[0] >= self.margin_floor))
 
     def motion(self, ya, yb):
         """Is the direct motion ya -> yb dense-valid? A few points first (most unsafe
@@ -59,14 +82,14 @@ class Validity:
         y = np.array([ya, yb])
         if not (self.probe(y, COARSE_SAMPLES) and self.probe(y, 8 * COARSE_SAMPLES)):
             return False
-        seg = check_path(self.robot, self.direct_motion(y))[0]
+        seg = check_path(self.robot, self.direct_motion(y), collision=self.collision)[0]
         return seg.feasible and seg.unresolved == 0 and seg.worst.margin >= self.margin_floor
 
     def segments(self, p, q):
         """The dense check of the waypoints p (N, 3) m, quaternions q (N, 4) and the
         motion between them (position linear, orientation slerp): one
         ``trajectory.verify`` segment report per pair."""
-        return check_motion(self.robot, p, q)
+        return check_motion(self.robot, p, q, collision=self.collision)
 
 
 def wrapped(d, periodic):

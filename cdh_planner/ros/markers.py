@@ -1,7 +1,7 @@
 """RViz / Foxglove markers of a planned path: the path, the platform and the cables
-coloured by tension margin (no node, no graph).
+coloured by tension margin, and a scene's obstacles (no node, no graph).
 
-    markers_msg(path, robot, frame_id, stamp) -> visualization_msgs/MarkerArray
+    markers_msg(path, robot, frame_id, stamp, scene=None) -> visualization_msgs/MarkerArray
 """
 
 import numpy as np
@@ -18,6 +18,7 @@ MARGIN_FULL = 0.2  # normalised tension margin drawn fully green (0 or less: red
 PATH_COLOR = (0.2, 0.5, 1.0, 1.0)
 PLATFORM_COLOR = (0.2, 0.2, 0.2, 1.0)
 POSES_DRAWN = 5  # platform and cables drawn at this many poses along the path, ends included
+OBSTACLE_COLOR = (0.6, 0.3, 0.1, 0.6)
 
 
 def cable_margins(path, robot):
@@ -39,7 +40,8 @@ def margin_color(margin, full=MARGIN_FULL):
     return ColorRGBA(r=red, g=green, b=0.0, a=1.0)
 
 
-def markers_msg(path, robot, frame_id, stamp, *, line_width=LINE_WIDTH_M, delete_all=True):
+def markers_msg(path, robot, frame_id, stamp, *, line_width=LINE_WIDTH_M, delete_all=True,
+                scene=None):
     """visualization_msgs/MarkerArray for RViz / Foxglove, all in ``frame_id`` (m):
 
     - ns ``path`` id 0: LINE_STRIP through the platform positions p, each vertex coloured
@@ -48,6 +50,10 @@ def markers_msg(path, robot, frame_id, stamp, *, line_width=LINE_WIDTH_M, delete
       ns ``platform``, a closed LINE_STRIP through the anchor points p + R b_i (distinct
       points, by angle around their centre), and ns ``cables``, a LINE_LIST of the six
       cables from the base anchor a_i to p + R b_i, each coloured by its tension margin.
+
+    - with a ``scene`` (scene.schema.Scene), ns ``obstacles`` id k: obstacle k as a SPHERE,
+      CUBE, CYLINDER (RViz's: along z, as the scene's) or, for a mesh, the TRIANGLE_LIST of
+      its convex hull (what the checks use).
 
     With ``delete_all`` a DELETEALL marker comes first, so a new plan replaces the old one.
     """
@@ -59,6 +65,8 @@ def markers_msg(path, robot, frame_id, stamp, *, line_width=LINE_WIDTH_M, delete
         out.markers.append(clear)
     if len(path) == 0:
         return out
+    if scene is not None:
+        out.markers.extend(obstacle_markers(scene, frame_id, stamp))
     margins = cable_margins(path, robot)
     line = _marker(frame_id, stamp, "path", 0, Marker.LINE_STRIP, line_width, PATH_COLOR)
     line.points = [_point(p) for p in path.p]
@@ -70,6 +78,35 @@ def markers_msg(path, robot, frame_id, stamp, *, line_width=LINE_WIDTH_M, delete
         out.markers.append(_platform_marker(frame_id, stamp, ident, attach, robot, line_width))
         out.markers.append(_cables_marker(frame_id, stamp, ident, robot.base_anchors, attach,
                                           margins[k], line_width))
+    return out
+
+
+def obstacle_markers(scene, frame_id, stamp):
+    """One marker per obstacle of ``scene`` (ns ``obstacles``, ids in scene order), placed
+    by its pose in ``frame_id`` (m)."""
+    from scipy.spatial import ConvexHull
+
+    kinds = {"sphere": Marker.SPHERE, "box": Marker.CUBE, "cylinder": Marker.CYLINDER,
+             "mesh": Marker.TRIANGLE_LIST}
+    out = []
+    for k, o in enumerate(scene.obstacles):
+        m = _marker(frame_id, stamp, "obstacles", k, kinds[o.kind], 1.0, OBSTACLE_COLOR)
+        m.pose.position = _point(o.position)
+        x, y, z, w = (float(v) for v in o.quaternion)
+        m.pose.orientation.x, m.pose.orientation.y, m.pose.orientation.z = x, y, z
+        m.pose.orientation.w = w
+        if o.kind == "sphere":
+            m.scale.x = m.scale.y = m.scale.z = 2.0 * o.radius
+        elif o.kind == "box":
+            m.scale.x, m.scale.y, m.scale.z = (float(s) for s in o.size)
+        elif o.kind == "cylinder":
+            m.scale.x = m.scale.y = 2.0 * o.radius
+            m.scale.z = float(o.height)
+        else:
+            m.scale.x = m.scale.y = m.scale.z = 1.0
+            hull = ConvexHull(o.vertices)
+            m.points = [_point(o.vertices[i]) for tri in hull.simplices for i in tri]
+        out.append(m)
     return out
 
 

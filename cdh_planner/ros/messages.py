@@ -234,6 +234,8 @@ ERROR_CODES = {
     Status.OK: NONE,
     Status.START_INFEASIBLE: START_OCCUPIED,  # start not wrench-feasible
     Status.GOAL_INFEASIBLE: GOAL_OCCUPIED,    # goal not wrench-feasible
+    Status.START_IN_COLLISION: START_OCCUPIED,  # start in collision (the scene)
+    Status.GOAL_IN_COLLISION: GOAL_OCCUPIED,    # goal in collision (the scene)
     Status.NO_PATH: NO_VALID_PATH,            # a component exhausted
     Status.TIMEOUT: TIMEOUT,
     Status.CHART_LIMIT: NO_VALID_PATH,        # no path found within max_charts

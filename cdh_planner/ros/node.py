@@ -44,9 +44,9 @@ from .recording import NodeRecording, RunLog, log_limits
 EXECUTOR_THREADS = 1 + planning.PLAN_QUEUE_DEPTH + 3
 
 
-def default_planner_factory(robot, task, settings):
+def default_planner_factory(robot, task, settings, scene=None):
     from ..planner import Planner
-    return Planner(robot, task, settings)
+    return Planner(robot, task, settings, scene=scene)
 
 
 class _GoalCancel:
@@ -149,7 +149,7 @@ class PlannerNode(Node):
     def _new_planner(self, config):
         """A Planner for ``config`` (a fresh atlas); InputError naming the parameter."""
         try:
-            return self._factory(config.robot, config.task, config.settings)
+            return self._factory(config.robot, config.task, config.settings, scene=config.scene)
         except InputError as exc:
             raise parameter_error(exc) from None
 

@@ -32,6 +32,7 @@ from ..model import robot_schema as rs
 from ..model.robot import FIELDS as ROBOT_FIELDS, OPTIONAL_GROUPS, robot_from_dict
 from ..model.task import TASKS, task_from_dict, task_parameters
 from ..pipeline.metrics import task_cost
+from ..scene.schema import load_scene
 from ..settings import SETTINGS, Bounds, PlannerSettings, check_range
 
 STRING, BOOL, INT, DOUBLE, DOUBLES, STRINGS = "string", "bool", "int", "double", "doubles", \
@@ -39,7 +40,7 @@ STRING, BOOL, INT, DOUBLE, DOUBLES, STRINGS = "string", "bool", "int", "double",
 REQUIRED = rs.REQUIRED  # default of a parameter that must come from the robot file
 
 # the groups whose change means a new Planner (the others only affect the node)
-PLANNER_PREFIXES = ("robot.", "task.", "planner.", "trajectory.")
+PLANNER_PREFIXES = ("robot.", "task.", "planner.", "trajectory.", "scene_file")
 INTERPOLATIONS = ("linear", "quintic")
 EXECUTION_MODES = ("stream", "follow_joint_trajectory")
 # read once at start, read-only afterwards: the subscription and action client they name
@@ -143,6 +144,10 @@ SPECS = (
             "for a joint state before answering NO_CURRENT_STATE (DDS discovery of a "
             "controller started at the same time can take about 3 s); 0: no wait",
             low=0.0, high=60.0),
+       Spec("scene_file", STRING, "",
+            "scene file (YAML, scene: obstacles in the base frame, cable radius, platform "
+            "shape; cdh_planner/scene/schema.py): plans keep clear of it; empty: no scene. "
+            "Read when set: edit the file, then set the parameter again"),
        Spec("log_dir", STRING, "~/.ros/cdh_planner",
             "directory of the run MCAP files (one file per node run; created when needed)"),
        Spec("log_enabled", BOOL, True, "record plan calls, published messages and streamed "
@@ -169,6 +174,7 @@ class NodeConfig:
     log_dir: str
     log_enabled: bool
     values: dict = field(default_factory=dict, compare=False, repr=False)
+    scene: object = None  # scene.schema.Scene of scene_file, or None
 
 
 def check_value(spec, value):
@@ -247,6 +253,8 @@ def node_config(values, source="ROS parameters"):
         task_cost(robot, task, settings.cost)   # e.g. great_circle needs the sphere task
     except InputError as exc:
         raise InputError("planner.cost", settings.cost, exc.reason) from None
+    scene = load_scene(os.path.expanduser(checked["scene_file"]), robot) \
+        if checked["scene_file"] else None
     log_dir = checked["log_dir"]
     if not log_dir and checked["log_enabled"]:
         raise InputError("log_dir", log_dir, "must name a directory while log_enabled is true")
@@ -255,7 +263,7 @@ def node_config(values, source="ROS parameters"):
                       stream_rate_hz=checked["stream_rate_hz"],
                       stream_interpolation=checked["stream_interpolation"],
                       log_dir=os.path.expanduser(log_dir), log_enabled=checked["log_enabled"],
-                      values=checked)
+                      values=checked, scene=scene)
 
 
 def _robot_dict(checked):

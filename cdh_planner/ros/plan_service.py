@@ -156,7 +156,7 @@ class PlanService:
         result = planning.output_refusal(result) or result
         if result.success:
             out = planning.plan_outputs(result, config.robot, config.base_frame,
-                                        self._outlet.stamp())
+                                        self._outlet.stamp(), getattr(config, "scene", None))
             self._commit(result, config, out, run_id, log_file)
             return Answer(result, out, out.path)
         path = self._no_path(config)

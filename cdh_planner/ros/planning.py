@@ -302,16 +302,16 @@ def run_planner(planner, start, goal, call=None, progress=None, logger=None):
     return result
 
 
-def plan_outputs(result, robot, base_frame, stamp):
+def plan_outputs(result, robot, base_frame, stamp, scene=None):
     """The messages of a successful PlanResult: path (stamp = ``stamp``, poses at stamp +
     t), cable trajectory (header stamp 0: start on receipt), tension envelope (stamp =
-    ``stamp``), markers."""
+    ``stamp``), markers (with the ``scene``'s obstacles, if any)."""
     path = result.path
     return PlanOutputs(
         path=M.path_msg(path, base_frame, stamp),
         cable_trajectory=M.cable_trajectory_msg(path, robot.winch_names, base_frame),
         tension_envelope=M.tension_envelope_msg(path, robot.winch_names, base_frame, stamp),
-        markers=markers_msg(path, robot, base_frame, stamp))
+        markers=markers_msg(path, robot, base_frame, stamp, scene=scene))
 
 
 def action_result(result, out=None, path=None):

@@ -88,52 +88,88 @@ class SearchOutcome:
 def run(atlas, x_start, x_goal, cost: Callable, stop: Stop, strategy="astar",
         direct: Optional[Callable] = None, progress: Optional[Callable] = None,
         edge_costs: Optional[dict] = None, link_ok: Optional[Callable] = None,
-        heuristic: Optional[Callable] = None) -> SearchOutcome:
+        heuristic: Optional[Callable] = None, route_check: Optional[Callable] = None) -> SearchOutcome:
     """One query from x_start to x_goal (points on M) on ``atlas``; module docstring.
     ``progress`` is called with {"charts", "time_s", "best_h"} every PROGRESS_PERIOD_S;
     ``edge_costs`` caches chart-link costs across queries; ``link_ok(points)`` is the
     caller's check of the points that join two charts (a link that fails it is cut and
     the search is run again); ``heuristic(x, target)`` orders the search (default
-    ``cost``)."""
+    ``cost``); ``route_check(points, direct)`` is the caller's check of a whole route whose
+    links passed ``link_ok`` (``direct``: the indices of direct motions): the index k of a
+    motion points[k] -> points[k + 1] that fails, whose link is then cut, or None. One
+    dense check of a route is cheaper than one per link, and finds the walls thinner than
+    link_ok's probe."""
     if strategy not in STRATEGIES:
         raise ValueError(f"unknown strategy {strategy!r} (expected {STRATEGIES})")
     i_start, i_goal = atlas.chart_at(x_start), atlas.chart_at(x_goal)
-    direct_cache = {}
+    memo = _Memo({} if edge_costs is None else edge_costs)
     while True:  # lazy links: a route's links are checked once found; a bad one is cut
-        search = _Bidirectional(atlas, cost, stop, strategy, direct, progress,
-                                {} if edge_costs is None else edge_costs, direct_cache, heuristic)
+        search = _Bidirectional(atlas, cost, stop, strategy, direct, progress, memo, heuristic)
         status, route, hops = search.run(i_start, i_goal)
         if status != Status.OK:
             return SearchOutcome(status, expanded=search.expanded)
-        points, direct_idx, bad = _route_points(atlas, route, hops, link_ok, search.direct_ok)
+        points, direct_idx, owners, bad = _route_points(atlas, route, hops, link_ok,
+                                                        search.direct_ok, memo.links_ok)
+        if bad is None and route_check is not None:
+            k = route_check(points, frozenset(direct_idx))
+            if k is not None and k in direct_idx:  # the caller's check is stricter than direct
+                memo.direct[owners[k]] = False
+                continue
+            bad = None if k is None else owners[k]
         if bad is None:
             return SearchOutcome(Status.OK, points, frozenset(direct_idx), route,
                                  search.route_cost(route, hops), search.expanded)
         atlas.unlink(*bad)
 
 
-def _route_points(atlas, route, hops, link_ok=None, direct_ok=None):
+class _Memo:
+    """What the searches of one query share across their restarts (a cut link restarts
+    the search; without these each restart recomputed h of every chart it reached and
+    re-checked every link of its route: the query slowed as the atlas grew). Each is a
+    pure function of the charts, which never move, so sharing changes no answer."""
+
+    def __init__(self, edge_costs):
+        self.edge_costs = edge_costs  # (i, j), i < j -> cost (the caller's, across queries)
+        self.h = {}  # (root, i) -> heuristic of chart i towards the other end
+        self.hop = {}  # (root, i) -> cost of the direct motion from chart i to the other end
+        self.direct = {}  # (i, j), i < j -> the direct motion is safe
+        self.links_ok = set()  # (i, j), i < j: links whose points passed link_ok
+        self.t0 = time.perf_counter()  # the query's start, for progress
+
+
+def _route_points(atlas, route, hops, link_ok=None, direct_ok=None, links_ok=None):
     """Points on M along a chart route; direct hops add only their far end, and so do links
     whose points fail but whose direct motion is safe. Returns (points, direct indices,
-    None) or (None, None, the first link that failed)."""
+    owners, None), owners[k] the charts (i, j), i < j, whose link or direct motion gives
+    motion k (points[k] -> points[k + 1]), or (None, None, None, the first link that
+    failed). ``links_ok``: a set of links known to pass ``link_ok`` (read and extended)."""
+    links_ok = set() if links_ok is None else links_ok
     points = [atlas.charts[route[0]].x]
-    direct_idx = []
+    direct_idx, owners = [], []
     if len(route) == 1:  # start == goal: a path that stays
-        return [points[0], points[0].copy()], [], None
+        return [points[0], points[0].copy()], [], [(route[0], route[0])], None
     for a, b in zip(route, route[1:]):
         if (a, b) in hops:
             direct_idx.append(len(points) - 1)
             points.append(atlas.charts[b].x)
+            owners.append((min(a, b), max(a, b)))
             continue
         pts = atlas.edge_points(a, b)
-        if pts is None or (link_ok is not None and not link_ok(pts)):
+        if pts is not None and link_ok is not None and (min(a, b), max(a, b)) not in links_ok:
+            if not link_ok(pts):
+                pts = None
+            else:
+                links_ok.add((min(a, b), max(a, b)))
+        if pts is None:
             if direct_ok is None or not direct_ok(a, b):
-                return None, None, (min(a, b), max(a, b))
+                return None, None, None, (min(a, b), max(a, b))
             direct_idx.append(len(points) - 1)
             points.append(atlas.charts[b].x)
+            owners.append((min(a, b), max(a, b)))
             continue
         points.extend(pts[1:])
-    return points, direct_idx, None
+        owners.extend([(min(a, b), max(a, b))] * (len(pts) - 1))
+    return points, direct_idx, owners, None
 
 
 class _Side:
@@ -156,8 +192,7 @@ class _Side:
 
 
 class _Bidirectional:
-    def __init__(self, atlas, cost, stop, strategy, direct, progress, edge_costs, direct_cache,
-                 heuristic=None):
+    def __init__(self, atlas, cost, stop, strategy, direct, progress, memo, heuristic=None):
         self.atlas = atlas
         self.cost = cost
         self.heuristic = cost if heuristic is None else heuristic
@@ -165,13 +200,13 @@ class _Bidirectional:
         self.strategy = strategy
         self.direct = direct
         self.progress = progress
-        self.edge_costs = edge_costs
-        self.direct_cache = direct_cache
+        self.edge_costs = memo.edge_costs
+        self.direct_cache = memo.direct
         self.expanded = 0
-        self._t0 = time.perf_counter()
+        self._t0 = memo.t0
         self._last_progress = 0.0
-        self._h = {}
-        self._hop = {}
+        self._h = memo.h
+        self._hop = memo.hop
         self._count = itertools.count()
 
     # ----- helpers ---------------------------------------------------------------------

@@ -22,7 +22,9 @@ A violation narrower than the sampling that the slope estimate does not anticipa
 still be missed; ``SegmentCheck.unresolved`` counts the intervals where the slope test
 still allowed a dip when the refinement stopped (0 in the normal case; a motion tangent
 to the boundary of C, margin touching 0, is one that sampling cannot decide).
-The margin is the normalised one of ``feasibility.evaluate`` (positive iff feasible).
+The margin is the normalised one of ``feasibility.evaluate`` (positive iff feasible);
+with a scene's collision model (``collision``), the least of it and the collision margin
+(``scene.collision.combine``: positive iff also clear of obstacles and other cables).
 """
 
 from dataclasses import dataclass
@@ -34,6 +36,7 @@ from scipy.spatial.transform import Rotation
 from ..errors import InputError
 from ..feasibility import evaluate
 from ..model.pose import rotation_angle_between, rotation_tt
+from ..scene.collision import combine
 
 DEFAULT_STEP_M = 1e-3
 DEFAULT_STEP_RAD = np.deg2rad(0.2)
@@ -141,11 +144,11 @@ class TaskLinePath:
 
 
 def check_motion(robot, positions, quaternions, max_step_m=DEFAULT_STEP_M,
-                 max_step_rad=DEFAULT_STEP_RAD):
+                 max_step_rad=DEFAULT_STEP_RAD, collision=None):
     """Check the motion through waypoints (positions (N, 3) m, quaternions (N, 4)) with
     position linear and orientation slerp between consecutive ones: N - 1 SegmentChecks."""
     path = SlerpPath(np.asarray(positions, dtype=float), np.asarray(quaternions, dtype=float))
-    return check_path(robot, path, max_step_m, max_step_rad)
+    return check_path(robot, path, max_step_m, max_step_rad, collision)
 
 
 def check_task_motion(robot, task, coords, max_step_m=DEFAULT_STEP_M,
@@ -154,12 +157,14 @@ def check_task_motion(robot, task, coords, max_step_m=DEFAULT_STEP_M,
     return check_path(robot, TaskLinePath(task, coords), max_step_m, max_step_rad)
 
 
-def check_path(robot, path, max_step_m=DEFAULT_STEP_M, max_step_rad=DEFAULT_STEP_RAD):
+def check_path(robot, path, max_step_m=DEFAULT_STEP_M, max_step_rad=DEFAULT_STEP_RAD,
+               collision=None):
     """Dense check of every segment of ``path`` (SlerpPath, TaskLinePath or alike:
-    ``path(seg, s) -> (p, R)``, ``path.speeds()``, ``path.n_segments``)."""
+    ``path(seg, s) -> (p, R)``, ``path.speeds()``, ``path.n_segments``); ``collision``: a
+    scene's CollisionModel or None."""
     if path.n_segments < 1:
         return []
-    samples = _Samples(robot, path)
+    samples = _Samples(robot, path, collision)
     samples.add(*_initial_grid(path, max_step_m, max_step_rad))
     unresolved = _refine(samples)
     first = _first_unsafe(samples)
@@ -194,8 +199,8 @@ def _initial_grid(path, max_step_m, max_step_rad):
 class _Samples:
     """Evaluated samples of all segments, kept sorted by (segment, s)."""
 
-    def __init__(self, robot, path):
-        self.robot, self.path = robot, path
+    def __init__(self, robot, path, collision=None):
+        self.robot, self.path, self.collision = robot, path, collision
         self.seg = np.empty(0, dtype=int)
         self.s = np.empty(0)
         self.margin = np.empty(0)
@@ -207,7 +212,8 @@ class _Samples:
         for a in range(0, s.size, CHUNK):
             p, R = self.path(seg[a:a + CHUNK], s[a:a + CHUNK])
             f = evaluate(self.robot, p, R=R)
-            margin[a:a + CHUNK], binding[a:a + CHUNK] = f.margin, f.binding
+            margin[a:a + CHUNK], binding[a:a + CHUNK] = combine(f.margin, f.binding,
+                                                                self.collision, p, R)
         return np.where(np.isnan(margin), -np.inf, margin), binding
 
     def add(self, seg, s):

@@ -26,8 +26,8 @@ WAYPOINTS = 40
 
 
 class FakePlanner:
-    def __init__(self, robot, task, settings):
-        self.robot, self.task, self.settings = robot, task, settings
+    def __init__(self, robot, task, settings, scene=None):
+        self.robot, self.task, self.settings, self.scene = robot, task, settings, scene
         self.delay_file = os.environ.get("FAKE_PLANNER_DELAY_FILE", "")
 
     def _result(self, ok, reason, message, path=None, t0=0.0):

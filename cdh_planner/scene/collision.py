@@ -1,0 +1,377 @@
+"""Collision checks of a pose against a scene: least signed distance and what binds.
+
+Each cable i is a capsule of radius r (``scene.cable_radius``) from its base anchor a_i
+to its platform anchor p + R b_i. Checked at a pose: every cable against every obstacle,
+the platform's shape against every obstacle, and every pair of cables (those sharing an
+anchor point compared only beyond ``scene.shared_anchor_exemption`` of it: see
+``schema``). Distances are signed (m, negative: penetration depth) and computed by the
+coal library (GJK / EPA and closed forms), except cable against cable: two capsules of
+one radius are the distance of two segments less 2 r, computed for all pairs at once in
+the compiled kernel below.
+
+Speed: a compiled kernel computes all cable pairs and a lower bound for every
+cable-obstacle and platform-obstacle pair (bounding spheres of the obstacles); coal is
+then called in the order of those bounds only while a bound is below the least distance
+found, so the result is the exact least distance with a few library calls.
+benchmarks/collision.py measures it.
+"""
+
+import math
+from dataclasses import dataclass
+
+import coal
+import numpy as np
+from numba import njit
+
+from .schema import SHARED_ANCHOR_M
+
+# A collision margin joins the normalised wrench margin as metres / COLLISION_UNIT_M: 1 cm
+# of room counts as a wrench margin of 0.1 (Robot 2's poses have 0.03 to 0.15), and the
+# planner's margin floor (1e-3) keeps planned waypoints 0.1 mm beyond the scene's clearance.
+COLLISION_UNIT_M = 0.1
+GJK_TOLERANCE = 1e-9  # m: coal's convergence tolerance (its default, 1e-6, is too coarse)
+EPS = 1e-300
+
+
+@dataclass(frozen=True)
+class Clearance:
+    """The least signed distance at a pose (m) and what binds: ``kind`` one of
+    "cable-obstacle", "platform-obstacle", "cable-cable" (None with nothing to check and
+    ``distance`` inf); ``obstacle`` its id (or None), ``cables`` the cable indices
+    involved (0-based). ``margin`` = distance - the scene's clearance; ``ok`` when >= 0."""
+
+    distance: float
+    margin: float
+    kind: str = None
+    obstacle: str = None
+    cables: tuple = ()
+    names: tuple = ()  # the cables' winch names
+
+    @property
+    def ok(self):
+        return self.margin >= 0.0
+
+    @property
+    def binding(self):
+        """What binds, in words: "winch_2 / ball", "platform / post", "winch_1 / winch_4"."""
+        if self.kind is None:
+            return ""
+        parts = [self.names[i] for i in self.cables] if self.cables else ["platform"]
+        return " / ".join(parts + ([self.obstacle] if self.obstacle is not None else []))
+
+
+class CollisionModel:
+    """The robot's cables and platform against the scene's obstacles, ready to check poses.
+
+    ``clearance(p, R)``: the least signed distance and what binds (exact, pruned);
+    ``distances(p, R)``: every checked pair's distance (no pruning: tests, markers).
+    Holds its work buffers: one model per thread."""
+
+    def __init__(self, robot, scene):
+        self.scene = scene
+        self.names = tuple(robot.winch_names)
+        A = np.asarray(robot.base_anchors, dtype=float)
+        B = np.asarray(robot.platform_anchors, dtype=float)
+        m, K = len(A), len(scene.obstacles)
+        self.obstacles = scene.obstacles
+        self.platform = scene.platform
+        self.pairs, trims = _cable_pairs(A, B)
+        centres = np.array([o.position for o in self.obstacles], dtype=float).reshape(-1, 3)
+        radii = np.array([o.bounding_radius() for o in self.obstacles], dtype=float)
+        plat = self.platform
+        self.static = np.concatenate([  # the kernel's constants, one array (offsets: _kernel)
+            A.ravel(), B.ravel(), centres.ravel(), radii, trims.ravel(),
+            [scene.cable_radius, scene.shared_anchor_exemption],
+            plat.position if plat else np.zeros(3),
+            [plat.bounding_radius() if plat else -1.0]])  # < 0: no platform
+        # work buffers: lower bounds (cables, then the platform) and each cable's capsule
+        # frame (rotation 9, centre 3, half length 1; its platform anchor 3), cable pair distances
+        self.lb = np.empty((m + 1, K))
+        self.frames = np.empty((m, 16))
+        self.cc = np.empty(len(self.pairs))
+        self.capsules = [coal.Capsule(float(scene.cable_radius), 1.0) for _ in range(m)]
+        self.cable_T = [coal.Transform3s() for _ in range(m)]
+        self.platform_T = coal.Transform3s()
+        # ComputeDistance keeps pointers to its shapes: the model holds them
+        self.geometry = geometry = [_geometry(o) for o in self.obstacles]
+        self.platform_geometry = _geometry(plat) if plat else None
+        self.placement = [coal.Transform3s(o.rotation, o.position) for o in self.obstacles]
+        self.cable_fn = [[coal.ComputeDistance(c, g) for g in geometry] for c in self.capsules]
+        self.platform_fn = [coal.ComputeDistance(self.platform_geometry, g) for g in geometry] \
+            if plat else []
+        self.request = coal.DistanceRequest()
+        self.request.gjk_tolerance = GJK_TOLERANCE
+        self.result = coal.DistanceResult()
+
+    # ------------------------------------------------------------------ least distance
+
+    def clearance(self, p, R):
+        """The least signed distance (m) at pose (p (3,) m, R (3, 3)) and what binds."""
+        p, R = self._pose(p, R)
+        best, what = math.inf, None
+        if self.cc.size:
+            k = int(np.argmin(self.cc))
+            best, what = float(self.cc[k]), ("cable-cable", None, tuple(map(int, self.pairs[k])))
+        if self.obstacles:
+            flat = self.lb.ravel()  # consumed: each pair tried is set to inf
+            m, K = len(self.names), len(self.obstacles)
+            while True:  # in increasing order of the bounds, while one is below the best
+                idx = int(np.argmin(flat))
+                if flat[idx] >= best:
+                    break
+                flat[idx] = math.inf
+                i, k = divmod(idx, K)
+                if i < m:
+                    d, w = self._cable_obstacle(i, k), ("cable-obstacle", k, (i,))
+                else:
+                    d, w = self._platform_obstacle(k, p, R), ("platform-obstacle", k, ())
+                if d < best:
+                    best, what = d, w
+        return self._answer(best, what)
+
+    def _pose(self, p, R):
+        """Fill the work buffers for pose (p, R): lower bounds, pair distances, frames."""
+        p = np.ascontiguousarray(p, dtype=float)
+        R = np.ascontiguousarray(R, dtype=float)
+        _kernel(p, R, self.static, self.pairs, self.lb, self.frames, self.cc)
+        return p, R
+
+    def _answer(self, best, what):
+        if what is None:
+            return Clearance(distance=math.inf, margin=math.inf)
+        kind, k, cables = what
+        oid = self.obstacles[k].id if k is not None else None
+        return Clearance(distance=best, margin=best - self.scene.clearance, kind=kind,
+                         obstacle=oid, cables=cables, names=self.names)
+
+    # ------------------------------------------------------------------ one pair (coal)
+
+    def _cable_obstacle(self, i, k):
+        """Signed distance (m) of cable i's capsule (frame from the last ``_pose``) to
+        obstacle k, by coal."""
+        f = self.frames[i]
+        self.capsules[i].halfLength = f[12]
+        T = self.cable_T[i]
+        T.setTransform(f[:9].reshape(3, 3), f[9:12])
+        self.result.clear()
+        return float(self.cable_fn[i][k](T, self.placement[k], self.request, self.result))
+
+    def _platform_obstacle(self, k, p, R):
+        """Signed distance (m) of the platform's shape at (p, R) to obstacle k, by coal."""
+        s = self.platform
+        self.platform_T.setTransform(R @ s.rotation, p + R @ s.position)
+        self.result.clear()
+        return float(self.platform_fn[k](self.platform_T, self.placement[k], self.request,
+                                         self.result))
+
+    # ------------------------------------------------------------------ every pair
+
+    def distances(self, p, R):
+        """Every checked pair at pose (p, R): a list of (kind, obstacle id or None, cable
+        indices, signed distance m), unpruned (for tests and markers)."""
+        p, R = self._pose(p, R)
+        out = [("cable-cable", None, tuple(map(int, pair)), float(d))
+               for pair, d in zip(self.pairs, self.cc)]
+        for k, o in enumerate(self.obstacles):
+            out += [("cable-obstacle", o.id, (i,), self._cable_obstacle(i, k))
+                    for i in range(len(self.names))]
+            if self.platform is not None:
+                out.append(("platform-obstacle", o.id, (), self._platform_obstacle(k, p, R)))
+        return out
+
+    def margins(self, p, R):
+        """Collision margins (m, distance - clearance) and bindings ("collision winch_2 /
+        ball") of N poses: p (N, 3) m, R (N, 3, 3)."""
+        p = np.asarray(p, dtype=float).reshape(-1, 3)
+        R = np.asarray(R, dtype=float).reshape(-1, 3, 3)
+        margin, binding = np.empty(len(p)), np.empty(len(p), dtype=object)
+        for n in range(len(p)):
+            c = self.clearance(p[n], R[n])
+            margin[n], binding[n] = c.margin, f"collision {c.binding}"
+        return margin, binding
+
+    def lower_bounds(self, p, R):
+        """Lower bounds (m + 1, K), m, of the cable-obstacle (rows 0..m-1) and
+        platform-obstacle (row m) distances at pose (p, R), from bounding spheres."""
+        self._pose(p, R)
+        return self.lb.copy()
+
+
+def combine(margin, binding, collision, p, R):
+    """The margins (N,) and bindings (N,) of wrench feasibility (normalised, from
+    ``feasibility.evaluate``) and of collision (``collision``: a CollisionModel or None)
+    at poses (p, R): the least of the two, the collision margin in units of
+    COLLISION_UNIT_M; positive iff the pose is wrench-feasible and collision-free."""
+    if collision is None:
+        return margin, binding
+    cm, cb = collision.margins(p, R)
+    cm = cm / COLLISION_UNIT_M
+    worse = cm < margin
+    return np.where(worse, cm, margin), np.where(worse, cb, binding)
+
+
+def _geometry(shape):
+    """The coal geometry of a Shape, in its own frame."""
+    if shape.kind == "sphere":
+        return coal.Sphere(shape.radius)
+    if shape.kind == "box":
+        return coal.Box(*map(float, shape.size))
+    if shape.kind == "cylinder":
+        return coal.Cylinder(shape.radius, shape.height)
+    points = coal.StdVec_Vec3s()
+    for v in shape.vertices:
+        points.append(np.asarray(v, dtype=float))
+    return coal.Convex.convexHull(points, False, "")
+
+
+def _cable_pairs(A, B):
+    """Every pair (i, j), i < j, of cables, and which ends they share: trims (n, 2) with
+    1.0 where the base anchors (column 0) or platform anchors (column 1) coincide."""
+    m = len(A)
+    pairs = [(i, j) for i in range(m) for j in range(i + 1, m)]
+    trims = [(float(np.linalg.norm(A[i] - A[j]) < SHARED_ANCHOR_M),
+              float(np.linalg.norm(B[i] - B[j]) < SHARED_ANCHOR_M)) for i, j in pairs]
+    return np.array(pairs, dtype=np.int64).reshape(-1, 2), np.array(trims).reshape(-1, 2)
+
+
+# ----------------------------------------------------------------------------- kernel
+
+@njit(cache=True)
+def _kernel(p, R, static, pairs, lb, frames, cc):
+    """For pose (p, R): lb[i, k] = dist(segment a_i b_i, c_k) - rho_k - r, a lower bound
+    of cable i's distance to obstacle k (c_k, rho_k its bounding sphere), and lb[m, k]
+    the platform's (|centre - c_k| - rho_k - rho_platform; inf without a platform); frames[i]: cable i's capsule
+    frame (rotation taking z to the cable, row-major; centre; half length); cc[n]: the
+    distance of the capsules of cable pair n (shared ends cut by rho; inf if nothing is
+    left). Scalar code on 3-tuples: no allocation in the loops."""
+    m, K, P = lb.shape[0] - 1, lb.shape[1], pairs.shape[0]
+    oB, oC = 3 * m, 6 * m
+    oR = oC + 3 * K
+    oT = oR + K
+    o = oT + 2 * P
+    r, rho = static[o], static[o + 1]
+    pc = _add(_rot(R, _v(static, o + 2)), _v(p, 0))
+    prad = static[o + 5]
+    for i in range(m):
+        a = _v(static, 3 * i)
+        b = _add(_rot(R, _v(static, oB + 3 * i)), _v(p, 0))
+        frames[i, 13], frames[i, 14], frames[i, 15] = b  # the platform anchor, for the pairs
+        _frame(a, b, frames[i])
+        for k in range(K):
+            lb[i, k] = _point_segment(_v(static, oC + 3 * k), a, b) - static[oR + k] - r
+    for k in range(K):
+        lb[m, k] = _norm(_sub(_v(static, oC + 3 * k), pc)) - static[oR + k] - prad \
+            if prad >= 0.0 else np.inf
+    for n in range(P):
+        i, j = pairs[n, 0], pairs[n, 1]
+        cut_a, cut_b = static[oT + 2 * n], static[oT + 2 * n + 1]
+        ok1, p0, p1 = _cut(_v(static, 3 * i), _v(frames[i], 13), cut_a, cut_b, rho)
+        ok2, q0, q1 = _cut(_v(static, 3 * j), _v(frames[j], 13), cut_a, cut_b, rho)
+        cc[n] = _segment_segment(p0, p1, q0, q1) - 2.0 * r if ok1 and ok2 else np.inf
+
+
+@njit(cache=True, inline="always")
+def _v(x, o):
+    return (x[o], x[o + 1], x[o + 2])
+
+
+@njit(cache=True, inline="always")
+def _add(a, b):
+    return (a[0] + b[0], a[1] + b[1], a[2] + b[2])
+
+
+@njit(cache=True, inline="always")
+def _sub(a, b):
+    return (a[0] - b[0], a[1] - b[1], a[2] - b[2])
+
+
+@njit(cache=True, inline="always")
+def _scale(s, a):
+    return (s * a[0], s * a[1], s * a[2])
+
+
+@njit(cache=True, inline="always")
+def _dot(a, b):
+    return a[0] * b[0] + a[1] * b[1] + a[2] * b[2]
+
+
+@njit(cache=True, inline="always")
+def _norm(a):
+    return math.sqrt(_dot(a, a))
+
+
+@njit(cache=True, inline="always")
+def _rot(R, x):
+    return (R[0, 0] * x[0] + R[0, 1] * x[1] + R[0, 2] * x[2],
+            R[1, 0] * x[0] + R[1, 1] * x[1] + R[1, 2] * x[2],
+            R[2, 0] * x[0] + R[2, 1] * x[1] + R[2, 2] * x[2])
+
+
+@njit(cache=True)
+def _frame(a, b, out):
+    """out[:13] = rotation taking z to the unit vector u along a -> b (row-major:
+    Rodrigues about z x u, R = I + K + K^2 / (1 + u_z)), the midpoint, half the length."""
+    d = _sub(b, a)
+    length = _norm(d)
+    x, y, z = (d[0] / length, d[1] / length, d[2] / length) if length > 0.0 else (0.0, 0.0, 1.0)
+    if z < -1.0 + 1e-12:
+        rows = (1.0, 0.0, 0.0, 0.0, -1.0, 0.0, 0.0, 0.0, -1.0)
+    else:
+        h = 1.0 / (1.0 + z)
+        rows = (1.0 - h * x * x, -h * x * y, x,
+                -h * x * y, 1.0 - h * y * y, y,
+                -x, -y, 1.0 - h * (x * x + y * y))
+    for c in range(9):
+        out[c] = rows[c]
+    for c in range(3):
+        out[9 + c] = 0.5 * (a[c] + b[c])
+    out[12] = 0.5 * length
+
+
+@njit(cache=True)
+def _cut(a, b, cut_a, cut_b, rho):
+    """(ok, a', b'): the segment a..b with rho removed at the ends flagged; ok False if
+    nothing is left."""
+    d = _sub(b, a)
+    length = _norm(d)
+    if (cut_a > 0.0 or cut_b > 0.0) and length == 0.0:
+        return False, a, b
+    s0 = rho / length if cut_a > 0.0 else 0.0
+    s1 = 1.0 - (rho / length if cut_b > 0.0 else 0.0)
+    if (cut_a > 0.0 or cut_b > 0.0) and s1 <= s0:
+        return False, a, b
+    return True, _add(a, _scale(s0, d)), _add(a, _scale(s1, d))
+
+
+@njit(cache=True)
+def _point_segment(c, a, b):
+    d, w = _sub(b, a), _sub(c, a)
+    dd = _dot(d, d)
+    t = 0.0 if dd <= 0.0 else min(1.0, max(0.0, _dot(w, d) / dd))
+    return _norm(_sub(w, _scale(t, d)))
+
+
+@njit(cache=True)
+def _segment_segment(p0, p1, q0, q1):
+    """Least distance between segments p0..p1 and q0..q1 (Ericson, Real-Time Collision
+    Detection, 5.1.9)."""
+    d1, d2, r = _sub(p1, p0), _sub(q1, q0), _sub(p0, q0)
+    a, e, f = _dot(d1, d1), _dot(d2, d2), _dot(d2, r)
+    if a <= EPS and e <= EPS:
+        return _norm(r)
+    if a <= EPS:
+        s, t = 0.0, min(1.0, max(0.0, f / e))
+    else:
+        c = _dot(d1, r)
+        if e <= EPS:
+            s, t = min(1.0, max(0.0, -c / a)), 0.0
+        else:
+            b = _dot(d1, d2)
+            denom = a * e - b * b
+            s = min(1.0, max(0.0, (b * f - c * e) / denom)) if denom > 1e-14 * a * e else 0.0
+            t = (b * s + f) / e
+            if t < 0.0:
+                s, t = min(1.0, max(0.0, -c / a)), 0.0
+            elif t > 1.0:
+                s, t = min(1.0, max(0.0, (b - c) / a)), 1.0
+    return _norm(_sub(_add(r, _scale(s, d1)), _scale(t, d2)))

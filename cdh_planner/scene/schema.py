@@ -1,0 +1,249 @@
+"""The scene: obstacles in the base frame, the platform's shape, the cables' radius.
+
+One format everywhere (problem files' ``scene:`` key, ``verify --scene FILE``, the node):
+
+    scene:
+      cable_radius: 0.001            # m; absent: robot.cable_radius (else 0)
+      clearance: 0.0                 # m: the least distance kept everywhere
+      shared_anchor_exemption: 0.01  # m: see below
+      platform: {type: box, size: [0.14, 0.14, 0.01],
+                 position: [0, 0, 0], quaternion: [0, 0, 0, 1]}   # platform frame; absent: none
+      obstacles:                     # base frame
+        - {id: ball, type: sphere, radius: 0.02, position: [x, y, z]}
+        - {id: post, type: box, size: [sx, sy, sz], position: [...], quaternion: [x, y, z, w]}
+        - {id: pipe, type: cylinder, radius: r, height: h, position: [...], quaternion: [...]}
+        - {id: fixture, type: mesh, file: fixture.stl, scale: 1.0, position: [...], quaternion: [...]}
+
+SI units. A box's ``size`` is its full edge lengths; a cylinder's axis is its own z,
+``height`` its full length, centred on ``position``; a mesh file (STL, OBJ, PLY; read by
+trimesh) is relative to the scene file's folder, scaled by ``scale`` then placed by
+``position`` / ``quaternion``, and checked as its convex hull (conservative: a concave
+fixture is best given as several meshes). ``position`` defaults to 0 and ``quaternion``
+(x, y, z, w, unit) to the identity.
+
+``shared_anchor_exemption`` (rho): two cables that share an anchor point (within
+SHARED_ANCHOR_M) touch there by design; their capsules are compared only beyond rho of
+that point (each cable is cut short by rho at the shared end). So two cables leaving a
+shared anchor at an angle alpha are in contact iff r / sin(alpha / 2) > rho (r the cable
+radius): with r = 1 mm and rho = 10 mm, iff alpha < 11.5 degrees.
+
+Every field is checked here; an error names the field and value (errors.InputError).
+"""
+
+import math
+import os
+from dataclasses import dataclass, field
+from pathlib import Path
+
+import numpy as np
+
+from .. import files
+from ..errors import MAX_POSITION_M, InputError, check_finite, check_keys, check_numbers
+from ..model.pose import check_quaternion, rotation_from_quaternion
+from ..model.robot import MAX_CABLE_RADIUS_M
+
+TYPES = ("sphere", "box", "cylinder", "mesh")
+PLATFORM_TYPES = TYPES  # a platform shape may be any of them, in the platform frame
+MAX_OBSTACLES = 1000  # per scene: every one is checked at every pose
+MAX_ID_CHARS = 64
+MAX_MESH_BYTES = 16 << 20  # a mesh file's size
+MAX_MESH_VERTICES = 100_000  # of a mesh, before its convex hull is taken
+DEFAULT_EXEMPTION_M = 0.01
+SHARED_ANCHOR_M = 1e-6  # two anchors closer than this are one shared anchor point
+IDENTITY = (0.0, 0.0, 0.0, 1.0)
+
+_COMMON = ("type", "position", "quaternion")
+_KEYS = {"sphere": ("radius",), "box": ("size",), "cylinder": ("radius", "height"),
+         "mesh": ("file", "scale")}
+_REQUIRED = {"sphere": ("radius",), "box": ("size",), "cylinder": ("radius", "height"),
+             "mesh": ("file",)}
+SCENE_KEYS = ("cable_radius", "clearance", "shared_anchor_exemption", "platform", "obstacles")
+
+
+@dataclass(frozen=True, eq=False)
+class Shape:
+    """A solid in its frame (base frame for an obstacle, platform frame for the platform).
+
+    ``kind``: one of TYPES; ``radius`` (m, sphere and cylinder), ``height`` (m, cylinder,
+    along its z), ``size`` (3,) m (box, full edges), ``vertices`` (n, 3) m (mesh: its convex
+    hull's vertices, scaled, in the shape's own frame), ``file`` and ``scale`` as given.
+    ``position`` (3,) m and ``quaternion`` (x, y, z, w) place it; ``rotation`` is the
+    quaternion's matrix. ``id``: an obstacle's unique name ("platform" for the platform)."""
+
+    id: str
+    kind: str
+    position: np.ndarray
+    quaternion: np.ndarray
+    radius: float = 0.0
+    height: float = 0.0
+    size: np.ndarray = None
+    vertices: np.ndarray = None
+    file: str = ""
+    scale: float = 1.0
+    rotation: np.ndarray = field(init=False, repr=False)
+
+    def __post_init__(self):
+        object.__setattr__(self, "rotation", rotation_from_quaternion(self.quaternion))
+
+    def bounding_radius(self):
+        """Radius (m) of a sphere about ``position`` that holds the whole shape."""
+        if self.kind == "sphere":
+            return self.radius
+        if self.kind == "box":
+            return 0.5 * float(np.linalg.norm(self.size))
+        if self.kind == "cylinder":
+            return math.hypot(self.radius, 0.5 * self.height)
+        return float(np.max(np.linalg.norm(self.vertices, axis=1)))
+
+
+@dataclass(frozen=True, eq=False)
+class Scene:
+    """Obstacles (base frame), the platform's shape (platform frame, or None) and the
+    cables' radius, all in m; ``clearance``: the least distance to keep (m);
+    ``shared_anchor_exemption``: rho of the module docstring (m)."""
+
+    cable_radius: float = 0.0
+    clearance: float = 0.0
+    shared_anchor_exemption: float = DEFAULT_EXEMPTION_M
+    platform: Shape = None
+    obstacles: tuple = ()
+    source: str = ""
+
+    def obstacle(self, obstacle_id):
+        """The obstacle named ``obstacle_id`` (KeyError if none)."""
+        for o in self.obstacles:
+            if o.id == obstacle_id:
+                return o
+        raise KeyError(obstacle_id)
+
+
+def load_scene(path, robot=None):
+    """The scene of the YAML file ``path`` (its top-level key ``scene:``); ``robot`` gives
+    the default cable radius (robot.cable_radius). InputError naming the field."""
+    doc = files.read_yaml(path, "scene")
+    check_keys("", doc, ("scene",), required=("scene",))
+    return scene_from_dict(doc["scene"], robot=robot, base_dir=Path(path).parent, source=str(path))
+
+
+def scene_from_dict(d, robot=None, base_dir=".", where="scene", source=""):
+    """A checked Scene from the ``scene:`` mapping ``d``; mesh files are relative to
+    ``base_dir``. An absent cable_radius is the robot's (robot.cable_radius, else 0); an
+    absent platform is none (the platform is not checked)."""
+    check_keys(where, d, SCENE_KEYS)
+    radius = d.get("cable_radius")
+    if radius is None:
+        radius = getattr(robot, "cable_radius", None) or 0.0
+    radius = _non_negative(f"{where}.cable_radius", radius, MAX_CABLE_RADIUS_M)
+    clearance = _non_negative(f"{where}.clearance", d.get("clearance", 0.0), MAX_POSITION_M)
+    rho = _non_negative(f"{where}.shared_anchor_exemption",
+                        d.get("shared_anchor_exemption", DEFAULT_EXEMPTION_M), MAX_POSITION_M)
+    platform = d.get("platform")
+    if platform is not None:
+        platform = shape_from_dict(platform, f"{where}.platform", "platform", base_dir)
+    return Scene(cable_radius=radius, clearance=clearance, shared_anchor_exemption=rho,
+                 platform=platform, obstacles=_obstacles(d.get("obstacles", []), where, base_dir),
+                 source=source)
+
+
+def _obstacles(items, where, base_dir):
+    where = f"{where}.obstacles"
+    if items is None:
+        return ()
+    if not isinstance(items, list):
+        raise InputError(where, items, "expected a list of obstacles")
+    if len(items) > MAX_OBSTACLES:
+        raise InputError(where, f"{len(items)} obstacles", f"at most {MAX_OBSTACLES}")
+    out, seen = [], set()
+    for i, item in enumerate(items):
+        at = f"{where}[{i}]"
+        if not isinstance(item, dict):
+            raise InputError(at, item, "expected a mapping (id, type, ...)")
+        if "id" not in item:
+            raise InputError(f"{at}.id", None, "required key is missing")
+        oid = item["id"]
+        if not isinstance(oid, str) or not 0 < len(oid) <= MAX_ID_CHARS or oid == "platform":
+            raise InputError(f"{at}.id", oid, f"expected a name of 1 to {MAX_ID_CHARS} "
+                                              "characters, not 'platform'")
+        if oid in seen:
+            raise InputError(f"{at}.id", oid, "ids must be unique: given twice")
+        seen.add(oid)
+        rest = {k: v for k, v in item.items() if k != "id"}
+        out.append(shape_from_dict(rest, at, oid, base_dir, extra=("id",)))
+    return tuple(out)
+
+
+def shape_from_dict(d, where, shape_id, base_dir=".", extra=()):
+    """A checked Shape from a mapping {type, <its fields>, position, quaternion}."""
+    if not isinstance(d, dict):
+        raise InputError(where, d, "expected a mapping (type, ...)")
+    kind = d.get("type")
+    if kind not in TYPES:
+        raise InputError(f"{where}.type", kind, f"expected one of {', '.join(TYPES)}")
+    check_keys(where, d, _COMMON + _KEYS[kind] + tuple(extra), required=_REQUIRED[kind])
+    position = np.array(check_numbers(f"{where}.position", d.get("position", [0.0] * 3), 3,
+                                      MAX_POSITION_M))
+    q = check_numbers(f"{where}.quaternion", d.get("quaternion", list(IDENTITY)), 4)
+    quaternion = check_quaternion(q, f"{where}.quaternion")
+    common = dict(id=shape_id, kind=kind, position=position, quaternion=quaternion)
+    if kind == "sphere":
+        return Shape(**common, radius=_positive(f"{where}.radius", d["radius"]))
+    if kind == "cylinder":
+        return Shape(**common, radius=_positive(f"{where}.radius", d["radius"]),
+                     height=_positive(f"{where}.height", d["height"]))
+    if kind == "box":
+        size = check_numbers(f"{where}.size", d["size"], 3, MAX_POSITION_M)
+        for i, s in enumerate(size):
+            _positive(f"{where}.size[{i}]", s)
+        return Shape(**common, size=np.array(size))
+    scale = _positive(f"{where}.scale", d.get("scale", 1.0))
+    name = d["file"]
+    if not isinstance(name, str) or not name or "\x00" in name:
+        raise InputError(f"{where}.file", name, "expected a file name (STL, OBJ or PLY)")
+    path = Path(base_dir) / name
+    vertices = mesh_hull(path, f"{where}.file") * scale
+    if float(np.max(np.abs(vertices))) > MAX_POSITION_M:
+        raise InputError(f"{where}.scale", scale, f"the scaled mesh reaches beyond "
+                                                  f"+-{MAX_POSITION_M:g} m")
+    return Shape(**common, vertices=vertices, file=str(path), scale=scale)
+
+
+def mesh_hull(path, where):
+    """The vertices (n, 3) of the convex hull of the mesh file ``path`` (trimesh reads
+    it); InputError naming ``where`` if it cannot be read or encloses no volume."""
+    import trimesh  # only scenes with meshes need it
+
+    try:
+        st = os.stat(path)
+    except (OSError, ValueError) as exc:
+        raise InputError(where, str(path), f"cannot read: {getattr(exc, 'strerror', None) or exc}") \
+            from None
+    if not os.path.isfile(path):
+        raise InputError(where, str(path), "not a regular file")
+    if st.st_size > MAX_MESH_BYTES:
+        raise InputError(where, str(path), f"file too large: {st.st_size} bytes "
+                                           f"(at most {MAX_MESH_BYTES})")
+    try:
+        mesh = trimesh.load(str(path), force="mesh", process=False)
+        v = np.asarray(mesh.vertices, dtype=float)
+        if not 4 <= len(v) <= MAX_MESH_VERTICES or not np.all(np.isfinite(v)):
+            raise ValueError(f"{len(v)} vertices (need 4 to {MAX_MESH_VERTICES}, finite)")
+        hull = mesh.convex_hull
+        if not hull.volume > 0.0:
+            raise ValueError("encloses no volume")
+        return np.asarray(hull.vertices, dtype=float)
+    except InputError:
+        raise
+    except Exception as exc:  # trimesh's many parsers raise many kinds: all are bad input
+        raise InputError(where, str(path), f"not a mesh trimesh can read: "
+                                           f"{type(exc).__name__}: {exc}") from None
+
+
+def _positive(where, value):
+    return check_finite(where, value, positive=True, limit=MAX_POSITION_M)
+
+
+def _non_negative(where, value, limit):
+    value = check_finite(where, value, limit=limit)
+    if value < 0:
+        raise InputError(where, value, "must be non-negative")
+    return value

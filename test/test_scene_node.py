@@ -1,0 +1,98 @@
+"""The node's scene (issue 22, item 4 in part): the parameter scene_file gives the scene
+its plans keep clear of; changing it makes a new planner; a bad file is refused naming
+the field. (The ~/obstacles topic and service are not there yet.)"""
+
+import numpy as np
+import pytest
+import yaml
+
+from cdh_planner.errors import InputError
+from cdh_planner.ros import params
+from cdh_planner.ros.node import default_planner_factory
+
+from ros_harness import file_parameters  # noqa: E402
+from conftest import CONFIG
+
+BALL = {"id": "ball", "type": "sphere", "radius": 0.01, "position": [0.0, 0.048, 0.217]}
+
+
+def config_with(tmp_path, scene):
+    path = tmp_path / "scene.yaml"
+    path.write_text(yaml.safe_dump({"scene": scene}))
+    values = dict(file_parameters(CONFIG / "robot2.yaml"), scene_file=str(path))
+    return params.node_config(values)
+
+
+def test_scene_file_gives_the_planners_scene(tmp_path):
+    config = config_with(tmp_path, {"cable_radius": 0.001, "obstacles": [BALL]})
+    assert [o.id for o in config.scene.obstacles] == ["ball"]
+    planner = default_planner_factory(config.robot, config.task, config.settings,
+                                      scene=config.scene)
+    assert planner.collision is not None and planner.scene is config.scene
+    assert params.needs_new_planner(["scene_file"], {"scene_file": ""}, {"scene_file": "x"})
+    no_scene = params.node_config(file_parameters(CONFIG / "robot2.yaml"))
+    assert no_scene.scene is None
+
+
+def test_a_bad_scene_file_is_refused_naming_the_field(tmp_path):
+    with pytest.raises(InputError) as info:
+        config_with(tmp_path, {"obstacles": [dict(BALL, radius=0)]})
+    assert info.value.field == "scene.obstacles[0].radius"
+    with pytest.raises(InputError, match="file not found"):
+        params.node_config(dict(file_parameters(CONFIG / "robot2.yaml"),
+                                scene_file=str(tmp_path / "missing.yaml")))
+
+
+def test_a_scene_set_over_the_parameter_service_changes_the_next_plan(tmp_path):
+    """The node with the real planner (Robot 2 free flight, Q2 -> Q3 of the sphere task: the
+    direct motion): a 3 mm bead put on cable 3 of the path's middle pose through
+    scene_file makes the next plan go around it (checked at every waypoint and densely
+    between with the closed-form capsule-sphere distance); clearing scene_file brings the
+    first plan back."""
+    from rclpy.parameter import Parameter
+    from test_ros_reliability import plan
+    from test_scene_distances import point_segment
+    from cdh_planner.model.pose import rotation_from_quaternion
+    from cdh_planner.model.robot import load_robot
+    from ros_harness import Q2, Q3, in_process_nodes
+
+    robot = load_robot(CONFIG / "robot2.yaml")
+
+    def poses(path_msg):
+        p = np.array([[s.pose.position.x, s.pose.position.y, s.pose.position.z]
+                      for s in path_msg.poses])
+        q = np.array([[s.pose.orientation.x, s.pose.orientation.y, s.pose.orientation.z,
+                       s.pose.orientation.w] for s in path_msg.poses])
+        return p, q
+
+    def least_bead_distance(path_msg, bead, r):
+        p, q = poses(path_msg)
+        t = np.linspace(0.0, 1.0, 21)[:, None]  # 20 steps between waypoints
+        pp = np.concatenate([p[k] + t * (p[k + 1] - p[k]) for k in range(len(p) - 1)])
+        qq = np.concatenate([q[k] + t * (q[k + 1] - q[k]) for k in range(len(q) - 1)])
+        R = rotation_from_quaternion(qq / np.linalg.norm(qq, axis=1, keepdims=True))
+        Bw = pp[:, None] + np.einsum("nij,kj->nki", R, robot.platform_anchors)
+        c = np.array(bead["position"])
+        return min(point_segment(c, robot.base_anchors[i], b[i]) for b in Bw
+                   for i in range(6)) - bead["radius"] - r
+
+    with in_process_nodes(tmp_path / "runs") as make:
+        node = make(factory=default_planner_factory,
+                    params=["task.type:=free", "planner.radius:=0.5"])
+        first, values = plan(node, Q2, Q3)
+        assert values["error_code"] == "0"
+        p, q = poses(first)
+        k = len(p) // 2
+        b = p[k] + rotation_from_quaternion(q[k]) @ robot.platform_anchors[2]
+        bead = {"id": "bead", "type": "sphere", "radius": 0.003,
+                "position": (0.5 * (robot.base_anchors[2] + b)).tolist()}
+        assert least_bead_distance(first, bead, 0.001) < 0
+        scene = tmp_path / "scene.yaml"
+        scene.write_text(yaml.safe_dump({"scene": {"cable_radius": 0.001, "obstacles": [bead]}}))
+        node.set_parameters([Parameter("scene_file", value=str(scene))])
+        around, values = plan(node, Q2, Q3)
+        assert values["error_code"] == "0", values
+        assert least_bead_distance(around, bead, 0.001) > 0
+        node.set_parameters([Parameter("scene_file", value="")])
+        again, _ = plan(node, Q2, Q3)
+        assert np.allclose(poses(again)[0], poses(first)[0])
