@@ -64,19 +64,27 @@ class Lift:
         if not f.feasible[0]:
             return None, (Status.infeasible(label), f"{label} pose is not wrench-feasible: "
                           f"{f.binding[0]} violated (margin {f.margin[0]:.3g}) at {describe(p, tau)}")
-        collision = self.validity.collision
-        if collision is not None:
-            c = collision.clearance(p, rotation_tt(tau))
-            if not c.ok:
-                return None, (Status.in_collision(label), f"{label} pose is in collision: "
-                              f"{c.binding} {c.distance * 1e3:.3g} mm apart (clearance "
-                              f"{self.validity.scene.clearance * 1e3:g} mm) at {describe(p, tau)}")
+        collides = self._collision(label, p, tau)
+        if collides is not None:
+            return None, collides
         x = self.constraint.lift(p, tau)
         if not self.in_domain(x):
             return None, (Status.infeasible(label), f"{label} pose is feasible but closer to the "
                           f"boundary of C than the planner's margin floor "
                           f"({self.validity.margin_floor:g}): {describe(p, tau)}")
         return x, None
+
+    def _collision(self, label, p, tau):
+        """(Status, message) if the pose (p m, tau rad) is in collision with the scene."""
+        collision = self.validity.collision
+        if collision is None:
+            return None
+        c = collision.clearance(p, rotation_tt(tau))
+        if c.ok:
+            return None
+        return (Status.in_collision(label), f"{label} pose is in collision: {c.binding} "
+                f"{c.distance * 1e3:.3g} mm apart (clearance "
+                f"{self.validity.scene.clearance * 1e3:g} mm) at {describe(p, tau)}")
 
 
 def finite_vector(name, v, n):
