@@ -232,3 +232,26 @@ def test_task_metrics_are_distances():
     with pytest.raises(InputError) as err:
         task_costs(pr.robot, pr.task, "great_circle")
     assert err.value.field == "cost"
+
+
+def test_with_a_scene_validity_is_the_least_of_wrench_and_collision_margins():
+    """The one plug-in point: a ball on cable 1 halfway along Robot 2's straight
+    free-flight motion makes that motion invalid, and every pose's margin is
+    min(wrench margin, clearance / unit)."""
+    from cdh_planner.scene.collision import COLLISION_UNIT_M
+    from cdh_planner.scene.schema import scene_from_dict
+    pr, planner, ends = stages("robot2_q2_q3_free_flight")
+    assert planner.validity.motion(ends[0], ends[1])          # without a scene: valid
+    pm, Rm = planner.validity.direct_motion(ends)(np.array([0]), np.array([0.5]))
+    on_cable = 0.5 * (pr.robot.base_anchors[0] + pm[0] + Rm[0] @ pr.robot.platform_anchors[0])
+    ball = {"id": "ball", "type": "sphere", "radius": 0.005, "position": on_cable.tolist()}
+    v = Validity(pr.robot, pr.task, pr.settings.margin_floor,
+                 scene_from_dict({"cable_radius": 0.001, "obstacles": [ball]}))
+    assert not v.motion(ends[0], ends[1])
+    y = v.direct_motion(ends)
+    s = np.linspace(0.0, 1.0, 41)
+    pp, R = y(np.zeros(s.size, dtype=int), s)
+    wrench = evaluate(pr.robot, pp, R=R).margin
+    clear = np.array([v.collision.clearance(a, b).margin for a, b in zip(pp, R)]) / COLLISION_UNIT_M
+    np.testing.assert_allclose(v.pose_margins(pp, R=R)[0], np.minimum(wrench, clear), rtol=1e-9)
+    assert np.min(clear) < 0 < np.min(wrench)
