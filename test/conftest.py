@@ -21,3 +21,22 @@ def repo():
 def config_dir():
     """config/: the paper's robots and the Table 1 problems."""
     return CONFIG
+
+
+# ------------------------------------------------- ROS: one domain and client per module
+
+@pytest.fixture(scope="module")
+def domain():
+    """A ROS domain id of the module's own, held while its tests run
+    (cdh_planner.ros.domains.claimed_domain; see test/ros_harness.py)."""
+    from cdh_planner.ros.domains import claimed_domain
+    with claimed_domain() as d:
+        yield d
+
+
+@pytest.fixture(scope="module")
+def client(domain):
+    """A PlannerClient in the module's ``domain`` (for the nodes its tests start there)."""
+    from cdh_planner.ros.client import PlannerClient
+    with PlannerClient(domain_id=domain) as c:
+        yield c

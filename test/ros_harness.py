@@ -71,6 +71,17 @@ def in_process_nodes(log_dir):
                 rclpy.try_shutdown(context=context)
 
 
+def until(condition, timeout_s=10.0):
+    """Whether ``condition()`` held within ``timeout_s`` (s), polled every 10 ms. The
+    timeout only bounds a hang: tests wait for events with it, they do not time them."""
+    end = time.monotonic() + timeout_s
+    while not condition():
+        if time.monotonic() > end:
+            return False
+        time.sleep(0.01)
+    return True
+
+
 def ros_env(domain):
     return isolated_env(domain)
 
@@ -208,7 +219,8 @@ class ControllerDouble:
                                      env=ros_env(domain), stdout=subprocess.PIPE,
                                      stderr=subprocess.STDOUT, text=True, cwd=REPO)
         self.lines, self.ready = [], threading.Event()
-        threading.Thread(target=self._read, daemon=True).start()
+        self._reader = threading.Thread(target=self._read, daemon=True)
+        self._reader.start()
 
     def __enter__(self):
         return self
@@ -235,7 +247,7 @@ class ControllerDouble:
     def stop(self):
         """(exit code, everything it printed)."""
         rc = stop_process(self.proc)
-        time.sleep(0.05)   # the reader thread takes the last lines
+        self._reader.join(5.0)   # it ends at the end of the output: every line is in
         return rc, "\n".join(self.lines)
 
 

@@ -33,9 +33,9 @@ from cdh_planner.io.mcap_log import (  # noqa: E402
     REQUEST_RECEIVED, RESPONSE_SENT, RunRecorder, check_recording, read_run, recover)
 from cdh_planner.io.ros_schemas import full_definition  # noqa: E402
 from cdh_planner.ros import replay as R  # noqa: E402
-from cdh_planner.ros.client import PlannerClient, plan_path_goal  # noqa: E402
+from cdh_planner.ros.client import plan_path_goal  # noqa: E402
 from cdh_planner.ros.recording import RunLog  # noqa: E402
-from ros_harness import (Q1, Q2, Q3, NodeProcess, claimed_domain, run_cli,  # noqa: E402
+from ros_harness import (Q1, Q2, Q3, NodeProcess, run_cli,  # noqa: E402
                          sphere_pose_msg)
 
 NODE = "/cdh_planner"
@@ -44,18 +44,6 @@ ACTION_TYPE = "cdh_planner_interfaces/action/PlanPath"
 GOALS = f"{ACTION}/_action/send_goal/_service_event"
 RESULTS = f"{ACTION}/_action/get_result/_service_event"
 T0 = 1_700_000_000 * 10**9
-
-
-@pytest.fixture(scope="module")
-def domain():
-    with claimed_domain() as d:
-        yield d
-
-
-@pytest.fixture(scope="module")
-def client(domain):
-    with PlannerClient(domain_id=domain) as c:
-        yield c
 
 
 @pytest.fixture(scope="module")
@@ -214,8 +202,8 @@ def test_a_use_current_start_goal_is_replayed_from_the_recorded_path_start(domai
     timer = client.node.create_timer(0.02, lambda: pub.publish(measured))
     try:
         client.wait_for_node(20.0)
+        # the node waits (execution.joint_states_wait_s) for a measurement if none is in yet
         client.spin_until(lambda: pub.get_subscription_count() > 0, 10.0)
-        client.spin(0.3)
         answer = client.plan_path(plan_path_goal(None, sphere_pose_msg(Q3),
                                                  use_current_start=True), timeout_s=30.0)
     finally:

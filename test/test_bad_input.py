@@ -34,7 +34,9 @@ ROBOT1 = CONFIG / "robot1.yaml"
 ROBOT2 = CONFIG / "robot2.yaml"
 PROBLEM = PROBLEMS / "robot2_q2_q3.yaml"
 POSE = {"position": [0.0, 0.0, 0.35], "tau": [0.0, 0.1, 0.0]}
-SECONDS = 5.0  # in-process, after imports: far more than any refusal takes
+# Only a hang or a blow-up (an alias bomb or a deep nesting expanded): a refusal takes a
+# fraction of this even on a loaded machine. Not a speed test: timings are in benchmarks/.
+SECONDS = 30.0
 
 
 # ----------------------------------------------------------------------------- helpers
@@ -56,12 +58,12 @@ def run_cli(capsys, argv, code=2):
     return lines[0]
 
 
-def run_process(argv, timeout=30):
-    """The real entry point as a process: (exit code, stderr lines, seconds)."""
-    t0 = time.perf_counter()
+def run_process(argv, timeout=SECONDS + 10):
+    """The real entry point as a process: (exit code, stderr lines); a hang or a blow-up
+    runs into ``timeout`` (s: SECONDS and the imports)."""
     proc = subprocess.run([sys.executable, "-m", "cdh_planner.cli", *map(str, argv)],
                           capture_output=True, text=True, cwd=REPO, timeout=timeout)
-    return proc.returncode, proc.stderr.splitlines(), time.perf_counter() - t0
+    return proc.returncode, proc.stderr.splitlines()
 
 
 @pytest.fixture
@@ -135,9 +137,8 @@ def test_deep_nesting_is_refused(tmp_path, capsys, poses):
 def test_deep_nesting_as_a_process(tmp_path, poses):
     deep = tmp_path / "deep.yaml"
     deep.write_text("[" * 100_000 + "]" * 100_000)
-    rc, err, seconds = run_process(["verify", deep, poses])
+    rc, err = run_process(["verify", deep, poses])
     assert rc == 2 and len(err) == 1 and "nested deeper than" in err[0], err
-    assert seconds < 20
 
 
 def test_million_number_list_is_refused_with_a_short_line(tmp_path, capsys, poses):
@@ -173,7 +174,7 @@ def test_error_lines_stay_short_whatever_the_value():
         t0 = time.perf_counter()
         message = str(InputError("robot." + "x" * 1000, value, "reason\nwith lines " * 100))
         assert len(message) <= MAX_MESSAGE_CHARS and "\n" not in message
-        assert time.perf_counter() - t0 < 1.0
+        assert time.perf_counter() - t0 < SECONDS     # only a hang (the self-looping list)
 
 
 # ----------------------------------------------------------------------------- aliases
@@ -184,9 +185,8 @@ def test_alias_bomb_is_refused_fast(tmp_path, capsys, poses):
     assert len(ALIAS_BOMB) < 500
     assert "not allowed" in run_cli(capsys, ["verify", bomb, poses])
     assert "not allowed" in run_cli(capsys, ["plan", "--quiet", bomb])
-    rc, err, seconds = run_process(["verify", bomb, poses])
+    rc, err = run_process(["verify", bomb, poses])
     assert rc == 2 and len(err) == 1 and "anchors (&name) are not allowed" in err[0], err
-    assert seconds < 20
 
 
 def test_a_single_alias_is_refused(tmp_path):

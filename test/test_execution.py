@@ -10,6 +10,7 @@ MultiThreadedExecutor as the planner node spins its own.
 """
 
 import functools
+import os
 import threading
 import time
 
@@ -33,7 +34,7 @@ from cdh_planner.ros import execution as X  # noqa: E402
 from cdh_planner.ros.messages import cable_trajectory_msg, to_seconds  # noqa: E402
 
 from conftest import CONFIG, PROBLEMS  # noqa: E402
-from ros_harness import ControllerDouble, claimed_domain  # noqa: E402
+from ros_harness import ControllerDouble, claimed_domain, until  # noqa: E402
 
 ACTION = "/cable_controller/follow_joint_trajectory"
 FRAME = "cdh_base"
@@ -390,20 +391,18 @@ class Side:
         self.context.try_shutdown()
 
 
-def until(condition, timeout_s):
-    end = time.monotonic() + timeout_s
-    while not condition():
-        if time.monotonic() > end:
-            return False
-        time.sleep(0.01)
-    return True
-
-
 class Done:
-    """An on_done callback that keeps every call (there must be one) and its thread."""
+    """An on_done callback that keeps every call and its thread. There must be exactly one:
+    ``wait`` checks there is one so far, and the ``ros`` fixture checks every Done made
+    again once the executor has stopped (no callback can come after that), rather than
+    sleeping a while after the first call and assuming a second one would have come."""
+
+    made = []
 
     def __init__(self):
         self.calls, self.event = [], threading.Event()
+        self.test = os.environ.get("PYTEST_CURRENT_TEST", "?")
+        Done.made.append(self)
 
     def __call__(self, outcome, message):
         self.calls.append((outcome, message, threading.current_thread().name, time.monotonic()))
@@ -411,7 +410,6 @@ class Done:
 
     def wait(self, timeout_s=10.0):
         assert self.event.wait(timeout_s), "on_done was not called"
-        time.sleep(0.05)   # a second call would come now
         assert len(self.calls) == 1, self.calls
         return self.calls[0][:2]
 
@@ -430,35 +428,44 @@ def ros():
         finally:
             if side is not None:
                 side.close()
+            # the executor has stopped: every on_done call that will ever come has come
+            twice = [(d.test, d.calls) for d in Done.made if len(d.calls) > 1]
+            assert not twice, f"on_done called more than once: {twice}"
             rc, log = double.stop()
             assert rc == 0, f"double exit code {rc}:\n{log}"
             assert "Traceback" not in log, log
 
 
+def next_positions(monitor, t):
+    """(lengths, arrival) of a joint state that arrived after monotonic time ``t``."""
+    assert until(lambda: monitor.latest[1] > t, 2.0), "no joint state after the event"
+    msg, arrived = monitor.latest
+    return X.measured_lengths(msg, monitor.winch_names), arrived
+
+
 def latest_positions_after(monitor, t):
     """The first joint state lengths that arrived after monotonic time ``t``."""
-    assert until(lambda: monitor.latest[1] > t, 2.0), "no joint state after the event"
-    lengths, why = monitor.lengths(1.0)
-    assert lengths is not None, why
-    return lengths
+    return next_positions(monitor, t)[0]
 
 
 def test_planned_trajectory_runs_to_completion_and_ends_at_its_last_point(ros):
     side, double = ros
     first, last = ends()
     accepted = len(double.events("accepted"))
+    succeeded = len(double.events("succeeded"))
     done = Done()
-    t0 = time.monotonic()
     side.executor.start(trajectory(), done)
     returned = time.monotonic()
     assert side.executor.busy
     outcome, message = done.wait()
     assert returned < done.calls[0][3]           # start() did not wait for the result
-    elapsed = time.monotonic() - t0
+    # COMPLETED carries the double's own words, which it sends only at the trajectory's
+    # end; the double says where that end was
     assert (outcome, message) == (X.COMPLETED, f"completed on {ACTION}: Goal successfully reached!")
+    np.testing.assert_allclose(double.event("succeeded", succeeded)["positions"], last,
+                               rtol=0, atol=1e-12)
     assert not side.executor.busy
     assert done.calls[0][2] != threading.current_thread().name   # from an executor thread
-    assert elapsed >= planned().t[-1] / TIME_SCALE * 0.95
     event = double.event("accepted", accepted)
     assert event == {"event": "accepted", "joint_names": WINCHES, "points": len(planned()),
                      "has_effort": False, "duration_s": pytest.approx(planned().t[-1], abs=1e-9)}
@@ -510,9 +517,21 @@ def slow_trajectory(factor=20):
     return slow
 
 
+def go_to(side, lengths):
+    """Move the joints to ``lengths`` (0.1 s) and wait until that has completed."""
+    done = Done()
+    side.executor.start(JointTrajectory(joint_names=WINCHES, points=[JointTrajectoryPoint(
+        positions=list(map(float, lengths)), velocities=[0.0] * len(WINCHES),
+        time_from_start=Duration(nanosec=100_000_000))]), done)
+    assert done.wait(5.0)[0] == X.COMPLETED
+
+
 def start_moving(side, double, done, msg):
-    """Start ``msg`` and return once the double has accepted it and the joints moved."""
+    """Start ``msg`` (a motion from the plan's first point) with the joints at that first
+    point, and return once the double has accepted it and the joints left that point: then
+    it is this motion that moved them, whatever the tests before left."""
     first, _ = ends()
+    go_to(side, first)
     accepted = len(double.events("accepted"))
     side.executor.start(msg, done)
     assert until(lambda: len(double.events("accepted")) > accepted
@@ -529,13 +548,14 @@ def test_cancel_mid_way_stops_and_the_joints_hold(ros):
     second = Done()
     side.executor.start(slow, second)            # refused at once: one at a time
     assert second.wait(1.0) == (X.FAILED, f"refused: already executing a trajectory on {ACTION}")
-    t_cancel = time.monotonic()
     assert side.executor.cancel() is True
     assert done.wait(5.0) == (X.STOPPED, f"stopped on request: canceled by {ACTION}")
-    assert time.monotonic() - t_cancel < 1.0
-    held = latest_positions_after(side.monitor, time.monotonic())
-    time.sleep(0.1)
-    np.testing.assert_array_equal(latest_positions_after(side.monitor, time.monotonic()), held)
+    # stopped mid-way (neither end of an ~11 s motion), then five more joint states (50 Hz
+    # from the double) all at the same place
+    held, t = next_positions(side.monitor, done.calls[0][3])
+    for _ in range(5):
+        later, t = next_positions(side.monitor, t)
+        np.testing.assert_array_equal(later, held)
     assert not np.allclose(held, last, atol=1e-4) and not np.allclose(held, first, atol=1e-4)
     assert until(lambda: double.events()[-1] == {"event": "canceled"}, 2.0), double.lines
 
@@ -561,14 +581,12 @@ def test_no_server_fails_quickly_naming_the_action_and_cancel_before_sending_sto
     side, _ = ros
     nobody = X.TrajectoryExecutor(side.node, "/nobody/follow_joint_trajectory", side.group)
     done = Done()
-    t0 = time.monotonic()
     nobody.start(trajectory(), done)
     returned = time.monotonic()
-    outcome, message = done.wait(5.0)
+    outcome, message = done.wait(5.0)            # 5 s: only a hang; the wait is 1 s
     assert returned < done.calls[0][3]           # start() did not wait for the server
-    assert done.calls[0][3] - t0 < 3.0
     assert outcome == X.FAILED and "/nobody/follow_joint_trajectory" in message
-    assert "within 1 s" in message
+    assert "within 1 s" in message               # it ended because the server wait did
     done = Done()
     nobody.start(trajectory(), done)
     assert nobody.cancel()
@@ -584,9 +602,10 @@ def test_a_server_that_never_answers_fails_after_the_duration_and_a_margin(ros):
     from control_msgs.action import FollowJointTrajectory
     from rclpy.action import ActionServer, GoalResponse
     side, _ = ros
-    release = threading.Event()
+    release, entered = threading.Event(), threading.Event()
 
     def silent(handle):
+        entered.set()
         release.wait(30.0)
         handle.abort()
         return FollowJointTrajectory.Result()
@@ -598,12 +617,15 @@ def test_a_server_that_never_answers_fails_after_the_duration_and_a_margin(ros):
                                            side.group, result_margin_s=0.2)
     try:
         done = Done()
-        t0 = time.monotonic()
         silent_executor.start(trajectory(), done)
         outcome, message = done.wait(planned().t[-1] + 10.0)
-        waited = done.calls[0][3] - t0
-        assert outcome == X.FAILED and "no result from /silent/follow_joint_trajectory" in message
-        assert waited >= planned().t[-1] + X.GOAL_TIME_TOLERANCE_S + 0.2 - 0.05, waited
+        # accepted and still running (its result held back) when the wait ran out, and the
+        # wait was the duration + tolerance + margin
+        assert entered.is_set() and not release.is_set()
+        wait_s = planned().t[-1] + X.GOAL_TIME_TOLERANCE_S + 0.2
+        assert outcome == X.FAILED and message.startswith(
+            f"no result from /silent/follow_joint_trajectory within {wait_s:.1f} s of "
+            f"acceptance"), message
         assert not silent_executor.busy
     finally:
         release.set()
@@ -639,40 +661,61 @@ def test_joint_state_monitor_reports_lengths_or_why_not(ros):
     side.retire(other, nothing, missing)
 
 
+class Polls:
+    """A ``cancelled`` callback for wait_lengths that counts its calls (wait_lengths polls it
+    before each wait of at most CANCEL_POLL_S) and runs ``on_call(n)`` at the n-th: the
+    test acts while the monitor is known to be waiting. True from call ``cancel_at`` on."""
+
+    def __init__(self, on_call=lambda n: None, cancel_at=None):
+        self.calls, self.on_call, self.cancel_at = 0, on_call, cancel_at
+
+    def __call__(self):
+        self.calls += 1
+        self.on_call(self.calls)
+        return self.cancel_at is not None and self.calls >= self.cancel_at
+
+
+def age_in(why):
+    """The age (s) in "the last joint state on T is AGE s old (at most M s)"."""
+    return float(why.split(" is ")[1].split(" s old")[0])
+
+
 def test_joint_state_monitor_waits_a_bounded_time_for_a_message(ros):
     """wait_lengths: at once when a recent message is there, or when the message names the
     winches wrongly; until the first message of a publisher that starts later; the whole
-    wait (then why not) when none comes; and no longer once cancelled."""
+    wait (then why not) when none comes; and no longer once cancelled. Each shown by what
+    was answered and by the polls of ``cancelled``, not by how long it took."""
     side, double = ros
-    t0 = time.monotonic()
-    lengths, why = side.monitor.wait_lengths(1.0, 5.0)
-    assert why == "" and lengths.shape == (6,) and time.monotonic() - t0 < 0.5
     missing = X.JointStateMonitor(side.node, "/joint_states", WINCHES[:5] + ["winch_7"],
                                   side.group)
     assert until(lambda: missing.latest is not None, 5.0)
-    t0 = time.monotonic()
-    lengths, why = missing.wait_lengths(1.0, 5.0)
-    assert lengths is None and "winch_7" in why and time.monotonic() - t0 < 0.5
+    polls = Polls()
+    lengths, why = missing.wait_lengths(30.0, 60.0, cancelled=polls)
+    assert lengths is None and "winch_7" in why and polls.calls == 0   # never waited
 
     late = X.JointStateMonitor(side.node, "/late/joint_states", WINCHES, side.group)
     publisher = side.node.create_publisher(X.JointState, "/late/joint_states", 10)
     msg = X.JointState(name=WINCHES, position=[0.3] * 6)
-    timer = threading.Timer(0.5, lambda: publisher.publish(msg))
     assert until(lambda: publisher.get_subscription_count() == 1, 5.0)
-    t0 = time.monotonic()
-    timer.start()
-    lengths, why = late.wait_lengths(1.0, 5.0)
-    took = time.monotonic() - t0
-    assert why == "" and np.all(lengths == 0.3) and 0.4 < took < 2.0, (why, took)
+    # nothing yet; the message is published at the second poll, after a wait that timed out
+    assert late.latest is None
+    polls = Polls(on_call=lambda n: n == 2 and publisher.publish(msg))
+    lengths, why = late.wait_lengths(30.0, 60.0, cancelled=polls)
+    assert why == "" and np.all(lengths == 0.3)
+    # answered on the message: had the wait run out (60 s), it would be too old (30 s)
+    assert polls.calls >= 2
 
-    time.sleep(0.01)
-    t0 = time.monotonic()
-    lengths, why = late.wait_lengths(1e-3, 0.3)      # that one is now too old
-    took = time.monotonic() - t0
-    assert lengths is None and "s old" in why and 0.3 <= took < 0.6, (why, took)
-    t0 = time.monotonic()
-    stop_at = t0 + 0.2
-    lengths, why = late.wait_lengths(1e-3, 5.0, cancelled=lambda: time.monotonic() > stop_at)
-    took = time.monotonic() - t0
-    assert lengths is None and 0.2 <= took < 0.5, (why, took)
+    polls = Polls()                                   # a recent message: answered at once
+    lengths, why = late.wait_lengths(30.0, 60.0, cancelled=polls)
+    assert why == "" and np.all(lengths == 0.3) and polls.calls == 0
+
+    # none recent enough (at most 0 s old) and none coming: the whole wait, then why not.
+    # The age in the reason is at least the wait, as the message arrived before it began
+    lengths, why = late.wait_lengths(0.0, 0.3)
+    assert lengths is None and "s old (at most 0 s)" in why and age_in(why) >= 0.3, why
+
+    polls = Polls(cancel_at=3)                        # cancelled at the third poll: no later
+    lengths, why = late.wait_lengths(0.0, 60.0, cancelled=polls)
+    assert lengths is None and "s old" in why and polls.calls == 3, (why, polls.calls)
+    assert age_in(why) < 60.0                         # not the whole wait
     side.retire(publisher, missing, late)

@@ -1,7 +1,6 @@
 """The planner end to end: paths of the paper's 2-D queries, no-path answers, periodic
 angles, theta = 0 starts, multi-query, and the plan command's bad input."""
 import json
-import time
 
 import numpy as np
 import pytest
@@ -114,12 +113,10 @@ def test_second_query_reuses_the_atlas():
     planner = Planner(pr.robot, pr.task, pr.settings)
     first = planner.plan(pr.start, pr.goal)
     n_charts = len(planner.atlas.charts)
-    t = time.perf_counter()
     again = planner.plan(pr.goal, pr.start)  # reversed, inside the same atlas
-    elapsed = time.perf_counter() - t
     assert first.success and again.success
-    assert len(planner.atlas.charts) <= 1.25 * n_charts  # little growth: open charts on the way
-    assert elapsed < first.time_s
+    # the reuse is in the charts, not in a timing: little growth (open charts on the way)
+    assert len(planner.atlas.charts) <= 1.25 * n_charts
     assert again.cost == pytest.approx(first.cost, rel=0.05)
 
 
@@ -270,18 +267,30 @@ def test_a_call_may_override_the_strategy_and_the_time_limit():
 def test_a_cancel_stops_the_complete_atlas_growth_too():
     """A cancel during --complete's growth (after the path is found) ends it at once: the
     node's cancel bound holds in every phase."""
-    import threading
-    pr = load_problem(PROBLEMS / "robot2_q1_q2.yaml")
+    pr = load_problem(PROBLEMS / "robot2_q1_q2.yaml")   # a direct motion: no search
     planner = Planner(pr.robot, pr.task, PlannerSettings(complete=True, radius=0.02))
-    cancel = threading.Event()
-    timer = threading.Timer(0.3, cancel.set)
-    timer.start()
-    t0 = time.perf_counter()
+
+    class CancelAt:
+        """Set from the AT-th poll on (the growth polls once per chart expansion); counts
+        the polls that saw it set and the charts there were then."""
+        AT = 20
+
+        def __init__(self):
+            self.polls, self.seen_set, self.charts = 0, 0, None
+
+        def is_set(self):
+            self.polls += 1
+            if self.polls < self.AT:
+                return False
+            self.seen_set += 1
+            self.charts = self.charts or len(planner.atlas.charts)
+            return True
+
+    cancel = CancelAt()
     res = planner.plan(pr.start, pr.goal, cancel=cancel)
-    elapsed = time.perf_counter() - t0
-    timer.cancel()
     assert res.success                       # the path was found before the cancel
-    assert elapsed < 0.3 + 0.5, elapsed
+    # the growth ended at the first poll that saw the cancel: no chart after it
+    assert cancel.seen_set == 1 and len(planner.atlas.charts) == cancel.charts
     assert not all(ch.closed for ch in planner.atlas.charts)   # growth cut short
 
 

@@ -34,13 +34,16 @@ ROBOT = CONFIG.robot
 # A small chart radius makes Robot 2's q2 -> q3 a long search: about 5 s with A* (3000
 # charts), under 1 s with GBF. Long enough to cancel, short enough for the next goal.
 LONG = ["planner.radius:=0.02", "planner.strategy:=astar"]
-CANCEL_BOUND_S = 0.5
+# The node's wait for joint states in this module (s): far longer than a client's timeout
+# in the tests that set a short one, so that an answer within that timeout shows the
+# short wait was in force, without timing the answer.
+WAIT_S = 60.0
 
 
 @pytest.fixture(scope="module")
 def ros(tmp_path_factory):
     with claimed_domain() as domain:
-        node = NodeProcess(domain, tmp_path_factory.mktemp("action"), params=LONG)
+        node = NodeProcess(domain, tmp_path_factory.mktemp("action"), params=LONG + [f"execution.joint_states_wait_s:={WAIT_S}"])
         try:
             with PlannerClient(domain_id=domain) as client:
                 client.wait_for_node(30.0)
@@ -115,7 +118,8 @@ def test_cancel_during_a_long_plan_then_the_next_goal_plans(ros):
     assert answer.goal_status == GoalStatus.STATUS_CANCELED, answer.result.error_msg
     assert answer.result.error_code == PlanPath.Result.CANCELED
     assert "cancel" in answer.result.error_msg
-    assert answer.cancel_s < CANCEL_BOUND_S, answer.cancel_s
+    # how fast a cancel ends a plan is benchmarks/plan_path_cancel.py's: here the answer's
+    # words say it was the cancel, and plan_path's 60 s bounds a hang
     assert len(answer.result.path.poses) == 0
     start, goal = sphere_pose_msg(Q2), sphere_pose_msg(Q3)
     after = ros.plan_path(plan_path_goal(start, goal, strategy="gbf"), timeout_s=60)
@@ -132,7 +136,7 @@ def test_goal_overrides_and_refusals_end_with_a_reason(ros):
     quick = ros.plan_path(plan_path_goal(q2, q3, timeout_s=0.3), timeout_s=30)  # A*: ~5 s
     assert quick.goal_status == GoalStatus.STATUS_ABORTED
     assert quick.result.error_code == PlanPath.Result.TIMEOUT
-    assert quick.result.planning_time_s == pytest.approx(0.3, abs=0.25)
+    assert quick.result.planning_time_s >= 0.3     # stopped at its deadline (causal)
     negative = ros.plan_path(plan_path_goal(q2, q3, timeout_s=-1.0), timeout_s=30)
     assert negative.result.error_code == PlanPath.Result.INVALID_REQUEST
     assert "timeout_s" in negative.result.error_msg
@@ -148,20 +152,24 @@ def test_goal_overrides_and_refusals_end_with_a_reason(ros):
 
 
 def test_use_current_start_without_measurements_is_refused_after_the_wait(ros):
+    """The reason says the wait ended with nothing received; the answer within 20 s (the
+    client's bound, only a hang) while the module's wait is WAIT_S shows the 1 s wait set
+    was the one in force. No answer before the wait: causality (the node's wait begins
+    after the goal is sent), not a threshold."""
     wait_s = 1.0
     assert ros.set_parameters({"execution.joint_states_wait_s": wait_s}) == [(True, "")]
     try:
         t0 = time.monotonic()
         answer = ros.plan_path(plan_path_goal(None, sphere_pose_msg(Q3),
-                                              use_current_start=True), timeout_s=30)
+                                              use_current_start=True), timeout_s=20)
         took = time.monotonic() - t0
     finally:
-        assert ros.set_parameters({"execution.joint_states_wait_s": 5.0}) == [(True, "")]
+        assert ros.set_parameters({"execution.joint_states_wait_s": WAIT_S}) == [(True, "")]
     assert answer.goal_status == GoalStatus.STATUS_ABORTED
     assert answer.result.error_code == PlanPath.Result.NO_CURRENT_STATE
     assert ("use_current_start: nothing received on /joint_states (no publishers seen)"
             == answer.result.error_msg)
-    assert wait_s <= took < wait_s + 2.0, took
+    assert took >= wait_s, took
 
 
 @pytest.mark.parametrize("fault,code,words", [
@@ -171,8 +179,9 @@ def test_use_current_start_without_measurements_is_refused_after_the_wait(ros):
     ("timeout", "INVALID_REQUEST", "timeout_s"),
 ])
 def test_use_current_start_with_a_bad_goal_is_refused_before_any_wait(ros, fault, code, words):
-    """The goal's own error, not "nothing received" after the wait: with a 60 s wait for
-    joint states and none coming, the answer arrives within the client's 30 s."""
+    """The goal's own error, not "nothing received" after the wait: with the module's
+    WAIT_S (60 s) wait for joint states and none coming, the answer arrives within the
+    client's 30 s."""
     goal = plan_path_goal(None, sphere_pose_msg(Q3, frame="map" if fault == "frame"
                                                 else "cdh_base"), use_current_start=True)
     if fault == "nan":
@@ -181,42 +190,34 @@ def test_use_current_start_with_a_bad_goal_is_refused_before_any_wait(ros, fault
         goal.strategy = "dijkstra"
     elif fault == "timeout":
         goal.timeout_s = -1.0
-    assert ros.set_parameters({"execution.joint_states_wait_s": 60.0}) == [(True, "")]
-    try:
-        answer = ros.plan_path(goal, timeout_s=30)
-    finally:
-        assert ros.set_parameters({"execution.joint_states_wait_s": 5.0}) == [(True, "")]
+    answer = ros.plan_path(goal, timeout_s=30)
     assert answer.goal_status == GoalStatus.STATUS_ABORTED
     assert answer.result.error_code == getattr(PlanPath.Result, code), answer.result.error_msg
     assert words in answer.result.error_msg and "joint_states" not in answer.result.error_msg
 
 
 def test_use_current_start_waits_for_winches_that_appear_after_the_goal(ros):
-    """The goal is sent before anything publishes joint states; a publisher that starts
-    1 s later (a controller coming up) is waited for, and the plan starts at its pose."""
+    """The goal is sent while nothing publishes joint states; a publisher that starts once
+    the goal is accepted (a controller coming up) is waited for, and the plan starts at
+    its pose: an answer that could only come from messages published after the goal."""
     q2 = sphere_pose_msg(Q2)
     lengths = cable_lengths(ROBOT, _position(q2), rotation_from_quaternion(_quaternion(q2)))
     msg = JointState(name=list(ROBOT.winch_names), position=[float(v) for v in lengths])
-    made = {}
-
-    def come_up():
-        made["pub"] = ros.node.create_publisher(JointState, "/joint_states", 10)
-        made["timer"] = ros.node.create_timer(0.02, lambda: made["pub"].publish(msg))
-        ros.node.destroy_timer(made.pop("once"))
-
-    made["once"] = ros.node.create_timer(1.0, come_up)
-    t0 = time.monotonic()
+    assert ros.node.count_publishers("/joint_states") == 0
+    sent = ros.plan_path_client.send_goal_async(plan_path_goal(
+        None, sphere_pose_msg(Q3), use_current_start=True, strategy="gbf"))
+    assert ros.spin_until(sent.done, 30.0) and sent.result().accepted
+    result = sent.result().get_result_async()
+    assert not result.done()
+    pub = ros.node.create_publisher(JointState, "/joint_states", 10)
+    timer = ros.node.create_timer(0.02, lambda: pub.publish(msg))
     try:
-        answer = ros.plan_path(plan_path_goal(None, sphere_pose_msg(Q3), use_current_start=True,
-                                              strategy="gbf"), timeout_s=60)
+        assert ros.spin_until(result.done, 60.0), "no result"
     finally:
-        for timer in ("once", "timer"):
-            if timer in made:
-                ros.node.destroy_timer(made[timer])
-        if "pub" in made:
-            ros.node.destroy_publisher(made["pub"])
-    assert answer.success, answer.result.error_msg
-    assert time.monotonic() - t0 >= 1.0
+        ros.node.destroy_timer(timer)
+        ros.node.destroy_publisher(pub)
+    answer = result.result()
+    assert answer.status == GoalStatus.STATUS_SUCCEEDED, answer.result.error_msg
     np.testing.assert_allclose(_position(answer.result.path.poses[0]), _position(q2), atol=1e-6)
     np.testing.assert_allclose(answer.result.cable_trajectory.points[0].positions, lengths,
                                atol=1e-6)
@@ -235,7 +236,6 @@ def test_use_current_start_plans_from_the_forward_kinematics_pose(ros):
     timer = ros.node.create_timer(0.02, lambda: pub.publish(msg))
     try:
         ros.spin_until(lambda: pub.get_subscription_count() > 0, 10.0)
-        ros.spin(0.3)
         answer = ros.plan_path(plan_path_goal(None, sphere_pose_msg(Q3), use_current_start=True,
                                               strategy="gbf"), timeout_s=60)
     finally:

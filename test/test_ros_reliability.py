@@ -29,7 +29,7 @@ from cdh_planner.ros import messages as M  # noqa: E402
 from cdh_planner.ros import planning  # noqa: E402
 from cdh_planner.ros.client import PlannerClient, path_duration  # noqa: E402
 from ros_harness import (Q1, Q2, ROBOT2, NodeProcess, claimed_domain, fake_planner_class,  # noqa: E402
-                         in_process_nodes, sphere_pose_msg)
+                         in_process_nodes, sphere_pose_msg, until)
 
 FakePlanner = fake_planner_class()
 PLAN_EVENTS = "/cdh_planner/plan/_service_event"
@@ -283,24 +283,42 @@ def test_an_internal_error_still_records_the_response(make_node, monkeypatch):
 
 # --------------------------------------------------------------------------- the queue
 
+class Polled:
+    """A ``cancel`` for PlanQueue.wait that counts how often it was polled (once per look at
+    the queue, at least every CANCEL_POLL_S while waiting), before and after ``set()``."""
+
+    def __init__(self):
+        self.polls, self.polls_after_set, self._set = 0, 0, False
+
+    def set(self):
+        self._set = True
+
+    def is_set(self):
+        self.polls += 1
+        self.polls_after_set += self._set
+        return self._set
+
+
 def test_plan_queue_runs_in_order_and_refuses_beyond_its_depth():
     queue = planning.PlanQueue(depth=2)
     first = queue.enter()
     assert queue.wait(first, timeout_s=0.1)            # runs at once
     waiting = [queue.enter(), queue.enter()]
     assert None not in waiting and queue.enter() is None and len(queue) == 3
-    order = []
+    order, polled = [], {t: Polled() for t in waiting}
 
     def take(turn):
-        if queue.wait(turn, timeout_s=5.0):
+        if queue.wait(turn, polled[turn], timeout_s=5.0):
             order.append(turn)
-            time.sleep(0.01)
             queue.leave()
 
     threads = [threading.Thread(target=take, args=(t,)) for t in reversed(waiting)]
     for t in threads:
         t.start()
-    time.sleep(0.05)
+    # each waiter has looked at the queue, waited and looked again (two polls), or has
+    # returned: either way a turn taken while the first runs would be in ``order`` now
+    assert until(lambda: all(p.polls >= 2 or not t.is_alive()
+                             for p, t in zip(map(polled.get, reversed(waiting)), threads)))
     assert not order                                   # the first is still running
     queue.leave()
     for t in threads:
@@ -329,14 +347,15 @@ def test_plan_queue_drop_and_cancel_give_a_waiting_turn_up():
     assert queue.enter() is None
     queue.drop(dropped)
     queue.drop(dropped)                                # idempotent
-    cancel = threading.Event()
+    cancel = Polled()
     got = []
     thread = threading.Thread(target=lambda: got.append(queue.wait(cancelled, cancel)))
     thread.start()
-    t0 = time.monotonic()
+    assert until(lambda: cancel.polls >= 2)            # waiting (looked, waited, looked)
     cancel.set()
-    thread.join(2.0)
-    assert got == [False] and time.monotonic() - t0 < 2 * planning.CANCEL_POLL_S + 0.1
+    thread.join(10.0)                                  # 10 s: only a hang
+    # it left at the first poll after the cancel (at most CANCEL_POLL_S later), not later
+    assert got == [False] and cancel.polls_after_set == 1
     assert len(queue) == 1                             # only the running one
     nxt = queue.enter()
     queue.leave()
@@ -366,15 +385,13 @@ def test_every_concurrent_request_is_answered(tmp_path):
             for c in clients:
                 c.wait_for_node(30.0)
             request = GetPlan.Request(start=sphere_pose_msg(Q1), goal=sphere_pose_msg(Q2))
-            t0 = time.monotonic()
             calls = [(c, c.plan_client.call_async(request)) for c in clients
                      for _ in range(CALLS)]
-            end = time.monotonic() + 60.0
+            end = time.monotonic() + 60.0       # only a hang: how long it takes is not tested
             while time.monotonic() < end and not all(f.done() for _, f in calls):
                 for c in clients:
                     c.executor.spin_once(timeout_sec=0.005)
             answered = [(c, f.result()) for c, f in calls if f.done()]
-            seconds = time.monotonic() - t0
             assert len(answered) == CLIENTS * CALLS, (len(answered), node.log()[-3000:])
             outcomes = {"plan": 0, "busy": 0}
             for c, response in answered:        # each answer's ~/plan_result
@@ -393,7 +410,6 @@ def test_every_concurrent_request_is_answered(tmp_path):
                     assert values["error_msg"].startswith("busy: "), values
                     outcomes["busy"] += 1
             assert outcomes["plan"] >= 1 + planning.PLAN_QUEUE_DEPTH, outcomes
-            assert seconds < 30.0, seconds
         finally:
             for c in clients:
                 c.close()
