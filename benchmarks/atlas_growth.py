@@ -116,8 +116,8 @@ def grow(args, robot, q, settings):
     xs, xg = (planner.constraint.lift(e.p, e.tau) for e in (q.start, q.goal))
     if args.mode == "search":
         out = run(planner.atlas, xs, xg, planner.cost, Stop(t + args.timeout), args.strategy,
-                  planner._direct_x, lambda d: rate(d["charts"]), link_ok=planner._link_ok,
-                  route_check=planner._route_unsafe)
+                  planner.route.direct_x, lambda d: rate(d["charts"]), link_ok=planner.route.link_ok,
+                  route_check=planner.route.route_unsafe)
         status = str(out.status)
     else:
         status = grow_atlas(planner, xs, args.timeout, rate)

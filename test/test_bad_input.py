@@ -661,12 +661,12 @@ def test_huge_numbers_are_shown_short(capsys):
     """Issue 19, item 7: a position of 1e308 was printed as a 309-digit number. An error
     shows a huge integer as a float is shown; the planner's pose text has 6 digits."""
     from cdh_planner.errors import short_repr
-    from cdh_planner.planner import _describe
+    from cdh_planner.pipeline.lift import describe
     assert short_repr(int(1e308)) == "1e+308" and short_repr(-10 ** 400) == "-~1e399"
     assert short_repr(10 ** 15) == "1000000000000000"
     line = run_cli(capsys, ["plan", "--quiet", PROBLEM, "--max-charts", "1e308"])
     assert "--max-charts = 1e+308: must be <=" in line
-    text = _describe(np.array([1e308, 0.081092, -0.2]), np.array([0.5, 1.25, -np.pi]))
+    text = describe(np.array([1e308, 0.081092, -0.2]), np.array([0.5, 1.25, -np.pi]))
     assert text == "p = [1e+308, 0.081092, -0.2] m, tau = [0.5, 1.25, -3.14159] rad"
 
 

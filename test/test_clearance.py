@@ -105,14 +105,16 @@ def test_smoothing_never_raises_the_clearance_cost(robot2_shortest):
     planner = Planner(pr.robot, pr.task, pr.settings.__class__(clearance_weight=WEIGHT))
     route = pr.task.coords(shortest.path.p, shortest.path.tau)
 
-    def cost(y):
-        lengths = planner._lengths(y[:-1], y[1:])
-        return float(np.sum(clearance.segment_costs(lengths, planner._margins(y), WEIGHT)))
+    smooth, margins = planner.smooth, planner.validity.margins
 
-    before = cost(planner._resample(route))
-    smoothed = planner._smooth_clearance(route)
+    def cost(y):
+        lengths = smooth.lengths(y[:-1], y[1:])
+        return float(np.sum(clearance.segment_costs(lengths, margins(y), WEIGHT)))
+
+    before = cost(smooth.resample(route))
+    smoothed = smooth(route)
     assert cost(smoothed) < 0.9 * before
-    assert np.all(planner._margins(smoothed) >= pr.settings.margin_floor)
+    assert np.all(margins(smoothed) >= pr.settings.margin_floor)
     np.testing.assert_array_equal(smoothed[[0, -1]], route[[0, -1]])
 
 

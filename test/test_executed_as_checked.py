@@ -280,3 +280,23 @@ def test_a_quasi_static_timing_is_handed_out_as_its_spline_and_slowed_to_the_lim
     assert np.allclose(pos, spline(t), atol=1e-12) and np.allclose(acc, spline(t, 2), atol=1e-9)
     assert np.max(np.abs(vel)) <= DEFAULT[0] * (1 + 1e-6)
     assert np.max(np.abs(acc)) <= DEFAULT[1] * (1 + 1e-6)
+
+
+def test_current_pose_prefers_what_the_feasibility_hook_accepts():
+    """model.forward_kinematics.current_pose (no ROS, no wrenches): of Robot 2's free-flight
+    goal and its nearly upside-down twin (same lengths), the hook decides which one a search
+    without a guess returns; both have the measured lengths."""
+    from cdh_planner.model.forward_kinematics import current_pose, nearest_pose
+    from cdh_planner.model.kinematics import forward_kinematics as fk1
+    from cdh_planner.model.pose import rotation_angle_between, rotation_tt
+    pr = load_problem(PROBLEMS / "robot2_q2_q3_free_flight.yaml")
+    p, R = pr.goal.p, rotation_tt(pr.goal.tau)
+    L = cable_lengths(pr.robot, p, R)
+    twin = fk1(pr.robot, L, [-0.018, 0.0097, 0.188], rotation_tt([-0.537, 3.059, -0.024]))
+    assert twin.ok and rotation_angle_between(twin.R, R) > 2.0
+    _, Q = current_pose(pr.robot, L)                      # no hook: the least tilted
+    assert rotation_angle_between(Q, R) < 1e-9
+    q, Q = current_pose(pr.robot, L, feasible=lambda p_, R_: rotation_angle_between(R_, twin.R) < 1e-6)
+    assert rotation_angle_between(Q, twin.R) < 1e-9
+    np.testing.assert_allclose(cable_lengths(pr.robot, q, Q), L, rtol=0, atol=1e-12)
+    assert nearest_pose(pr.robot, L, [(twin.p, twin.R), (p + 0.01, R)])[0] is twin.p

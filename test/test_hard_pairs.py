@@ -11,7 +11,8 @@ from cdh_planner.io.problem import load_problem
 from cdh_planner.model.robot import load_robot
 from cdh_planner.model.pose import Pose
 from cdh_planner.model.task import FreeTask
-from cdh_planner.planner import CHORD_SAMPLES, Planner, PlannerSettings
+from cdh_planner.pipeline.route import CHORD_SAMPLES
+from cdh_planner.planner import Planner, PlannerSettings
 from cdh_planner.status import Status
 from cdh_planner.trajectory.verify import SlerpPath
 
@@ -40,14 +41,14 @@ def test_a_link_across_a_wall_thinner_than_the_probe_is_found_on_the_route():
     planner = Planner(robot, FreeTask(), PlannerSettings(radius=0.25))
     p, tau = planner.task.pose(WALL)
     assert np.all(evaluate(robot, p, tau).margin > 0.05)
-    assert planner._probe(WALL, CHORD_SAMPLES)  # the probe alone missed the wall
+    assert planner.validity.probe(WALL, CHORD_SAMPLES)  # the probe alone missed the wall
     s = np.linspace(0.0, 1.0, 401)
-    pp, R = planner._direct_motion(WALL)(np.zeros(s.size, dtype=int), s)
+    pp, R = planner.validity.direct_motion(WALL)(np.zeros(s.size, dtype=int), s)
     margin = evaluate(robot, pp, R=R).margin
     assert margin.min() < -1.0 and 0.0 < np.mean(margin < 0) < 1 / (CHORD_SAMPLES - 1)
     xs = [planner.constraint.lift(p[k], tau[k]) for k in range(2)]
-    assert planner._route_unsafe(xs, frozenset()) == 0
-    assert planner._route_unsafe(xs, frozenset({0})) is None  # a direct motion: checked before
+    assert planner.route.route_unsafe(xs, frozenset()) == 0
+    assert planner.route.route_unsafe(xs, frozenset({0})) is None  # a direct motion: checked before
 
 
 def test_the_hard_pair_lies_across_the_singularity_and_is_answered_at_once():

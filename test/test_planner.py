@@ -240,8 +240,8 @@ def test_complete_atlas_closes_every_chart(tmp_path):
     other = Planner(pr.robot, pr.task, pr.settings)
     c = other.constraint
     out = run(other.atlas, c.lift(pr.start.p, pr.start.tau), c.lift(pr.goal.p, pr.goal.tau), other.cost,
-              Stop(max_charts=20_000), "gbf", other._direct_x, link_ok=other._link_ok,
-              route_check=other._route_unsafe)
+              Stop(max_charts=20_000), "gbf", other.route.direct_x, link_ok=other.route.link_ok,
+              route_check=other.route.route_unsafe)
     assert out.status == Status.NO_PATH
     island = len(planner.atlas.charts)
     assert 0.8 * island < len(other.atlas.charts) < 2.4 * island

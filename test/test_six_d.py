@@ -106,7 +106,7 @@ def test_no_path_across_the_components_of_a_robot1_slice(tmp_path, strategy):
     c = planner.constraint
     xs, xg = c.lift(pr.start.p, pr.start.tau), c.lift(pr.goal.p, pr.goal.tau)
     out = run(planner.atlas, xs, xg, planner.cost, Stop(max_charts=20_000), strategy,
-              link_ok=planner._link_ok)
+              link_ok=planner.route.link_ok)
     assert out.status == Status.NO_PATH
     res = Planner(pr.robot, pr.task, replace(pr.settings, strategy=strategy)).plan(pr.start, pr.goal)
     assert (res.success, res.reason, res.charts) == (False, Status.NO_PATH, 0)

@@ -117,13 +117,14 @@ def test_admissible_decides_the_heuristic_under_a_clearance_cost(registered):
     planner = Planner(pr.robot, pr.task, replace(pr.settings, clearance_weight=1.0))
     c = planner.constraint
     xs, xg = c.lift(pr.start.p, pr.start.tau), c.lift(pr.goal.p, pr.goal.tau)
+    route = planner.route
     for name in ("astar", "wastar", "gbf"):
-        strategy, h = planner._search_strategy(name)
-        expect = planner.length if STRATEGIES[name].admissible else planner._greedy_heuristic
-        assert strategy == name and h(xs, xg) == expect(xs, xg)
-    assert planner._search_strategy("wastar")[1](xs, xg) < planner.cost(xs, xg)
+        h = route.heuristic(name)
+        expect = planner.length if STRATEGIES[name].admissible else route.greedy_heuristic
+        assert planner._strategy(name) == name and h(xs, xg) == expect(xs, xg)
+    assert route.heuristic("wastar")(xs, xg) < planner.cost(xs, xg)
     plain = Planner(pr.robot, pr.task, replace(pr.settings, clearance_weight=0.0))
-    assert plain._search_strategy("wastar") == ("wastar", None)
+    assert plain._strategy("wastar") == "wastar" and plain.route.heuristic("wastar") is None
 
 
 def test_register_refuses_what_would_be_ambiguous():

@@ -2,6 +2,7 @@
 
     fk = forward_kinematics_many(robot, lengths, p0, R0)   # (M, 6); seeds (M, 3), (M, 3, 3)
     fk.p, fk.R, fk.residual, fk.ok                          # (M, 3), (M, 3, 3), (M,), (M,)
+    p, R = current_pose(robot, lengths, guess=(p, R))       # one pose from measured lengths
 
 The same Newton on SE(3) as ``model.kinematics.forward_kinematics`` (one pose, with
 backtracking and reasons), run on M poses together: p <- p + dp, R <- exp([w]x) R with
@@ -16,7 +17,8 @@ from dataclasses import dataclass
 import numpy as np
 from scipy.spatial.transform import Rotation
 
-from .kinematics import TOL_M
+from ..errors import InputError
+from .kinematics import TOL_M, cable_lengths, forward_kinematics, rotation_vector_exp
 
 MAX_ITERATIONS = 20
 
@@ -60,3 +62,110 @@ def forward_kinematics_many(robot, lengths, p0, R0, tol=TOL_M, max_iterations=MA
     d = p[:, :, None] + R @ robot.platform_anchors.T - robot.base_anchors.T
     residual = np.max(np.abs(np.sqrt(np.einsum("nik,nik->nk", d, d)) - L), axis=1)
     return ManyPoses(p=p, R=R, residual=residual, ok=residual <= tol)
+
+
+# Seeds of a pose search without a guess: the platform level (R = I) first, then turned
+# about the base z axis and tilted, each with p from the lengths (``_position_seeds``).
+_SEED_TURNS = (0.0, np.pi / 2, -np.pi / 2, np.pi)
+_SEED_TILTS = (np.zeros(3), np.array([0.4, 0.0, 0.0]), np.array([-0.4, 0.0, 0.0]),
+               np.array([0.0, 0.4, 0.0]), np.array([0.0, -0.4, 0.0]))
+
+
+def nearest_pose(robot, lengths, poses):
+    """Of the poses (p (3,) m, R (3, 3)) in ``poses``, the one whose cable lengths are
+    nearest ``lengths`` (m, largest difference): the best start for ``current_pose``'s
+    Newton, since a hexapod has several poses for the same lengths. None if there are none."""
+    L = np.asarray(lengths, dtype=float)
+    return min(poses, key=lambda pose: float(np.max(np.abs(cable_lengths(robot, *pose) - L))),
+               default=None)
+
+
+def current_pose(robot, lengths, guess=None, feasible=None):
+    """The platform pose (p (3,) m, R (3, 3)) whose cable lengths are ``lengths`` (6,) m,
+    by Newton (``forward_kinematics``) from ``guess`` = (p, R), the last known pose.
+
+    A hexapod's forward kinematics has several solutions (for planar anchor sets, at
+    least the mirror image through the base plane); Newton from the last known pose finds
+    the one the platform is on as long as it moved little since. Without a guess, Newton
+    runs from 20 orientations (level, turned about z, tilted by 0.4 rad), each with one or
+    two positions fitted to the lengths (``_position_seeds``), ~30 ms; of the solutions a
+    wrench-feasible one is preferred (the platform hangs in taut cables), then the least
+    tilted (z axis nearest the base's). Lengths alone cannot tell feasible solutions apart:
+    Robot 2's free-flight goal (config/problems) has a feasible twin with the same lengths
+    tilted 3.06 rad, nearly upside down, and its pose p (0.02, -0.01, 0.30) m, tau (0.3,
+    0.4, 0.1) rad one 9 cm higher and less tilted, which is what the search returns. Pass a
+    guess whenever a pose is known; when Newton fails from it (the platform moved far
+    since), the seeds are searched as without one.
+
+    InputError (field ``joint_states``) naming why when no pose is found (singular cable
+    Jacobian, no convergence) or the lengths are not numbers > 0. ``feasible(p, R) -> bool``
+    tells the poses the platform can hang in (the caller's wrench check: model/ knows no
+    wrenches, ``ros.execution.current_pose`` passes ``feasibility.evaluate``); None: all.
+    """
+    L = np.asarray(lengths, dtype=float)
+    if L.shape != (len(robot.winch_names),) or not np.all(np.isfinite(L)) or np.any(L <= 0):
+        raise InputError("joint_states", np.asarray(lengths).tolist(),
+                         "expected one finite cable length > 0 (m) per winch")
+    near = None
+    if guess is not None:
+        p0, R0 = guess
+        fk = forward_kinematics(robot, L, p0, R0)
+        if fk.ok:
+            return fk.p, fk.R
+        # the platform is far from the last known pose (moved while not watched, a stale
+        # guess): search as without a guess rather than refuse
+        near = fk.message
+    best, reasons = None, []
+    for R0 in _rotation_seeds():
+        for p0 in _position_seeds(robot, L, R0):
+            try:
+                fk = forward_kinematics(robot, L, p0, R0)
+            except InputError as exc:   # a seed beyond the position limits
+                reasons.append(str(exc))
+                continue
+            if not fk.ok:
+                reasons.append(fk.message)
+                continue
+            # every converged solution has a residual at rounding level, so the residual
+            # cannot choose: feasibility does, then the tilt (angle of the platform's z axis
+            # from the base's), since a platform hanging in cables is seldom upside down
+            hangs = feasible is None or bool(feasible(fk.p, fk.R))
+            tilt = float(np.arccos(np.clip(fk.R[2, 2], -1.0, 1.0)))
+            key = (not hangs, round(tilt, 6), fk.residual)
+            if best is None or key < best[0]:
+                best = (key, fk)
+    if best is None:
+        not_near = "near the last known one nor " if near else ""
+        raise InputError("joint_states", L.tolist(), f"no pose {not_near}from "
+                                                     f"{len(reasons)} seeds: {near or reasons[0]}")
+    return best[1].p, best[1].R
+
+
+def _rotation_seeds():
+    for turn in _SEED_TURNS:
+        Rz = rotation_vector_exp([0.0, 0.0, turn])
+        for tilt in _SEED_TILTS:
+            yield rotation_vector_exp(tilt) @ Rz
+
+
+def _position_seeds(robot, L, R):
+    """Positions p with |p - c_i| = L_i in the least-squares sense, c_i = a_i - R b_i.
+    Differences of the squared equations are linear in p; when the c_i are (nearly)
+    coplanar one direction is left free and the mean equation gives it as a quadratic:
+    both roots (above and below the plane) are returned."""
+    c = robot.base_anchors - robot.platform_anchors @ R.T
+    c_mean = c.mean(axis=0)
+    sq = np.sum(c * c, axis=1)
+    A = -2.0 * (c - c_mean)
+    b = (L ** 2 - np.mean(L ** 2)) - (sq - sq.mean())
+    U, s, Vt = np.linalg.svd(A, full_matrices=False)
+    if s[2] > 1e-6 * s[0]:
+        return [np.linalg.lstsq(A, b, rcond=None)[0]]
+    p0 = Vt[:2].T @ ((U[:, :2].T @ b) / s[:2])       # the solution in the plane
+    n = Vt[2]
+    # |p0 + t n|^2 - 2 c_mean . (p0 + t n) + mean |c|^2 = mean L^2, a quadratic in t
+    half_b = float(n @ (p0 - c_mean))
+    const = float(p0 @ p0 - 2 * c_mean @ p0 + sq.mean() - np.mean(L ** 2))
+    disc = half_b ** 2 - const
+    root = np.sqrt(max(disc, 0.0))
+    return [p0 + (-half_b + root) * n, p0 + (-half_b - root) * n]

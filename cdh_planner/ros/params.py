@@ -31,7 +31,7 @@ from ..errors import InputError
 from ..model import robot_schema as rs
 from ..model.robot import FIELDS as ROBOT_FIELDS, OPTIONAL_GROUPS, robot_from_dict
 from ..model.task import TASKS, task_from_dict, task_parameters
-from ..planner import task_cost
+from ..pipeline.metrics import task_cost
 from ..scene.schema import load_scene
 from ..settings import SETTINGS, Bounds, PlannerSettings, check_range
 

@@ -1,0 +1,108 @@
+"""Which poses and motions the planner may use: the one place every stage asks.
+
+A pose is valid when its margin is at least the planner's margin floor: the wrench
+feasibility margin (normalised, ``feasibility.evaluate``), with a scene the least of it
+and the collision margin (``scene.collision.combine``); a motion between two poses when
+it is, densely (``trajectory.verify``, with the same collision model). Poses are task
+coordinate rows y (N, k) (``model.task``): M is
+the graph of the closed-form lift over the feasible poses of the task, so moving y and
+checking the pose keeps every point on M.
+"""
+
+import numpy as np
+
+from ..cable_feasibility import feasibility_of as evaluate  # 6 cables: the closed form
+from ..model.pose import quaternion_from_tau, rotation_tt, wrap_angle
+from ..scene.margin import COLLISION_UNIT_M, combine
+from ..trajectory.verify import SlerpPath, TaskLinePath, check_motion, check_path
+
+COARSE_SAMPLES = 17  # a direct motion is first checked at these few points (a cheap "no")
+
+
+class Validity:
+    """Valid poses and motions of one robot and task (module docstring)."""
+
+    def __init__(self, robot, task, margin_floor, scene=None):
+        """``scene`` (scene.schema.Scene or None): obstacles the poses keep clear of."""
+        self.robot, self.task, self.margin_floor = robot, task, margin_floor
+        self.periodic = np.array(task.periodic, dtype=bool)
+        self.scene = scene
+        self.collision = _collision_model(robot, scene)
+
+    def pose_margins(self, p, tau=None, R=None):
+        """Margins (N,) and bindings of poses (p (N, 3) m, tau (N, 3) rad or R (N, 3, 3)):
+        wrench feasibility's (normalised) and, with a scene, the least of it and the
+        collision margin (scene.collision.combine): positive iff valid at floor 0."""
+        f = evaluate(self.robot, p, tau, R)
+        if self.collision is None:
+            return f.margin, f.binding
+        return combine(f.margin, f.binding, self.collision, p, rotation_tt(tau) if R is None else R)
+
+    def margins(self, y):
+        """Margins (N,) of task coordinate rows y (N, k) (``pose_margins``)."""
+        p, tau = self.task.pose(y)
+        return self.pose_margins(p, tau)[0]
+
+    def clear(self, p, tau):
+        """Is the pose (p (3,) m, tau (3,) rad) clear of collision by the margin floor?
+        (True without a scene)"""
+        if self.collision is None:
+            return True
+        c = self.collision.clearance(p, rotation_tt(tau))
+        return c.margin / COLLISION_UNIT_M >= self.margin_floor
+
+    def pose(self, y):
+        """Which rows of y (N, k) are valid poses: margin at least the floor (N,) bool."""
+        return self.margins(y) >= self.margin_floor
+
+    def direct_motion(self, y):
+        """The direct motion through task coordinates y (N, k): position linear and
+        orientation slerp in free flight (what a controller executes), straight lines in a
+        task's coordinates otherwise (slerp would leave the task)."""
+        y = np.array(y, dtype=float)
+        if self.task.slerp:
+            p, tau = self.task.pose(y)
+            return SlerpPath(p, quaternion_from_tau(tau))
+        per = self.periodic
+        y[1:, per] = y[0, per] + np.cumsum(wrap_angle(np.diff(y[:, per], axis=0)), axis=0)  # short arcs
+        return TaskLinePath(self.task, y)
+
+    def probe(self, y, n):
+        """Are n evenly spaced poses of every direct motion between the rows of y valid?
+        (one vectorised closed-form call)"""
+        motion = self.direct_motion(y)
+        seg = np.repeat(np.arange(motion.n_segments), n)
+        s = np.tile(np.linspace(0.0, 1.0, n), motion.n_segments)
+        p, R = motion(seg, s)
+        return bool(np.all(self.pose_margins(p, R=R)[0] >= self.margin_floor))
+
+    def motion(self, ya, yb):
+        """Is the direct motion ya -> yb dense-valid? A few points first (most unsafe
+        motions fail there), then the dense check."""
+        y = np.array([ya, yb])
+        if not (self.probe(y, COARSE_SAMPLES) and self.probe(y, 8 * COARSE_SAMPLES)):
+            return False
+        seg = check_path(self.robot, self.direct_motion(y), collision=self.collision)[0]
+        return seg.feasible and seg.unresolved == 0 and seg.worst.margin >= self.margin_floor
+
+    def segments(self, p, q):
+        """The dense check of the waypoints p (N, 3) m, quaternions q (N, 4) and the
+        motion between them (position linear, orientation slerp): one
+        ``trajectory.verify`` segment report per pair."""
+        return check_motion(self.robot, p, q, collision=self.collision)
+
+
+def wrapped(d, periodic):
+    """Rows of task coordinates with the periodic columns wrapped to [-pi, pi)."""
+    d = d.copy()
+    d[:, periodic] = wrap_angle(d[:, periodic])
+    return d
+
+
+def _collision_model(robot, scene):
+    """The CollisionModel of ``scene`` (None without one): coal and the compiled kernel are
+    loaded only when there is a scene."""
+    if scene is None:
+        return None
+    from ..scene.collision import CollisionModel
+    return CollisionModel(robot, scene)
