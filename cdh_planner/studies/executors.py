@@ -62,8 +62,7 @@ class RayExecutor:
         started = time.perf_counter()
         ray.init(address=address, num_cpus=None if address else self.workers,
                  include_dashboard=False, logging_level="ERROR", log_to_driver=False,
-                 configure_logging=True, ignore_reinit_error=True,
-                 runtime_env=_runtime_env(address))
+                 ignore_reinit_error=True)  # a local Ray's workers inherit PYTHONPATH
         self.start_s = time.perf_counter() - started
         worker = ray.remote(num_cpus=1, max_restarts=-1, max_task_retries=-1)(_Worker)
         self.actors = [worker.remote(module.__name__) for _ in range(self.workers)]
@@ -133,13 +132,6 @@ class _Worker:
         if self.key != job_key:
             self.key, self.context = job_key, self.module.make_context(job)
         return self.module.run_call(self.context, call)
-
-
-def _runtime_env(address):
-    """A local Ray's workers import this package as the driver does (its PYTHONPATH);
-    a cluster's have it installed."""
-    path = os.environ.get("PYTHONPATH")
-    return {"env_vars": {"PYTHONPATH": path}} if path and not address else None
 
 
 def make_executor(workers=None, address=None, ray=True, module=workspace):
