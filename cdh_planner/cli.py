@@ -33,7 +33,7 @@ from cdh_planner.errors import MAX_MESSAGE_CHARS, InputError, clip
 PROG = 'cdh-planner'
 
 # Order here is the order in --help. A name whose module does not exist yet is skipped.
-COMMANDS = ['verify', 'slice', 'plan', 'workspace', 'node', 'call', 'replay', 'recover', 'demo']
+COMMANDS = ['verify', 'slice', 'plan', 'workspace', 'sweep', 'node', 'call', 'replay', 'recover', 'demo']
 
 # The one-line summaries of `cdh-planner --help`, the same as each module's add_parser help
 # (test_startup_imports checks). Held here so that a run imports only the module of the command it runs:
@@ -43,6 +43,7 @@ SUMMARIES = {
     'slice': 'draw a 2-D slice of the wrench-feasible C-space to a PNG',
     'plan': 'plan a wrench-feasible path for a problem file (no ROS needed)',
     'workspace': 'sample poses: wrench feasibility, margin and reachability from home',
+    'sweep': 'compare robot designs: the workspace (and queries) of each, to a CSV',
     'node': 'run the ROS 2 planner node',
     'call': "call a running node's plan service (and execute)",
     'replay': 'republish a recorded run, or re-send its plan requests',

@@ -47,11 +47,16 @@ def _bars(stream):
 
 
 def _lines(stream, interval_s, clock):
-    start = last = clock()
+    last = clock()
+    starts = {}  # stage -> (start time, done before): a stage that starts again restarts
 
     def update(stage, done, total):
         nonlocal last
         now = clock()
+        if stage not in starts or done < starts[stage][1]:
+            starts[stage] = (now, 0)
+        start = starts[stage][0]
+        starts[stage] = (start, done)
         if now - last < interval_s and done < total:
             return
         if now - last < interval_s and now - start < interval_s:

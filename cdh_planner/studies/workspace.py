@@ -55,6 +55,7 @@ class WorkspaceSpec:
     reach: bool = False
     timeout_s: float = 10.0
     settings: PlannerSettings = field(default_factory=PlannerSettings)
+    tilt_about: tuple = None  # the orientation the tilt is measured from (None: the home's)
 
     def check(self, prefix=""):
         """This spec, or InputError naming the field out of range (``prefix`` + its name:
@@ -106,7 +107,8 @@ def sample_poses(spec, start, count):
     r, az = np.sqrt(np.maximum(0.0, 1.0 - z * z)), 2.0 * np.pi * u[:, 4]
     axis = np.stack([r * np.cos(az), r * np.sin(az), z], axis=1)
     angle = spec.tilt * np.cbrt(u[:, 5])  # uniform in the ball of rotation vectors
-    R = Rotation.from_quat(spec.home_quaternion) * Rotation.from_rotvec(axis * angle[:, None])
+    about = spec.home_quaternion if spec.tilt_about is None else spec.tilt_about
+    R = Rotation.from_quat(about) * Rotation.from_rotvec(axis * angle[:, None])
     q = R.as_quat()
     q *= np.where(q[:, 3:] < 0, -1.0, 1.0)  # one sign: w >= 0
     return p, q
@@ -154,10 +156,12 @@ def reachable_of(status):
 # ----- what a worker runs: one context per job, then calls ---------------------------------
 @dataclass(frozen=True)
 class Job:
-    """What workers need to answer calls: the model (robot) and the spec. Picklable."""
+    """What workers need to answer calls: the model (robot), the spec and the queries
+    (``(task, settings, start, goal)`` each, planned on the model). Picklable."""
 
     model: object
     spec: WorkspaceSpec
+    queries: tuple = ()
 
 
 def make_context(job):
@@ -165,13 +169,25 @@ def make_context(job):
     return job
 
 
+def query_call(model, query):
+    """Plan one query ``(task, settings, start, goal)`` on ``model``: a dict of the answer."""
+    task, settings, start, goal = query
+    result = Planner(model, task, settings).plan(start, goal)
+    return {"success": bool(result.success), "reason": str(result.reason),
+            "cost": float(result.cost) if result.success else None,
+            "time_s": float(result.time_s), "charts": int(result.charts)}
+
+
 def run_call(context, call):
-    """Answer one call ``(kind, args)``: ("points", (start, count)) or ("reach", index)."""
+    """Answer one call ``(kind, args)``: ("points", (start, count)), ("reach", index) or
+    ("query", k) (the job's k-th query)."""
     kind, args = call
     if kind == "points":
         return point_call(context.model, context.spec, *args)
     if kind == "reach":
         return reach_call(context.model, context.spec, args)
+    if kind == "query":
+        return query_call(context.model, context.queries[args])
     raise ValueError(f"unknown call kind {kind!r}")
 
 
@@ -189,6 +205,7 @@ class WorkspaceResult:
     seconds: dict             # {"points", "reach", "total"} s
     workers: int
     stopped: str = None       # None, or the bound that stopped the run early
+    job: "Job" = None           # what the workers answered from
 
     @property
     def evaluated(self):
@@ -234,17 +251,19 @@ def point_calls(spec):
             for s in range(0, spec.samples, POINT_CHUNK)]
 
 
-def run_workspace(model, spec, executor, progress=None, max_seconds=None, clock=time.monotonic):
+def run_workspace(model, spec, executor, progress=None, max_seconds=None, clock=time.monotonic,
+                  queries=()):
     """Evaluate every sample (and plan the feasible ones with ``spec.reach``) on
     ``executor``; ``progress(stage, done, total)`` after each answer; stop early (an answer
     with ``stopped``) when ``max_seconds`` (s, None: no bound) have passed. ``spec`` is
-    checked by the caller (``WorkspaceSpec.check``)."""
+    checked by the caller (``WorkspaceSpec.check``). ``queries``: of the job (``Job``), for
+    the caller to plan on the same workers (``res.job``)."""
     t0 = clock()
     deadline = None if max_seconds is None else t0 + max_seconds
     n = spec.samples
     res = WorkspaceResult(spec, np.full((n, 3), np.nan), np.full((n, 4), np.nan),
                           np.full(n, np.nan), [""] * n, [None] * n, {}, executor.workers)
-    job = Job(model, spec)
+    job = res.job = Job(model, spec, tuple(queries))
     calls = point_calls(spec)
     done = 0
     for _key, out in executor.map(job, calls, deadline=deadline, clock=clock):
@@ -286,7 +305,8 @@ def result_dict(robot, res):
                  res.reach_status))]
     return {"robot": robot.name, "robot_file": robot.source, "samples": spec.samples,
             "seed": spec.seed, "box": {"low": list(spec.box_low), "high": list(spec.box_high)},
-            "tilt_rad": spec.tilt, "home": {"position": list(spec.home_position),
+            "tilt_rad": spec.tilt, "tilt_about": None if spec.tilt_about is None else list(spec.tilt_about),
+            "home": {"position": list(spec.home_position),
                                             "quaternion": list(spec.home_quaternion)},
             "reach": spec.reach, "timeout_s": spec.timeout_s if spec.reach else None,
             "counts": res.counts(), "fractions": res.fractions(), "seconds": res.seconds,
