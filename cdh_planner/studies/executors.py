@@ -60,7 +60,8 @@ class RayExecutor:
 
         self.ray, self.workers, self.module = ray, int(workers), module
         started = time.perf_counter()
-        ray.init(address=address, num_cpus=None if address else self.workers,
+        # "local": a new Ray even when a cluster's address file is left in /tmp/ray
+        ray.init(address=address or "local", num_cpus=None if address else self.workers,
                  include_dashboard=False, logging_level="ERROR", log_to_driver=False,
                  ignore_reinit_error=True)  # a local Ray's workers inherit PYTHONPATH
         self.start_s = time.perf_counter() - started
