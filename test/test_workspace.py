@@ -138,3 +138,16 @@ def test_plot_is_written(tmp_path, capsys):
                      str(out), "--quiet"]) == 0
     assert out.read_bytes()[:8] == b"\x89PNG\r\n\x1a\n"
     capsys.readouterr()
+
+
+def test_no_ray_run_and_other_commands_import_no_ray():
+    """Ray is a dependency of the studies' Ray executor only (issue 24, item 3)."""
+    import subprocess
+    import sys
+    code = ("import sys, contextlib, io\nfrom cdh_planner import cli\n"
+            "with contextlib.redirect_stdout(io.StringIO()):\n"
+            f"    assert cli.main(['workspace', {str(ROBOT2)!r}, '--samples', '50', '--no-ray', '--quiet']) == 0\n"
+            "import cdh_planner.ros.node, cdh_planner.commands.plan, cdh_planner.commands.sweep\n"
+            "print('ray' in sys.modules)")
+    out = subprocess.run([sys.executable, "-c", code], capture_output=True, text=True, check=True)
+    assert out.stdout.strip().splitlines()[-1] == "False"

@@ -9,6 +9,7 @@ import socket
 import subprocess
 import sys
 import time
+from pathlib import Path
 
 import numpy as np
 import pytest
@@ -90,6 +91,8 @@ def test_a_cluster_started_outside_answers_as_a_local_ray(tmp_path, capsys):
     """``ray start --head --block`` on localhost (this test starts and stops it), then the
     command with --ray-address: the same poses and answers as --workers 2."""
     port = _free_port()
+    address_file = Path("/tmp/ray/ray_current_cluster")  # `ray start` leaves it: ours goes
+    had_file = address_file.exists()
     head = subprocess.Popen(
         [sys.executable, "-m", "ray.scripts.scripts", "start", "--head", "--block",
          f"--port={port}", "--num-cpus=2", "--include-dashboard=false", "--disable-usage-stats"],
@@ -116,3 +119,20 @@ def test_a_cluster_started_outside_answers_as_a_local_ray(tmp_path, capsys):
     finally:
         os.killpg(head.pid, signal.SIGTERM)  # the head and the daemons it started
         head.wait(timeout=60)
+        if not had_file and address_file.exists() and f":{port}" in address_file.read_text():
+            address_file.unlink()
+
+
+def test_a_sweep_on_two_ray_workers_answers_as_in_this_process(tmp_path, capsys):
+    sweep = tmp_path / "sweep.yaml"
+    sweep.write_text(f"robot: {ROBOT2}\nvary:\n  robot.tension_max: [[4, 4, 4, 4, 4, 4], [5, 5, 5, 5, 5, 5]]\n"
+                     "workspace: {samples: 150, seed: 4, reach: true, timeout: 30}\n")
+    rows = {}
+    for name, extra in (("serial", ["--no-ray"]), ("ray", ["--workers", "2"])):
+        assert cli.main(["sweep", str(sweep), "--out", str(tmp_path / name), "--quiet", *extra]) == 0
+        lines = (tmp_path / name / "results.csv").read_text().splitlines()
+        header = lines[0].split(",")
+        keep = [k for k, h in enumerate(header) if "seconds" not in h]
+        rows[name] = [[line.split(",")[k] for k in keep] for line in lines]
+    assert rows["serial"] == rows["ray"] and len(rows["ray"]) == 3
+    capsys.readouterr()
