@@ -151,3 +151,20 @@ def test_no_ray_run_and_other_commands_import_no_ray():
             "print('ray' in sys.modules)")
     out = subprocess.run([sys.executable, "-c", code], capture_output=True, text=True, check=True)
     assert out.stdout.strip().splitlines()[-1] == "False"
+
+
+def test_task_file_samples_lie_on_the_task_and_a_home_off_it_is_refused(tmp_path, capsys):
+    """Robot 2's sphere task: every sample on the sphere (residual < 1e-12 m), the sampled
+    alpha1 over [-pi, pi]; a --home off the sphere is one line naming --home, exit 2."""
+    problem = CONFIG / "problems" / "robot2_q2_q3.yaml"
+    out = tmp_path / "t.json"
+    assert cli.main(["workspace", str(ROBOT2), "--samples", "500", "--no-ray", "--quiet",
+                     "--task-file", str(problem), "--json", str(out)]) == 0
+    doc = json.loads(out.read_text())
+    p = np.array([q["position"] for q in doc["poses"]])
+    assert np.allclose(np.linalg.norm(p - [0, 0, 0.306], axis=1), 0.13, atol=1e-12)
+    assert 0 < doc["fractions"]["feasible"] < 1 and doc["task"].startswith("sphere")
+    assert cli.main(["workspace", str(ROBOT2), "--no-ray", "--quiet", "--task-file", str(problem),
+                     "--home", "0", "0", "0.2", "0", "0", "0"]) == 2
+    err = capsys.readouterr().err
+    assert err.count("\n") == 1 and "--home" in err and "off the task" in err

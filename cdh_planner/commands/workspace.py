@@ -1,7 +1,7 @@
 """``cdh-planner workspace``: where the robot holds its load, and what it reaches from home.
 
     cdh-planner workspace ROBOT.yaml [--samples N] [--seed S] [--box X0,Y0,Z0,X1,Y1,Z1]
-                          [--tilt A] [--reach [--home X Y Z PHI THETA SIGMA] [--timeout S]]
+                          [--tilt A | --task-file T.yaml] [--reach [--home X Y Z PHI THETA SIGMA] [--timeout S]]
                           [--workers N | --no-ray] [--ray-address HOST:PORT]
                           [--max-seconds S] [--json OUT] [--plot OUT.png] [--quiet]
 
@@ -15,7 +15,7 @@ Runs on a local Ray of ``--workers`` actors (default: the cores), on a cluster w
 """
 
 import math
-import time
+from dataclasses import replace
 
 import numpy as np
 
@@ -47,6 +47,10 @@ def add_parser(subparsers):
     p.add_argument("--box", metavar="X0,Y0,Z0,X1,Y1,Z1",
                    help="position box corners, m or with unit (default: the box under the "
                         "base anchors the cables reach)")
+    p.add_argument("--task-file", metavar="T.yaml",
+                   help="sample a task's coordinates instead (a problem file with 'task:' or a "
+                        "ROS parameters file; x, y, z over --box, angles over their bounds); "
+                        "--reach then plans on the task")
     p.add_argument("--tilt", default="30deg", metavar="A",
                    help="largest rotation from the home orientation, rad or deg (default 30deg)")
     p.add_argument("--reach", action="store_true",
@@ -109,20 +113,31 @@ def build_spec(args, robot):
     """The WorkspaceSpec of the options, checked (InputError naming the option)."""
     low, high = parse_box(args.box) if args.box else ws.default_box(robot)
     tilt = parse_angle(args.tilt, "--tilt")
+    task = None
+    if args.task_file:
+        from .slice import task_in_yaml
+        task = task_in_yaml(args.task_file)
+        if task is None:
+            raise InputError("--task-file", args.task_file, "no 'task:' mapping (top level or "
+                                                            "under ros__parameters)")
     if args.home:
         position = [parse_length(v, f"--home {n}") for v, n in zip(args.home[:3], "xyz")]
         tau = [parse_angle(v, f"--home {n}") for v, n in zip(args.home[3:], ("phi", "theta", "sigma"))]
         home = ws.home_from_tau(position, tau)
     else:
-        home = ws.default_home(robot)
+        home = ws.default_home(robot) if task is None else None
     if not math.isfinite(args.timeout):
         raise InputError("--timeout", args.timeout, "must be a finite number of seconds")
     spec = ws.WorkspaceSpec(samples=args.samples, seed=args.seed, box_low=low, box_high=high,
-                            home_position=home[0], home_quaternion=home[1], tilt=tilt,
-                            reach=args.reach, timeout_s=args.timeout,
-                            settings=PlannerSettings()).check("--")
+                            home_position=(0.0, 0.0, 0.0), home_quaternion=(0.0, 0.0, 0.0, 1.0),
+                            tilt=tilt, reach=args.reach, timeout_s=args.timeout,
+                            settings=PlannerSettings(), task=task).check("--")
+    if home is None:
+        home = ws.default_task_home(robot, spec)
+    elif task is not None:
+        ws.check_on_task(task, *home)
     ws.check_home(robot, *home)
-    return spec
+    return replace(spec, home_position=home[0], home_quaternion=home[1])
 
 
 def parse_box(text):

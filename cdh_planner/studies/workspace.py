@@ -29,8 +29,9 @@ import numpy as np
 from ..errors import InputError
 from ..feasibility import evaluate
 from ..io.random_queries import workspace_box
-from ..model.pose import Pose, quaternion_from_tau, rotation_from_quaternion, tau_from_rotation
-from ..model.task import FreeTask
+from ..model.pose import (Pose, quaternion_from_tau, rotation_from_quaternion, tau_from_quaternion,
+                          tau_from_rotation)
+from ..model.task import COORDINATES, FreeTask
 from ..planner import Planner, PlannerSettings
 from ..status import Status
 
@@ -56,6 +57,7 @@ class WorkspaceSpec:
     timeout_s: float = 10.0
     settings: PlannerSettings = field(default_factory=PlannerSettings)
     tilt_about: tuple = None  # the orientation the tilt is measured from (None: the home's)
+    task: object = None       # a Task: sample its coordinates (not the box and tilt), plan on it
 
     def check(self, prefix=""):
         """This spec, or InputError naming the field out of range (``prefix`` + its name:
@@ -72,6 +74,8 @@ class WorkspaceSpec:
             raise InputError(f"{prefix}tilt", self.tilt, "must be between 0 and pi rad (180 deg)")
         if not 0 < self.timeout_s <= MAX_TIMEOUT_S:
             raise InputError(f"{prefix}timeout", self.timeout_s, f"must be in (0, {MAX_TIMEOUT_S:g}] s")
+        if self.task is not None:
+            task_ranges(self)
         return self
 
 
@@ -95,12 +99,36 @@ def default_home(robot, draws=HOME_DRAWS, seed=0):
     return tuple(map(float, p[k])), tuple(map(float, R[k].as_quat()))
 
 
+def task_ranges(spec):
+    """(low, high) per coordinate of ``spec.task``: x, y, z over the box, the angles over
+    their natural bounds (``model.task.COORDINATES``); InputError for one without bounds."""
+    names = spec.task.names
+    if len(names) > 4 * BLOCKS_PER_SAMPLE:
+        raise InputError("--task-file", spec.task.describe(), f"more than {4 * BLOCKS_PER_SAMPLE} coordinates")
+    out = []
+    for name in names:
+        if name in ("x", "y", "z"):
+            k = "xyz".index(name)
+            out.append((spec.box_low[k], spec.box_high[k]))
+        elif COORDINATES[name].bounds is not None:
+            out.append(tuple(COORDINATES[name].bounds))
+        else:
+            raise InputError("--task-file", name, "a task coordinate without natural bounds: "
+                                                  "it cannot be sampled")
+    return np.array(out, dtype=float)
+
+
 def sample_poses(spec, start, count):
-    """Samples ``start .. start + count - 1``: positions (count, 3) m, quaternions (count, 4)."""
+    """Samples ``start .. start + count - 1``: positions (count, 3) m, quaternions (count, 4).
+    With a task, its coordinates uniform in ``task_ranges``, mapped to poses."""
     from scipy.spatial.transform import Rotation
 
     bitgen = np.random.Philox(key=spec.seed, counter=BLOCKS_PER_SAMPLE * start)
     u = np.random.Generator(bitgen).random((count, 4 * BLOCKS_PER_SAMPLE))
+    if spec.task is not None:
+        r = task_ranges(spec)
+        p, tau = spec.task.pose(r[:, 0] + (r[:, 1] - r[:, 0]) * u[:, :len(r)])
+        return p, quaternion_from_tau(tau)
     lo, hi = np.asarray(spec.box_low), np.asarray(spec.box_high)
     p = lo + (hi - lo) * u[:, :3]
     z = 2.0 * u[:, 3] - 1.0
@@ -135,7 +163,7 @@ def reach_call(model, spec, index):
     p, q = sample_poses(spec, index, 1)
     home = _pose(spec.home_position, spec.home_quaternion)
     settings = replace(spec.settings, timeout_s=spec.timeout_s)
-    planner = Planner(model, FreeTask(), settings)
+    planner = Planner(model, spec.task or FreeTask(), settings)
     result = planner.plan(home, _pose(p[0], q[0]))
     return index, str(result.reason), float(result.time_s)
 
@@ -308,6 +336,7 @@ def result_dict(robot, res):
             "tilt_rad": spec.tilt, "tilt_about": None if spec.tilt_about is None else list(spec.tilt_about),
             "home": {"position": list(spec.home_position),
                                             "quaternion": list(spec.home_quaternion)},
+            "task": None if spec.task is None else spec.task.describe(),
             "reach": spec.reach, "timeout_s": spec.timeout_s if spec.reach else None,
             "counts": res.counts(), "fractions": res.fractions(), "seconds": res.seconds,
             "workers": res.workers, "complete": res.stopped is None, "stopped": res.stopped,
@@ -316,6 +345,22 @@ def result_dict(robot, res):
 
 def _rows(a):
     return [None if not np.all(np.isfinite(r)) else r for r in a.tolist()]
+
+
+def default_task_home(model, spec, draws=HOME_DRAWS // 5):
+    """The default home on ``spec.task``: the largest-margin of ``draws`` task samples of
+    seed 0 (position (3,), quaternion (4,))."""
+    p, q = sample_poses(replace(spec, seed=0), 0, draws)
+    k = int(np.argmax(pose_margins(model, p, q)[0]))
+    return tuple(map(float, p[k])), tuple(map(float, q[k]))
+
+
+def check_on_task(task, position, quaternion, tol=1e-6):
+    """InputError naming --home unless the pose is on ``task`` (within ``tol`` m or rad)."""
+    tau = tau_from_quaternion(np.asarray([quaternion], float))
+    off = float(task.residual(np.asarray([position], float), tau)[0])
+    if not off <= tol:
+        raise InputError("--home", list(position), f"{off:.3g} off the task ({task.describe()})")
 
 
 def check_home(model, position, quaternion):
