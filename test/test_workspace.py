@@ -125,6 +125,8 @@ def test_max_seconds_is_an_answer_not_an_error(robot, home):
     (["--json", "/nonexistent/dir/w.json"], "--json"),
     (["--plot", "w.txt"], "--plot"),
     (["--samples", "ten"], "--samples"),
+    (["--tilt", "10deg", "--task-file", str(CONFIG / "problems" / "robot2_q2_q3.yaml")], "--tilt"),
+    (["--task-file", str(CONFIG / "robot1.yaml")], "--task-file"),
 ])
 def test_bad_input_is_one_line_naming_the_option_exit_2(extra, field, capsys):
     assert cli.main(["workspace", str(ROBOT2), "--no-ray", "--quiet", *extra]) == 2

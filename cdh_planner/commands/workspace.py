@@ -51,7 +51,7 @@ def add_parser(subparsers):
                    help="sample a task's coordinates instead (a problem file with 'task:' or a "
                         "ROS parameters file; x, y, z over --box, angles over their bounds); "
                         "--reach then plans on the task")
-    p.add_argument("--tilt", default="30deg", metavar="A",
+    p.add_argument("--tilt", metavar="A",
                    help="largest rotation from the home orientation, rad or deg (default 30deg)")
     p.add_argument("--reach", action="store_true",
                    help="plan from the home pose to every feasible sample")
@@ -112,7 +112,9 @@ def run_spec(robot, spec, workers, address, use_ray, max_seconds, quiet):
 def build_spec(args, robot):
     """The WorkspaceSpec of the options, checked (InputError naming the option)."""
     low, high = parse_box(args.box) if args.box else ws.default_box(robot)
-    tilt = parse_angle(args.tilt, "--tilt")
+    if args.tilt is not None and args.task_file:
+        raise InputError("--tilt", args.tilt, "not with --task-file: the task fixes the orientations")
+    tilt = parse_angle(args.tilt or "30deg", "--tilt")
     task = None
     if args.task_file:
         from .slice import task_in_yaml
