@@ -30,7 +30,7 @@ setup(
         ('share/' + package_name + '/launch', sorted(glob('launch/*.launch.py'))),
     ],
     install_requires=['setuptools', 'numpy', 'scipy', 'pyyaml', 'matplotlib', 'tqdm', 'threadpoolctl', 'numba', 'toppra',
-                      'mcap', 'mcap-ros2-support', 'rosbags'],
+                      'mcap', 'mcap-ros2-support', 'rosbags', 'ray'],
     zip_safe=True,
     maintainer='cdh_planner maintainers',
     maintainer_email='maintainer@example.com',

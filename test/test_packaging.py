@@ -28,6 +28,7 @@ THIRD_PARTY = {
     "mcap": ("mcap-ros2-support", "mcap"),
     "mcap_ros2": ("mcap-ros2-support", "mcap-ros2-support"),
     "rosbags": ("python3-rosbags-pip", "rosbags"),
+    "ray": ("python3-ray-pip", "ray"),
 }
 ROS = {"rclpy", "ament_index_python", "builtin_interfaces", "rcl_interfaces", "action_msgs",
        "std_msgs", "std_srvs", "geometry_msgs", "nav_msgs", "trajectory_msgs", "sensor_msgs",
