@@ -13,6 +13,7 @@ Ray is imported only by ``RayExecutor``: nothing else in the package needs it.
 import os
 import time
 
+from ..errors import InputError
 from . import workspace
 
 MAX_LOST = 100            # answers lost to dead workers before the map gives up (each retried)
@@ -56,7 +57,11 @@ class RayExecutor:
     Ray of ``workers`` CPUs for this process."""
 
     def __init__(self, workers, address=None, module=workspace):
-        import ray  # the one import of Ray in the package
+        try:
+            import ray  # the one import of Ray in the package
+        except ImportError:
+            raise InputError("--workers", workers, "needs Ray, which is not installed "
+                                                   "(pip install ray==2.60.0), or run with --no-ray") from None
 
         self.ray, self.workers, self.module = ray, int(workers), module
         started = time.perf_counter()
