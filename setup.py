@@ -31,7 +31,7 @@ setup(
     ],
     install_requires=['setuptools', 'numpy', 'scipy', 'pyyaml', 'matplotlib', 'tqdm', 'threadpoolctl', 'numba', 'toppra',
                       'coal', 'trimesh',
-                      'mcap', 'mcap-ros2-support', 'rosbags'],
+                      'mcap', 'mcap-ros2-support', 'rosbags', 'ray'],
     zip_safe=True,
     maintainer='cdh_planner maintainers',
     maintainer_email='maintainer@example.com',

@@ -33,7 +33,8 @@ from cdh_planner.errors import MAX_MESSAGE_CHARS, InputError, clip
 PROG = 'cdh-planner'
 
 # Order here is the order in --help. A name whose module does not exist yet is skipped.
-COMMANDS = ['verify', 'slice', 'plan', 'node', 'call', 'replay', 'recover', 'urdf', 'demo']
+COMMANDS = ['verify', 'slice', 'plan', 'workspace', 'sweep', 'node', 'call', 'replay', 'recover', 'urdf',
+            'demo']
 
 # The one-line summaries of `cdh-planner --help`, the same as each module's add_parser help
 # (test_startup_imports checks). Held here so that a run imports only the module of the command it runs:
@@ -42,6 +43,8 @@ SUMMARIES = {
     'verify': 'check poses and the motion between them for wrench feasibility',
     'slice': 'draw a 2-D slice of the wrench-feasible C-space to a PNG',
     'plan': 'plan a wrench-feasible path for a problem file (no ROS needed)',
+    'workspace': 'sample poses: wrench feasibility, margin and reachability from home',
+    'sweep': 'compare robot designs: the workspace (and queries) of each, to a CSV',
     'node': 'run the ROS 2 planner node',
     'call': "plan through a running node's ~/plan_path action (and execute)",
     'replay': 'republish a recorded run, or re-send its plan requests',

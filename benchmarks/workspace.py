@@ -1,0 +1,80 @@
+"""Throughput of the workspace analysis (issue 24): poses/s of the point test, plans/s of
+the reach map in this process and on a local Ray of 1 and 2 workers, and Ray's start-up.
+
+    python benchmarks/workspace.py [--robot config/robot2.yaml] [--samples 200000]
+                                   [--plans 60] [--workers 1 2] [--no-ray]
+
+Prints numbers only (machines differ); the issue's targets (2 workers >= 1.7x 1 worker on a
+reach job, Ray start < 3 s) are printed beside them, never turned into an exit code.
+"""
+
+import argparse
+import sys
+import time
+from pathlib import Path
+
+import numpy as np
+
+ROOT = Path(__file__).resolve().parents[1]
+sys.path.insert(0, str(ROOT))  # run from a checkout without installing
+
+from cdh_planner.model.robot import load_robot  # noqa: E402
+from cdh_planner.studies import workspace as ws  # noqa: E402
+from cdh_planner.studies.executors import RayExecutor, SerialExecutor  # noqa: E402
+
+
+def main(argv=None):
+    ap = argparse.ArgumentParser(description=__doc__.splitlines()[0])
+    ap.add_argument("--robot", default=str(ROOT / "config" / "robot2.yaml"))
+    ap.add_argument("--samples", type=int, default=200_000)
+    ap.add_argument("--plans", type=int, default=60, help="plans of the reach job")
+    ap.add_argument("--workers", type=int, nargs="+", default=[1, 2])
+    ap.add_argument("--seed", type=int, default=1)
+    ap.add_argument("--no-ray", action="store_true")
+    args = ap.parse_args(argv)
+
+    robot = load_robot(args.robot)
+    low, high = ws.default_box(robot)
+    home = ws.default_home(robot)
+    spec = ws.WorkspaceSpec(samples=args.samples, seed=args.seed, box_low=low, box_high=high,
+                            home_position=home[0], home_quaternion=home[1]).check()
+    t0 = time.perf_counter()
+    points = ws.run_workspace(robot, spec, SerialExecutor())
+    dt = time.perf_counter() - t0
+    print(f"{robot.name}: point test (sample + closed form), one core: {args.samples} poses in "
+          f"{dt:.2f} s = {args.samples / dt:,.0f} poses/s; feasible {100 * points.fractions()['feasible']:.2f} %")
+
+    targets = np.flatnonzero(points.feasible)[:args.plans].tolist()
+    reach = ws.WorkspaceSpec(**{**spec.__dict__, "reach": True, "timeout_s": 30.0})
+    job, calls = ws.Job(robot, reach), [("reach", j) for j in targets]
+    _reach("in this process", SerialExecutor(), job, calls)
+    if args.no_ray:
+        return
+    rates = {}
+    for w in args.workers:
+        ex = RayExecutor(w)
+        try:
+            print(f"Ray, {w} worker(s): start {ex.start_s:.2f} s (target < 3 s)")
+            list(ex.map(job, calls[:w]))  # warm: every actor builds its context, compiles
+            rates[w] = _reach(f"Ray, {w} worker(s)", ex, job, calls)
+        finally:
+            ex.close()
+    if 1 in rates and 2 in rates:
+        print(f"2 workers / 1 worker: {rates[2] / rates[1]:.2f}x (target >= 1.7x)")
+
+
+def _reach(label, executor, job, calls):
+    t0 = time.perf_counter()
+    answers = dict(executor.map(job, calls))
+    dt = time.perf_counter() - t0
+    statuses = [a[1] for a in answers.values()]
+    cpu = sum(a[2] for a in answers.values())
+    rate = len(calls) / dt
+    print(f"{label}: {len(calls)} plans in {dt:.2f} s = {rate:.2f} plans/s "
+          f"(planner time {cpu:.2f} s; {statuses.count('ok')} ok, "
+          f"{len(statuses) - statuses.count('ok')} other)")
+    return rate
+
+
+if __name__ == "__main__":
+    main()

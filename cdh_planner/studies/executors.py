@@ -1,0 +1,148 @@
+"""Where a study's calls run: in this process (``SerialExecutor``) or on Ray actors
+(``RayExecutor``: a local Ray started here, or a cluster at ``address``).
+
+Both have ``workers`` and ``map(job, calls, deadline=None)``: it yields ``(i, answer)`` as the
+calls finish (any order), each call exactly once, with ``i`` its position in ``calls``;
+``run_call(context, call)`` of the job's module answers it, the context built once per
+worker by ``make_context(job)``. Past ``deadline`` (time.monotonic, s) no call is started and
+the ones in flight are abandoned: the caller sees fewer answers (a bound, not an error).
+
+Ray is imported only by ``RayExecutor``: nothing else in the package needs it.
+"""
+
+import os
+import time
+
+from ..errors import InputError
+from . import workspace
+
+MAX_LOST = 100            # answers lost to dead workers before the map gives up (each retried)
+IN_FLIGHT_PER_WORKER = 2  # calls queued per actor: one running, one ready
+
+
+def default_workers():
+    """The cores this process may use."""
+    try:
+        return len(os.sched_getaffinity(0))
+    except AttributeError:  # not Linux
+        return os.cpu_count() or 1
+
+
+class SerialExecutor:
+    """Every call in this process, in order (small runs, tests, no Ray)."""
+
+    workers = 1
+
+    def __init__(self, module=workspace):
+        self.module = module
+        self._key, self._context = None, None
+
+    def map(self, job, calls, deadline=None, clock=time.monotonic):
+        if self._key is not job:
+            self._key, self._context = job, self.module.make_context(job)
+        for i, call in enumerate(calls):
+            if deadline is not None and clock() > deadline:
+                return
+            yield i, self.module.run_call(self._context, call)
+
+    def close(self):
+        pass
+
+
+class RayExecutor:
+    """Calls on ``workers`` Ray actors, each of which builds a job's context once and then
+    takes its calls. A worker killed mid-call: Ray restarts the actor and re-runs the call
+    (``max_task_retries``); if that fails too the call is queued again here, so each call is
+    answered once. ``address``: a running cluster ("HOST:PORT", "auto"); None starts a local
+    Ray of ``workers`` CPUs for this process."""
+
+    def __init__(self, workers, address=None, module=workspace):
+        try:
+            import ray  # the one import of Ray in the package
+        except ImportError:
+            raise InputError("--workers", workers, "needs Ray, which is not installed "
+                                                   "(pip install ray==2.60.0), or run with --no-ray") from None
+
+        self.ray, self.workers, self.module = ray, int(workers), module
+        started = time.perf_counter()
+        # "local": a new Ray even when a cluster's address file is left in /tmp/ray
+        ray.init(address=address or "local", num_cpus=None if address else self.workers,
+                 include_dashboard=False, logging_level="ERROR", log_to_driver=False,
+                 ignore_reinit_error=True)  # a local Ray's workers inherit PYTHONPATH
+        self.start_s = time.perf_counter() - started
+        worker = ray.remote(num_cpus=1, max_restarts=-1, max_task_retries=-1)(_Worker)
+        self.actors = [worker.remote(module.__name__) for _ in range(self.workers)]
+        self._job, self._job_ref, self._job_key = None, None, 0
+
+    def pids(self):
+        """The worker processes' ids (tests kill one)."""
+        return self.ray.get([a.pid.remote() for a in self.actors])
+
+    def map(self, job, calls, deadline=None, clock=time.monotonic):
+        ray = self.ray
+        if self._job is not job:  # one copy of the job in the object store per job
+            self._job, self._job_ref, self._job_key = job, ray.put(job), self._job_key + 1
+        job_key = self._job_key
+        queue = list(range(len(calls)))[::-1]
+        pending, lost = {}, 0  # ref -> (call index, actor)
+        load = {a: 0 for a in self.actors}
+        while queue or pending:
+            while queue and (deadline is None or clock() <= deadline):
+                actor = min(load, key=load.get)
+                if load[actor] >= IN_FLIGHT_PER_WORKER:
+                    break
+                i = queue.pop()
+                ref = actor.run.remote(job_key, self._job_ref, calls[i])
+                pending[ref], load[actor] = (i, actor), load[actor] + 1
+            if not pending:
+                return  # past the deadline with calls left: the caller counts them
+            timeout = None if deadline is None else max(0.0, deadline - clock()) + 0.05
+            ready, _ = ray.wait(list(pending), num_returns=1, timeout=timeout)
+            if not ready:
+                return  # the deadline passed with calls in flight: abandoned
+            ref = ready[0]
+            i, actor = pending.pop(ref)
+            load[actor] -= 1
+            try:
+                answer = ray.get(ref)
+            except (ray.exceptions.RayActorError, ray.exceptions.WorkerCrashedError,
+                    ray.exceptions.ObjectLostError):
+                lost += 1
+                if lost > MAX_LOST:
+                    raise RuntimeError(f"{lost} calls lost to dead Ray workers") from None
+                queue.append(i)  # once more, on whichever actor is free
+                continue
+            except ray.exceptions.RayTaskError as exc:  # the call raised: re-raise its error
+                raise exc.as_instanceof_cause() from None
+            yield i, answer
+
+    def close(self):
+        for a in self.actors:
+            self.ray.kill(a)
+        self.ray.shutdown()
+
+
+class _Worker:
+    """A Ray actor: the context of the current job, then calls."""
+
+    def __init__(self, module_name):
+        import importlib
+
+        self.module = importlib.import_module(module_name)
+        self.key, self.context = None, None
+
+    def pid(self):
+        return os.getpid()
+
+    def run(self, job_key, job, call):
+        if self.key != job_key:
+            self.key, self.context = job_key, self.module.make_context(job)
+        return self.module.run_call(self.context, call)
+
+
+def make_executor(workers=None, address=None, ray=True, module=workspace):
+    """The executor of the commands' options: ``SerialExecutor`` without Ray (``ray``
+    False), else a ``RayExecutor`` of ``workers`` actors (default: the cores)."""
+    if not ray:
+        return SerialExecutor(module)
+    return RayExecutor(workers or default_workers(), address=address, module=module)
