@@ -48,7 +48,8 @@ def test_tf_gives_the_platform_pose_during_an_execution(tmp_path):
               f"execution.joint_states_topic:={JOINT_STATES}"]
     with claimed_domain() as domain, \
             ControllerDouble(domain, *ROBOT.winch_names, "--action", ACTION, "--joint-states",
-                             JOINT_STATES, "--time-scale", 4.0,
+                             JOINT_STATES, "--time-scale", 1.0,   # real time: the node
+                             # looks for joint states at 50 Hz, and > 20 poses must be seen
                              "--initial", *map(repr, _lengths(Q1).tolist())) as double, \
             NodeProcess(domain, tmp_path, params=params, fake=True) as node, \
             PlannerClient(domain_id=domain) as client:
@@ -71,6 +72,11 @@ def test_tf_gives_the_platform_pose_during_an_execution(tmp_path):
         assert M.status_values(status)["outcome"] == "completed", node.log()
         client.spin(0.3)
 
+        def settled():   # the newest platform pose and cable state are of one joint state
+            return bool(cables.messages and tf.messages[first:]) and (
+                cables.messages[-1].header.stamp == tf.messages[-1].transforms[-1].header.stamp)
+
+        assert client.spin_until(settled, 10.0)   # the winches rest at the goal: it comes
         [fixed] = [t for m in static.messages for t in m.transforms]
         assert (fixed.header.frame_id, fixed.child_frame_id) == ("world", "cdh_base")
         r = fixed.transform.rotation
