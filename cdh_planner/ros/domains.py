@@ -14,16 +14,41 @@ import random
 import signal
 import socket
 import subprocess
+import tempfile
+from pathlib import Path
 
 PORT_BASE = 41_000
 DOMAINS = range(1, 101)   # 0 is everybody's default; ids up to 101 keep DDS ports < 33000
 
 
+# When each domain id was last released (a file's modification time per id): a node killed
+# in a domain stays in the other participants' graphs until its lease ends, so a domain is
+# handed out again only after every other one has been (least recently released first).
+RELEASED = Path(tempfile.gettempdir()) / "cdh_planner_domains"
+
+
+def _released_at(d):
+    try:
+        return (RELEASED / str(d)).stat().st_mtime
+    except OSError:
+        return 0.0
+
+
+def _release(d):
+    try:
+        RELEASED.mkdir(exist_ok=True)
+        (RELEASED / str(d)).touch()
+    except OSError:
+        pass   # only an ordering hint
+
+
 @contextlib.contextmanager
 def claimed_domain():
-    """Yield a ROS domain id no other ``claimed_domain`` holds; RuntimeError if none."""
+    """Yield a ROS domain id no other ``claimed_domain`` holds, the one released longest
+    ago; RuntimeError if none."""
     ids = list(DOMAINS)
     random.shuffle(ids)
+    ids.sort(key=_released_at)
     for d in ids:
         sock = socket.socket(socket.AF_INET, socket.SOCK_STREAM)
         try:
@@ -34,6 +59,7 @@ def claimed_domain():
         try:
             yield d
         finally:
+            _release(d)
             sock.close()
         return
     raise RuntimeError(f"no free ROS domain id in {DOMAINS.start}..{DOMAINS.stop - 1}")
