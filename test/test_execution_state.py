@@ -334,3 +334,12 @@ def test_shutdown_while_following_ends_stopped(node):
     node._execution.close()
     assert controller.cancels == 1 and outcomes(node) == ["stopped"]
     assert not node._execution.running
+
+
+def test_the_platform_pose_updates_one_at_a_time(node):
+    """The 50 Hz pose update runs forward kinematics, which a loaded machine can make
+    slower than its period: in a reentrant group each tick started another update on
+    another executor thread until none was left for goals and results (CI: accepted
+    use_current_start goals whose result never came)."""
+    from rclpy.callback_groups import MutuallyExclusiveCallbackGroup
+    assert isinstance(node.frames.timer.callback_group, MutuallyExclusiveCallbackGroup)

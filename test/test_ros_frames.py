@@ -49,7 +49,7 @@ def test_tf_gives_the_platform_pose_during_an_execution(tmp_path):
     with claimed_domain() as domain, \
             ControllerDouble(domain, *ROBOT.winch_names, "--action", ACTION, "--joint-states",
                              JOINT_STATES, "--time-scale", 1.0,   # real time: the node
-                             # looks for joint states at 50 Hz, and > 20 poses must be seen
+                             # looks for joint states at 50 Hz, and > 10 poses must be seen
                              "--initial", *map(repr, _lengths(Q1).tolist())) as double, \
             NodeProcess(domain, tmp_path, params=params, fake=True) as node, \
             PlannerClient(domain_id=domain) as client:
@@ -84,7 +84,7 @@ def test_tf_gives_the_platform_pose_during_an_execution(tmp_path):
 
         lengths = {_key(m.header.stamp): np.array(m.position) for m in measured.messages}
         platform = [t for m in tf.messages[first:] for t in m.transforms]
-        assert len(platform) > 20, "the platform's pose during the execution"
+        assert len(platform) > 10, "the platform's pose during the execution"
         assert all((t.header.frame_id, t.child_frame_id) == ("cdh_base", "cdh_platform")
                    for t in platform)
         guess = current_pose(ROBOT, _lengths(Q1))
@@ -97,7 +97,7 @@ def test_tf_gives_the_platform_pose_during_an_execution(tmp_path):
             np.testing.assert_allclose(p, guess[0], rtol=0, atol=1e-9)
             np.testing.assert_allclose(R, guess[1], rtol=0, atol=1e-9)
             compared += 1
-        assert compared > 20
+        assert compared > 10
         moved = np.linalg.norm(_pose(platform[-1])[0] - _pose(platform[0])[0])
         assert moved > 0.01                          # it did move with the winches
         assert {_key(p.header.stamp) for p in poses.messages} >= {

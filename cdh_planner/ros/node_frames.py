@@ -17,6 +17,7 @@ from geometry_msgs.msg import PoseStamped
 from sensor_msgs.msg import JointState
 from std_msgs.msg import Float64, String
 from visualization_msgs.msg import MarkerArray
+from rclpy.callback_groups import MutuallyExclusiveCallbackGroup
 from rclpy.qos import DurabilityPolicy, QoSProfile, ReliabilityPolicy
 from tf2_msgs.msg import TFMessage
 
@@ -54,7 +55,11 @@ class NodeFrames:
             node.create_subscription(TFMessage, topic, self._received, qos,
                                      callback_group=callback_group)
         self._seen = None        # the JointState last turned into a pose
-        self.timer = node.create_timer(PERIOD_S, self.update, callback_group=callback_group)
+        # one update at a time: in a reentrant group a slow forward kinematics (loaded
+        # machine, Newton from seeds) started a new update every period on another executor
+        # thread until none was left for plan goals, joint states and results
+        self.timer = node.create_timer(PERIOD_S, self.update,
+                                       callback_group=MutuallyExclusiveCallbackGroup())
 
     def _received(self, msg):
         for transform in msg.transforms:
