@@ -130,7 +130,7 @@ def evaluate(robot, p, tau=None, R=None):
     if len(robot.base_anchors) != 6:
         raise InputError("robot.winch_names", list(robot.winch_names),
                          f"{len(robot.winch_names)} cables: this command handles 6-cable robots "
-                         "for now (issue 21: cdh_planner.zonotope tests any m >= 6)")
+                         "for now (cdh_planner.zonotope tests any m >= 6: docs/more-cables.md)")
     p = np.atleast_2d(np.asarray(p, dtype=float))
     if R is None:
         R = rotation_tt(np.atleast_2d(tau))

@@ -1,4 +1,4 @@
-"""Wrench feasibility for any number of cables m >= 6 (issue 21; maths: docs/more-cables.md).
+"""Wrench feasibility for any number of cables m >= 6 (maths: docs/more-cables.md).
 
 The wrenches m cables can hold form the zonotope Z = {J t : t_min <= t <= t_max} (J is
 6 x m, column i = [u_i; a_i x u_i]). Its facets lie on the hyperplanes spanned by 5

@@ -86,7 +86,7 @@ class Route:
 
     def det_j(self, xs):
         """det J (the cables' screw Jacobian) at points of M. J is never singular on C (a
-        singular J makes the tension set of the wrench ellipsoid unbounded: math.md, Sec. 3),
+        singular J makes the tension set of the wrench ellipsoid unbounded: the tension set is the image of the ellipsoid under J^-1),
         so its sign is the same all along any path: ends of opposite signs have none."""
         poses = [self.constraint.pose(x) for x in xs]
         return evaluate(self.validity.robot, np.array([a for a, _ in poses]),

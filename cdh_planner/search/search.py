@@ -44,6 +44,7 @@ with its own loop overrides ``search`` too (test/test_strategies.py).
 its end (at this resolution, see ``atlas.domain``) holds no path to the other end.
 """
 
+import abc
 import heapq
 import itertools
 import math
@@ -345,7 +346,7 @@ def register(cls):
     return cls
 
 
-class Strategy:
+class Strategy(abc.ABC):
     """Base of every search strategy (module doc). ``search(s, stop)`` runs on the shared
     ``Bidirectional`` state ``s`` (both roots already on their heaps with ``priority(0, h)``)
     and returns (Status, chart route start -> goal, its direct hops (i, j)): NO_PATH when a
@@ -356,12 +357,13 @@ class Strategy:
     description: ClassVar[str] = ""  # in the settings' description (node parameter, CLI, docs)
     admissible: ClassVar[bool] = False  # its heuristic must be a lower bound of the cost
 
+    @abc.abstractmethod
     def priority(self, g, h):
         """Order of a chart on a side's heap: cost so far ``g``, heuristic ``h`` to the other end."""
-        raise NotImplementedError
 
+    @abc.abstractmethod
     def search(self, s, stop):
-        raise NotImplementedError
+        """The search over ``s`` until a route or ``stop`` (class docstring)."""
 
 
 @register

@@ -1,3 +1,3 @@
-"""Studies over many poses and designs (issue 24): workspace analysis, reachability maps and
+"""Studies over many poses and designs (README, "workspace and sweep"): workspace analysis, reachability maps and
 design sweeps. The core (``workspace``, ``sweep``) is plain Python and numpy; it runs calls on
 an executor (``executors``): in this process, or on Ray actors (Ray is imported only there)."""
