@@ -23,18 +23,27 @@ def _is_terminal(stream):
 
 
 @contextmanager
+def displayed(quiet, stream, bar, lines):
+    """The choice every progress display makes: yield an update that does nothing when
+    ``quiet``; on a terminal ``bar(stream)``'s (a context manager yielding the update);
+    anywhere else ``lines(stream)`` (plain lines). ``stream`` None: stderr."""
+    stream = sys.stderr if stream is None else stream
+    if quiet:
+        yield lambda *args: None
+    elif _is_terminal(stream):
+        with bar(stream) as update:
+            yield update
+    else:
+        yield lines(stream)
+
+
+@contextmanager
 def chart_progress(quiet=False, stream=None, interval_s=LINE_INTERVAL_S, clock=time.monotonic):
     """Yield ``update(charts, best_h)`` that shows the chart count and the search's best
     remaining distance estimate (task units) on ``stream`` (default: stderr): a bar on a
     terminal, else a line at most every ``interval_s`` s of ``clock``; nothing if ``quiet``."""
-    stream = sys.stderr if stream is None else stream
-    if quiet:
-        yield lambda charts, best_h: None
-    elif _is_terminal(stream):
-        with _bar(stream) as update:
-            yield update
-    else:
-        yield _lines(stream, interval_s, clock)
+    with displayed(quiet, stream, _bar, lambda s: _lines(s, interval_s, clock)) as update:
+        yield update
 
 
 @contextmanager

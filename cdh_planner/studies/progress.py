@@ -6,11 +6,10 @@ atlas: a tqdm bar with rate and ETA on a terminal, else one plain line at most e
         update("points", done, total)
 """
 
-import sys
 import time
 from contextlib import contextmanager
 
-from ..io.progress import LINE_INTERVAL_S, _is_terminal
+from ..io.progress import LINE_INTERVAL_S, displayed
 
 UNITS = {"points": "pose", "reach": "plan", "designs": "design"}
 
@@ -18,14 +17,8 @@ UNITS = {"points": "pose", "reach": "plan", "designs": "design"}
 @contextmanager
 def count_progress(quiet=False, stream=None, interval_s=LINE_INTERVAL_S, clock=time.monotonic):
     """Yield ``update(stage, done, total)`` (see the module docstring)."""
-    stream = sys.stderr if stream is None else stream
-    if quiet:
-        yield lambda stage, done, total: None
-    elif _is_terminal(stream):
-        with _bars(stream) as update:
-            yield update
-    else:
-        yield _lines(stream, interval_s, clock)
+    with displayed(quiet, stream, _bars, lambda s: _lines(s, interval_s, clock)) as update:
+        yield update
 
 
 @contextmanager
