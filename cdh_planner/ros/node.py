@@ -48,7 +48,7 @@ from .node_parameters import declare_parameters, refuse_unknown
 from .params import needs_new_planner, node_config, parameter_error
 from .plan_execution import PlanExecution
 from .plan_service import PlanService
-from .recording import NodeRecording, RunLog, log_limits
+from .run_log import NodeRecording, RunLog, log_limits
 
 # executor threads: the plan being computed, the requests waiting their turn, and spare ones
 # (busy answers, execute / stop, the stream timer, parameters) that are never all blocked

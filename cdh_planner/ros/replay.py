@@ -41,7 +41,7 @@ from ..recording.mcap_log import scan_records as scan_run  # raw records of a (p
 from ..recording.ros_schemas import rosidl_type
 from .messages import path_arrays
 from .interface import CABLE_COMMAND, SERVICE_QOS
-from .recording import PARAMETER_EVENTS
+from .run_log import PARAMETER_EVENTS
 
 
 MATCH_SETTLE_S = 0.3   # s after the publisher sees its subscribers, before the first message
