@@ -17,7 +17,7 @@ from cdh_planner.errors import InputError
 from cdh_planner.ros import messages as M
 from cdh_planner.ros.client import PlannerClient
 from cdh_planner.ros.params import node_config
-from cdh_planner.ros.plan_execution import forward_command
+from cdh_planner.ros.command_outlets import forward_command
 from ros_harness import (Q1, Q2, ROBOT2, ControllerDouble, NodeProcess, claimed_domain,
                          file_parameters, in_process_nodes, sphere_pose_msg, wait_node_measures)
 from test_ros_execution import _lengths
