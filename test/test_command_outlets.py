@@ -100,10 +100,17 @@ def test_register_refuses_what_would_be_ambiguous():
         name = "other_order"
         specs = (Spec("execution.joint_order", STRING, "", "another order"),)
 
+    def declaring(name):
+        return type("Declaring", (LengthsAndVelocities,), {
+            "name": "declaring", "specs": (Spec(name, STRING, "/x", "a topic"),)})
+
     for cls, match in ((Undescribed, "description must be"),
                        (OtherStream, "'stream' is already registered"),
                        (OtherOrder, "execution.joint_order is declared otherwise by mode "
-                                    "'forward_command'")):
+                                    "'forward_command'"),
+                       (declaring("lengths_topic"), "lengths_topic is not execution.<name>"),
+                       (declaring("execution.mode"), "execution.mode is the node's own"),
+                       (declaring("execution.joint_states_topic"), "is the node's own")):
         with pytest.raises(ValueError, match=match):
             register(cls)
     assert list(OUTLETS) == ["stream", "forward_command", "follow_joint_trajectory"]

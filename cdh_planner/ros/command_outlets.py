@@ -29,6 +29,8 @@ from ..errors import InputError
 from .param_spec import STRING, STRINGS, Spec
 
 OUTLETS = {}  # execution.mode -> registered CommandOutlet class (``register``)
+NODE_PARAMETERS = set()  # the node's own parameter names, no outlet's (``reserve``)
+PREFIX = "execution."    # an outlet's parameters are execution.<name>
 # as forward_command_controller's subscription (rclcpp::SystemDefaultsQoS): reliable,
 # volatile; never latched (a controller that starts gets nothing old)
 COMMAND_QOS = 10
@@ -36,14 +38,16 @@ COMMAND_QOS = 10
 
 def register(cls):
     """Class decorator: make ``cls`` an ``execution.mode`` (module doc). Refused (ValueError
-    naming it): no name or description, a name registered by another class, or a parameter
-    another outlet declares otherwise (outlets may share one declared alike)."""
+    naming it): no name or description, a name registered by another class, a parameter
+    not named execution.<name> or one of the node's own, or one another outlet declares
+    otherwise (outlets may share one declared alike)."""
     for attr in ("name", "description"):
         if not isinstance(getattr(cls, attr), str) or not getattr(cls, attr):
             raise ValueError(f"command outlet {cls.__name__}: {attr} must be a non-empty string")
     if cls.name in OUTLETS and OUTLETS[cls.name] is not cls:
         raise ValueError(f"execution mode {cls.name!r} is already registered "
                          f"({OUTLETS[cls.name].__name__})")
+    _check_names(cls, NODE_PARAMETERS)
     for spec in cls.specs:
         other = next((o for o in OUTLETS.values() if o is not cls
                       and any(s.name == spec.name and s != spec for s in o.specs)), None)
@@ -52,6 +56,21 @@ def register(cls):
                              f"otherwise by mode {other.name!r}")
     OUTLETS[cls.name] = cls
     return cls
+
+
+def reserve(names):
+    """Declare the node's own parameters ``names`` (params.py): no outlet, registered now or
+    later, may declare one (ValueError naming it)."""
+    for cls in OUTLETS.values():
+        _check_names(cls, names)
+    NODE_PARAMETERS.update(names)
+
+
+def _check_names(cls, reserved):
+    for spec in cls.specs:
+        if not spec.name.startswith(PREFIX) or spec.name in reserved:
+            why = "is the node's own" if spec.name in reserved else f"is not {PREFIX}<name>"
+            raise ValueError(f"execution mode {cls.name!r}: parameter {spec.name} {why}")
 
 
 def outlet_specs():

@@ -36,7 +36,7 @@ from ..model.task import TASKS, task_from_dict, task_parameters
 from ..pipeline.metrics import task_cost
 from ..scene.schema import load_scene
 from ..settings import SETTINGS, LiveChoices, PlannerSettings, check_range
-from .command_outlets import OUTLETS, modes_description, outlet_specs
+from .command_outlets import OUTLETS, modes_description, outlet_specs, reserve
 from .param_spec import BOOL, DOUBLE, DOUBLES, INT, REQUIRED, STRING, STRINGS, Spec  # noqa: F401
 
 # the groups whose change means a new Planner (the others only affect the node)
@@ -161,6 +161,7 @@ _TAIL = tuple(
             "in log_dir last written longer ago than this (days) are removed; 0: no limit",
             low=0.0)]
 )
+reserve({s.name for s in _HEAD + _TAIL} | {"execution.mode"})
 _BUILT = {}  # the registered outlets -> the specs (rebuilt when an outlet is registered)
 
 
