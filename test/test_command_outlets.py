@@ -173,3 +173,30 @@ def test_the_node_executes_a_plan_through_it(tmp_path, registered):
                                    rtol=0, atol=1e-12)
         np.testing.assert_array_equal(data[-1, 6:], 0.0)     # the end: at rest
         assert np.any(np.abs(data[:-1, 6:]) > 1e-6)          # moving on the way
+
+
+def test_a_mode_registered_after_configure_ends_its_run_failed(tmp_path):
+    """Its outlet was not made at configure: ~/execute is refused with why, the run ends
+    (one result, failed) and the node executes again."""
+    pytest.importorskip("nav_msgs")
+    from nav_msgs.srv import GetPlan
+    from rclpy.parameter import Parameter
+    from std_srvs.srv import Trigger
+    from ros_harness import Q1, Q2, in_process_nodes, sphere_pose_msg
+    with in_process_nodes(tmp_path / "runs") as make:
+        node = make()
+        request = GetPlan.Request(start=sphere_pose_msg(Q1), goal=sphere_pose_msg(Q2))
+        assert node._plan(request, GetPlan.Response()).plan.poses
+        register(LengthsAndVelocities)
+        try:
+            assert node.set_parameters([Parameter("execution.mode",
+                                                  value="lengths_velocities")])[0].successful
+            answer = node._execute(Trigger.Request(), Trigger.Response())
+            assert not answer.success and "configure it again" in answer.message, answer.message
+            assert not node.execution.running
+        finally:
+            del OUTLETS[LengthsAndVelocities.name]
+        node.set_parameters([Parameter("execution.mode", value="stream")])
+        answer = node._execute(Trigger.Request(), Trigger.Response())
+        assert answer.success, answer.message
+        node._stop(Trigger.Request(), Trigger.Response())

@@ -96,8 +96,8 @@ class PlanExecution:
         run = self.runs.begin(values["execution.mode"])
         if run is None:
             return False, f"refused: already executing{self._where()}; call ~/stop first"
-        outlet = self.outlets[run.mode]
         try:
+            outlet = self._outlet(run.mode)
             if not outlet.streamed:
                 return self._start_following(run, outlet, out,
                                              f"{what} through {outlet.target}{note}")
@@ -114,6 +114,13 @@ class PlanExecution:
             return False, f"refused: execution {run.outcome}: {run.message}"
         return True, (f"executing: {what} at {config.stream_rate_hz:g} Hz on "
                       f"{outlet.target}{note}")
+
+    def _outlet(self, mode):
+        """The outlet made at configure for ``mode``."""
+        if mode not in self.outlets:
+            raise RuntimeError(f"execution mode {mode!r} was registered after the node was "
+                               f"configured: configure it again")
+        return self.outlets[mode]
 
     def _check_start(self, values, path, robot):
         """(refusal or "", note): the measured lengths against the path's first point; with
