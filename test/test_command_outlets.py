@@ -200,3 +200,34 @@ def test_a_mode_registered_after_configure_ends_its_run_failed(tmp_path):
         answer = node._execute(Trigger.Request(), Trigger.Response())
         assert answer.success, answer.message
         node._stop(Trigger.Request(), Trigger.Response())
+
+
+def test_replay_keeps_a_streamed_outlets_recorded_commands_off_unless_asked(registered):
+    """The topic a recorded parameter names for a streamed outlet (the new one's included)
+    is a command topic of the run file, resolved as the node resolved it."""
+    pytest.importorskip("rcl_interfaces")
+    from rcl_interfaces.msg import Parameter, ParameterEvent, ParameterValue
+    from rclpy.serialization import serialize_message
+    from cdh_planner.ros import replay as R
+
+    def record(topic, type_name="std_msgs/msg/Float64MultiArray", data=b""):
+        return R.Record(topic, type_name, data, 0, False)
+
+    def setting(name, value):
+        return Parameter(name=name, value=ParameterValue(type=4, string_value=value))
+
+    event = ParameterEvent(node="/ns/cdh_planner", new_parameters=[
+        setting("execution.forward_command_topic", "/cable_controller/commands"),
+        setting("execution.lengths_velocities_topic", "~/lengths_velocities"),
+        setting("log_dir", "/ns/cdh_planner/path")])
+    records = [record(R.PARAMETER_EVENTS, "rcl_interfaces/msg/ParameterEvent",
+                      serialize_message(event)),
+               record("/cable_controller/commands"), record("/ns/cdh_planner/lengths_velocities"),
+               record("/ns/cdh_planner/cable_command", "sensor_msgs/msg/JointState"),
+               record("/ns/cdh_planner/path", "nav_msgs/msg/Path")]
+    assert R.command_topics(records) == {"/cable_controller/commands",
+                                         "/ns/cdh_planner/lengths_velocities",
+                                         "/ns/cdh_planner/cable_command"}
+    assert {r.topic for r in R.select_topics(records)} == {"/ns/cdh_planner/path"}
+    with pytest.raises(InputError, match="a command topic"):
+        R.select_topics(records, ["/ns/cdh_planner/lengths_velocities"])

@@ -62,6 +62,12 @@ def test_forward_command_drives_a_joint_group_position_controller(tmp_path):
         np.testing.assert_allclose(commands[-1]["data"], expected, rtol=0, atol=1e-12)
         first = [start[n] for n in ORDER]      # sampled a few ms after the start
         np.testing.assert_allclose(commands[0]["data"], first, rtol=0, atol=1e-4)
+    # the recorded commands move the robot: replay leaves them out unless asked
+    from cdh_planner.ros import replay as R
+    [run] = node.run_files()
+    records = R.read_records(run)
+    assert TOPIC not in {r.topic for r in R.select_topics(records)}
+    assert TOPIC in {r.topic for r in R.select_topics(records, commands=True)}
 
 
 def test_forward_command_reorders_by_name():

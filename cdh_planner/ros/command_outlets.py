@@ -82,6 +82,13 @@ def outlet_specs():
     return tuple(out.values())
 
 
+def command_topic_parameters():
+    """The names of the streamed outlets' start-only parameters: the topics their commands
+    go to (``replay`` keeps recorded commands off a live system unless asked)."""
+    return {s.name for cls in OUTLETS.values() if cls.streamed for s in cls.specs
+            if s.start_only}
+
+
 def modes_description():
     """``execution.mode``'s description, from the registry."""
     items = [f"{name} ({cls.description})" for name, cls in OUTLETS.items()]

@@ -39,6 +39,7 @@ from ..recording.mcap_log import ACTION_INFIX, GET_RESULT, REQUEST_RECEIVED, RES
     SEND_GOAL, SERVICE_EVENT_SUFFIX, NotARecording, check_recording
 from ..recording.mcap_log import scan_records as scan_run  # raw records of a (possibly killed) run file
 from ..recording.ros_schemas import rosidl_type
+from .command_outlets import command_topic_parameters
 from .messages import path_arrays
 from .interface import CABLE_COMMAND, SERVICE_QOS
 from .run_log import PARAMETER_EVENTS
@@ -142,24 +143,51 @@ def is_command_topic(topic):
     return topic.rsplit("/", 1)[-1] in COMMAND_TOPICS
 
 
+def command_topics(records):
+    """The topics of ``records`` that move the robot: ``is_command_topic``, and those the
+    recorded parameters name as a streamed command outlet's topic (forward_command's
+    ``execution.forward_command_topic``, any registered outlet's: its value in the
+    parameter snapshot a run file begins with, or a later change), resolved as the node
+    resolved them (relative: in the node's namespace; ``~/``: under the node)."""
+    from rcl_interfaces.msg import ParameterEvent
+    names, named = command_topic_parameters(), set()
+    for r in records:
+        if r.topic == PARAMETER_EVENTS and r.type_name == "rcl_interfaces/msg/ParameterEvent":
+            event = deserialize_message(r.data, ParameterEvent)
+            named |= {_resolved(p.value.string_value, event.node)
+                      for p in (*event.new_parameters, *event.changed_parameters)
+                      if p.name in names}
+    return {r.topic for r in records if is_command_topic(r.topic) or r.topic in named}
+
+
+def _resolved(name, node):
+    """The topic ``name`` as the node ``node`` (/ns/node) resolves it."""
+    if name.startswith("/"):
+        return name
+    if name.startswith("~/"):
+        return f"{node.rstrip('/')}/{name[2:]}"
+    return f"{node.rsplit('/', 1)[0]}/{name}"
+
+
 def select_topics(records, topics=None, commands=False):
     """The records to republish: no service events, no ``/parameter_events`` unless named,
-    and no command topic (``is_command_topic``) unless ``commands``: on a live system a
+    and no command topic (``command_topics``) unless ``commands``: on a live system a
     replayed command would move the robot. Only ``topics`` if given (InputError naming a
     topic that is not in the file, or a command topic without ``commands``)."""
     available = sorted({r.topic for r in records if not is_service_event(r)})
+    moving = command_topics(records)
     if topics:
         missing = [t for t in topics if t not in available]
         if missing:
             raise InputError("--topics", missing[0],
                              f"not a recorded topic (recorded: {', '.join(available)})")
-        blocked = [t for t in topics if is_command_topic(t) and not commands]
+        blocked = [t for t in topics if t in moving and not commands]
         if blocked:
             raise InputError("--topics", blocked[0], "a command topic (it moves the robot): "
                                                      "add --commands to republish it")
         wanted = set(topics)
     else:
-        wanted = {t for t in available if commands or not is_command_topic(t)} - {PARAMETER_EVENTS}
+        wanted = {t for t in available if commands or t not in moving} - {PARAMETER_EVENTS}
     return [r for r in records if r.topic in wanted]
 
 
