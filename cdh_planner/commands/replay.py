@@ -7,7 +7,8 @@
 
 Without ``--requests``: republish the recorded topics with their original timing (scaled by
 ``--rate``; no wait between two messages longer than ``--max-gap``). The command topics
-(``cable_command``, ``cable_trajectory``) move the robot: they are republished only with
+(``cable_command``, a streamed mode's topic as recorded in its parameter, e.g.
+``execution.forward_command_topic``, and ``cable_trajectory``) move the robot: they are republished only with
 ``--commands``, e.g. ``--commands --topics /cdh_planner/cable_command`` to test a winch
 controller on a bench.
 With ``--requests``: re-send the recorded plan requests to a running node, in recorded
@@ -64,7 +65,8 @@ def add_parser(subparsers):
                    help="only these topics (default: all but service events and "
                         "/parameter_events)")
     p.add_argument("--commands", action="store_true",
-                   help="also republish the command topics (cable_command, cable_trajectory): "
+                   help="also republish the command topics (cable_command, a streamed mode's "
+                        "topic such as execution.forward_command_topic, cable_trajectory): "
                         "they move the robot, so they are left alone unless asked for")
     p.add_argument("--delay", type=float, default=1.0, metavar="S",
                    help="wait up to S seconds for a subscriber on every replayed topic before "
