@@ -30,13 +30,13 @@ docstring of that function).
 from dataclasses import dataclass, replace
 
 import numpy as np
-from scipy.interpolate import CubicSpline
-from scipy.spatial.transform import Rotation, Slerp
 
 from ..feasibility import (cable_vectors, evaluate, inverse_ellipsoid_factor, load_point,
                            nominal_wrench, screw_jacobian)
 from ..model.forward_kinematics import forward_kinematics_many
 from ..model.pose import tau_from_rotation
+from ..model.rotation import Rotation, Slerp
+from .splines import CubicSpline
 
 CHECK_DT = 1e-3        # s: step of the check's central differences
 PHASES = 2             # samples per CHECK_DT: a violation narrower than the step is not
