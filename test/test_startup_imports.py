@@ -11,8 +11,8 @@ from cdh_planner import cli
 from conftest import REPO
 
 HEAVY = ("toppra", "matplotlib", "matplotlib.pyplot", "rclpy", "scipy.spatial", "numba", "numpy",
-         "scipy.interpolate", "scipy.sparse", "scipy.linalg", "scipy.optimize")
-SCIPY = {"scipy.spatial", "scipy.interpolate", "scipy.sparse", "scipy.linalg", "scipy.optimize"}
+         "scipy", "scipy.interpolate", "scipy.sparse", "scipy.linalg", "scipy.optimize", "numpy.ma")
+SCIPY = {"scipy", "scipy.spatial", "scipy.interpolate", "scipy.sparse", "scipy.linalg", "scipy.optimize"}
 
 
 def _modules_after(code):
@@ -50,7 +50,7 @@ def test_a_direct_motion_plan_loads_no_plotting_ros_numba_or_scipy_module():
             "assert 'dynamic timing' in out.getvalue()")
     loaded = _modules_after(code)
     assert "toppra" in loaded
-    assert not loaded & ({"matplotlib", "matplotlib.pyplot", "rclpy", "numba"} | SCIPY)
+    assert not loaded & ({"matplotlib", "matplotlib.pyplot", "rclpy", "numba", "numpy.ma"} | SCIPY)
 
 
 def test_toppra_is_imported_without_matplotlib_and_its_plt_still_works():
@@ -90,6 +90,7 @@ def test_toppra_is_imported_without_scipy_interpolate_or_sparse_and_they_still_w
             "import toppra.interpolator as ti, toppra.simplepath as sp\n"
             "import toppra.solverwrapper.ecos_solverwrapper as ecos\n"
             "assert 'scipy.interpolate' not in sys.modules and 'scipy.sparse' not in sys.modules\n"
+            "assert 'scipy' not in sys.modules\n"
             "import numpy as np\n"
             "path = ti.SplineInterpolator([0.0, 1.0, 2.0], [[0.0], [1.0], [0.0]])\n"
             "assert abs(path(0.5)[0] - ti.CubicSpline([0.0, 1.0, 2.0], [0.0, 1.0, 0.0])(0.5)) < 1e-15\n"
@@ -114,3 +115,12 @@ def test_a_planning_algorithm_that_needs_scipy_still_gets_it():
             "from scipy.spatial import cKDTree\n"
             "assert cKDTree(np.eye(3)).query([1.0, 0.0, 0.0])[1] == 0\n")
     assert {"scipy.linalg", "scipy.spatial"} <= _modules_after(code)
+
+
+def test_toppra_defers_scipy_interpolate_also_when_scipy_is_already_loaded():
+    code = ("import scipy.linalg\n"
+            "import cdh_planner.trajectory.dynamics\n"
+            "assert 'scipy.interpolate' not in sys.modules and 'scipy.sparse' not in sys.modules\n"
+            "import toppra.interpolator as ti\n"
+            "assert abs(ti.CubicSpline([0.0, 1.0], [0.0, 2.0])(0.5) - 1.0) < 1e-15\n")
+    assert "scipy.interpolate" in _modules_after(code)

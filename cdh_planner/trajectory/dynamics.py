@@ -47,7 +47,7 @@ from ..feasibility import (cable_vectors, evaluate, inverse_ellipsoid_factor, no
 from ..model.pose import tau_from_rotation
 from ..model.rotation import Rotation
 from ._toppra import toppra  # toppra without matplotlib and scipy.interpolate (start-up)
-from .executed import executable, spline_rates
+from .executed import executable, spline_rates, unique_sorted
 from .path import PlannedPath
 from .splines import CubicSpline, RotationSpline  # scipy's, in numpy (start-up time)
 
@@ -256,9 +256,9 @@ def _grid(geo, n):
     """The waypoints' s and n evenly spaced ones, none closer than a tenth of the spacing to
     a waypoint (a sliver interval would turn toppra's rounding into a huge s'')."""
     even = np.linspace(0.0, geo.length, n)
-    wp = np.unique(geo.s_wp)
+    wp = unique_sorted(geo.s_wp)
     gap = np.min(np.abs(even[:, None] - wp[None, :]), axis=1)
-    return np.unique(np.concatenate([wp, even[gap > 0.1 * geo.length / (n - 1)]]))
+    return unique_sorted(np.concatenate([wp, even[gap > 0.1 * geo.length / (n - 1)]]))
 
 
 def _infeasible(path, geo, grid, reason):

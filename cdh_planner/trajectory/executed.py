@@ -127,6 +127,13 @@ def _extremes(c):
 
 # ----------------------------------------------------------------------------- the check
 
+
+def unique_sorted(a):
+    """The distinct values of a 1-D array, ascending (np.unique's answer; np.unique itself
+    imports numpy.ma, 10 - 20 ms of a plan's start-up)."""
+    a = np.sort(np.asarray(a).ravel())
+    return a[np.concatenate([[True], a[1:] != a[:-1]])] if a.size else a
+
 @dataclass(frozen=True)
 class ExecutionCheck:
     """The check of one trajectory as executed: ``ok``; ``reason`` (what failed, one
@@ -201,14 +208,14 @@ def check_executed(robot, t_wp, L, V, A, seed, mass=None, inertia=None, max_cabl
                           least_margin=float(np.min(margin / span, initial=np.inf)),
                           worst_t=worst_t, speed_ratio=float(np.max(speed, initial=0.0)),
                           accel_ratio=float(np.max(accel, initial=0.0)),
-                          bad_segments=np.unique(bad_k), samples=int(np.sum(sel)))
+                          bad_segments=unique_sorted(bad_k), samples=int(np.sum(sel)))
 
 
 def _executed_margins(robot, t_wp, L, V, A, seed, ts, mid, q, mass, inertia):
     """Tension margins (M, 6) N at the samples ts[mid] of the executed motion (forward
     kinematics of the quintic's lengths, differences over ts[mid -+ q]), and where forward
     kinematics lost the platform (M,) (no convergence, or a twin far from the seed)."""
-    need = np.unique(np.concatenate([mid - q, mid, mid + q]))
+    need = unique_sorted(np.concatenate([mid - q, mid, mid + q]))
     pos, _, _ = quintic(t_wp, L, V, A, ts[need])
     p_seed, R_seed = seed(ts[need])
     fk = forward_kinematics_many(robot, pos, p_seed, R_seed)
