@@ -68,9 +68,8 @@ class Rotation:
         v = np.atleast_2d(v)
         angle = _norm(v)
         small = angle <= SMALL_ANGLE
-        a2 = angle * angle
-        with np.errstate(invalid="ignore", divide="ignore"):
-            scale = np.where(small, 0.5 - a2 / 48 + a2 * a2 / 3840, np.sin(angle / 2) / angle)
+        a2 = angle * angle  # (+ small: no 0 / 0 where the series is taken; exact elsewhere)
+        scale = np.where(small, 0.5 - a2 / 48 + a2 * a2 / 3840, np.sin(angle / 2) / (angle + small))
         return cls(np.concatenate([v * scale[:, None], np.cos(angle / 2)[:, None]], axis=1), single)
 
     # -- views ---------------------------------------------------------------------------
@@ -94,8 +93,7 @@ class Rotation:
         angle = 2 * np.arctan2(_norm(q[:, :3]), q[:, 3])
         small = angle <= SMALL_ANGLE
         a2 = angle * angle
-        with np.errstate(invalid="ignore", divide="ignore"):
-            scale = np.where(small, 2 + a2 / 12 + 7 * a2 * a2 / 2880, angle / np.sin(angle / 2))
+        scale = np.where(small, 2 + a2 / 12 + 7 * a2 * a2 / 2880, angle / (np.sin(angle / 2) + small))
         return self._out(scale[:, None] * q[:, :3])
 
     def magnitude(self):
