@@ -124,3 +124,17 @@ def test_toppra_defers_scipy_interpolate_also_when_scipy_is_already_loaded():
             "import toppra.interpolator as ti\n"
             "assert abs(ti.CubicSpline([0.0, 1.0], [0.0, 2.0])(0.5) - 1.0) < 1e-15\n")
     assert "scipy.interpolate" in _modules_after(code)
+
+
+@pytest.mark.parametrize("given, expected", [(None, "1"), ("2", "2")])
+def test_the_cli_asks_for_one_blas_thread_unless_told_otherwise(given, expected):
+    """Set before numpy loads OpenBLAS (its thread pool's start is 30 ms of a plan)."""
+    import os
+    env = {k: v for k, v in os.environ.items() if k != "OPENBLAS_NUM_THREADS"}
+    if given is not None:
+        env["OPENBLAS_NUM_THREADS"] = given
+    code = ("import contextlib, io, os\nfrom cdh_planner import cli\n"
+            "with contextlib.redirect_stdout(io.StringIO()):\n    cli.main(['--help'])\n"
+            "print(os.environ['OPENBLAS_NUM_THREADS'])")
+    out = subprocess.run([sys.executable, "-c", code], capture_output=True, text=True, check=True, env=env)
+    assert out.stdout.strip() == expected
