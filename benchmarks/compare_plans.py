@@ -6,9 +6,10 @@
 Runs ``cdh-planner plan PROBLEM --json OUT --quiet`` once with this checkout first on
 PYTHONPATH and once with OTHER_CHECKOUT's, for each problem (default: every
 config/problems/*.yaml), and prints one line each: identical, equal to --tol (every number
-within tol x max(1, |value|); the largest absolute difference), different (the first path that differs), or skipped (either run took longer
-than --timeout s). The planning time (``time_s``, a clock reading) is left out of the
-comparison. Exit code 0 when none differs.
+within tol x max(1, |value|); the largest absolute difference), different (the first path
+that differs), or skipped (either run took longer than --timeout s). The planning time
+(``time_s``, a clock reading) is left out of the comparison. Exit code 0 when none
+differs.
 """
 
 import argparse

@@ -4,14 +4,15 @@ libraries it loads at its top for things the planner never uses.
     from ._toppra import toppra
 
 Those are matplotlib.pyplot (its algorithm module's plotting helpers; about 0.25 s),
-scipy.interpolate (its own path classes: CubicSpline, PPoly, BPoly, UnivariateSpline;
-with scipy.optimize and special about 0.2 s) and scipy.sparse (its ECOS solver wrapper;
-0.12 s; scipy's own package 10 - 20 ms): the planner hands toppra its own path and constraints (trajectory/dynamics.py)
-and uses its default solver. So while toppra is imported, the modules in ``DEFERRED``
-are placeholders, removed from ``sys.modules`` right after: a name toppra takes from one
-(``plt``, ``CubicSpline``, ...) is a stand-in that imports the real module at its first
-use (never, unless a toppra plot, path class or ECOS is used), and every other import of
-those modules gets the real one. A module already imported is used as it is.
+scipy.interpolate (its own path classes: CubicSpline, PPoly, BPoly, UnivariateSpline; with
+scipy.optimize and special about 0.2 s) and scipy.sparse (its ECOS solver wrapper; 0.12 s;
+scipy's own package 10 - 20 ms): the planner hands toppra its own path and constraints
+(trajectory/dynamics.py) and uses its default solver. So while toppra is imported, the
+modules in ``DEFERRED`` are placeholders, removed from ``sys.modules`` right after: a name
+toppra takes from one (``plt``, ``CubicSpline``, ...) is a stand-in that imports the real
+module at its first use (never, unless a toppra plot, path class or ECOS is used), and
+every other import of those modules gets the real one. A module already imported is used
+as it is.
 
 Import this module at start-up in a process with threads (the node imports it with the
 planner, before it spins): another thread importing one of those modules during the few

@@ -134,6 +134,7 @@ def unique_sorted(a):
     a = np.sort(np.asarray(a).ravel())
     return a[np.concatenate([[True], a[1:] != a[:-1]])] if a.size else a
 
+
 @dataclass(frozen=True)
 class ExecutionCheck:
     """The check of one trajectory as executed: ``ok``; ``reason`` (what failed, one
