@@ -48,7 +48,8 @@ MATCH_SETTLE_S = 0.3   # s after the publisher sees its subscribers, before the 
 MAX_GAP_S = 5.0        # default longest wait between two republished messages (s)
 # the parameters that decide a plan's answer (the others: streaming, recording)
 ANSWER_PREFIXES = ("robot.", "task.", "planner.", "trajectory.")
-ANSWER_PARAMETERS = ("base_frame",)
+ANSWER_PARAMETERS = ("base_frame", "scene_file")
+SCENE_TYPE = "cdh_planner_interfaces/msg/Scene"   # the node's ~/scene (node_scene.py)
 
 
 # the recorded PlanPath goals and results (io.mcap_log.RunRecorder.write_action_event)
@@ -263,6 +264,7 @@ class RecordedPlan:
     # name -> rcl_interfaces/msg/Parameter in effect at this request (answer-deciding ones)
     parameters: dict = field(default_factory=dict)
     action: bool = False        # a PlanPath goal (through the action), not a GetPlan call
+    scene: object = None        # the node's last recorded Scene before it (None: none recorded)
 
     @property
     def label(self):
@@ -285,7 +287,12 @@ def recorded_plans(records):
     calls = {}
     pending = {}     # node -> parameter sets recorded since its last request
     state = {}       # node -> name -> Parameter
+    scenes = {}      # node -> its last recorded Scene
     for r in records:
+        if r.type_name == SCENE_TYPE and r.topic.endswith("/scene"):
+            from cdh_planner_interfaces.msg import Scene
+            scenes[node_of(r.topic)] = deserialize_message(r.data, Scene)
+            continue
         if r.topic == PARAMETER_EVENTS and r.type_name == "rcl_interfaces/msg/ParameterEvent":
             event = deserialize_message(r.data, ParameterEvent)
             params = [p for p in (*event.new_parameters, *event.changed_parameters)
@@ -316,7 +323,8 @@ def recorded_plans(records):
         if event.info.event_type == REQUEST_RECEIVED and request:
             node = node_of(service)
             calls[key] = RecordedPlan(seq, service, request[0], None, pending.pop(node, []),
-                                      dict(state.get(node, {})), action=action)
+                                      dict(state.get(node, {})), action=action,
+                                      scene=scenes.get(node))
         elif event.info.event_type == RESPONSE_SENT and response and key in calls:
             calls[key].response = response[0]
     return list(calls.values())

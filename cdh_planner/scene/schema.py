@@ -224,18 +224,35 @@ def mesh_hull(path, where):
                                            f"(at most {MAX_MESH_BYTES})")
     try:
         mesh = trimesh.load(str(path), force="mesh", process=False)
-        v = np.asarray(mesh.vertices, dtype=float)
-        if not 4 <= len(v) <= MAX_MESH_VERTICES or not np.all(np.isfinite(v)):
-            raise ValueError(f"{len(v)} vertices (need 4 to {MAX_MESH_VERTICES}, finite)")
-        hull = mesh.convex_hull
-        if not hull.volume > 0.0:
-            raise ValueError("encloses no volume")
-        return np.asarray(hull.vertices, dtype=float)
-    except InputError:
-        raise
+        return _hull(np.asarray(mesh.vertices, dtype=float))
     except Exception as exc:  # trimesh's many parsers raise many kinds: all are bad input
         raise InputError(where, str(path), f"not a mesh trimesh can read: "
                                            f"{type(exc).__name__}: {exc}") from None
+
+
+def hull_of_points(points, where):
+    """The vertices (n, 3) of the convex hull of ``points`` (m; a mesh given by its
+    vertices, as shape_msgs/Mesh gives it); InputError naming ``where`` if there are not 4
+    to MAX_MESH_VERTICES finite points enclosing a volume."""
+    try:
+        return _hull(np.asarray(points, dtype=float).reshape(-1, 3))
+    except Exception as exc:  # noqa: BLE001 - qhull and trimesh raise many kinds
+        raise InputError(where, f"{np.size(points) // 3} vertices", f"not a solid mesh: "
+                                                                    f"{exc}") from None
+
+
+def _hull(v):
+    """Convex hull vertices of the points v (n, 3); ValueError saying why there are none."""
+    import trimesh
+
+    if not 4 <= len(v) <= MAX_MESH_VERTICES or not np.all(np.isfinite(v)):
+        raise ValueError(f"{len(v)} vertices (need 4 to {MAX_MESH_VERTICES}, finite)")
+    with np.errstate(all="ignore"):  # a flat set's volume is 0 / 0: refused below
+        hull = trimesh.convex.convex_hull(v)
+        volume = hull.volume
+    if not volume > 0.0:
+        raise ValueError("encloses no volume")
+    return np.asarray(hull.vertices, dtype=float)
 
 
 def _positive(where, value):
