@@ -243,6 +243,31 @@ def test_the_pruned_least_distance_is_the_least_of_all_pairs_and_names_it():
             sorted(t[3] for t in every)[1] - least < 1e-12  # a tie may name either
 
 
+def test_cables_against_the_platforms_own_shape_match_the_closed_form():
+    """A spherical platform body (closed form: the distance of its centre to the cable
+    cut short by the exemption at its platform anchor, less both radii); a ball about the
+    anchors' centre is clear, a body reaching past an anchor is hit by its cable there."""
+    rng = np.random.default_rng(11)
+    rho, r = 0.01, R_CABLE
+    for body_r, hits in ((0.05, False), (0.12, True)):
+        cm = model([], platform={"type": "sphere", "radius": body_r, "position": [0, 0, 0.02]},
+                   shared_anchor_exemption=rho)
+        for _ in range(10):
+            p, R = random_pose(rng)
+            centre = p + R @ np.array([0.0, 0.0, 0.02])
+            Bw = platform_anchors(ROBOT2, p, R)
+            got = {c[0]: d for kind, _, c, d in cm.distances(p, R) if kind == "cable-platform"}
+            assert sorted(got) == list(range(6))
+            for i, d in got.items():
+                a, b = ROBOT2.base_anchors[i], Bw[i]
+                cut = b + rho * (a - b) / np.linalg.norm(a - b)
+                assert d == pytest.approx(point_segment(centre, a, cut) - body_r - r, abs=1e-7)
+            c = cm.clearance(p, R)
+            assert (c.kind == "cable-platform") == hits or c.distance > min(got.values())
+            if hits:
+                assert not c.ok and c.obstacle == "platform" and "/ platform" in c.binding
+
+
 def test_lower_bounds_never_exceed_the_exact_distance():
     rng = np.random.default_rng(8)
     for _ in range(10):
@@ -252,10 +277,11 @@ def test_lower_bounds_never_exceed_the_exact_distance():
                       "position": near_cable_point(rng, ROBOT2, p, R, 0.05)} for k in range(6)]
         cm = model(obstacles, platform={"type": "box", "size": [0.14, 0.14, 0.01]})
         lb = cm.lower_bounds(p, R)
+        assert lb.shape == (7, 7) and lb[6, 6] == math.inf
         for kind, oid, cables, d in cm.distances(p, R):
-            row = cables[0] if kind == "cable-obstacle" else 6
+            row = cables[0] if kind in ("cable-obstacle", "cable-platform") else 6
             if kind != "cable-cable":
-                assert lb[row, int(oid[1:])] <= d + 1e-12
+                assert lb[row, 6 if oid == "platform" else int(oid[1:])] <= d + 1e-12
 
 
 def test_an_empty_scene_binds_only_cable_pairs_and_robot2_cables_clear_each_other():

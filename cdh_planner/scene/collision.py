@@ -2,9 +2,10 @@
 
 Each cable i is a capsule of radius r (``scene.cable_radius``) from its base anchor a_i
 to its platform anchor p + R b_i. Checked at a pose: every cable against every obstacle,
-the platform's shape against every obstacle, and every pair of cables (those sharing an
-anchor point compared only beyond ``scene.shared_anchor_exemption`` of it: see
-``schema``). Distances are signed (m, negative: penetration depth) and computed by the
+the platform's shape against every obstacle, every cable against the platform's own shape
+(beyond ``scene.shared_anchor_exemption`` of its platform anchor, where it is fixed to the
+body), and every pair of cables (those sharing an anchor point compared only beyond
+``scene.shared_anchor_exemption`` of it: see ``schema``). Distances are signed (m, negative: penetration depth) and computed by the
 coal library (GJK / EPA and closed forms), except cable against cable: two capsules of
 one radius are the distance of two segments less 2 r, computed for all pairs at once in
 the compiled kernel below.
@@ -38,7 +39,8 @@ class Clearance:
     """The least signed distance at a pose (m) and what binds: ``kind`` one of
     "cable-obstacle", "platform-obstacle", "cable-cable" (None with nothing to check and
     ``distance`` inf); ``obstacle`` its id (or None), ``cables`` the cable indices
-    involved (0-based). ``margin`` = distance - the scene's clearance; ``ok`` when >= 0."""
+    involved (0-based): "cable-platform" names the obstacle "platform". ``margin`` =
+    distance - the scene's clearance; ``ok`` when >= 0."""
 
     distance: float
     margin: float
@@ -84,13 +86,17 @@ class CollisionModel:
             [scene.cable_radius, scene.shared_anchor_exemption],
             plat.position if plat else np.zeros(3),
             [plat.bounding_radius() if plat else -1.0]])  # < 0: no platform
-        # work buffers: lower bounds (cables, then the platform) and each cable's capsule
-        # frame (rotation 9, centre 3, half length 1; its platform anchor 3), cable pair distances
-        self.lb = np.empty((m + 1, K))
+        # work buffers: lower bounds (rows: cables, then the platform; columns: obstacles,
+        # then the platform's own shape) and each cable's capsule frame (rotation 9, centre
+        # 3, half length 1; its platform anchor 3) and that of its part kept clear of the
+        # platform (13), cable pair distances
+        self.lb = np.empty((m + 1, K + 1))
         self.frames = np.empty((m, 16))
+        self.frames_p = np.empty((m, 13))
         self.cc = np.empty(len(self.pairs))
         self.capsules = [coal.Capsule(float(scene.cable_radius), 1.0) for _ in range(m)]
         self.cable_T = [coal.Transform3s() for _ in range(m)]
+        self.capsules_p = [coal.Capsule(float(scene.cable_radius), 1.0) for _ in range(m)]
         self.platform_T = coal.Transform3s()
         # ComputeDistance keeps pointers to its shapes: the model holds them
         self.geometry = geometry = [_geometry(o) for o in self.obstacles]
@@ -98,6 +104,8 @@ class CollisionModel:
         self.placement = [coal.Transform3s(o.rotation, o.position) for o in self.obstacles]
         self.cable_fn = [[coal.ComputeDistance(c, g) for g in geometry] for c in self.capsules]
         self.platform_fn = [coal.ComputeDistance(self.platform_geometry, g) for g in geometry] \
+            if plat else []
+        self.own_fn = [coal.ComputeDistance(c, self.platform_geometry) for c in self.capsules_p] \
             if plat else []
         self.request = coal.DistanceRequest()
         self.request.gjk_tolerance = GJK_TOLERANCE
@@ -112,35 +120,37 @@ class CollisionModel:
         if self.cc.size:
             k = int(np.argmin(self.cc))
             best, what = float(self.cc[k]), ("cable-cable", None, tuple(map(int, self.pairs[k])))
-        if self.obstacles:
-            flat = self.lb.ravel()  # consumed: each pair tried is set to inf
-            m, K = len(self.names), len(self.obstacles)
-            while True:  # in increasing order of the bounds, while one is below the best
-                idx = int(np.argmin(flat))
-                if flat[idx] >= best:
-                    break
-                flat[idx] = math.inf
-                i, k = divmod(idx, K)
-                if i < m:
-                    d, w = self._cable_obstacle(i, k), ("cable-obstacle", k, (i,))
-                else:
-                    d, w = self._platform_obstacle(k, p, R), ("platform-obstacle", k, ())
-                if d < best:
-                    best, what = d, w
+        flat = self.lb.ravel()  # consumed: each pair tried is set to inf
+        m, K = len(self.names), len(self.obstacles)
+        while True:  # in increasing order of the bounds, while one is below the best
+            idx = int(np.argmin(flat))
+            if flat[idx] >= best:
+                break
+            flat[idx] = math.inf
+            i, k = divmod(idx, K + 1)
+            if k == K:
+                d, w = self._cable_platform(i, p, R), ("cable-platform", k, (i,))
+            elif i < m:
+                d, w = self._cable_obstacle(i, k), ("cable-obstacle", k, (i,))
+            else:
+                d, w = self._platform_obstacle(k, p, R), ("platform-obstacle", k, ())
+            if d < best:
+                best, what = d, w
         return self._answer(best, what)
 
     def _pose(self, p, R):
         """Fill the work buffers for pose (p, R): lower bounds, pair distances, frames."""
         p = np.ascontiguousarray(p, dtype=float)
         R = np.ascontiguousarray(R, dtype=float)
-        _kernel(p, R, self.static, self.pairs, self.lb, self.frames, self.cc)
+        _kernel(p, R, self.static, self.pairs, self.lb, self.frames, self.frames_p, self.cc)
         return p, R
 
     def _answer(self, best, what):
         if what is None:
             return Clearance(distance=math.inf, margin=math.inf)
         kind, k, cables = what
-        oid = self.obstacles[k].id if k is not None else None
+        oid = None if k is None else "platform" if k == len(self.obstacles) \
+            else self.obstacles[k].id
         return Clearance(distance=best, margin=best - self.scene.clearance, kind=kind,
                          obstacle=oid, cables=cables, names=self.names)
 
@@ -158,11 +168,25 @@ class CollisionModel:
 
     def _platform_obstacle(self, k, p, R):
         """Signed distance (m) of the platform's shape at (p, R) to obstacle k, by coal."""
-        s = self.platform
-        self.platform_T.setTransform(R @ s.rotation, p + R @ s.position)
+        self._place_platform(p, R)
         self.result.clear()
         return float(self.platform_fn[k](self.platform_T, self.placement[k], self.request,
                                          self.result))
+
+    def _cable_platform(self, i, p, R):
+        """Signed distance (m) of cable i's capsule, short of its platform anchor by the
+        exemption (frame from the last ``_pose``), to the platform's own shape at (p, R)."""
+        f = self.frames_p[i]
+        self.capsules_p[i].halfLength = f[12]
+        T = self.cable_T[i]
+        T.setTransform(f[:9].reshape(3, 3), f[9:12])
+        self._place_platform(p, R)
+        self.result.clear()
+        return float(self.own_fn[i](T, self.platform_T, self.request, self.result))
+
+    def _place_platform(self, p, R):
+        s = self.platform
+        self.platform_T.setTransform(R @ s.rotation, p + R @ s.position)
 
     # ------------------------------------------------------------------ every pair
 
@@ -177,6 +201,9 @@ class CollisionModel:
                     for i in range(len(self.names))]
             if self.platform is not None:
                 out.append(("platform-obstacle", o.id, (), self._platform_obstacle(k, p, R)))
+        K = len(self.obstacles)
+        out += [("cable-platform", "platform", (i,), self._cable_platform(i, p, R))
+                for i in range(len(self.names)) if self.lb[i, K] < math.inf]
         return out
 
     def margins(self, p, R):
@@ -191,8 +218,9 @@ class CollisionModel:
         return margin, binding
 
     def lower_bounds(self, p, R):
-        """Lower bounds (m + 1, K), m, of the cable-obstacle (rows 0..m-1) and
-        platform-obstacle (row m) distances at pose (p, R), from bounding spheres."""
+        """Lower bounds (m + 1, K + 1), m, of the cable-obstacle (rows 0..m-1, columns
+        0..K-1), platform-obstacle (row m) and cable-platform (column K) distances at pose
+        (p, R), from bounding spheres (inf: not checked)."""
         self._pose(p, R)
         return self.lb.copy()
 
@@ -224,14 +252,17 @@ def _cable_pairs(A, B):
 # ----------------------------------------------------------------------------- kernel
 
 @njit(cache=True)
-def _kernel(p, R, static, pairs, lb, frames, cc):
+def _kernel(p, R, static, pairs, lb, frames, frames_p, cc):
     """For pose (p, R): lb[i, k] = dist(segment a_i b_i, c_k) - rho_k - r, a lower bound
     of cable i's distance to obstacle k (c_k, rho_k its bounding sphere), and lb[m, k]
-    the platform's (|centre - c_k| - rho_k - rho_platform; inf without a platform); frames[i]: cable i's capsule
-    frame (rotation taking z to the cable, row-major; centre; half length); cc[n]: the
-    distance of the capsules of cable pair n (shared ends cut by rho; inf if nothing is
-    left). Scalar code on 3-tuples: no allocation in the loops."""
-    m, K, P = lb.shape[0] - 1, lb.shape[1], pairs.shape[0]
+    the platform's (|centre - c_k| - rho_k - rho_platform; inf without a platform);
+    lb[i, K] cable i's (cut by rho at its platform anchor) to the platform's own shape
+    (inf without one, or if nothing is left; lb[m, K] inf); frames[i]: cable i's capsule
+    frame (rotation taking z to the cable, row-major; centre; half length), frames_p[i]
+    that of its cut part; cc[n]: the distance of the capsules of cable pair n (shared ends
+    cut by rho; inf if nothing is left). Scalar code on 3-tuples: no allocation in the
+    loops."""
+    m, K, P = lb.shape[0] - 1, lb.shape[1] - 1, pairs.shape[0]
     oB, oC = 3 * m, 6 * m
     oR = oC + 3 * K
     oT = oR + K
@@ -246,6 +277,13 @@ def _kernel(p, R, static, pairs, lb, frames, cc):
         _frame(a, b, frames[i])
         for k in range(K):
             lb[i, k] = _point_segment(_v(static, oC + 3 * k), a, b) - static[oR + k] - r
+        lb[i, K] = np.inf
+        if prad >= 0.0:
+            ok, q0, q1 = _cut(a, b, 0.0, 1.0, rho)
+            if ok:
+                _frame(q0, q1, frames_p[i])
+                lb[i, K] = _point_segment(pc, q0, q1) - prad - r
+    lb[m, K] = np.inf
     for k in range(K):
         lb[m, k] = _norm(_sub(_v(static, oC + 3 * k), pc)) - static[oR + k] - prad \
             if prad >= 0.0 else np.inf

@@ -7,7 +7,7 @@ One format everywhere (problem files' ``scene:`` key, ``verify --scene FILE``, t
       clearance: 0.0                 # m: the least distance kept everywhere
       shared_anchor_exemption: 0.01  # m: see below
       platform: {type: box, size: [0.14, 0.14, 0.01],
-                 position: [0, 0, 0], quaternion: [0, 0, 0, 1]}   # platform frame; absent: none
+                 position: [0, 0, 0], quaternion: [0, 0, 0, 1]}   # platform frame; absent: robot.platform_shape
       obstacles:                     # base frame
         - {id: ball, type: sphere, radius: 0.02, position: [x, y, z]}
         - {id: post, type: box, size: [sx, sy, sz], position: [...], quaternion: [x, y, z, w]}
@@ -128,7 +128,7 @@ def load_scene(path, robot=None):
 def scene_from_dict(d, robot=None, base_dir=".", where="scene", source=""):
     """A checked Scene from the ``scene:`` mapping ``d``; mesh files are relative to
     ``base_dir``. An absent cable_radius is the robot's (robot.cable_radius, else 0); an
-    absent platform is none (the platform is not checked)."""
+    absent platform is the robot's (robot.platform_shape: none, not checked, by default)."""
     check_keys(where, d, SCENE_KEYS)
     radius = d.get("cable_radius")
     if radius is None:
@@ -140,9 +140,24 @@ def scene_from_dict(d, robot=None, base_dir=".", where="scene", source=""):
     platform = d.get("platform")
     if platform is not None:
         platform = shape_from_dict(platform, f"{where}.platform", "platform", base_dir)
+    else:
+        platform = robot_platform(robot)
     return Scene(cable_radius=radius, clearance=clearance, shared_anchor_exemption=rho,
                  platform=platform, obstacles=_obstacles(d.get("obstacles", []), where, base_dir),
                  source=source)
+
+
+def robot_platform(robot):
+    """The platform Shape of ``robot.platform_shape`` (platform frame), or None (no robot,
+    or type none)."""
+    kind = getattr(robot, "platform_shape", "none")
+    if kind == "none":
+        return None
+    size = np.asarray(robot.platform_size, dtype=float)
+    fields = {"box": dict(size=size), "sphere": dict(radius=0.5 * size[0]),
+              "cylinder": dict(radius=0.5 * size[0], height=size[2])}[kind]
+    return Shape(id="platform", kind=kind, position=np.asarray(robot.platform_center, float),
+                 quaternion=np.array(IDENTITY), **fields)
 
 
 def _obstacles(items, where, base_dir):
