@@ -10,6 +10,11 @@ coal library (GJK / EPA and closed forms), except cable against cable: two capsu
 one radius are the distance of two segments less 2 r, computed for all pairs at once in
 the compiled kernel below.
 
+Cable against a sphere, box or cylinder platform: the kernel minimises the shape's signed
+distance (convex) along the cable by golden-section search, exactly; in contact that is
+the deepest point of the cable's axis less its radius, where coal (a mesh platform, the
+obstacles) gives the penetration depth: the same sign, a smaller magnitude.
+
 Speed: a compiled kernel computes all cable pairs and a lower bound for every
 cable-obstacle and platform-obstacle pair (bounding spheres of the obstacles); coal is
 then called in the order of those bounds only while a bound is below the least distance
@@ -32,6 +37,8 @@ from .schema import SHARED_ANCHOR_M
 # planner's margin floor (1e-3) keeps planned waypoints 0.1 mm beyond the scene's clearance.
 GJK_TOLERANCE = 1e-9  # m: coal's convergence tolerance (its default, 1e-6, is too coarse)
 EPS = 1e-300
+MESH_CODE = 3.0   # a platform the kernel leaves to coal (a mesh)
+GOLDEN_STEPS = 60   # golden-section steps on a cable: 0.618^60 = 3e-13 of its length
 
 
 @dataclass(frozen=True)
@@ -85,7 +92,8 @@ class CollisionModel:
             A.ravel(), B.ravel(), centres.ravel(), radii, trims.ravel(),
             [scene.cable_radius, scene.shared_anchor_exemption],
             plat.position if plat else np.zeros(3),
-            [plat.bounding_radius() if plat else -1.0]])  # < 0: no platform
+            [plat.bounding_radius() if plat else -1.0],  # < 0: no platform
+            _platform_form(plat)])  # its kind code, 3 dimensions, rotation (platform frame)
         # work buffers: lower bounds (rows: cables, then the platform; columns: obstacles,
         # then the platform's own shape) and each cable's capsule frame (rotation 9, centre
         # 3, half length 1; its platform anchor 3) and that of its part kept clear of the
@@ -94,6 +102,7 @@ class CollisionModel:
         self.frames = np.empty((m, 16))
         self.frames_p = np.empty((m, 13))
         self.cc = np.empty(len(self.pairs))
+        self.cp = np.empty(m)   # cable-platform distances of a primitive platform (kernel)
         self.capsules = [coal.Capsule(float(scene.cable_radius), 1.0) for _ in range(m)]
         self.cable_T = [coal.Transform3s() for _ in range(m)]
         self.capsules_p = [coal.Capsule(float(scene.cable_radius), 1.0) for _ in range(m)]
@@ -120,6 +129,9 @@ class CollisionModel:
         if self.cc.size:
             k = int(np.argmin(self.cc))
             best, what = float(self.cc[k]), ("cable-cable", None, tuple(map(int, self.pairs[k])))
+        i = int(np.argmin(self.cp))
+        if self.cp[i] < best:
+            best, what = float(self.cp[i]), ("cable-platform", len(self.obstacles), (i,))
         flat = self.lb.ravel()  # consumed: each pair tried is set to inf
         m, K = len(self.names), len(self.obstacles)
         while True:  # in increasing order of the bounds, while one is below the best
@@ -142,7 +154,8 @@ class CollisionModel:
         """Fill the work buffers for pose (p, R): lower bounds, pair distances, frames."""
         p = np.ascontiguousarray(p, dtype=float)
         R = np.ascontiguousarray(R, dtype=float)
-        _kernel(p, R, self.static, self.pairs, self.lb, self.frames, self.frames_p, self.cc)
+        _kernel(p, R, self.static, self.pairs, self.lb, self.frames, self.frames_p, self.cc,
+                self.cp)
         return p, R
 
     def _answer(self, best, what):
@@ -202,8 +215,9 @@ class CollisionModel:
             if self.platform is not None:
                 out.append(("platform-obstacle", o.id, (), self._platform_obstacle(k, p, R)))
         K = len(self.obstacles)
-        out += [("cable-platform", "platform", (i,), self._cable_platform(i, p, R))
-                for i in range(len(self.names)) if self.lb[i, K] < math.inf]
+        out += [("cable-platform", "platform", (i,),
+                 self._cable_platform(i, p, R) if self.lb[i, K] < math.inf else float(self.cp[i]))
+                for i in range(len(self.names)) if self.lb[i, K] < math.inf or self.cp[i] < math.inf]
         return out
 
     def margins(self, p, R):
@@ -223,6 +237,19 @@ class CollisionModel:
         (p, R), from bounding spheres (inf: not checked)."""
         self._pose(p, R)
         return self.lb.copy()
+
+
+def _platform_form(shape):
+    """The kernel's description of a platform shape (13 numbers): kind code (0 sphere, 1
+    box, 2 cylinder, MESH_CODE a mesh or none: coal's), dimensions (radius; half edges;
+    radius, half height), its rotation in the platform frame (row-major)."""
+    if shape is None:
+        return np.r_[MESH_CODE, 0.0, 0.0, 0.0, np.eye(3).ravel()]
+    dims = {"sphere": lambda: (0.0, shape.radius, 0.0, 0.0),
+            "box": lambda: (1.0, *(0.5 * np.asarray(shape.size, float))),
+            "cylinder": lambda: (2.0, shape.radius, 0.5 * shape.height, 0.0),
+            "mesh": lambda: (MESH_CODE, 0.0, 0.0, 0.0)}[shape.kind]()
+    return np.r_[dims, np.asarray(shape.rotation, float).ravel()]
 
 
 def _geometry(shape):
@@ -252,7 +279,7 @@ def _cable_pairs(A, B):
 # ----------------------------------------------------------------------------- kernel
 
 @njit(cache=True)
-def _kernel(p, R, static, pairs, lb, frames, frames_p, cc):
+def _kernel(p, R, static, pairs, lb, frames, frames_p, cc, cp):
     """For pose (p, R): lb[i, k] = dist(segment a_i b_i, c_k) - rho_k - r, a lower bound
     of cable i's distance to obstacle k (c_k, rho_k its bounding sphere), and lb[m, k]
     the platform's (|centre - c_k| - rho_k - rho_platform; inf without a platform);
@@ -260,8 +287,9 @@ def _kernel(p, R, static, pairs, lb, frames, frames_p, cc):
     (inf without one, or if nothing is left; lb[m, K] inf); frames[i]: cable i's capsule
     frame (rotation taking z to the cable, row-major; centre; half length), frames_p[i]
     that of its cut part; cc[n]: the distance of the capsules of cable pair n (shared ends
-    cut by rho; inf if nothing is left). Scalar code on 3-tuples: no allocation in the
-    loops."""
+    cut by rho; inf if nothing is left); cp[i]: cable i's (cut) distance to a sphere, box or
+    cylinder platform, exact here (lb[i, K] is then inf: no coal call), inf otherwise.
+    Scalar code on 3-tuples: no allocation in the loops."""
     m, K, P = lb.shape[0] - 1, lb.shape[1] - 1, pairs.shape[0]
     oB, oC = 3 * m, 6 * m
     oR = oC + 3 * K
@@ -270,6 +298,8 @@ def _kernel(p, R, static, pairs, lb, frames, frames_p, cc):
     r, rho = static[o], static[o + 1]
     pc = _add(_rot(R, _v(static, o + 2)), _v(p, 0))
     prad = static[o + 5]
+    form = static[o + 6:o + 19]     # kind code, dimensions, rotation (platform frame)
+    M = R @ form[4:13].reshape(3, 3)   # the platform shape's axes in the base frame
     for i in range(m):
         a = _v(static, 3 * i)
         b = _add(_rot(R, _v(static, oB + 3 * i)), _v(p, 0))
@@ -277,10 +307,12 @@ def _kernel(p, R, static, pairs, lb, frames, frames_p, cc):
         _frame(a, b, frames[i])
         for k in range(K):
             lb[i, k] = _point_segment(_v(static, oC + 3 * k), a, b) - static[oR + k] - r
-        lb[i, K] = np.inf
+        lb[i, K], cp[i] = np.inf, np.inf
         if prad >= 0.0:
             ok, q0, q1 = _cut(a, b, 0.0, 1.0, rho)
-            if ok:
+            if ok and form[0] < MESH_CODE:
+                cp[i] = _segment_sdf(_local(M, pc, q0), _local(M, pc, q1), form) - r
+            elif ok:
                 _frame(q0, q1, frames_p[i])
                 lb[i, K] = _point_segment(pc, q0, q1) - prad - r
     lb[m, K] = np.inf
@@ -293,6 +325,51 @@ def _kernel(p, R, static, pairs, lb, frames, frames_p, cc):
         ok1, p0, p1 = _cut(_v(static, 3 * i), _v(frames[i], 13), cut_a, cut_b, rho)
         ok2, q0, q1 = _cut(_v(static, 3 * j), _v(frames[j], 13), cut_a, cut_b, rho)
         cc[n] = _segment_segment(p0, p1, q0, q1) - 2.0 * r if ok1 and ok2 else np.inf
+
+
+@njit(cache=True)
+def _local(M, c, x):
+    """x (base frame) in the frame of axes M (columns) and origin c."""
+    d = _sub(x, c)
+    return (M[0, 0] * d[0] + M[1, 0] * d[1] + M[2, 0] * d[2],
+            M[0, 1] * d[0] + M[1, 1] * d[1] + M[2, 1] * d[2],
+            M[0, 2] * d[0] + M[1, 2] * d[1] + M[2, 2] * d[2])
+
+
+@njit(cache=True)
+def _sdf(x, form):
+    """Signed distance (m) of the point x (shape frame) to a sphere (code 0: radius), box
+    (1: half edges) or cylinder (2: radius, half height; axis z)."""
+    if form[0] == 0.0:
+        return _norm(x) - form[1]
+    if form[0] == 1.0:
+        q = (abs(x[0]) - form[1], abs(x[1]) - form[2], abs(x[2]) - form[3])
+    else:
+        q = (math.hypot(x[0], x[1]) - form[1], abs(x[2]) - form[2], -np.inf)
+    out = (max(q[0], 0.0), max(q[1], 0.0), max(q[2], 0.0))
+    return _norm(out) + min(max(q[0], max(q[1], q[2])), 0.0)
+
+
+@njit(cache=True)
+def _segment_sdf(x0, x1, form):
+    """Least signed distance of the segment x0..x1 (shape frame) to the shape: the signed
+    distance to a convex set is convex, so golden-section search on the segment finds its
+    minimum (GOLDEN_STEPS steps: within 1e-12 of the segment's length)."""
+    d = _sub(x1, x0)
+    lo, hi, g = 0.0, 1.0, 0.6180339887498949
+    c, e = hi - g, g
+    fc = _sdf(_add(x0, _scale(c, d)), form)
+    fe = _sdf(_add(x0, _scale(e, d)), form)
+    for _ in range(GOLDEN_STEPS):
+        if fc < fe:
+            hi, e, fe = e, c, fc
+            c = hi - g * (hi - lo)
+            fc = _sdf(_add(x0, _scale(c, d)), form)
+        else:
+            lo, c, fc = c, e, fe
+            e = lo + g * (hi - lo)
+            fe = _sdf(_add(x0, _scale(e, d)), form)
+    return min(fc, fe, _sdf(x0, form), _sdf(x1, form))
 
 
 @njit(cache=True, inline="always")
