@@ -173,3 +173,47 @@ def test_a_planner_is_made_for_each_scene_a_plan_is_made_under():
     planner, scene = plans._for_scene(call, cfg, plans._planner)
     assert scene is s1 and planner.scene is s1 and made == [s1] and plans._planner is planner
     assert plans._for_scene(call, cfg, plans._planner)[0] is planner and made == [s1]
+
+
+# ----------------------------------------------------------------- hypothesis
+
+from datetime import timedelta  # noqa: E402
+
+from hypothesis import HealthCheck, given, settings  # noqa: E402
+from hypothesis import strategies as st  # noqa: E402
+
+NUMBERS = st.one_of(st.floats(allow_nan=True, allow_infinity=True),
+                    st.sampled_from([0.0, -0.01, 0.01, 1e-9, 2e3, 1.0]))
+
+
+@st.composite
+def obstacles(draw):
+    msg = Obstacle(id=draw(st.sampled_from(["a", "b", "", "platform", "x" * 70])),
+                   operation=draw(st.integers(0, 3)))
+    msg.primitive.type = draw(st.integers(0, 6))
+    msg.primitive.dimensions = draw(st.lists(NUMBERS, max_size=3))
+    if draw(st.booleans()):
+        msg.mesh.vertices = [Point(x=draw(NUMBERS), y=draw(NUMBERS), z=draw(NUMBERS))
+                             for _ in range(draw(st.integers(0, 6)))]
+    for k in "xyz":
+        setattr(msg.pose.position, k, draw(NUMBERS))
+    for k in "xyzw":
+        setattr(msg.pose.orientation, k, draw(st.sampled_from([0.0, 1.0, 0.5, math.nan])))
+    return msg
+
+
+@settings(max_examples=150, deadline=timedelta(seconds=5), derandomize=True, database=None,
+          suppress_health_check=list(HealthCheck))
+@given(items=st.lists(obstacles(), max_size=5), frame=st.sampled_from([FRAME, "", "world"]))
+def test_any_obstacle_array_is_taken_or_refused_item_by_item_never_raising(items, frame):
+    """Random ObstacleArrays: every item is taken or refused with a one-line reason naming
+    it; the scene holds exactly the ids taken, and the version counts the updates."""
+    state = SceneState()
+    state.configure(config())
+    up = state.update(array(*items, frame=frame), FRAME)
+    assert len(up.taken) + len(up.refused) == (len(items) if frame == FRAME else 1)
+    assert all("\n" not in r for r in up.refused)
+    assert up.version == (1 if up.taken else 0)
+    scene = state.current().scene
+    ids = [] if scene is None else [o.id for o in scene.obstacles]
+    assert len(ids) == len(set(ids)) and all(0 < len(i) <= 64 and i != "platform" for i in ids)
