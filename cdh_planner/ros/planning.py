@@ -44,7 +44,8 @@ SINGULAR_SIN = 1e-9  # |sin theta| below this: phi is not determined by the orie
 
 # keys that ``result_status`` adds to messages.plan_status's (strings; numbers by repr)
 EXTRA_KEYS = ("path_stamp", "waypoints", "path_length_m", "duration_s", "min_margin",
-              "min_tension_margin_n", "least_margin", "least_tension_margin_n", "outputs")
+              "min_tension_margin_n", "least_margin", "least_tension_margin_n", "outputs",
+              "scene_version")   # the last: a call the planner answered (ros.scene_state)
 PROGRESS_NAME = "cdh_planner: planning"
 # ``outputs`` value of a successful result: the plan is on the latched topics now, or will be
 # when the running execution ends (``docs/ros-node.md``, "Planning while executing")
