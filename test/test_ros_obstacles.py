@@ -110,3 +110,26 @@ def test_obstacles_over_dds_change_the_next_plan_and_replay_reproduces_them(
             in r.stdout, r.stdout
         assert "request 3: obstacles as recorded (scene version 2): 1 added or removed" \
             in r.stdout, r.stdout
+
+
+def test_every_rotated_run_file_begins_with_the_current_scene(tmp_path):
+    """RunLog: a message written as a snapshot (the node's ~/scene) opens every later file
+    (after the parameters), so a replay of any one file knows the obstacles."""
+    from cdh_planner.ros.recording import RunLog
+    from cdh_planner.ros.scene_msgs import scene_msg
+    from cdh_planner.scene.schema import scene_from_dict
+    from std_msgs.msg import String
+
+    log = RunLog(tmp_path, True, warn=print, info=lambda text: None, max_bytes=4000)
+    ball = scene_from_dict({"obstacles": [{"id": "ball", "type": "sphere", "radius": 0.01}]})
+    log.write("/cdh_planner/scene", scene_msg(1, ball, FRAME), transient_local=True,
+              snapshot=True)
+    for k in range(40):
+        log.write("/cdh_planner/chatter", String(data="x" * 400))
+    log.close()
+    files = sorted(tmp_path.glob("*.mcap"))
+    assert len(files) >= 3
+    for f in files:
+        records = read_records(f)
+        assert records[0].type_name == SCENE_TYPE and records[0].transient_local, f
+        assert sum(r.type_name == SCENE_TYPE for r in records) == 1

@@ -84,7 +84,7 @@ class NodeScene:
         frame, stamp = node.config.base_frame, node.get_clock().now().to_msg()
         try:
             node.record.publish(self.pub_scene, scene_msg(now.version, now.scene, frame, stamp),
-                                latched=True)
+                                latched=True, snapshot=True)   # every run file begins with it
             markers = MarkerArray(markers=[Marker(action=Marker.DELETEALL, ns="obstacles")])
             if now.scene is not None:
                 markers.markers += obstacle_markers(now.scene, frame, stamp)

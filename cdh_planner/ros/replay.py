@@ -40,7 +40,7 @@ from ..io.mcap_log import ACTION_INFIX, GET_RESULT, REQUEST_RECEIVED, RESPONSE_S
 from ..io.mcap_log import scan_records as scan_run  # raw records of a (possibly killed) run file
 from ..io.ros_schemas import rosidl_type
 from .messages import path_arrays
-from .interface import CABLE_COMMAND, SERVICE_QOS
+from .interface import CABLE_COMMAND, OBSTACLES, SERVICE_QOS
 from .recording import PARAMETER_EVENTS
 
 
@@ -144,8 +144,8 @@ def is_command_topic(topic):
 
 
 def select_topics(records, topics=None, commands=False):
-    """The records to republish: no service events, no ``/parameter_events`` unless named,
-    and no command topic (``is_command_topic``) unless ``commands``: on a live system a
+    """The records to republish: no service events, no ``/parameter_events`` nor a node's
+    ``~/obstacles`` unless named (each would change a live node), and no command topic (``is_command_topic``) unless ``commands``: on a live system a
     replayed command would move the robot. Only ``topics`` if given (InputError naming a
     topic that is not in the file, or a command topic without ``commands``)."""
     available = sorted({r.topic for r in records if not is_service_event(r)})
@@ -161,6 +161,7 @@ def select_topics(records, topics=None, commands=False):
         wanted = set(topics)
     else:
         wanted = {t for t in available if commands or not is_command_topic(t)} - {PARAMETER_EVENTS}
+        wanted = {t for t in wanted if not t.endswith(f"/{OBSTACLES}")}   # the node's input
     return [r for r in records if r.topic in wanted]
 
 
