@@ -245,6 +245,26 @@ def test_the_robots_platform_shape_is_the_scenes_default_platform():
     box = scene_from_dict({}, robot=_robot2_with(type="box", size=[0.1, 0.2, 0.01])).platform
     assert np.allclose(box.size, [0.1, 0.2, 0.01])
     assert scene_from_dict({}, robot=_robot2_with(type="none")).platform is None
+    # without a scene file, a robot with a platform shape is checked against itself
+    from cdh_planner.scene.schema import default_scene
+    assert default_scene(_robot2_with(type="none")) is None
+    own = default_scene(robot)
+    assert own.platform.kind == "cylinder" and own.obstacles == ()
+
+
+def test_a_platform_shape_parameter_gives_the_nodes_scene_without_a_scene_file():
+    from conftest import CONFIG
+    from cdh_planner.ros import params
+    from ros_harness import file_parameters
+    values = dict(file_parameters(CONFIG / "robot2.yaml"),
+                  **{"robot.platform_shape.type": "box",
+                     "robot.platform_shape.size": [0.12, 0.12, 0.01]})
+    scene = params.node_config(values).scene
+    assert scene.platform.kind == "box" and np.allclose(scene.platform.size, [0.12, 0.12, 0.01])
+    with pytest.raises(InputError) as info:
+        params.node_config(dict(values, **{"robot.platform_shape.size": [0.1, 0.2, 0.01],
+                                           "robot.platform_shape.type": "cylinder"}))
+    assert info.value.field == "robot.platform_shape.size"
 
 
 @pytest.mark.parametrize("shape,field", [

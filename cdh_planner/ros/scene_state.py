@@ -7,7 +7,8 @@ node (``node_scene.py``) maps the topic and the service onto it, the tests drive
     update = state.update(array_msg, base_frame)   # an ObstacleArray: Update(taken, refused)
     now = state.current()                    # SceneVersion(version, scene): a goal's scene
 
-Versions: 0 is the scene of ``scene_file`` (None without one: nothing is checked); each
+Versions: 0 is the scene of ``scene_file`` (without one: None, nothing is checked, unless
+the robot declares its platform's shape: ``scene.schema.default_scene``); each
 update that takes at least one obstacle adds one, and so does each parameter change that
 gives another scene (a new ``scene_file`` replaces the obstacles by the file's; a change of
 ``robot.*`` keeps them, with the robot's new defaults). Once an obstacle has been received

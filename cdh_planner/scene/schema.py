@@ -147,6 +147,13 @@ def scene_from_dict(d, robot=None, base_dir=".", where="scene", source=""):
                  source=source)
 
 
+def default_scene(robot):
+    """The scene of a robot without a scene file: none (nothing checked), unless the robot
+    declares its platform's shape (robot.platform_shape), whose cables are then kept clear
+    of it and of each other."""
+    return scene_from_dict({}, robot) if robot_platform(robot) is not None else None
+
+
 def robot_platform(robot):
     """The platform Shape of ``robot.platform_shape`` (platform frame), or None (no robot,
     or type none)."""
