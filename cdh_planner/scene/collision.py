@@ -103,6 +103,11 @@ class CollisionModel:
         self.frames_p = np.empty((m, 13))
         self.cc = np.empty(len(self.pairs))
         self.cp = np.empty(m)   # cable-platform distances of a primitive platform (kernel)
+        self._coal(m)
+
+    def _coal(self, m):
+        """coal's shapes, placements and distance functors (cables, platform, obstacles)."""
+        scene, plat = self.scene, self.platform
         self.capsules = [coal.Capsule(float(scene.cable_radius), 1.0) for _ in range(m)]
         self.cable_T = [coal.Transform3s() for _ in range(m)]
         self.capsules_p = [coal.Capsule(float(scene.cable_radius), 1.0) for _ in range(m)]
@@ -307,14 +312,7 @@ def _kernel(p, R, static, pairs, lb, frames, frames_p, cc, cp):
         _frame(a, b, frames[i])
         for k in range(K):
             lb[i, k] = _point_segment(_v(static, oC + 3 * k), a, b) - static[oR + k] - r
-        lb[i, K], cp[i] = np.inf, np.inf
-        if prad >= 0.0:
-            ok, q0, q1 = _cut(a, b, 0.0, 1.0, rho)
-            if ok and form[0] < MESH_CODE:
-                cp[i] = _segment_sdf(_local(M, pc, q0), _local(M, pc, q1), form) - r
-            elif ok:
-                _frame(q0, q1, frames_p[i])
-                lb[i, K] = _point_segment(pc, q0, q1) - prad - r
+        lb[i, K], cp[i] = _own(a, b, pc, prad, M, form, r, rho, frames_p[i])
     lb[m, K] = np.inf
     for k in range(K):
         lb[m, k] = _norm(_sub(_v(static, oC + 3 * k), pc)) - static[oR + k] - prad \
@@ -325,6 +323,23 @@ def _kernel(p, R, static, pairs, lb, frames, frames_p, cc, cp):
         ok1, p0, p1 = _cut(_v(static, 3 * i), _v(frames[i], 13), cut_a, cut_b, rho)
         ok2, q0, q1 = _cut(_v(static, 3 * j), _v(frames[j], 13), cut_a, cut_b, rho)
         cc[n] = _segment_segment(p0, p1, q0, q1) - 2.0 * r if ok1 and ok2 else np.inf
+
+
+@njit(cache=True)
+def _own(a, b, pc, prad, M, form, r, rho, frame):
+    """(lower bound, exact distance) of the cable a..b, cut by rho at its platform anchor
+    b, to the platform's own shape: exact for a primitive (the bound inf), else the bound
+    from its bounding sphere and the cut capsule's ``frame`` for coal; (inf, inf) without a
+    platform or a cut cable."""
+    if prad < 0.0:
+        return np.inf, np.inf
+    ok, q0, q1 = _cut(a, b, 0.0, 1.0, rho)
+    if not ok:
+        return np.inf, np.inf
+    if form[0] < MESH_CODE:
+        return np.inf, _segment_sdf(_local(M, pc, q0), _local(M, pc, q1), form) - r
+    _frame(q0, q1, frame)
+    return _point_segment(pc, q0, q1) - prad - r, np.inf
 
 
 @njit(cache=True)
