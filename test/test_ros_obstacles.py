@@ -18,7 +18,10 @@ from cdh_planner.ros.replay import SCENE_TYPE, read_records  # noqa: E402
 from cdh_planner_interfaces.msg import Obstacle, ObstacleArray  # noqa: E402
 from shape_msgs.msg import SolidPrimitive  # noqa: E402
 
-from ros_harness import FRAME, Q2, Q3, ROBOT2, NodeProcess, run_cli, sphere_pose_msg  # noqa: E402
+from cdh_planner.ros.interface import LATCHED  # noqa: E402
+from visualization_msgs.msg import Marker, MarkerArray  # noqa: E402
+from ros_harness import FRAME, Q2, Q3, ROBOT2, Collector, NodeProcess, run_cli, \
+    sphere_pose_msg  # noqa: E402
 from test_scene_distances import point_segment  # noqa: E402
 
 FREE = ["task.type:=free", "planner.radius:=0.5"]   # Robot 2 free flight: Q2 -> Q3 direct
@@ -78,6 +81,14 @@ def test_obstacles_over_dds_change_the_next_plan_and_replay_reproduces_them(
         assert least_distance(robot, first.path, centre, radius) < 0
         scene = client.update_scene(array(sphere("bead", centre, radius)))
         assert scene.version == 1 and scene.checked and [o.id for o in scene.obstacles] == ["bead"]
+        # the latched ~/scene_markers: DELETEALL, then the bead as a 6 mm SPHERE there
+        drawn = Collector(client.node, MarkerArray, "/cdh_planner/scene_markers", LATCHED)
+        assert client.spin_until(lambda: drawn.messages, 10.0)
+        deleteall, bead = drawn.messages[-1].markers
+        assert deleteall.action == Marker.DELETEALL and bead.type == Marker.SPHERE
+        assert bead.ns == "obstacles" and bead.scale.x == pytest.approx(2 * radius)
+        assert np.allclose([bead.pose.position.x, bead.pose.position.y, bead.pose.position.z],
+                           centre)
         around = client.plan_path(plan_path_goal(start, goal), timeout_s=60)
         assert around.result.error_code == 0, around.result.error_msg
         assert around.result.scene_version == 1
