@@ -126,7 +126,7 @@ def test_obstacles_over_dds_change_the_next_plan_and_replay_reproduces_them(
 def test_every_rotated_run_file_begins_with_the_current_scene(tmp_path):
     """RunLog: a message written as a snapshot (the node's ~/scene) opens every later file
     (after the parameters), so a replay of any one file knows the obstacles."""
-    from cdh_planner.ros.recording import RunLog
+    from cdh_planner.ros.run_log import RunLog
     from cdh_planner.ros.scene_msgs import scene_msg
     from cdh_planner.scene.schema import scene_from_dict
     from std_msgs.msg import String

@@ -92,7 +92,7 @@ def test_slice_colours_collision_apart_where_a_cable_meets_the_ball(tmp_path, ca
     distance (no collision library); the other cells keep their wrench classes; the PNG is
     written with the collision legend."""
     from cdh_planner.commands.slice import task_in_yaml
-    from cdh_planner.io.plots import COLLISION, SliceView, classify, compute_slice
+    from cdh_planner.pictures.slices import COLLISION, SliceView, classify, compute_slice
     from cdh_planner.cable_feasibility import feasibility_of
     from cdh_planner.model.pose import rotation_tt
     from cdh_planner.model.robot import load_robot

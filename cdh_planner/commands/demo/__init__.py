@@ -17,7 +17,7 @@ import time
 from pathlib import Path
 
 from ...errors import InputError
-from ...io.outputs import same_file
+from ..outputs import same_file
 from . import obstacle, paper, ros_story
 
 PACKAGE = "cdh_planner"

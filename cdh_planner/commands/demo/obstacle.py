@@ -12,12 +12,12 @@ import math
 
 import numpy as np
 
-from ...io.plots import COLLISION, Marker, SliceView
-from ...io.problem import load_problem
+from ...pictures.slices import COLLISION, Marker, SliceView
+from ...parsing.problem import load_problem
 from ...model.pose import quaternion_from_tau, rotation_from_quaternion
 from ...planner import Planner
 from ...scene.collision import CollisionModel
-from ...trajectory.verify import check_motion
+from ...trajectory.path_check import check_motion
 from ..slice import render_slice
 from .steps import Step
 

@@ -34,13 +34,12 @@ from nav_msgs.msg import Path
 from cdh_planner_interfaces.action import PlanPath
 
 from ..errors import InputError, exception_line
+from ..model.pose import on_singular_set
 from ..planner import PlanResult
 from ..settings import check_setting
 from ..status import Status
 from . import messages as M
 from .markers import markers_msg
-
-SINGULAR_SIN = 1e-9  # |sin theta| below this: phi is not determined by the orientation
 
 # keys that ``result_status`` adds to messages.plan_status's (strings; numbers by repr)
 EXTRA_KEYS = ("path_stamp", "waypoints", "path_length_m", "duration_s", "min_margin",
@@ -108,9 +107,9 @@ def request_poses(request, base_frame):
     """
     start = M.pose_from_msg(request.start, base_frame, "start")
     goal = M.pose_from_msg(request.goal, base_frame, "goal")
-    if _singular(start) and not _singular(goal):
+    if on_singular_set(start.tau) and not on_singular_set(goal.tau):
         start = M.pose_from_msg(request.start, base_frame, "start", phi_hint=goal.tau[0])
-    elif _singular(goal) and not _singular(start):
+    elif on_singular_set(goal.tau) and not on_singular_set(start.tau):
         goal = M.pose_from_msg(request.goal, base_frame, "goal", phi_hint=start.tau[0])
     return start, goal
 
@@ -120,10 +119,6 @@ def request_tolerance(request):
     node's ``task.tolerance``)."""
     t = float(request.tolerance)
     return t if math.isfinite(t) and 0.0 < t <= 0.1 else None
-
-
-def _singular(pose):
-    return abs(math.sin(float(pose.tau[1]))) <= SINGULAR_SIN
 
 
 def refusal(reason, message, strategy=""):
@@ -322,7 +317,8 @@ def action_result(result, out=None, path=None, scene_version=0):
     empty answer: its stamp pairs the result with its ``~/plan_result``, as GetPlan's).
     min_margin: the least normalised margin over the path and the motion between its
     waypoints (NaN without a path). ``scene_version``: the scene it was planned under."""
-    msg = PlanPath.Result(scene_version=int(scene_version), error_code=M.NONE if result.success else M.error_code(result.reason),
+    msg = PlanPath.Result(error_code=M.NONE if result.success else M.error_code(result.reason),
+                          scene_version=int(scene_version),
                           error_msg="" if result.success else (result.message or result.reason),
                           planning_time_s=float(result.time_s), charts=int(result.charts),
                           min_margin=float(result.least_margin) if result.success else math.nan)
