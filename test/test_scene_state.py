@@ -160,8 +160,8 @@ def test_a_planner_is_made_for_each_scene_a_plan_is_made_under():
             self.scene = scene
 
     made = []
-    plans = PlanService(config(), Planner(None), outlet=None)
-    plans.make_planner = lambda cfg, scene: made.append(scene) or Planner(scene)
+    plans = PlanService(config(), Planner(None), outlet=None,
+                        make_planner=lambda cfg, scene: made.append(scene) or Planner(scene))
 
     class Call:
         scene = None

@@ -120,8 +120,7 @@ class PlannerNode(LifecycleMixin, LifecycleNode):
         self.record.parameters(self.get_parameters_by_prefix("").values(), initial=True)
         log_file = self.record(self.runlog.open) or ""
         self.outlet = Outlet(self)
-        self.plans = PlanService(config, planner, self.outlet)
-        self.plans.make_planner = self._new_planner
+        self.plans = PlanService(config, planner, self.outlet, make_planner=self._new_planner)
         self.scene.configure(config)
         self._execution = PlanExecution(self, config, self.pub_command, self.pub_execution,
                                         self.record.publish, self.plans.execution_ended,

@@ -67,7 +67,8 @@ class Cancel:
 
 class PlanService:
 
-    def __init__(self, config, planner, outlet, depth=plan_requests.PLAN_QUEUE_DEPTH):
+    def __init__(self, config, planner, outlet, depth=plan_requests.PLAN_QUEUE_DEPTH,
+                 make_planner=None):
         self._lock = threading.RLock()    # the plans, the configuration and the counter
         self._queue = plan_requests.PlanQueue(depth)
         self._config, self._planner = config, planner
@@ -76,9 +77,9 @@ class PlanService:
         self._last = None      # (PlannedPath, Robot, PlanOutputs) of the last good plan
         self._pending = None   # the same, of a plan made while executing
         self.executing = lambda: False   # the node's: is an execution running
-        # the node's: make_planner(config, scene) -> a planner for another scene (None: the
-        # planner in force serves every scene)
-        self.make_planner = None
+        # make_planner(config, scene) -> a planner for another scene (None: the planner in
+        # force serves every scene)
+        self.make_planner = make_planner
         self.shutting_down = False
         self.planning = False
 
