@@ -38,7 +38,7 @@ from .schema import SHARED_ANCHOR_M
 GJK_TOLERANCE = 1e-9  # m: coal's convergence tolerance (its default, 1e-6, is too coarse)
 EPS = 1e-300
 MESH_CODE = 3.0   # a platform the kernel leaves to coal (a mesh)
-GOLDEN_STEPS = 60   # golden-section steps on a cable: 0.618^60 = 3e-13 of its length
+GOLDEN_STEPS = 40   # golden-section steps on a cable: 0.618^40 = 4e-9 of its length (~1 nm)
 
 
 @dataclass(frozen=True)
@@ -103,6 +103,7 @@ class CollisionModel:
         self.frames_p = np.empty((m, 13))
         self.cc = np.empty(len(self.pairs))
         self.cp = np.empty(m)   # cable-platform distances of a primitive platform (kernel)
+        self.least = np.empty(3)   # the least of cc and cp: value, 0 (cc) / 1 (cp) / -1, index
         self._coal(m)
 
     def _coal(self, m):
@@ -130,13 +131,11 @@ class CollisionModel:
     def clearance(self, p, R):
         """The least signed distance (m) at pose (p (3,) m, R (3, 3)) and what binds."""
         p, R = self._pose(p, R)
-        best, what = math.inf, None
-        if self.cc.size:
-            k = int(np.argmin(self.cc))
-            best, what = float(self.cc[k]), ("cable-cable", None, tuple(map(int, self.pairs[k])))
-        i = int(np.argmin(self.cp))
-        if self.cp[i] < best:
-            best, what = float(self.cp[i]), ("cable-platform", len(self.obstacles), (i,))
+        best, kind, n = self.least   # the kernel's least cable-cable / cable-platform distance
+        what = None if kind < 0 else \
+            ("cable-cable", None, tuple(map(int, self.pairs[int(n)]))) if kind == 0 else \
+            ("cable-platform", len(self.obstacles), (int(n),))
+        best = float(best)
         flat = self.lb.ravel()  # consumed: each pair tried is set to inf
         m, K = len(self.names), len(self.obstacles)
         while True:  # in increasing order of the bounds, while one is below the best
@@ -161,6 +160,7 @@ class CollisionModel:
         R = np.ascontiguousarray(R, dtype=float)
         _kernel(p, R, self.static, self.pairs, self.lb, self.frames, self.frames_p, self.cc,
                 self.cp)
+        _least(self.cc, self.cp, self.least)
         return p, R
 
     def _answer(self, best, what):
@@ -326,6 +326,19 @@ def _kernel(p, R, static, pairs, lb, frames, frames_p, cc, cp):
 
 
 @njit(cache=True)
+def _least(cc, cp, out):
+    """out = (least of cc and cp, 0 if it is cc's / 1 if cp's / -1 if both are empty or
+    inf, its index)."""
+    out[0], out[1], out[2] = np.inf, -1.0, -1.0
+    for n in range(cc.shape[0]):
+        if cc[n] < out[0]:
+            out[0], out[1], out[2] = cc[n], 0.0, n
+    for i in range(cp.shape[0]):
+        if cp[i] < out[0]:
+            out[0], out[1], out[2] = cp[i], 1.0, i
+
+
+@njit(cache=True)
 def _own(a, b, pc, prad, M, form, r, rho, frame):
     """(lower bound, exact distance) of the cable a..b, cut by rho at its platform anchor
     b, to the platform's own shape: exact for a primitive (the bound inf), else the bound
@@ -369,7 +382,10 @@ def _sdf(x, form):
 def _segment_sdf(x0, x1, form):
     """Least signed distance of the segment x0..x1 (shape frame) to the shape: the signed
     distance to a convex set is convex, so golden-section search on the segment finds its
-    minimum (GOLDEN_STEPS steps: within 1e-12 of the segment's length)."""
+    minimum (GOLDEN_STEPS steps: within 4e-9 of the segment's length); a sphere's in
+    closed form."""
+    if form[0] == 0.0:
+        return _point_segment((0.0, 0.0, 0.0), x0, x1) - form[1]
     d = _sub(x1, x0)
     lo, hi, g = 0.0, 1.0, 0.6180339887498949
     c, e = hi - g, g
