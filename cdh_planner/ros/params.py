@@ -34,7 +34,7 @@ from ..model import robot_schema as rs
 from ..model.robot import FIELDS as ROBOT_FIELDS, OPTIONAL_GROUPS, robot_from_dict
 from ..model.task import TASKS, task_from_dict, task_parameters
 from ..pipeline.metrics import task_cost
-from ..scene.schema import load_scene
+from ..scene.schema import default_scene, load_scene
 from ..settings import SETTINGS, LiveChoices, PlannerSettings, check_range
 from .command_outlets import OUTLETS, modes_description, outlet_specs, reserve
 from .param_spec import BOOL, DOUBLE, DOUBLES, INT, REQUIRED, STRING, STRINGS, Spec  # noqa: F401
@@ -297,7 +297,7 @@ def node_config(values, source="ROS parameters"):
     except InputError as exc:
         raise InputError("planner.cost", settings.cost, exc.reason) from None
     scene = load_scene(os.path.expanduser(checked["scene_file"]), robot) \
-        if checked["scene_file"] else None
+        if checked["scene_file"] else default_scene(robot)
     log_dir = checked["log_dir"]
     if not log_dir and checked["log_enabled"]:
         raise InputError("log_dir", log_dir, "must name a directory while log_enabled is true")
