@@ -46,7 +46,7 @@ def main(argv=None):
 
     targets = np.flatnonzero(points.feasible)[:args.plans].tolist()
     reach = ws.WorkspaceSpec(**{**spec.__dict__, "reach": True, "timeout_s": 30.0})
-    job, calls = ws.Job(robot, reach), [("reach", j) for j in targets]
+    job, calls = ws.Job(robot, reach), [("reach", (j,)) for j in targets]
     _reach("in this process", SerialExecutor(), job, calls)
     if args.no_ray:
         return
@@ -65,10 +65,10 @@ def main(argv=None):
 
 def _reach(label, executor, job, calls):
     t0 = time.perf_counter()
-    answers = dict(executor.map(job, calls))
+    answers = [a for _, batch in executor.map(job, calls) for a in batch]
     dt = time.perf_counter() - t0
-    statuses = [a[1] for a in answers.values()]
-    cpu = sum(a[2] for a in answers.values())
+    statuses = [a[1] for a in answers]
+    cpu = sum(a[2] for a in answers)
     rate = len(calls) / dt
     print(f"{label}: {len(calls)} plans in {dt:.2f} s = {rate:.2f} plans/s "
           f"(planner time {cpu:.2f} s; {statuses.count('ok')} ok, "

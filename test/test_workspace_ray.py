@@ -63,14 +63,14 @@ def test_a_killed_worker_loses_no_sample_and_counts_none_twice(robot, spec):
     points = ws.run_workspace(robot, ws.WorkspaceSpec(**{**spec.__dict__, "reach": False}),
                               SerialExecutor())
     targets = np.flatnonzero(points.feasible)[:60].tolist()
-    calls = [("reach", j) for j in targets]
+    calls = [("reach", (j,)) for j in targets]
     ex = RayExecutor(2)
     try:
         victim = ex.pids()[0]
         job = ws.Job(robot, spec)
         got = []
         for n, (i, out) in enumerate(ex.map(job, calls)):
-            got.append((i, out[:2]))
+            got.append((i, out[0][:2]))
             if n == 3:
                 os.kill(victim, signal.SIGKILL)
         assert victim not in ex.pids()  # the actor was restarted: another process
@@ -78,7 +78,7 @@ def test_a_killed_worker_loses_no_sample_and_counts_none_twice(robot, spec):
         ex.close()
     assert sorted(i for i, _ in got) == list(range(len(calls)))
     serial = dict(SerialExecutor().map(job, calls))
-    assert {i: out for i, out in got} == {i: out[:2] for i, out in serial.items()}
+    assert {i: out for i, out in got} == {i: out[0][:2] for i, out in serial.items()}
 
 
 def _free_port():

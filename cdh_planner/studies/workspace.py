@@ -41,6 +41,8 @@ from ..status import Status
 MAX_SAMPLES = 1_000_000     # per run: the JSON holds every pose (~200 bytes each: <= 200 MB)
 MAX_TIMEOUT_S = 3600.0      # per plan
 POINT_CHUNK = 5_000         # samples per point call (~20 ms of closed form; fixed: not a knob)
+CALLS_PER_WORKER = 16       # reach calls per worker at least: the last one's tail is <= 1/16
+MAX_PLANS_PER_CALL = 32     # plans per reach call at most: 32x fewer calls for the driver
 HOME_DRAWS = 100_000        # random poses the default home is the best of
 BLOCKS_PER_SAMPLE = 2       # Philox blocks (4 uint64 each) per sample: 8 uniforms, 6 used
 
@@ -182,8 +184,12 @@ def point_call(context, start, count):
             "binding": np.asarray(binding).astype(str)}
 
 
-def reach_call(context, index):
-    """Plan from the home pose to sample ``index``: (index, status str, seconds)."""
+def reach_call(context, indices):
+    """Plan from the home pose to each sample of ``indices``: [(index, status str, seconds)]."""
+    return [_reach_one(context, int(i)) for i in indices]
+
+
+def _reach_one(context, index):
     job, spec = context.job, context.job.spec
     p, q = sample_poses(spec, index, 1)
     home = _pose(spec.home_position, spec.home_quaternion)
@@ -191,6 +197,15 @@ def reach_call(context, index):
     planner = Planner(job.model, spec.task or FreeTask(), settings, scene=job.scene)
     result = planner.plan(home, _pose(p[0], q[0]))
     return index, str(result.reason), float(result.time_s)
+
+
+def reach_calls(targets, workers):
+    """The reach calls of sample indices ``targets`` on ``workers``: [("reach", (i, ..)), ..],
+    several plans per call when there are many per worker (fewer calls for the driver to
+    send and collect), at least CALLS_PER_WORKER calls per worker (a short tail)."""
+    per_call = max(1, min(MAX_PLANS_PER_CALL, len(targets) // (max(workers, 1) * CALLS_PER_WORKER)))
+    return [("reach", tuple(int(j) for j in targets[k:k + per_call]))
+            for k in range(0, len(targets), per_call)]
 
 
 def _pose(p, q):
@@ -244,8 +259,8 @@ def query_call(model, query):
 
 
 def run_call(context, call):
-    """Answer one call ``(kind, args)``: ("points", (start, count)), ("reach", index) or
-    ("query", k) (the job's k-th query)."""
+    """Answer one call ``(kind, args)``: ("points", (start, count)), ("reach", (index, ..))
+    or ("query", k) (the job's k-th query)."""
     kind, args = call
     if kind == "points":
         return point_call(context, *args)
@@ -346,12 +361,14 @@ def run_workspace(model, spec, executor, progress=None, max_seconds=None, clock=
         res.stopped = "max_seconds"
     elif spec.reach:
         targets = np.flatnonzero(res.feasible).tolist()
-        for i, (_key, (index, status, _s)) in enumerate(
-                executor.map(job, [("reach", int(j)) for j in targets], deadline=deadline,
-                              clock=clock)):
-            res.reach_status[index] = status
+        planned = 0
+        for _key, answers in executor.map(job, reach_calls(targets, executor.workers),
+                                          deadline=deadline, clock=clock):
+            for index, status, _s in answers:
+                res.reach_status[index] = status
+            planned += len(answers)
             if progress:
-                progress("reach", i + 1, len(targets))
+                progress("reach", planned, len(targets))
         if sum(s is not None for s in res.reach_status) < len(targets):
             res.stopped = "max_seconds"
     res.seconds["reach"] = clock() - t1
