@@ -6,7 +6,9 @@ round (loads vary on a shared machine), medians printed.
 
 Variants, each adding to the one before (``OPTIONS``): "before" the options of the first
 version (no usage-stats switch), "usage" RAY_USAGE_STATS_ENABLED=0, "store" a 100 MB object
-store, "metrics" no metrics collection, "shipped" the executor's own start
+store, "metrics" no metrics collection, "noprestart" no idle workers started with the
+raylet (the actors start after ``ray.init``), "lean" no autoscaler monitor and no log monitor
+(two Python processes fewer; Ray's private RayParams, patched here only), "shipped" the executor's own start
 (``executors.start_local_ray``, what the commands run). Prints numbers only (machines differ).
 """
 
@@ -28,6 +30,13 @@ OPTIONS = {  # name: (ray.init keywords, environment)
     "metrics": ({**BASE, "object_store_memory": 100 * 2 ** 20,
                  "_system_config": {"enable_metrics_collection": False}},
                 {"RAY_USAGE_STATS_ENABLED": "0"}),
+    "noprestart": ({**BASE, "object_store_memory": 100 * 2 ** 20,
+                    "_system_config": {"enable_metrics_collection": False,
+                                       "enable_worker_prestart": False}},
+                   {"RAY_USAGE_STATS_ENABLED": "0"}),
+    "lean": ({**BASE, "object_store_memory": 100 * 2 ** 20,
+              "_system_config": {"enable_metrics_collection": False}, "lean": True},
+             {"RAY_USAGE_STATS_ENABLED": "0"}),
     "shipped": (None, {}),
 }
 
@@ -39,8 +48,16 @@ t1 = time.perf_counter()
 kw, workers = json.loads(sys.argv[1]), int(sys.argv[2])
 if kw is None:
     from cdh_planner.studies.executors import start_local_ray
+    t1 = time.perf_counter()  # the command has imported it already
     start_local_ray(workers)
 else:
+    if kw.pop("lean", False):  # Ray's private parameters: no autoscaler monitor, no log monitor
+        import ray._private.parameter as parameter
+        original = parameter.RayParams.__init__
+        def lean(self, *args, **kwargs):
+            original(self, *args, **kwargs)
+            self.no_monitor, self.include_log_monitor = True, False
+        parameter.RayParams.__init__ = lean
     ray.init(address="local", num_cpus=workers, **kw)
 t2 = time.perf_counter()
 
