@@ -88,6 +88,19 @@ def run(workers, job, targets):
             "load": os.getloadavg()[0], "ok": sum(a[1] == "ok" for a in answers)}
 
 
+def autogroup_note():
+    """A line on Linux's autogroup scheduling, which shares the cores between sessions
+    (terminals, jobs) first: the workers, in this process's session, share one session's
+    slice when other sessions are busy, however many they are."""
+    try:
+        on = Path("/proc/sys/kernel/sched_autogroup_enabled").read_text().strip() == "1"
+    except OSError:
+        return "autogroup scheduling: unknown (not Linux?)"
+    return ("autogroup scheduling on: the workers share this session's slice of the cores; "
+            "with other sessions busy, 2 workers get no more CPU than 1" if on else
+            "autogroup scheduling off")
+
+
 def main(argv=None):
     ap = argparse.ArgumentParser(description=__doc__.splitlines()[0])
     ap.add_argument("--robot", default=str(ROOT / "config" / "robot2.yaml"))
@@ -97,7 +110,7 @@ def main(argv=None):
     args = ap.parse_args(argv)
     job, targets = reach_job(args.robot, args.plans, args.seed)
     print(f"{len(targets)} plans (Robot 2 seed {args.seed}, default box and home, 30 deg tilt); "
-          f"{args.rounds} rounds of 1 worker then 2")
+          f"{args.rounds} rounds of 1 worker then 2; {autogroup_note()}")
     runs = {1: [], 2: []}
     for r in range(args.rounds):
         for w in (1, 2):
