@@ -57,6 +57,27 @@ def test_one_and_two_ray_workers_answer_as_this_process(robot, spec):
         assert np.array_equal(res.position, serial.position)
 
 
+def test_two_ray_workers_answer_with_a_scene_as_this_process(robot, spec, tmp_path):
+    """The scene travels with the job: each actor builds its collision model once; points
+    and plans as in this process."""
+    from cdh_planner.scene.schema import scene_from_dict
+    centre = ((np.array(spec.box_low) + np.array(spec.box_high)) / 2).tolist()
+    scene = scene_from_dict({"cable_radius": 0.001, "platform": {"type": "sphere", "radius": 0.03},
+                             "obstacles": [{"id": "ball", "type": "sphere", "radius": 0.04,
+                                            "position": centre}]}, robot)
+    home = ws.default_home(robot, draws=5000, scene=scene)
+    small = ws.WorkspaceSpec(**{**spec.__dict__, "samples": 300, "home_position": home[0],
+                                "home_quaternion": home[1]})
+    serial = ws.run_workspace(robot, small, SerialExecutor(), scene=scene)
+    ex = RayExecutor(2)
+    try:
+        res = ws.run_workspace(robot, small, ex, scene=scene)
+    finally:
+        ex.close()
+    assert answers(res) == answers(serial)
+    assert any(b.startswith("collision") for b in res.binding) and res.counts()["planned"] > 0
+
+
 def test_a_killed_worker_loses_no_sample_and_counts_none_twice(robot, spec):
     """Plans to the feasible samples of 12000 on 2 actors; one actor process is killed
     (SIGKILL) after the first answers: every call is answered exactly once, as in-process."""
