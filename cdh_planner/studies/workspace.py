@@ -30,9 +30,9 @@ from dataclasses import dataclass, field, replace
 import numpy as np
 
 from ..errors import InputError
-from ..io.random_queries import workspace_box
 from ..model.pose import (Pose, quaternion_from_tau, rotation_from_quaternion, tau_from_quaternion,
                           tau_from_rotation)
+from ..model.robot import workspace_box
 from ..model.task import COORDINATES, FreeTask
 from ..pipeline.validity import Validity
 from ..planner import Planner, PlannerSettings
@@ -85,7 +85,7 @@ class WorkspaceSpec:
 
 
 def default_box(robot):
-    """The box under the base anchors that the cables reach (``random_queries.workspace_box``)."""
+    """The box under the base anchors that the cables reach (``model.robot.workspace_box``)."""
     lo, hi = workspace_box(robot)
     return tuple(map(float, lo)), tuple(map(float, hi))
 
