@@ -138,8 +138,12 @@ def test_a_cluster_started_outside_answers_as_a_local_ray(tmp_path, capsys):
         assert docs[0] == docs[1]
         assert docs[0]["counts"]["planned"] > 0
     finally:
-        os.killpg(head.pid, signal.SIGTERM)  # the head and the daemons it started
-        head.wait(timeout=60)
+        head.terminate()  # the head stops its daemons in 2 s (SIGTERM to all of them: 30 s)
+        try:
+            head.wait(timeout=60)
+        except subprocess.TimeoutExpired:
+            os.killpg(head.pid, signal.SIGKILL)
+            head.wait(timeout=30)
         if not had_file and address_file.exists() and f":{port}" in address_file.read_text():
             address_file.unlink()
 
