@@ -21,8 +21,10 @@ path's first pose as its start instead (its line says so); without a recorded pa
 recorded.
 Before each request the parameters recorded since the previous one (the file's snapshot,
 then each change) are set on the node, those that decide answers (``base_frame``,
-``robot.*``, ``task.*``, ``planner.*``, ``trajectory.*``), each recorded change in one atomic
-call; ``--keep-parameters`` leaves the node's own. The planner keeps its atlas between
+``scene_file``, ``robot.*``, ``task.*``, ``planner.*``, ``trajectory.*``), each recorded
+change in one atomic call; then the node's obstacles are made those of its last recorded
+``~/scene`` (REMOVE and ADD on its ``~/obstacles``); ``--keep-parameters`` leaves the node's
+own parameters and obstacles. The planner keeps its atlas between
 requests, so the answers are the recorded ones on a node in the state the recording started
 from: a freshly started node. A node that has already planned may answer with other
 (equally valid) paths.
@@ -79,7 +81,8 @@ def add_parser(subparsers):
                         "started node, since the planner keeps its atlas between requests)")
     p.add_argument("--node", help="node for --requests (default: the recorded one)")
     p.add_argument("--keep-parameters", dest="keep_parameters", action="store_true",
-                   help="--requests: do not set the recorded parameters on the node")
+                   help="--requests: do not set the recorded parameters (and obstacles) "
+                        "on the node")
     p.add_argument("--tolerance", type=float, default=1e-6, metavar="M",
                    help="--requests: largest pose difference that still matches, in m for "
                         "positions and rad for orientations (default: %(default)g)")
@@ -191,6 +194,7 @@ def replay_requests(args, records):
             setter = R.ParameterSetter(client, min(args.timeout, 30.0))
             for plan in plans:
                 problems = [] if args.keep_parameters else _apply(setter, plan)
+                problems += [] if args.keep_parameters else _apply_scene(client, plan)
                 note = ""
                 if plan.action:
                     goal, note = R.goal_to_replay(plan)
@@ -238,6 +242,25 @@ def _apply(setter, plan):
             problems.append(problem)
             print(f"{plan.label}: parameters not applied: {problem}")
     return problems
+
+
+def _apply_scene(client, plan):
+    """Bring the node's obstacles to those recorded before ``plan`` (the node's ~/scene);
+    print what changed; the problems."""
+    from ..ros.client import ClientError
+    from ..ros.scene_msgs import scene_change
+    if plan.scene is None:
+        return []
+    try:
+        change = scene_change(client.get_scene(), plan.scene)
+        if change.obstacles:
+            client.update_scene(change)
+            print(f"{plan.label}: obstacles as recorded (scene version "
+                  f"{plan.scene.version}): {len(change.obstacles)} added or removed")
+    except ClientError as exc:
+        print(f"{plan.label}: obstacles not applied: {exc}")
+        return [f"obstacles: {exc}"]
+    return []
 
 
 def _reasons(args, setter, plan, first, problems, first_call):

@@ -32,7 +32,7 @@ from ..model import robot_schema as rs
 from ..model.robot import FIELDS as ROBOT_FIELDS, OPTIONAL_GROUPS, robot_from_dict
 from ..model.task import TASKS, task_from_dict, task_parameters
 from ..pipeline.metrics import task_cost
-from ..scene.schema import load_scene
+from ..scene.schema import default_scene, load_scene
 from ..settings import SETTINGS, Bounds, PlannerSettings, check_range
 
 STRING, BOOL, INT, DOUBLE, DOUBLES, STRINGS = "string", "bool", "int", "double", "doubles", \
@@ -287,7 +287,7 @@ def node_config(values, source="ROS parameters"):
     except InputError as exc:
         raise InputError("planner.cost", settings.cost, exc.reason) from None
     scene = load_scene(os.path.expanduser(checked["scene_file"]), robot) \
-        if checked["scene_file"] else None
+        if checked["scene_file"] else default_scene(robot)
     log_dir = checked["log_dir"]
     if not log_dir and checked["log_enabled"]:
         raise InputError("log_dir", log_dir, "must name a directory while log_enabled is true")
