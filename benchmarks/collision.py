@@ -20,7 +20,7 @@ import argparse
 import time
 
 import numpy as np
-from scipy.spatial.transform import Rotation
+from cdh_planner.model.rotation import Rotation
 
 from pathlib import Path
 
@@ -51,7 +51,7 @@ def scene(robot, rng, offset):
         direction = rng.normal(size=3)
         c = c + offset * direction / np.linalg.norm(direction)
         obstacles.append({"id": f"o{k}", "position": c.tolist(),
-                          "quaternion": Rotation.random(random_state=rng).as_quat().tolist(),
+                          "quaternion": Rotation.random(1, rng).as_quat()[0].tolist(),
                           **shapes[k % 3]})
     return scene_from_dict({"cable_radius": 0.001, "obstacles": obstacles,
                             "platform": {"type": "box", "size": [0.14, 0.14, 0.01]}})

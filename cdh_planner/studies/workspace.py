@@ -33,6 +33,7 @@ from ..errors import InputError
 from ..model.pose import (Pose, quaternion_from_tau, rotation_from_quaternion, tau_from_quaternion,
                           tau_from_rotation)
 from ..model.robot import workspace_box
+from ..model.rotation import Rotation
 from ..model.task import COORDINATES, FreeTask
 from ..pipeline.validity import Validity
 from ..planner import Planner, PlannerSettings
@@ -95,12 +96,10 @@ def default_home(robot, draws=HOME_DRAWS, seed=0, scene=None):
     scene, clear of it) among ``draws`` random poses in ``default_box`` (positions uniform,
     orientations uniform in SO(3), numpy seed 0), as (position (3,) m, quaternion (4,)
     [x, y, z, w])."""
-    from scipy.spatial.transform import Rotation
-
     rng = np.random.default_rng(seed)
     lo, hi = workspace_box(robot)
     p = rng.uniform(lo, hi, size=(draws, 3))
-    q = Rotation.random(draws, random_state=rng).as_quat()
+    q = Rotation.random(draws, rng).as_quat()
     k = int(np.argmax(pose_margins(point_validity(robot, scene), p, q)[0]))
     return tuple(map(float, p[k])), tuple(map(float, q[k]))
 
@@ -127,8 +126,6 @@ def task_ranges(spec):
 def sample_poses(spec, start, count):
     """Samples ``start .. start + count - 1``: positions (count, 3) m, quaternions (count, 4).
     With a task, its coordinates uniform in ``task_ranges``, mapped to poses."""
-    from scipy.spatial.transform import Rotation
-
     bitgen = np.random.Philox(key=spec.seed, counter=BLOCKS_PER_SAMPLE * start)
     u = np.random.Generator(bitgen).random((count, 4 * BLOCKS_PER_SAMPLE))
     if spec.task is not None:
