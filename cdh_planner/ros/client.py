@@ -425,7 +425,7 @@ class PlannerClient:
         self.watch_execution()
         n = len(answer.path.poses)
         self.spin_until(lambda: self.trajectories and len(self.trajectories[-1].points) == n
-                        and self.envelopes
+                        and self.envelopes and len(self.envelopes[-1].points) == n  # this plan's
                         and self.node.count_publishers(self.topic(CABLE_COMMAND)) > 0
                         and self.node.count_publishers(self.topic(EXECUTION_RESULT)) > 0,
                         LATCHED_WAIT_S)
@@ -435,7 +435,8 @@ class PlannerClient:
         run = Execution()
         if self.trajectories and len(self.trajectories[-1].points) == n:
             run.trajectory = self.trajectories[-1]
-            run.envelope = self.envelopes[-1] if self.envelopes else None
+            run.envelope = (self.envelopes[-1] if self.envelopes
+                            and len(self.envelopes[-1].points) == n else None)
             run.goal = np.asarray(run.trajectory.points[-1].positions, dtype=float)
         first, ends = len(self.commands), len(self.execution_results)
         run.called_at = time.monotonic()
