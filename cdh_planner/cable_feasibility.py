@@ -1,9 +1,19 @@
 """Wrench feasibility of poses of any robot, the one entry its callers use: the closed form
 (``feasibility.evaluate``) for six cables, the facet test (``zonotope.evaluate``) for more.
 The facet test's compiled kernels are imported only for a robot that needs them, so that a
-six-cable command loads no numba (test_startup_imports)."""
+six-cable command loads no numba (test_startup_imports).
 
-from .feasibility import evaluate
+The planner asks ``planning_feasibility``: for m > 6 a pose is valid when the published
+tension rule's band t0 +- v (``zonotope``) lies within the limits, which also proves the
+ellipsoid inside the zonotope (docs/more-cables.md, "Planning with m > 6 cables"); for six
+cables it is the closed form itself.
+"""
+
+import dataclasses
+
+import numpy as np
+
+from .feasibility import CONSTRAINTS, evaluate
 
 
 def feasibility_of(robot, p, tau=None, R=None):
@@ -13,3 +23,36 @@ def feasibility_of(robot, p, tau=None, R=None):
         return evaluate(robot, p, tau=tau, R=R)
     from .zonotope import evaluate as facet_test
     return facet_test(robot, p, tau=tau, R=R)
+
+
+def planning_feasibility(robot, p, tau=None, R=None):
+    """``feasibility_of`` with, for m > 6 cables, ``margin`` and ``binding`` those of the
+    tension rule's band and the lengths: the least of ``margins`` (N, 4, m), named as the
+    closed form names them ("tension_max[3]"), -inf where singular. Positive iff the band
+    t0 +- v is within the limits (``tension_status`` ok), which implies the facet test's
+    feasibility. Six cables: ``feasibility.evaluate`` unchanged."""
+    f = feasibility_of(robot, p, tau=tau, R=R)
+    m = len(robot.base_anchors)
+    if m == 6:
+        return f
+    n = len(f.margin)
+    flat = f.margins.reshape(n, -1)
+    k = np.argmin(np.where(np.isnan(flat), -np.inf, flat), axis=1)
+    margin = flat[np.arange(n), k]
+    names = np.array([f"{CONSTRAINTS[j // m]}[{j % m + 1}]" for j in range(4 * m)])
+    singular = ~np.isfinite(f.margin) | np.isnan(margin)
+    return dataclasses.replace(f, margin=np.where(singular, -np.inf, margin),
+                               binding=np.where(singular, "singular", names[k]).astype(str))
+
+
+def tension_map(robot, J):
+    """The tension rule at N poses as an affine map of the wrench, t(w) = t0 + P (w - w0):
+    P (N, m, 6), the range-weighted pseudo-inverse D J^T (J D J^T)^-1 (``zonotope``'s rule;
+    J^-1 for six cables), from J (N, 6, m), so that callers that add an inertial wrench to
+    w0 (dynamic timing, the executed check) move the tensions as the published rule does."""
+    if J.shape[-1] == 6:
+        return np.linalg.inv(J)
+    D = (robot.tension_max - robot.tension_min) ** 2
+    JD = J * D
+    G = JD @ np.swapaxes(J, -1, -2)
+    return np.swapaxes(np.linalg.solve(G, JD), -1, -2)

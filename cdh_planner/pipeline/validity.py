@@ -11,7 +11,7 @@ checking the pose keeps every point on M.
 
 import numpy as np
 
-from ..cable_feasibility import feasibility_of as evaluate  # 6 cables: the closed form
+from ..cable_feasibility import planning_feasibility as evaluate  # m > 6: the rule's band
 from ..model.pose import quaternion_from_tau, rotation_tt, wrap_angle
 from ..scene.margin import COLLISION_UNIT_M, combine
 from ..trajectory.verify import SlerpPath, TaskLinePath, check_motion, check_path
@@ -82,14 +82,15 @@ class Validity:
         y = np.array([ya, yb])
         if not (self.probe(y, COARSE_SAMPLES) and self.probe(y, 8 * COARSE_SAMPLES)):
             return False
-        seg = check_path(self.robot, self.direct_motion(y), collision=self.collision)[0]
+        seg = check_path(self.robot, self.direct_motion(y), collision=self.collision,
+                         feasibility=evaluate)[0]
         return seg.feasible and seg.unresolved == 0 and seg.worst.margin >= self.margin_floor
 
     def segments(self, p, q):
         """The dense check of the waypoints p (N, 3) m, quaternions q (N, 4) and the
         motion between them (position linear, orientation slerp): one
         ``trajectory.verify`` segment report per pair."""
-        return check_motion(self.robot, p, q, collision=self.collision)
+        return check_motion(self.robot, p, q, collision=self.collision, feasibility=evaluate)
 
 
 def wrapped(d, periodic):

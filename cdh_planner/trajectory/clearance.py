@@ -31,7 +31,7 @@ margin in N of a path, sampled as densely as ``verify`` checks it.
 
 import numpy as np
 
-from ..feasibility import evaluate
+from ..cable_feasibility import planning_feasibility as evaluate
 from .verify import DEFAULT_STEP_M, DEFAULT_STEP_RAD, SlerpPath
 
 MAX_MARGIN = 0.5  # no pose has a larger normalised margin

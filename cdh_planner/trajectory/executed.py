@@ -33,8 +33,9 @@ import numpy as np
 from scipy.interpolate import CubicSpline
 from scipy.spatial.transform import Rotation, Slerp
 
-from ..feasibility import (cable_vectors, evaluate, inverse_ellipsoid_factor, load_point,
-                           nominal_wrench, screw_jacobian)
+from ..cable_feasibility import feasibility_of as evaluate, tension_map
+from ..feasibility import (cable_vectors, inverse_ellipsoid_factor, load_point, nominal_wrench,
+                           screw_jacobian)
 from ..model.forward_kinematics import forward_kinematics_many
 from ..model.pose import tau_from_rotation
 
@@ -181,10 +182,11 @@ def check_executed(robot, t_wp, L, V, A, seed, mass=None, inertia=None, max_cabl
         k = k[np.any((t_wp[1:, None] >= w[:, 0]) & (t_wp[:-1, None] <= w[:, 1]), axis=1)]
     lo, hi, vel, acc = quintic_bounds(t_wp, L, V, A, k)
     lengths_ok = (lo >= robot.length_min - TOL) & (hi <= robot.length_max + TOL)
-    speed = np.max(vel / np.broadcast_to(max_cable_speed, (6,)), axis=1, initial=0.0)
-    accel = np.max(acc / np.broadcast_to(max_cable_accel, (6,)), axis=1, initial=0.0)
+    m = L.shape[1]
+    speed = np.max(vel / np.broadcast_to(max_cable_speed, (m,)), axis=1, initial=0.0)
+    accel = np.max(acc / np.broadcast_to(max_cable_accel, (m,)), axis=1, initial=0.0)
     bad_k = k[~np.all(lengths_ok, axis=1) | (speed > 1 + TOL) | (accel > 1 + TOL)]
-    margin, lost, worst_t = np.full((0, 6), np.inf), np.zeros(0, dtype=bool), float("nan")
+    margin, lost, worst_t = np.full((0, m), np.inf), np.zeros(0, dtype=bool), float("nan")
     span = robot.tension_max - robot.tension_min
     if bad_k.size == 0:
         mid = np.flatnonzero(sel[q:n + 1 - q]) + q   # samples whose tensions are checked
@@ -228,12 +230,17 @@ def _executed_margins(robot, t_wp, L, V, A, seed, ts, mid, q, mass, inertia):
 
 
 def _tensions(robot, p, R, c, c_dd, omega, alpha, mass, inertia):
-    """Tensions f (M, 6) balancing the load wrench minus the inertial wrench, and the
-    ellipsoid's spread v (M, 6), N."""
+    """Tensions f (M, m) balancing the load wrench minus the inertial wrench, and the
+    ellipsoid's spread v (M, m), N. With m > 6, those of the published tension rule
+    (``cable_feasibility.tension_map``): its centred nominal t0 moved by P times the
+    inertial wrench, and its band v = |rows of P L|."""
     u = cable_vectors(robot, p, R)
     u /= np.linalg.norm(u, axis=-1)[..., None]
-    J_inv = np.linalg.inv(screw_jacobian(robot, u))
     w = nominal_wrench(robot, c)
+    if len(robot.base_anchors) > 6:
+        return _rule_tensions(robot, p, R, c, u, w, _inertial(R, c, c_dd, omega, alpha, mass,
+                                                                  inertia))
+    J_inv = np.linalg.inv(screw_jacobian(robot, u))
     if mass is not None:
         I = np.asarray(inertia, dtype=float).reshape(3, 3)
         Iw = omega @ I.T
@@ -243,6 +250,24 @@ def _tensions(robot, p, R, c, c_dd, omega, alpha, mass, inertia):
     f = np.einsum("nij,nj->ni", J_inv, w)
     v = np.linalg.norm(J_inv @ inverse_ellipsoid_factor(robot, c), axis=-1)
     return f, v
+
+
+def _inertial(R, c, c_dd, omega, alpha, mass, inertia):
+    """The inertial wrench (M, 6) of the load (zero without a mass), as ``_tensions``."""
+    if mass is None:
+        return np.zeros((len(c), 6))
+    I = np.asarray(inertia, dtype=float).reshape(3, 3)
+    moment = np.einsum("nij,nj->ni", R, alpha @ I.T + np.cross(omega, omega @ I.T))
+    force = mass * c_dd
+    return np.concatenate([force, np.cross(c, force) + moment], axis=1)
+
+
+def _rule_tensions(robot, p, R, c, u, w0, inertial):
+    """The tension rule's f = t0 + P (w - w0), w = w0 - inertial, and its band v (M, m) N."""
+    P = tension_map(robot, screw_jacobian(robot, u))
+    t0 = evaluate(robot, p, R=R).tension_nominal
+    f = t0 - np.einsum("nij,nj->ni", P, inertial)
+    return f, np.linalg.norm(P @ inverse_ellipsoid_factor(robot, c), axis=-1)
 
 
 def _reason(least_n, lengths_ok, speed, accel, no_pose):
