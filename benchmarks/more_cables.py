@@ -84,19 +84,21 @@ def main():
     settings = dataclasses.replace(pr.settings, strategy=args.strategy, timeout_s=60)
     Planner(pr.robot, pr.task, settings).plan(pr.start, pr.goal)  # warm up (compiled code)
     print(f"load average {os.getloadavg()[0]:.1f} on {os.cpu_count()} CPUs")
-    totals, routes, ok = [], [], 0
+    totals, routes, cpus, ok = [], [], [], 0
     for k, (start, goal) in enumerate(queries(pr.robot, args.queries,
                                               np.random.default_rng(args.seed))):
+        cpu = time.process_time()
         res, route_s = timed_plan(Planner(pr.robot, pr.task, settings), start, goal)
+        cpus.append(time.process_time() - cpu)
         ok += res.success
         totals.append(res.time_s)
         routes.append(route_s)
         print(f"cogiro query {k}: {'ok' if res.success else res.reason.value:<10} "
-              f"{res.time_s:6.2f} s (route {route_s:5.2f} s), {res.charts:4d} charts, "
+              f"{res.time_s:6.2f} s (route {route_s:5.2f} s; CPU {cpus[-1]:5.2f} s), {res.charts:4d} charts, "
               f"{res.stats.get('timing', '')}")
     med = statistics.median(totals)
     print(f"cogiro: {ok}/{len(totals)} planned; median {med:.2f} s (route {statistics.median(routes):.2f} s), "
-          f"target {TARGET_S:g} s: {'met' if med < TARGET_S else 'NOT MET'}; "
+          f"CPU {statistics.median(cpus):.2f} s; target {TARGET_S:g} s: {'met' if med < TARGET_S else 'NOT MET'}; "
           f"load average {os.getloadavg()[0]:.1f}")
     for name in ("robot2_8_q2_q3", "robot2_8_pivot", "robot2_8_slice", "robot2_8_q2_q3_free_flight"):
         p2 = load_problem(PROBLEMS / f"{name}.yaml")

@@ -45,6 +45,16 @@ def planning_feasibility(robot, p, tau=None, R=None):
                                binding=np.where(singular, "singular", names[k]).astype(str))
 
 
+def nominal_tensions(robot, p, R):
+    """The nominal tensions (N, m) N at poses (p (N, 3) m, R (N, 3, 3)): the closed form's
+    f0 for six cables, the centred rule's t0 for more (``zonotope.rule_tensions``: no facet
+    test, for poses on a planned motion)."""
+    if len(robot.base_anchors) == 6:
+        return evaluate(robot, p, R=R).tension_nominal
+    from .zonotope import rule_tensions
+    return rule_tensions(robot, p, R)[0]
+
+
 def tension_map(robot, J):
     """The tension rule at N poses as an affine map of the wrench, t(w) = t0 + P (w - w0):
     P (N, m, 6), the range-weighted pseudo-inverse D J^T (J D J^T)^-1 (``zonotope``'s rule;

@@ -805,6 +805,26 @@ def evaluate(robot, p, tau=None, R=None):
                              tension_status=status.astype(str))
 
 
+NO_SUBSETS = np.empty((0, 5), dtype=np.int64)
+
+
+def rule_tensions(robot, p, R):
+    """The tension rule's centred nominal t0 (N, m) N and band half-widths v (N, m) N at
+    poses (p (N, 3) m, R (N, 3, 3)), without the facet test: the kernel with no subset
+    centres every pose. Equal to ``evaluate``'s where the facet test holds (its only use:
+    along planned motions, dynamic timing and the executed check); nan / inf where singular."""
+    p = np.ascontiguousarray(np.atleast_2d(p), dtype=float)
+    R = np.ascontiguousarray(np.asarray(R, dtype=float).reshape(-1, 3, 3))
+    lengths, _, J, c = pose_geometry(p, R, robot.base_anchors, robot.platform_anchors,
+                                     robot.load_point)
+    kernel = evaluate_kernel_parallel if len(p) >= PARALLEL_MIN else evaluate_kernel
+    scale, _, _, _, _, t0, v = kernel(
+        J, c, robot.wrench_center_local, _inverse_factor(robot.ellipsoid_matrix.tobytes()),
+        robot.ellipsoid_frame == "load", robot.tension_min, robot.tension_max, NO_SUBSETS,
+        SINGULAR_DET)
+    singular = ~(scale > SINGULAR_DET) | (lengths.min(axis=1) <= 0)
+    return np.where(singular[:, None], np.nan, t0), np.where(singular[:, None], np.inf, v)
+
 
 def facet_normal(J, subset, up):
     """The outward unit normal n (6,) of a facet at a pose with Jacobian J (6, m): the one

@@ -43,7 +43,7 @@ from scipy.interpolate import CubicSpline
 from scipy.spatial.transform import Rotation, RotationSpline
 
 from ..errors import InputError, check_finite
-from ..cable_feasibility import feasibility_of, planning_feasibility as evaluate, tension_map
+from ..cable_feasibility import nominal_tensions, planning_feasibility as evaluate, tension_map
 from ..feasibility import cable_vectors, inverse_ellipsoid_factor, nominal_wrench, screw_jacobian
 from ..model.pose import tau_from_rotation
 from ._toppra import toppra  # toppra without matplotlib (0.25 s of start-up)
@@ -132,7 +132,7 @@ def _terms(robot, geo, s, mass, inertia):
         f0 = np.einsum("nij,nj->ni", J_inv, nominal_wrench(robot, c))
     else:  # m > 6: the published rule, t0 + P (w - w0) (cable_feasibility.tension_map)
         J_inv = tension_map(robot, J)
-        f0 = feasibility_of(robot, p, R=R).tension_nominal
+        f0 = nominal_tensions(robot, p, R)
     v = np.linalg.norm(J_inv @ inverse_ellipsoid_factor(robot, c), axis=-1)
     # the platform anchor q_i = p + R b_i: q_s = p_s + R (w x b), q_ss = p_ss + R (w_s x b +
     # w x (w x b)); L = |q - a| gives L_s = u . q_s and L_ss = (|q_s|^2 - L_s^2) / L + u . q_ss

@@ -33,7 +33,7 @@ import numpy as np
 from scipy.interpolate import CubicSpline
 from scipy.spatial.transform import Rotation, Slerp
 
-from ..cable_feasibility import feasibility_of as evaluate, tension_map
+from ..cable_feasibility import nominal_tensions, tension_map
 from ..feasibility import (cable_vectors, inverse_ellipsoid_factor, load_point, nominal_wrench,
                            screw_jacobian)
 from ..model.forward_kinematics import forward_kinematics_many
@@ -265,7 +265,7 @@ def _inertial(R, c, c_dd, omega, alpha, mass, inertia):
 def _rule_tensions(robot, p, R, c, u, w0, inertial):
     """The tension rule's f = t0 + P (w - w0), w = w0 - inertial, and its band v (M, m) N."""
     P = tension_map(robot, screw_jacobian(robot, u))
-    t0 = evaluate(robot, p, R=R).tension_nominal
+    t0 = nominal_tensions(robot, p, R)
     f = t0 - np.einsum("nij,nj->ni", P, inertial)
     return f, np.linalg.norm(P @ inverse_ellipsoid_factor(robot, c), axis=-1)
 
@@ -385,7 +385,7 @@ def slow_down(robot, path, scale):
     accelerations / scale^2, and the dynamic part of the tensions / scale^2 (the static
     tensions of each pose, f0, unchanged; the ellipsoid's spread unchanged)."""
     R = Rotation.from_quat(path.quaternion).as_matrix()
-    f0 = evaluate(robot, path.p, R=R).tension_nominal
+    f0 = nominal_tensions(robot, path.p, R)
     f = f0 + (path.tension_nominal - f0) / scale ** 2
     return replace(path, t=path.t * scale, velocities=path.velocities / scale,
                    accelerations=path.accelerations / scale ** 2, tension_nominal=f,
