@@ -9,11 +9,9 @@ ellipsoid inside the zonotope (docs/more-cables.md, "Planning with m > 6 cables"
 cables it is the closed form itself.
 """
 
-import dataclasses
-
 import numpy as np
 
-from .feasibility import CONSTRAINTS, evaluate
+from .feasibility import evaluate
 
 
 def feasibility_of(robot, p, tau=None, R=None):
@@ -26,23 +24,16 @@ def feasibility_of(robot, p, tau=None, R=None):
 
 
 def planning_feasibility(robot, p, tau=None, R=None):
-    """``feasibility_of`` with, for m > 6 cables, ``margin`` and ``binding`` those of the
-    tension rule's band and the lengths: the least of ``margins`` (N, 4, m), named as the
-    closed form names them ("tension_max[3]"), -inf where singular. Positive iff the band
-    t0 +- v is within the limits (``tension_status`` ok), which implies the facet test's
-    feasibility. Six cables: ``feasibility.evaluate`` unchanged."""
-    f = feasibility_of(robot, p, tau=tau, R=R)
-    m = len(robot.base_anchors)
-    if m == 6:
-        return f
-    n = len(f.margin)
-    flat = f.margins.reshape(n, -1)
-    k = np.argmin(np.where(np.isnan(flat), -np.inf, flat), axis=1)
-    margin = flat[np.arange(n), k]
-    names = np.array([f"{CONSTRAINTS[j // m]}[{j % m + 1}]" for j in range(4 * m)])
-    singular = ~np.isfinite(f.margin) | np.isnan(margin)
-    return dataclasses.replace(f, margin=np.where(singular, -np.inf, margin),
-                               binding=np.where(singular, "singular", names[k]).astype(str))
+    """What the planner asks of poses (p (N, 3) m, tau (N, 3) rad or R (N, 3, 3)): for six
+    cables ``feasibility.evaluate``; for more, ``zonotope.band_feasibility``: ``margin``
+    and ``binding`` those of the centred tension rule's band and the lengths, the least of
+    ``margins`` (N, 4, m), named as the closed form names them ("tension_max[3]"), -inf
+    where singular. Positive iff the band t0 +- v is within the limits, which implies the
+    facet test's feasibility (so the facet test itself is not run)."""
+    if len(robot.base_anchors) == 6:
+        return evaluate(robot, p, tau=tau, R=R)
+    from .zonotope import band_feasibility
+    return band_feasibility(robot, p, tau=tau, R=R)
 
 
 def nominal_tensions(robot, p, R):

@@ -805,7 +805,48 @@ def evaluate(robot, p, tau=None, R=None):
                              tension_status=status.astype(str))
 
 
-NO_SUBSETS = np.empty((0, 5), dtype=np.int64)
+NO_SUBSETS = np.empty((0, 5), dtype=np.int64)  # the kernel without the facet test
+
+
+@lru_cache(maxsize=None)
+def _band_names(m):
+    """Names of the 4m band and length margins, as the closed form names its 24."""
+    return np.array([f"{CONSTRAINTS[j // m]}[{j % m + 1}]" for j in range(4 * m)])
+
+
+def band_feasibility(robot, p, tau=None, R=None):
+    """The planner's feasibility of poses of an m-cable robot (``Feasibility``): ``margin``
+    the least of the length margins and the centred rule's band margins ``margins``
+    (N, 4, m), named as the closed form names them; positive iff the band t0 +- v is within
+    the limits (which implies the facet test). One kernel call without the facet test
+    (``rule_tensions``)."""
+    p = np.ascontiguousarray(np.atleast_2d(np.asarray(p, dtype=float)))
+    if R is None:
+        R = rotation_tt(np.atleast_2d(tau))
+    R = np.ascontiguousarray(np.asarray(R, dtype=float).reshape(-1, 3, 3))
+    n, m = p.shape[0], len(robot.base_anchors)
+    lengths, u, J, c = pose_geometry(p, R, robot.base_anchors, robot.platform_anchors,
+                                     robot.load_point)
+    kernel = evaluate_kernel_parallel if n >= PARALLEL_MIN else evaluate_kernel
+    scale, _, _, _, _, t0, v = kernel(
+        J, c, robot.wrench_center_local, _inverse_factor(robot.ellipsoid_matrix.tobytes()),
+        robot.ellipsoid_frame == "load", robot.tension_min, robot.tension_max, NO_SUBSETS,
+        SINGULAR_DET)
+    singular = ~(scale > SINGULAR_DET) | (lengths.min(axis=1) <= 0)
+    span_l = robot.length_max - robot.length_min
+    span_t = robot.tension_max - robot.tension_min
+    margins = np.stack([(lengths - robot.length_min) / span_l, (robot.length_max - lengths) / span_l,
+                        (t0 - v - robot.tension_min) / span_t, (robot.tension_max - t0 - v) / span_t],
+                       axis=1)
+    flat = margins.reshape(n, -1)
+    k = np.argmin(np.where(np.isnan(flat), -np.inf, flat), axis=1)
+    margin = flat[np.arange(n), k]
+    singular |= np.isnan(margin)
+    return Feasibility(lengths=lengths, unit_vectors=u, det_j=scale,
+                       tension_nominal=np.where(singular[:, None], np.nan, t0),
+                       tension_spread=np.where(singular[:, None], np.inf, v), margins=margins,
+                       margin=np.where(singular, -np.inf, margin),
+                       binding=np.where(singular, "singular", _band_names(m)[k]).astype(str))
 
 
 def rule_tensions(robot, p, R):
