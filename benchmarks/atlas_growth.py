@@ -31,11 +31,11 @@ from pathlib import Path
 import numpy as np
 from threadpoolctl import threadpool_limits
 
-from cdh_planner.io.random_queries import random_free_queries
+from random_queries import random_free_queries  # benchmarks/random_queries.py, beside this script
 from cdh_planner.model.robot import load_robot
 from cdh_planner.model.task import FreeTask
 from cdh_planner.planner import Planner, PlannerSettings
-from cdh_planner.search.search import STRATEGIES, Stop, run
+from cdh_planner.search.strategies import STRATEGIES, Stop, run
 
 ROOT = Path(__file__).resolve().parents[1]
 

@@ -18,13 +18,13 @@ import warnings
 from dataclasses import replace
 from pathlib import Path
 
-from cdh_planner.atlas.atlas import Atlas
-from cdh_planner.io.problem import load_problem
-from cdh_planner.io.random_queries import random_free_queries
+from cdh_planner.atlas.charts import Atlas
+from cdh_planner.parsing.problem import load_problem
+from random_queries import random_free_queries  # benchmarks/random_queries.py, beside this script
 from cdh_planner.model.robot import load_robot
 from cdh_planner.model.task import FreeTask
 from cdh_planner.planner import Planner, PlannerSettings
-from cdh_planner.search.search import MB, Stop, run
+from cdh_planner.search.strategies import MB, Stop, run
 
 ROOT = Path(__file__).resolve().parents[1]
 

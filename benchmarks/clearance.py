@@ -22,10 +22,10 @@ from pathlib import Path
 import numpy as np
 
 from cdh_planner.feasibility import evaluate
-from cdh_planner.io.problem import load_problem
+from cdh_planner.parsing.problem import load_problem
 from cdh_planner.planner import Planner
 from cdh_planner.settings import STRATEGY_CHOICES
-from cdh_planner.trajectory.verify import SlerpPath
+from cdh_planner.trajectory.path_check import SlerpPath
 
 PROBLEMS = Path(__file__).resolve().parents[1] / "config" / "problems"
 ROWS = ("robot1_qs_qg", "robot1_qs1_qg", "robot1_qs2_qg", "robot2_q1_q2", "robot2_q2_q3",

@@ -111,7 +111,7 @@ def main():
 
 def plan_times(n):
     """Median seconds of Robot 2's free flight q2 -> q3 around a ball on the straight path."""
-    from cdh_planner.io.problem import load_problem
+    from cdh_planner.parsing.problem import load_problem
     from cdh_planner.planner import Planner
 
     pr = load_problem(CONFIG / "problems" / "robot2_q2_q3_free_flight.yaml")

@@ -18,8 +18,8 @@ from pathlib import Path
 
 import numpy as np
 
-from cdh_planner.io.plan_plots import plot_dynamics
-from cdh_planner.io.problem import load_problem
+from cdh_planner.pictures.plans import plot_dynamics
+from cdh_planner.parsing.problem import load_problem
 from cdh_planner.planner import Planner
 from cdh_planner.trajectory.dynamics import DynamicTiming, _Geometry, dynamic_timing, tensions_over_time
 

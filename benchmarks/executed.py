@@ -19,7 +19,7 @@ from pathlib import Path
 
 import numpy as np
 
-from cdh_planner.io.problem import load_problem
+from cdh_planner.parsing.problem import load_problem
 from cdh_planner.planner import Planner
 from cdh_planner.trajectory import dynamics as D
 from cdh_planner.trajectory import executed as E

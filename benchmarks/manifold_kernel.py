@@ -51,7 +51,7 @@ def main(argv=None):
     args = ap.parse_args(argv)
 
     t0 = time.perf_counter()
-    from cdh_planner.io.problem import load_problem
+    from cdh_planner.parsing.problem import load_problem
     from cdh_planner.manifold.constraint import TaskConstraint
     from cdh_planner.manifold.navigation import N_VARS, NavigationManifold
     from cdh_planner.model.task import FreeTask

@@ -27,10 +27,10 @@ ROOT = Path(__file__).resolve().parents[1]
 sys.path.insert(0, str(ROOT))
 
 from cdh_planner.cable_feasibility import planning_feasibility  # noqa: E402
-from cdh_planner.io.problem import load_problem  # noqa: E402
+from cdh_planner.parsing.problem import load_problem  # noqa: E402
 from cdh_planner.model.pose import Pose, rotation_tt  # noqa: E402
 from cdh_planner.planner import Planner  # noqa: E402
-from cdh_planner.trajectory.verify import SlerpPath  # noqa: E402
+from cdh_planner.trajectory.path_check import SlerpPath  # noqa: E402
 from cdh_planner.model.pose import quaternion_from_tau  # noqa: E402
 
 PROBLEMS = ROOT / "config" / "problems"

@@ -38,7 +38,7 @@ def main():
 
     from cdh_planner.commands.slice import task_in_yaml
     from cdh_planner.ros.client import PlannerClient, plan_path_goal
-    from cdh_planner.ros.domains import claimed_domain, isolated_env, stop_process
+    from cdh_planner.ros.isolation import claimed_domain, isolated_env, stop_process
     robot_file = ROOT / "config" / "robot2.yaml"
     task = task_in_yaml(robot_file)
     start, goal = sphere_pose(task, Q2), sphere_pose(task, Q3)

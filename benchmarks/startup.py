@@ -59,7 +59,7 @@ def node_to_serving(runs):
     import rclpy
     from nav_msgs.srv import GetPlan
 
-    from cdh_planner.ros.domains import claimed_domain, isolated_env, stop_process
+    from cdh_planner.ros.isolation import claimed_domain, isolated_env, stop_process
 
     out = []
     with claimed_domain() as domain, tempfile.TemporaryDirectory() as logs:

@@ -17,10 +17,10 @@ from pathlib import Path
 
 import numpy as np
 
-from cdh_planner.io.problem import load_problem
+from cdh_planner.parsing.problem import load_problem
 from cdh_planner.planner import Planner
-from cdh_planner.search.search import STRATEGIES, Stop, run
-from cdh_planner.trajectory.verify import check_task_motion
+from cdh_planner.search.strategies import STRATEGIES, Stop, run
+from cdh_planner.trajectory.path_check import check_task_motion
 
 PROBLEMS = Path(__file__).resolve().parents[1] / "config" / "problems"
 # name, paper seconds (gbf, astar), our targets (gbf, astar), straight line shown in the paper;

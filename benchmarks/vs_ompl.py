@@ -7,7 +7,7 @@
 the script says so and runs our planner only.)
 
 Queries: the seven Table 1 problems (config/problems) and ``--queries`` random free-flight
-queries (io.random_queries: both ends feasible, the straight motion unsafe), half on Robot 1
+queries (benchmarks/random_queries.py: both ends feasible, the straight motion unsafe), half on Robot 1
 and half on Robot 2. Every planner runs on a query before the next query starts
 (interleaved, so load changes hit all alike).
 
@@ -30,7 +30,7 @@ queries: one process, each planner on each query once (warm after the first).
 - ompl-atlas (Table 1 rows only): OMPL's AtlasStateSpace + RRTConnect on our navigation
   manifold (delta 0.1, rho 0.5, epsilon 0.1, alpha pi/8); seconds = solve only.
 
-Every returned path is checked again, densely (trajectory.verify: 1 mm / 0.2 deg steps,
+Every returned path is checked again, densely (trajectory.path_check: 1 mm / 0.2 deg steps,
 adaptive refinement) between consecutive states as the planner moves between them:
 position linear + slerp for free flight, straight lines in task coordinates (periodic
 ones along the short arc) on task rows. "answered": a path, or our clean "no_path".
@@ -65,16 +65,16 @@ from pathlib import Path
 import numpy as np
 
 from cdh_planner.feasibility import evaluate
-from cdh_planner.io.problem import load_problem
-from cdh_planner.io.random_queries import random_free_queries
-from cdh_planner.io.random_queries import workspace_box as random_workspace_box
-from cdh_planner.search.search import STRATEGIES
+from cdh_planner.parsing.problem import load_problem
+from random_queries import random_free_queries  # benchmarks/random_queries.py, beside this script
+from cdh_planner.model.robot import workspace_box as random_workspace_box
+from cdh_planner.search.strategies import STRATEGIES
 from cdh_planner.manifold.constraint import TaskConstraint
 from cdh_planner.model.pose import quaternion_from_tau, tau_from_quaternion
 from cdh_planner.model.robot import load_robot
 from cdh_planner.model.task import FreeTask
 from cdh_planner.planner import Planner, PlannerSettings, task_cost
-from cdh_planner.trajectory.verify import check_motion, check_task_motion
+from cdh_planner.trajectory.path_check import check_motion, check_task_motion
 
 try:
     from ompl import base as ob, geometric as og, util as ou
@@ -139,7 +139,7 @@ def motion_from_poses(q, p, tau):
 
 
 def is_safe(q, motion):
-    """Dense check of every segment of a motion (trajectory.verify)."""
+    """Dense check of every segment of a motion (trajectory.path_check)."""
     if is_free(q.task):
         segs = check_motion(q.robot, *motion)
     else:

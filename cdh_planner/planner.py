@@ -20,7 +20,7 @@ from typing import Callable, Optional
 
 from threadpoolctl import threadpool_limits
 
-from .atlas.atlas import Atlas
+from .atlas.charts import Atlas
 from .manifold.configuration import ConfigurationConstraint
 from .manifold.constraint import TaskConstraint
 from .model.pose import Pose
@@ -31,7 +31,7 @@ from .pipeline.route import Route, failure_message
 from .pipeline.smooth import Smooth
 from .pipeline.timing import time_stage
 from .pipeline.validity import Validity
-from .search.search import AUTO, MB, Stop
+from .search.strategies import AUTO, MB, Stop
 from .settings import PlannerSettings, check_setting  # noqa: F401  (PlannerSettings: API)
 from .status import Status
 from .trajectory.dynamics import check_dynamics

@@ -3,9 +3,9 @@
 Each ``PlannerSettings`` field carries its metadata (``Setting``: node parameter name, CLI
 flag, unit, range or choices, description) and ``check_setting`` validates a value
 against it. The node's parameter descriptors (``ros/params.py``), the problem file's keys
-(``io/problem.py``) and the ``plan`` command's flags (``commands/plan.py``) are built from
+(``parsing/problem.py``) and the ``plan`` command's flags (``commands/plan.py``) are built from
 ``SETTINGS``, so a new setting is one field here. The strategy's choices are the search's
-registry (``search.search.STRATEGIES``) read when used, so a strategy registered later is a
+registry (``search.strategies.STRATEGIES``) read when used, so a strategy registered later is a
 choice of every edge too.
 """
 
@@ -15,7 +15,7 @@ from dataclasses import dataclass, field, fields
 from typing import Optional
 
 from .errors import InputError
-from .search.search import AUTO, STRATEGIES
+from .search.strategies import AUTO, STRATEGIES
 
 COSTS = ("auto", "so3", "great_circle", "se3")
 

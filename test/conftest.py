@@ -28,8 +28,8 @@ def config_dir():
 @pytest.fixture(scope="module")
 def domain():
     """A ROS domain id of the module's own, held while its tests run
-    (cdh_planner.ros.domains.claimed_domain; see test/ros_harness.py)."""
-    from cdh_planner.ros.domains import claimed_domain
+    (cdh_planner.ros.isolation.claimed_domain; see test/ros_harness.py)."""
+    from cdh_planner.ros.isolation import claimed_domain
     with claimed_domain() as d:
         yield d
 

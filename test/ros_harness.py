@@ -5,7 +5,7 @@
         client.wait_for_node()
         ...
 
-``claimed_domain`` (cdh_planner.ros.domains) holds a localhost TCP port per domain id while
+``claimed_domain`` (cdh_planner.ros.isolation) holds a localhost TCP port per domain id while
 the test runs, so test processes running at the same time (other sessions, other test
 modules, the demo) never share a domain (two nodes with the same service name in one domain
 answer each other's calls).
@@ -22,7 +22,7 @@ from pathlib import Path
 
 import numpy as np
 
-from cdh_planner.ros.domains import claimed_domain, isolated_env, stop_process  # noqa: F401 (re-exported)
+from cdh_planner.ros.isolation import claimed_domain, isolated_env, stop_process  # noqa: F401 (re-exported)
 
 from conftest import REPO
 ROBOT2 = REPO / "config" / "robot2.yaml"

@@ -29,12 +29,12 @@ from rosbags.highlevel import AnyReader  # noqa: E402
 
 from cdh_planner_interfaces.action import PlanPath  # noqa: E402
 
-from cdh_planner.io.mcap_log import (  # noqa: E402
+from cdh_planner.recording.mcap_log import (  # noqa: E402
     REQUEST_RECEIVED, RESPONSE_SENT, RunRecorder, check_recording, read_run, recover)
-from cdh_planner.io.ros_schemas import full_definition  # noqa: E402
+from cdh_planner.recording.ros_schemas import full_definition  # noqa: E402
 from cdh_planner.ros import replay as R  # noqa: E402
 from cdh_planner.ros.client import plan_path_goal  # noqa: E402
-from cdh_planner.ros.recording import RunLog  # noqa: E402
+from cdh_planner.ros.run_log import RunLog  # noqa: E402
 from ros_harness import (Q1, Q2, Q3, NodeProcess, run_cli,  # noqa: E402
                          sphere_pose_msg)
 

@@ -6,9 +6,9 @@ import numpy as np
 from hypothesis import HealthCheck, given, settings
 from hypothesis import strategies as st
 
-from cdh_planner.atlas.atlas import Atlas, _KeyIndex
+from cdh_planner.atlas.charts import Atlas, _KeyIndex
 from cdh_planner.atlas.domain import SampledDomain
-from cdh_planner.search.search import Stop, run
+from cdh_planner.search.strategies import Stop, run
 from cdh_planner.status import Status
 
 

@@ -18,14 +18,15 @@ import numpy as np
 import pytest
 import yaml
 
-from cdh_planner import cli, files
+from cdh_planner import cli
+from cdh_planner.parsing import files
 from cdh_planner.commands import verify as verify_cmd
 from cdh_planner.errors import MAX_MESSAGE_CHARS, InputError
 from cdh_planner.feasibility import evaluate
-from cdh_planner.io.poses import load_poses, poses_from_obj
-from cdh_planner.io.problem import load_problem
+from cdh_planner.parsing.poses import load_poses, poses_from_obj
+from cdh_planner.parsing.problem import load_problem
 from cdh_planner.model.robot import load_robot
-from cdh_planner.trajectory import verify as tv
+from cdh_planner.trajectory import path_check as tv
 from cdh_planner.trajectory.timing import MAX_DURATION_S, time_parameterize
 
 from conftest import CONFIG, PROBLEMS, REPO
@@ -314,7 +315,7 @@ def test_too_many_samples_in_all_are_refused(tmp_path, capsys, monkeypatch):
 
 
 def test_too_many_poses_are_refused(monkeypatch):
-    monkeypatch.setattr("cdh_planner.io.poses.MAX_POSES", 3)
+    monkeypatch.setattr("cdh_planner.parsing.poses.MAX_POSES", 3)
     with pytest.raises(InputError, match="at most 3 poses"):
         poses_from_obj([POSE] * 4)
 
@@ -608,7 +609,7 @@ def _write_recording(path, n=3):
     """A small complete run file (RunRecorder; needs the ROS 2 message packages)."""
     pytest.importorskip("mcap_ros2")
     JointState = pytest.importorskip("sensor_msgs.msg").JointState
-    from cdh_planner.io.mcap_log import RunRecorder
+    from cdh_planner.recording.mcap_log import RunRecorder
     with RunRecorder(path) as rec:
         for i in range(n):
             rec.write("/cmd", JointState(name=["w"], position=[float(i)]), 1000 + i)
@@ -760,7 +761,7 @@ def test_replay_refuses_a_recorded_topic_name_rclpy_refuses(tmp_path, capsys, ro
     """A file written by another tool with a topic named '/bad topic!!': rclpy's
     InvalidTopicNameException on its publisher was exit 3."""
     JointState = pytest.importorskip("sensor_msgs.msg").JointState
-    from cdh_planner.io.mcap_log import RunRecorder
+    from cdh_planner.recording.mcap_log import RunRecorder
     path = tmp_path / "bad.mcap"
     with RunRecorder(path) as rec:
         rec.write("/bad topic!!", JointState(name=["w"], position=[1.0]), 1000)
@@ -804,7 +805,7 @@ def test_replay_requests_refuses_a_request_that_does_not_decode(tmp_path, capsys
     """A file (of another tool) whose GetPlan event holds bytes that are not one: rclpy's
     RMWError on deserializing it was exit 3."""
     from mcap.writer import CompressionType, Writer
-    from cdh_planner.io.ros_schemas import full_definition, recorded_type
+    from cdh_planner.recording.ros_schemas import full_definition, recorded_type
     name = recorded_type("nav_msgs/srv/GetPlan_Event")
     path = tmp_path / "garbage.mcap"
     with open(path, "wb") as f:

@@ -1,13 +1,13 @@
-"""io/cdr.py (rosbags' public typestore) encodes what rclpy decodes back to the same message,
+"""recording/cdr.py (rosbags' public typestore) encodes what rclpy decodes back to the same message,
 with no byte beyond the message (rclpy's own serializer may pad, with uninitialised bytes:
 rosbags rejects that), empty messages (std_srvs/Trigger's request) included."""
 
 import pytest
 from rclpy.serialization import deserialize_message, serialize_message
 
-from cdh_planner.io.cdr import CdrEncoders
-from cdh_planner.io.mcap_log import _service_event
-from cdh_planner.io.ros_schemas import encodable, full_definition, recorded_type
+from cdh_planner.recording.cdr import CdrEncoders
+from cdh_planner.recording.mcap_log import _service_event
+from cdh_planner.recording.ros_schemas import encodable, full_definition, recorded_type
 
 
 def _messages():

@@ -13,10 +13,10 @@ import pytest
 
 from cdh_planner.cli import main
 from cdh_planner.feasibility import evaluate
-from cdh_planner.io.problem import load_problem
+from cdh_planner.parsing.problem import load_problem
 from cdh_planner.planner import Planner
 from cdh_planner.trajectory import clearance
-from cdh_planner.trajectory.verify import SlerpPath, check_motion
+from cdh_planner.trajectory.path_check import SlerpPath, check_motion
 
 from conftest import REPO
 PROBLEMS = REPO / "config" / "problems"
@@ -133,9 +133,9 @@ def test_plan_command_reports_the_least_margins(tmp_path, capsys):
 def test_node_plan_result_carries_the_least_margins():
     pytest.importorskip("diagnostic_msgs")
     from builtin_interfaces.msg import Time
-    from cdh_planner.ros import planning
+    from cdh_planner.ros import plan_requests
     _, pr, res = plan("robot2_q1_q2", clearance_weight=WEIGHT)
-    status = planning.result_status(res, pr.robot, "r#1", "", Time(sec=1))
+    status = plan_requests.result_status(res, pr.robot, "r#1", "", Time(sec=1))
     values = {kv.key: kv.value for kv in status.values}
     assert float(values["least_margin"]) == res.least_margin
     assert float(values["least_tension_margin_n"]) == res.least_tension_margin

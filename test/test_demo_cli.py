@@ -16,7 +16,7 @@ from cdh_planner.commands import demo as demo_cmd
 from cdh_planner.commands.demo import paper
 from cdh_planner.commands.demo.steps import Step
 from cdh_planner.feasibility import evaluate
-from cdh_planner.trajectory.verify import TaskLinePath
+from cdh_planner.trajectory.path_check import TaskLinePath
 
 from conftest import REPO as ROOT
 CHECK_STEPS = demo_cmd.STEPS[:3]  # robots, poses, motions: everything but the pictures

@@ -4,7 +4,7 @@ one otherwise; a bad ROS_DOMAIN_ID is refused naming it."""
 import pytest
 
 from cdh_planner.errors import InputError
-from cdh_planner.ros.domains import DOMAINS, MAX_DOMAIN_ID, chosen_domain, claimed_domain
+from cdh_planner.ros.isolation import DOMAINS, MAX_DOMAIN_ID, chosen_domain, claimed_domain
 
 
 def test_ros_domain_id_is_used_when_set():
@@ -35,7 +35,7 @@ def test_a_bad_ros_domain_id_is_refused_naming_it(text):
 def test_a_released_domain_comes_back_only_after_the_others():
     """A node killed in a domain lingers in the graph until its lease ends: the next claims
     take the domains released longest ago, so 20 claims in a row are 20 different ids."""
-    from cdh_planner.ros.domains import claimed_domain
+    from cdh_planner.ros.isolation import claimed_domain
     seen = []
     for _ in range(20):
         with claimed_domain() as d:

@@ -10,7 +10,7 @@ import pytest
 
 from conftest import PROBLEMS
 from cdh_planner.feasibility import evaluate, screw_jacobian
-from cdh_planner.io.problem import load_problem
+from cdh_planner.parsing.problem import load_problem
 from cdh_planner.planner import Planner
 from cdh_planner.trajectory.dynamics import dynamic_timing
 

@@ -16,7 +16,7 @@ import pytest
 from conftest import PROBLEMS
 from cdh_planner.commands.plan import result_dict
 from cdh_planner.feasibility import evaluate, screw_jacobian
-from cdh_planner.io.problem import load_problem
+from cdh_planner.parsing.problem import load_problem
 from cdh_planner.model.forward_kinematics import forward_kinematics_many
 from cdh_planner.model.kinematics import cable_lengths
 from cdh_planner.planner import Planner

@@ -1,4 +1,4 @@
-"""Executing a plan on a trajectory controller (cdh_planner/ros/execution.py).
+"""Executing a plan on a trajectory controller (cdh_planner/ros/winches.py).
 
 In process: the FollowJointTrajectory goal of a cable trajectory (no effort, stamp zero),
 measured cable lengths of a JointState, the start check, and the pose of measured lengths
@@ -25,12 +25,12 @@ from trajectory_msgs.msg import JointTrajectory, JointTrajectoryPoint  # noqa: E
 
 from cdh_planner.errors import InputError  # noqa: E402
 from cdh_planner.feasibility import evaluate  # noqa: E402
-from cdh_planner.io.problem import load_problem  # noqa: E402
+from cdh_planner.parsing.problem import load_problem  # noqa: E402
 from cdh_planner.model.kinematics import (cable_lengths, forward_kinematics,  # noqa: E402
                                           rotation_vector_exp)
 from cdh_planner.model.pose import rotation_angle_between, rotation_tt  # noqa: E402
 from cdh_planner.model.robot import load_robot  # noqa: E402
-from cdh_planner.ros import execution as X  # noqa: E402
+from cdh_planner.ros import winches as X  # noqa: E402
 from cdh_planner.ros.messages import cable_trajectory_msg, to_seconds  # noqa: E402
 
 from conftest import CONFIG, PROBLEMS  # noqa: E402
@@ -269,8 +269,8 @@ def test_current_pose_of_unreachable_lengths_says_why(guess):
 
 @functools.lru_cache(maxsize=None)
 def double_module():
-    from cdh_planner.ros import sim_controller
-    return sim_controller
+    from cdh_planner.ros import simulated_controller
+    return simulated_controller
 
 
 def _raw(change=None):

@@ -75,7 +75,7 @@ from rclpy.executors import SingleThreadedExecutor  # noqa: E402
 from rclpy.parameter import Parameter  # noqa: E402
 from std_srvs.srv import Trigger  # noqa: E402
 
-from cdh_planner.ros import execution  # noqa: E402
+from cdh_planner.ros import winches  # noqa: E402
 from cdh_planner.ros import messages as M  # noqa: E402
 from cdh_planner.ros import plan_execution  # noqa: E402
 from ros_harness import Q1, Q2, in_process_nodes, sphere_pose_msg  # noqa: E402
@@ -188,7 +188,7 @@ def test_a_completed_stream_after_a_failed_controller_run_keeps_the_node(node, m
 # ---- fault injection at every step of a controller run
 
 class ScriptedController:
-    """Stands in for execution.TrajectoryExecutor: records on_done / on_accepted and does
+    """Stands in for winches.TrajectoryExecutor: records on_done / on_accepted and does
     what the test scripts at start and cancel."""
 
     action_name = "/scripted/follow_joint_trajectory"
@@ -232,7 +232,7 @@ def test_a_controller_that_raises_at_start_ends_the_run_failed(node):
 
 @pytest.mark.parametrize("why", ["rejected by the controller", "no action server"])
 def test_a_run_refused_at_once_ends_failed_with_the_reason(node, why):
-    scripted(node, at_start=(execution.FAILED, why))
+    scripted(node, at_start=(winches.FAILED, why))
     ok, message = execute(node)
     assert not ok and why in message
     assert outcomes(node) == ["failed"] and why in node.results[0].message
@@ -251,7 +251,7 @@ def test_stop_in_a_phase_ends_when_the_controller_answers(node, phase):
     assert "already executing" in execute(node)[1]
     controller.on_accepted and controller.on_accepted()   # a late acceptance: still stopping
     assert node._execution.runs.phase == Phase.STOPPING
-    controller.on_done(execution.STOPPED, "canceled by the controller")
+    controller.on_done(winches.STOPPED, "canceled by the controller")
     assert outcomes(node) == ["stopped"]
     assert_ready(node, 1)
 
@@ -269,7 +269,7 @@ def test_a_lost_result_ends_failed_when_the_executor_gives_up(node):
     controller = scripted(node)
     assert execute(node)[0]
     controller.on_accepted()
-    controller.on_done(execution.FAILED, "no result within 7.2 s of acceptance")
+    controller.on_done(winches.FAILED, "no result within 7.2 s of acceptance")
     assert outcomes(node) == ["failed"]
     assert_ready(node, 1)
 
@@ -278,11 +278,11 @@ def test_a_late_answer_of_an_old_run_does_not_end_the_next(node):
     controller = scripted(node)
     assert execute(node)[0]
     old_done = controller.on_done
-    old_done(execution.COMPLETED, "completed")
+    old_done(winches.COMPLETED, "completed")
     assert execute(node)[0]
-    old_done(execution.FAILED, "a late duplicate of the old run")
+    old_done(winches.FAILED, "a late duplicate of the old run")
     assert node._execution.running and outcomes(node) == ["completed"]
-    controller.on_done(execution.COMPLETED, "completed")
+    controller.on_done(winches.COMPLETED, "completed")
     assert outcomes(node) == ["completed", "completed"]
 
 
@@ -302,7 +302,7 @@ def test_an_end_whose_side_effects_raise_still_ends(node, monkeypatch, broken):
                             lambda msg: (node.results.append(msg), 1 / 0))
     else:
         monkeypatch.setattr(node._execution, "_on_end", lambda pending: 1 / 0)
-    controller.on_done(execution.COMPLETED, "completed")
+    controller.on_done(winches.COMPLETED, "completed")
     monkeypatch.undo()
     assert not node._execution.running
     assert_ready(node, 1)

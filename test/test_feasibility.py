@@ -8,7 +8,7 @@ from cdh_planner import feasibility as fz
 from cdh_planner.model.pose import rotation_tt
 from cdh_planner.model.robot import load_robot
 from cdh_planner.model.task import SliceTask, SphereTask
-from cdh_planner.trajectory.verify import check_task_motion
+from cdh_planner.trajectory.path_check import check_task_motion
 
 from conftest import CONFIG
 ROBOT1 = load_robot(CONFIG / "robot1.yaml")

@@ -7,14 +7,14 @@ from dataclasses import replace
 import numpy as np
 
 from cdh_planner.feasibility import evaluate
-from cdh_planner.io.problem import load_problem
+from cdh_planner.parsing.problem import load_problem
 from cdh_planner.model.robot import load_robot
 from cdh_planner.model.pose import Pose
 from cdh_planner.model.task import FreeTask
 from cdh_planner.pipeline.route import CHORD_SAMPLES
 from cdh_planner.planner import Planner, PlannerSettings
 from cdh_planner.status import Status
-from cdh_planner.trajectory.verify import SlerpPath
+from cdh_planner.trajectory.path_check import SlerpPath
 
 from conftest import REPO as ROOT
 

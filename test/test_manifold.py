@@ -4,7 +4,7 @@ import numpy as np
 import pytest
 from scipy.spatial import HalfspaceIntersection
 
-from cdh_planner.atlas.atlas import Atlas
+from cdh_planner.atlas.charts import Atlas
 from cdh_planner.atlas.polytope import Polytope
 from cdh_planner.feasibility import evaluate
 from cdh_planner.manifold.constraint import TaskConstraint

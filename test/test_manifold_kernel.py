@@ -11,7 +11,7 @@ from dataclasses import replace
 import numpy as np
 import pytest
 
-from cdh_planner.io.problem import load_problem
+from cdh_planner.parsing.problem import load_problem
 from cdh_planner.manifold.navigation import N_EQS, N_VARS, NavigationManifold
 
 from conftest import CONFIG

@@ -26,9 +26,9 @@ from std_msgs.msg import ColorRGBA, Float64MultiArray, MultiArrayDimension  # no
 from trajectory_msgs.msg import JointTrajectory, JointTrajectoryPoint  # noqa: E402
 from visualization_msgs.msg import Marker, MarkerArray  # noqa: E402
 
-from cdh_planner.io.mcap_log import (  # noqa: E402
+from cdh_planner.recording.mcap_log import (  # noqa: E402
     MAGIC, REQUEST_RECEIVED, RESPONSE_SENT, RunRecorder, read_run, recover_run)
-from cdh_planner.io.ros_schemas import full_definition  # noqa: E402
+from cdh_planner.recording.ros_schemas import full_definition  # noqa: E402
 
 from conftest import REPO
 T0 = 1_700_000_000_000_000_000
@@ -309,7 +309,7 @@ def test_recorder_misuse(tmp_path):
 CHILD = """
 import sys, time
 from sensor_msgs.msg import JointState
-from cdh_planner.io.mcap_log import RunRecorder
+from cdh_planner.recording.mcap_log import RunRecorder
 with RunRecorder(sys.argv[1]) as rec:
     for i in range(int(sys.argv[2])):
         rec.write("/cmd", JointState(name=["w"], position=[float(i)]), 1000 + i)

@@ -11,14 +11,14 @@ import pytest
 from cdh_planner import zonotope as zt
 from cdh_planner.cable_feasibility import planning_feasibility
 from cdh_planner.feasibility import evaluate
-from cdh_planner.io.problem import load_problem
+from cdh_planner.parsing.problem import load_problem
 from cdh_planner.manifold.configuration import ConfigurationConstraint
 from cdh_planner.model.forward_kinematics import forward_kinematics_many
 from cdh_planner.model.kinematics import forward_kinematics
 from cdh_planner.model.pose import rotation_tt
 from cdh_planner.model.robot import load_robot
 from cdh_planner.planner import Planner
-from cdh_planner.trajectory.verify import SlerpPath
+from cdh_planner.trajectory.path_check import SlerpPath
 
 from conftest import CONFIG
 from lp_oracle import ellipsoid_held

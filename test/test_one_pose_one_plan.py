@@ -14,7 +14,7 @@ from hypothesis import given, settings
 from hypothesis import strategies as st
 from scipy.spatial.transform import Rotation
 
-from cdh_planner.io.problem import load_problem
+from cdh_planner.parsing.problem import load_problem
 from cdh_planner.model.kinematics import cable_lengths, forward_kinematics, rotation_vector_exp
 from cdh_planner.model.pose import (Pose, on_singular_set, quaternion_from_tau, rotation_angle_between,
                                     rotation_tt, tau_from_quaternion, tau_from_rotation, wrap_angle)
@@ -274,7 +274,7 @@ def test_a_measured_start_through_the_nodes_messages_plans_the_pole_path():
     pytest.importorskip("rclpy")
     from nav_msgs.srv import GetPlan
     from cdh_planner.ros import messages as M
-    from cdh_planner.ros.planning import request_poses
+    from cdh_planner.ros.plan_requests import request_poses
     pr = load_problem(PROBLEMS / "robot2_q1_q2.yaml")
     goal = M.pose_stamped_msg(pr.goal.p, rotation_tt(pr.goal.tau), "base")
     results = [("lambda", Planner(pr.robot, pr.task, pr.settings).plan(pr.start, pr.goal))]

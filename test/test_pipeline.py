@@ -11,7 +11,7 @@ import pytest
 from conftest import PROBLEMS
 from cdh_planner.errors import InputError
 from cdh_planner.feasibility import evaluate
-from cdh_planner.io.problem import load_problem
+from cdh_planner.parsing.problem import load_problem
 from cdh_planner.model.pose import Pose, quaternion_from_tau, rotation_angle_between, rotation_tt
 from cdh_planner.pipeline import lift as L
 from cdh_planner.pipeline.densify import Densify
@@ -21,7 +21,7 @@ from cdh_planner.pipeline.smooth import CLEARANCE_STEP_M, CLEARANCE_STEP_RAD, Sm
 from cdh_planner.pipeline.timing import time_stage
 from cdh_planner.pipeline.validity import Validity, wrapped
 from cdh_planner.planner import Planner
-from cdh_planner.search.search import Stop
+from cdh_planner.search.strategies import Stop
 from cdh_planner.status import Status
 
 

@@ -1,4 +1,4 @@
-"""Pictures of a planning query (cdh_planner.io.plan_plots): geometric helpers on simple
+"""Pictures of a planning query (cdh_planner.pictures.plans): geometric helpers on simple
 inputs, and the PNGs of a small real query (Robot 1, theta = 0 start, Greedy Best-First)."""
 
 from dataclasses import replace
@@ -10,9 +10,9 @@ import pytest
 from matplotlib.image import imread
 from matplotlib.path import Path as MplPath
 
-from cdh_planner.io.plan_plots import axis_range, chart_polygons, order_by_angle, plot_plan, \
+from cdh_planner.pictures.plans import axis_range, chart_polygons, order_by_angle, plot_plan, \
     split_at_wraps, unwrap_about, wrap, wrap_copies, zoom
-from cdh_planner.io.problem import load_problem
+from cdh_planner.parsing.problem import load_problem
 from cdh_planner.model.task import SphereTask
 from cdh_planner.status import Status
 from cdh_planner.planner import Planner

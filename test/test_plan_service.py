@@ -10,7 +10,7 @@ pytest.importorskip("nav_msgs")
 
 from nav_msgs.srv import GetPlan  # noqa: E402
 
-from cdh_planner.ros import planning  # noqa: E402
+from cdh_planner.ros import plan_requests  # noqa: E402
 from cdh_planner.ros.params import node_config  # noqa: E402
 from cdh_planner.ros.plan_service import PlanService  # noqa: E402
 from ros_harness import (Q1, Q2, ROBOT2, fake_planner_class, file_parameters,  # noqa: E402
@@ -56,7 +56,7 @@ def plans():
 
 
 def ask(plans):
-    call = planning.PlanCall.of_get_plan(GetPlan.Request(start=sphere_pose_msg(Q1),
+    call = plan_requests.PlanCall.of_get_plan(GetPlan.Request(start=sphere_pose_msg(Q1),
                                                          goal=sphere_pose_msg(Q2)))
     return plans.answer(call, "run#1", "", plans.enter())
 
@@ -101,14 +101,14 @@ def test_at_shutdown_a_pending_plan_is_dropped(plans):
 
 
 def test_beyond_the_queue_the_answer_is_busy_and_shutdown_cancels_the_waiting(plans):
-    turns = [plans.enter() for _ in range(1 + planning.PLAN_QUEUE_DEPTH)]
+    turns = [plans.enter() for _ in range(1 + plan_requests.PLAN_QUEUE_DEPTH)]
     assert all(t is not None for t in turns) and plans.enter() is None
-    busy = plans.answer(planning.PlanCall(None, None), "run#2", "", None)
+    busy = plans.answer(plan_requests.PlanCall(None, None), "run#2", "", None)
     assert busy.result.reason == "busy" and not busy.path.poses
     assert plans._queue.wait(turns[0])          # the first one plans ...
     answers = []
     waiter = threading.Thread(target=lambda: answers.append(plans.answer(
-        planning.PlanCall(None, None), "run#3", "", turns[1])))
+        plan_requests.PlanCall(None, None), "run#3", "", turns[1])))
     waiter.start()
     plans.begin_shutdown()                      # ... the second is answered canceled
     waiter.join(5.0)

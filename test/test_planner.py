@@ -7,12 +7,12 @@ import pytest
 
 from cdh_planner.cli import main
 from cdh_planner.feasibility import evaluate
-from cdh_planner.io.problem import load_problem
+from cdh_planner.parsing.problem import load_problem
 from cdh_planner.model.pose import quaternion_from_tau
 from cdh_planner.planner import Planner, PlannerSettings, Pose
-from cdh_planner.search.search import Stop, run
+from cdh_planner.search.strategies import Stop, run
 from cdh_planner.status import Status
-from cdh_planner.trajectory.verify import check_motion, check_task_motion
+from cdh_planner.trajectory.path_check import check_motion, check_task_motion
 
 from conftest import REPO as ROOT
 PROBLEMS = ROOT / "config" / "problems"

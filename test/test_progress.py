@@ -1,9 +1,9 @@
-"""Progress output (io/progress.py): a bar on a terminal, sparse plain lines elsewhere.
+"""Progress output (progress.py): a bar on a terminal, sparse plain lines elsewhere.
 A fake clock and in-memory streams: no timing."""
 
 import io
 
-from cdh_planner.io.progress import chart_progress
+from cdh_planner.progress import chart_progress
 
 
 class FakeClock:

@@ -12,7 +12,7 @@ import yaml
 
 from cdh_planner import cli
 from cdh_planner.errors import InputError
-from cdh_planner.io.poses import load_poses
+from cdh_planner.parsing.poses import load_poses
 from cdh_planner.model import robot_schema
 from cdh_planner.model.robot import FIELDS, OPTIONAL_GROUPS, Robot, load_robot, read_yaml, \
     robot_from_dict, ros_parameters

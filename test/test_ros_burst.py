@@ -19,7 +19,7 @@ from rclpy.action import ActionClient  # noqa: E402
 
 from cdh_planner_interfaces.action import PlanPath  # noqa: E402
 
-from cdh_planner.io.mcap_log import read_run  # noqa: E402
+from cdh_planner.recording.mcap_log import read_run  # noqa: E402
 from cdh_planner.ros.client import PlannerClient, plan_path_goal  # noqa: E402
 from cdh_planner.ros.interface import ACTION_QOS  # noqa: E402
 from ros_harness import Q1, Q2, NodeProcess, claimed_domain, sphere_pose_msg  # noqa: E402

@@ -1,7 +1,7 @@
 """``execution.mode: forward_command``: the node streams std_msgs/Float64MultiArray to a
 ros2_control JointGroupPositionController's ``~/commands``, in the controller's joint order
 (``execution.joint_order``, checked against the robot's winch names). Over DDS against the
-simulated controller with ``--commands`` (cdh_planner/ros/sim_controller.py, through
+simulated controller with ``--commands`` (cdh_planner/ros/simulated_controller.py, through
 test/doubles/follow_joint_trajectory_server.py), which applies a command only when the
 real controller would (data size = number of joints; finite) and publishes the joints'
 JointState. The node around the TEST DOUBLE planner: these tests are about execution.

@@ -19,9 +19,9 @@ from tf2_msgs.msg import TFMessage
 from cdh_planner.feasibility import evaluate
 from cdh_planner.model.pose import rotation_from_quaternion
 from cdh_planner.ros import messages as M
-from cdh_planner.ros import planning
+from cdh_planner.ros import plan_requests
 from cdh_planner.ros.client import PlannerClient
-from cdh_planner.ros.execution import current_pose
+from cdh_planner.ros.winches import current_pose
 from cdh_planner.ros.node_frames import TF_QOS, TF_STATIC_QOS
 from cdh_planner.ros.params import node_config
 from ros_harness import (Q1, Q2, ROBOT2, Collector, ControllerDouble, NodeProcess,
@@ -149,7 +149,7 @@ def test_a_goal_in_the_z_up_frame_plans_the_same_path_as_in_the_paper_frame(tmp_
         assert answer.success, (answer.values, node.log())
         assert answer.path.header.frame_id == "cdh_base"             # outputs: paper frame
         # the first plan of the node: the offline planner's, from the paper-frame poses
-        poses = planning.request_poses(GetPlan.Request(start=start, goal=goal), "cdh_base")
+        poses = plan_requests.request_poses(GetPlan.Request(start=start, goal=goal), "cdh_base")
         offline = planner_module.Planner(ROBOT, CONFIG.task, CONFIG.settings).plan(*poses)
         assert offline.success
         positions, quaternions = M.path_arrays(answer.path)[:2]

@@ -122,9 +122,9 @@ def test_diagnostic_levels(health, level, words):
 
 
 def test_configure_warms_the_planners_kernel():
-    """planning.warm_up (called on every planner the node makes: configure, new parameters)
+    """plan_requests.warm_up (called on every planner the node makes: configure, new parameters)
     evaluates the constraint's compiled kernel once; a planner without one is left as is."""
-    from cdh_planner.ros.planning import warm_up
+    from cdh_planner.ros.plan_requests import warm_up
     calls = []
 
     class Constraint:

@@ -26,7 +26,7 @@ from visualization_msgs.msg import Marker, MarkerArray  # noqa: E402
 
 from cdh_planner.model.pose import rotation_from_quaternion  # noqa: E402
 from cdh_planner.ros import messages as M  # noqa: E402
-from cdh_planner.ros import planning  # noqa: E402
+from cdh_planner.ros import plan_requests  # noqa: E402
 from cdh_planner.ros.client import PlannerClient  # noqa: E402
 from cdh_planner.ros.params import node_config  # noqa: E402
 from ros_harness import (EQUATOR, EQUATOR_Q3, Q1, Q2, Q3, ROBOT2, Collector,  # noqa: E402
@@ -85,7 +85,7 @@ def _quaternions(path_msg):
 
 def test_plan_over_ros_is_the_offline_planners_answer(q1_q2):
     request, answer, _ = q1_q2
-    start, goal = planning.request_poses(request, CONFIG.base_frame)
+    start, goal = plan_requests.request_poses(request, CONFIG.base_frame)
     offline = planner_module.Planner(ROBOT, TASK, CONFIG.settings).plan(start, goal)
     assert offline.success
     path = offline.path
@@ -99,7 +99,7 @@ def test_plan_over_ros_is_the_offline_planners_answer(q1_q2):
     assert values["error_code"] == "0" and values["strategy"] == offline.strategy
     assert int(values["charts"]) == offline.charts
     assert float(values["cost"]) == pytest.approx(offline.cost, rel=1e-9)
-    summary = planning.path_summary(path, ROBOT)
+    summary = plan_requests.path_summary(path, ROBOT)
     assert float(values["duration_s"]) == pytest.approx(summary["duration_s"], rel=1e-12)
     assert float(values["min_tension_margin_n"]) == pytest.approx(
         summary["min_tension_margin_n"], rel=1e-12)
@@ -170,7 +170,7 @@ def test_markers_and_plan_result(q1_q2):
     status = out["plan_result"]
     assert status.level == DiagnosticStatus.OK
     values = M.status_values(status)
-    assert set(M.STATUS_KEYS) | set(planning.EXTRA_KEYS) == set(values)
+    assert set(M.STATUS_KEYS) | set(plan_requests.EXTRA_KEYS) == set(values)
     assert values["log_file"].endswith(".mcap")
     assert float(values["planning_time_s"]) > 0 and int(values["waypoints"]) == len(markers[1].points)
 

@@ -18,7 +18,7 @@ from cdh_planner.feasibility import evaluate  # noqa: E402
 from cdh_planner.model.pose import quaternion_from_tau  # noqa: E402
 from cdh_planner.model.robot import load_robot  # noqa: E402
 from cdh_planner.model.task import PivotTask, SliceTask  # noqa: E402
-from cdh_planner.ros import planning  # noqa: E402
+from cdh_planner.ros import plan_requests  # noqa: E402
 from cdh_planner.model import robot_schema  # noqa: E402
 from cdh_planner.model.robot import FIELDS as ROBOT_FIELDS, OPTIONAL_GROUPS  # noqa: E402
 from cdh_planner.ros import params  # noqa: E402
@@ -161,7 +161,7 @@ def test_a_parameter_set_to_its_value_keeps_the_planner():
 def test_request_poses_take_the_azimuth_of_the_other_pose_at_the_pole():
     config = node_config(ROBOT2_PARAMS)
     request = GetPlan.Request(start=sphere_pose_msg(Q1), goal=sphere_pose_msg(Q2))
-    start, goal = planning.request_poses(request, "cdh_base")
+    start, goal = plan_requests.request_poses(request, "cdh_base")
     np.testing.assert_allclose(config.task.coords(start.p[None], start.tau[None]),
                                [[0.55, math.pi / 2]], atol=1e-9)
     np.testing.assert_allclose(config.task.coords(goal.p[None], goal.tau[None]), [Q2],
@@ -171,12 +171,12 @@ def test_request_poses_take_the_azimuth_of_the_other_pose_at_the_pole():
 def test_refusal_reasons_and_codes():
     request = GetPlan.Request(start=sphere_pose_msg(Q1, frame="map"), goal=sphere_pose_msg(Q2))
     with pytest.raises(InputError) as err:
-        planning.request_poses(request, "cdh_base")
-    result = planning.input_refusal(err.value)
+        plan_requests.request_poses(request, "cdh_base")
+    result = plan_requests.input_refusal(err.value)
     assert result.reason is Status.BAD_FRAME and result.reason == "bad_frame"
     assert not result.success
     robot = load_robot(ROBOT2)
-    status = planning.result_status(result, robot, "r#1", "", sphere_pose_msg(Q1).header.stamp)
+    status = plan_requests.result_status(result, robot, "r#1", "", sphere_pose_msg(Q1).header.stamp)
     values = {kv.key: kv.value for kv in status.values}
     assert values["error_code"] == "202" and "map" in values["error_msg"]
     assert values["path_stamp"] == "0"
@@ -193,7 +193,7 @@ def test_a_goals_own_faults_are_refused_with_their_member(fault, reason, code):
     goal.strategy = "dijkstra" if fault == "strategy" else ""
     goal.timeout_s = -1.0 if fault == "timeout" else 0.0
     goal.goal.pose.position.x = math.nan if fault == "nan" else goal.goal.pose.position.x
-    refused = planning.goal_refusal(goal, "cdh_base", "astar")
+    refused = plan_requests.goal_refusal(goal, "cdh_base", "astar")
     if fault is None:
         assert refused is None
     else:
@@ -210,7 +210,7 @@ class Exploding:
 
 def test_planner_exception_becomes_an_answer():
     lines = []
-    result = planning.run_planner(Exploding(), None, None, logger=lines.append)
+    result = plan_requests.run_planner(Exploding(), None, None, logger=lines.append)
     assert not result.success and result.reason is Status.INTERNAL_ERROR
     assert result.reason == "internal_error"
     assert "ZeroDivisionError: boom" in result.message and "Traceback" in lines[0]

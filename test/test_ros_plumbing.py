@@ -25,7 +25,7 @@ from trajectory_msgs.msg import JointTrajectory  # noqa: E402
 from cdh_planner.model.robot import load_robot  # noqa: E402
 from cdh_planner.ros import messages as M  # noqa: E402
 from cdh_planner.ros.client import PlannerClient  # noqa: E402
-from cdh_planner.ros.planning import PLAN_QUEUE_DEPTH  # noqa: E402
+from cdh_planner.ros.plan_requests import PLAN_QUEUE_DEPTH  # noqa: E402
 from ros_harness import (Q1, Q2, ROBOT2, Collector, NodeProcess,  # noqa: E402
                          claimed_domain, sphere_pose_msg, stamp_s)
 

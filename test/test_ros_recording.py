@@ -34,7 +34,7 @@ from sensor_msgs.msg import JointState  # noqa: E402
 from cdh_planner_interfaces.msg import TensionEnvelope  # noqa: E402
 from trajectory_msgs.msg import JointTrajectory  # noqa: E402
 
-from cdh_planner.io.mcap_log import REQUEST_RECEIVED, RESPONSE_SENT, read_run  # noqa: E402
+from cdh_planner.recording.mcap_log import REQUEST_RECEIVED, RESPONSE_SENT, read_run  # noqa: E402
 from ros_harness import (Q1, Q2, Collector, NodeProcess, claimed_domain, cli,  # noqa: E402
                          pose_text, ros_env, run_cli, sphere_pose_msg, stamp_s)
 
@@ -367,7 +367,7 @@ def test_replay_after_parameter_changes_matches_every_request(domain, client, tm
 
 def test_replay_caps_each_wait(domain, client, tmp_path):
     """A 30-year gap between two recorded messages is waited --max-gap seconds, and said."""
-    from cdh_planner.io.mcap_log import RunRecorder
+    from cdh_planner.recording.mcap_log import RunRecorder
     path = tmp_path / "gap.mcap"
     with RunRecorder(path) as rec:
         rec.write("/cmd", JointState(name=["w"], position=[0.0]), 10**9)
@@ -385,7 +385,7 @@ def test_replay_leaves_command_topics_alone_unless_asked(tmp_path):
     skips cable_command and cable_trajectory, and naming one in --topics is refused."""
     from sensor_msgs.msg import JointState
     from cdh_planner import cli as cli_module
-    from cdh_planner.io.mcap_log import RunRecorder
+    from cdh_planner.recording.mcap_log import RunRecorder
     from cdh_planner.ros.replay import read_records, select_topics
     path = tmp_path / "cmd.mcap"
     with RunRecorder(path) as rec:

@@ -24,9 +24,9 @@ from nav_msgs.srv import GetPlan  # noqa: E402
 from rclpy.parameter import Parameter  # noqa: E402
 from std_srvs.srv import Trigger  # noqa: E402
 
-from cdh_planner.io.mcap_log import REQUEST_RECEIVED, RESPONSE_SENT, read_run  # noqa: E402
+from cdh_planner.recording.mcap_log import REQUEST_RECEIVED, RESPONSE_SENT, read_run  # noqa: E402
 from cdh_planner.ros import messages as M  # noqa: E402
-from cdh_planner.ros import planning  # noqa: E402
+from cdh_planner.ros import plan_requests  # noqa: E402
 from cdh_planner.ros.client import PlannerClient, path_duration  # noqa: E402
 from ros_harness import (Q1, Q2, ROBOT2, NodeProcess, claimed_domain, fake_planner_class,  # noqa: E402
                          in_process_nodes, sphere_pose_msg, until)
@@ -100,7 +100,7 @@ def test_failed_outputs_leave_nothing_to_execute(make_node, monkeypatch):
     def broken(*args, **kwargs):
         raise struct.error("'i' format requires -2147483648 <= number <= 2147483647")
 
-    monkeypatch.setattr(planning, "plan_outputs", broken)
+    monkeypatch.setattr(plan_requests, "plan_outputs", broken)
     path, values = plan(node)
     assert not path.poses and values["error_code"] == "200"
     assert values["error_msg"].startswith("internal error: struct.error: 'i' format"), values
@@ -173,13 +173,13 @@ def test_outputs_beyond_the_bounds_are_refused_with_the_reason(make_node):
 ])
 def test_output_refusal(change, why):
     result = FakePlanner(*_robot_task_settings()).plan(*_poses())
-    assert planning.output_refusal(result) is None
+    assert plan_requests.output_refusal(result) is None
     bad = dataclasses.replace(result, path=dataclasses.replace(result.path, **change(result.path)))
-    refused = planning.output_refusal(bad)
+    refused = plan_requests.output_refusal(bad)
     assert refused.reason == "output_limit" and why in refused.message, refused.message
-    many = dataclasses.replace(result, path=_repeat(result.path, planning.MAX_WAYPOINTS + 1))
-    assert f"more than the node's bound of {planning.MAX_WAYPOINTS}" in \
-        planning.output_refusal(many).message
+    many = dataclasses.replace(result, path=_repeat(result.path, plan_requests.MAX_WAYPOINTS + 1))
+    assert f"more than the node's bound of {plan_requests.MAX_WAYPOINTS}" in \
+        plan_requests.output_refusal(many).message
 
 
 def _robot_task_settings():
@@ -193,7 +193,7 @@ def _poses():
     from cdh_planner.ros.params import node_config
     from ros_harness import file_parameters
     base = node_config(file_parameters(ROBOT2)).base_frame
-    return planning.request_poses(GetPlan.Request(start=sphere_pose_msg(Q1),
+    return plan_requests.request_poses(GetPlan.Request(start=sphere_pose_msg(Q1),
                                                   goal=sphere_pose_msg(Q2)), base)
 
 
@@ -231,7 +231,7 @@ def test_a_plan_made_while_executing_is_published_when_the_stream_ends(make_node
     trajectories, paths = spy(monkeypatch, node.pub_trajectory), spy(monkeypatch, node.pub_path)
     node.set_parameters([Parameter("trajectory.max_cable_speed", value=0.1)])
     second, values = plan(node)
-    assert second.poses and values["outputs"] == planning.DEFERRED
+    assert second.poses and values["outputs"] == plan_requests.DEFERRED
     assert path_duration(second) < 0.9 * path_duration(first)
     assert not trajectories and not paths          # the controller's topic is left alone
     ok, message = execute(node)
@@ -245,14 +245,14 @@ def test_a_plan_made_while_executing_is_published_when_the_stream_ends(make_node
     assert ok and executing_s(message) == pytest.approx(path_duration(second), abs=1e-3)
     stop(node)
     third, values = plan(node)                     # not executing: published at once
-    assert values["outputs"] == planning.PUBLISHED and len(trajectories) == 2
+    assert values["outputs"] == plan_requests.PUBLISHED and len(trajectories) == 2
 
 
 def test_a_plan_that_fails_while_executing_changes_nothing(make_node, monkeypatch):
     node = make_node()
     first, _ = plan(node)
     assert execute(node)[0]
-    monkeypatch.setattr(planning, "plan_outputs", lambda *a, **k: 1 / 0)
+    monkeypatch.setattr(plan_requests, "plan_outputs", lambda *a, **k: 1 / 0)
     path, values = plan(node)
     assert not path.poses and "internal error" in values["error_msg"]
     monkeypatch.undo()
@@ -300,7 +300,7 @@ class Polled:
 
 
 def test_plan_queue_runs_in_order_and_refuses_beyond_its_depth():
-    queue = planning.PlanQueue(depth=2)
+    queue = plan_requests.PlanQueue(depth=2)
     first = queue.enter()
     assert queue.wait(first, timeout_s=0.1)            # runs at once
     waiting = [queue.enter(), queue.enter()]
@@ -327,7 +327,7 @@ def test_plan_queue_runs_in_order_and_refuses_beyond_its_depth():
 
 
 def test_plan_queue_close_answers_the_waiting():
-    queue = planning.PlanQueue(depth=1)
+    queue = plan_requests.PlanQueue(depth=1)
     assert queue.wait(queue.enter(), timeout_s=0.1)
     turn = queue.enter()
     got = []
@@ -341,7 +341,7 @@ def test_plan_queue_close_answers_the_waiting():
 def test_plan_queue_drop_and_cancel_give_a_waiting_turn_up():
     """A request refused before planning drops its turn, one cancelled while it waits
     leaves within CANCEL_POLL_S: the next one runs, and their places are free."""
-    queue = planning.PlanQueue(depth=2)
+    queue = plan_requests.PlanQueue(depth=2)
     assert queue.wait(queue.enter(), timeout_s=0.1)
     dropped, cancelled = queue.enter(), queue.enter()
     assert queue.enter() is None
@@ -363,7 +363,7 @@ def test_plan_queue_drop_and_cancel_give_a_waiting_turn_up():
 
 
 def test_depth_zero_is_one_plan_at_a_time():
-    queue = planning.PlanQueue(depth=0)
+    queue = plan_requests.PlanQueue(depth=0)
     assert queue.wait(queue.enter(), timeout_s=0.1)
     assert queue.enter() is None
     queue.leave()
@@ -409,7 +409,7 @@ def test_every_concurrent_request_is_answered(tmp_path):
                 else:
                     assert values["error_msg"].startswith("busy: "), values
                     outcomes["busy"] += 1
-            assert outcomes["plan"] >= 1 + planning.PLAN_QUEUE_DEPTH, outcomes
+            assert outcomes["plan"] >= 1 + plan_requests.PLAN_QUEUE_DEPTH, outcomes
         finally:
             for c in clients:
                 c.close()

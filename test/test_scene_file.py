@@ -210,7 +210,7 @@ def test_random_scene_file_text_reads_or_is_refused_cleanly(text, tmp_path_facto
 @bounded(80)
 @given(scene=VALUES)
 def test_a_problem_files_scene_reads_or_is_refused_cleanly(scene, tmp_path_factory):
-    from cdh_planner.io.problem import problem_from_dict
+    from cdh_planner.parsing.problem import problem_from_dict
     from conftest import CONFIG, PROBLEMS
 
     doc = yaml.safe_load((PROBLEMS / "robot2_q2_q3_free_flight.yaml").read_text())

@@ -12,13 +12,13 @@ import pytest
 from scipy.spatial.transform import Rotation
 
 from cdh_planner.feasibility import evaluate
-from cdh_planner.io.problem import load_problem
+from cdh_planner.parsing.problem import load_problem
 from cdh_planner.model.pose import Pose, quaternion_from_tau, tau_from_quaternion
 from cdh_planner.planner import Planner
 from cdh_planner.scene.collision import CollisionModel
 from cdh_planner.scene.schema import scene_from_dict
 from cdh_planner.status import Status
-from cdh_planner.trajectory.verify import interpolate_segment
+from cdh_planner.trajectory.path_check import interpolate_segment
 
 from conftest import PROBLEMS
 from test_scene_distances import box_signed, cylinder_signed, point_segment

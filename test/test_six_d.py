@@ -8,18 +8,18 @@ from dataclasses import replace
 import numpy as np
 import pytest
 
-from cdh_planner.atlas.atlas import Atlas
+from cdh_planner.atlas.charts import Atlas
 from cdh_planner.atlas.domain import PolytopeDomain, SampledDomain, make_domain
-from cdh_planner.io.problem import load_problem
-from cdh_planner.io.random_queries import random_free_queries
+from cdh_planner.parsing.problem import load_problem
+from benchmarks.random_queries import random_free_queries
 from cdh_planner.manifold.constraint import TaskConstraint
 from cdh_planner.model.pose import quaternion_from_tau
 from cdh_planner.model.robot import load_robot
 from cdh_planner.model.task import FreeTask
 from cdh_planner.planner import Planner, PlannerSettings, default_radius
-from cdh_planner.search.search import STRATEGIES, Stop, run
+from cdh_planner.search.strategies import STRATEGIES, Stop, run
 from cdh_planner.status import Status
-from cdh_planner.trajectory.verify import check_motion
+from cdh_planner.trajectory.path_check import check_motion
 
 from test_planner import assert_dense_feasible, robot1_problem
 

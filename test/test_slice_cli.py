@@ -8,7 +8,7 @@ import yaml
 
 from cdh_planner import cli
 from cdh_planner.feasibility import evaluate
-from cdh_planner.io import plots
+from cdh_planner.pictures import slices
 from cdh_planner.model.robot import load_robot
 from cdh_planner.model.task import SliceTask, SphereTask
 
@@ -71,10 +71,10 @@ def test_default_resolution_is_classified_in_whole_chunks(tmp_path, monkeypatch,
         sizes.append(len(p))
         return evaluate(robot, p, *args, **kwargs)
 
-    monkeypatch.setattr(plots, "evaluate", counted)
+    monkeypatch.setattr(slices, "evaluate", counted)
     assert cli.main(["slice", str(ROBOT1_FILE), *SLICE1, "-o", str(tmp_path / "s.png")]) == 0
     assert "400 x 400 grid" in capsys.readouterr().out
-    assert sum(sizes) == 400 * 400 and len(sizes) == -(-400 * 400 // plots.CHUNK)
+    assert sum(sizes) == 400 * 400 and len(sizes) == -(-400 * 400 // slices.CHUNK)
 
 
 @pytest.mark.parametrize("argv, text", [
@@ -119,38 +119,38 @@ def test_robot1_without_task_is_an_error(tmp_path, capsys):
 
 def test_classes_follow_the_documented_rule():
     robot = load_robot(ROBOT1_FILE)
-    view = plots.SliceView(task=SliceTask(fixed={"x": 0.0, "y": 0.0, "phi": 0.3, "theta": 0.4, "sigma": 0.0}),
+    view = slices.SliceView(task=SliceTask(fixed={"x": 0.0, "y": 0.0, "phi": 0.3, "theta": 0.4, "sigma": 0.0}),
                            axes=("z", "z"), ranges=((0.0, 0.7), (0.0, 0.7)))
     z = np.linspace(0.0, 0.7, 300)
     p = np.column_stack([np.zeros_like(z), np.zeros_like(z), z])
     f = evaluate(robot, p, tau=np.tile([0.3, 0.4, 0.0], (z.size, 1)))
-    cls = plots.classify(f)
+    cls = slices.classify(f)
     length_out = np.any(f.margins[:, :2] <= 0, axis=(1, 2))
-    assert np.all((cls == plots.FEASIBLE) == f.feasible)
-    assert np.all((cls == plots.LENGTH_OUT) == (~f.feasible & length_out))
-    assert np.all((cls == plots.TENSION_OUT) == (~f.feasible & ~length_out))
+    assert np.all((cls == slices.FEASIBLE) == f.feasible)
+    assert np.all((cls == slices.LENGTH_OUT) == (~f.feasible & length_out))
+    assert np.all((cls == slices.TENSION_OUT) == (~f.feasible & ~length_out))
     # This line through the workspace meets all three classes.
-    assert set(np.unique(cls)) == {plots.FEASIBLE, plots.LENGTH_OUT, plots.TENSION_OUT}
+    assert set(np.unique(cls)) == {slices.FEASIBLE, slices.LENGTH_OUT, slices.TENSION_OUT}
     assert view.coords([0.1], [0.2]).shape == (1, 1)
 
 
 def test_compute_slice_matches_pointwise_evaluation():
     robot = load_robot(ROBOT2_FILE)
     task = SphereTask(center=(0.0, 0.0, 0.306), radius=0.13)
-    view = plots.SliceView(task=task, axes=("alpha1", "alpha2"), ranges=((-np.pi, np.pi), (0.0, np.pi / 2)))
-    grid = plots.compute_slice(robot, view, resolution=30)
+    view = slices.SliceView(task=task, axes=("alpha1", "alpha2"), ranges=((-np.pi, np.pi), (0.0, np.pi / 2)))
+    grid = slices.compute_slice(robot, view, resolution=30)
     assert grid.classes.shape == (30, 30)
     j, i = 7, 21  # row (alpha2), column (alpha1)
     p, tau = task.pose([[grid.xs[i], grid.ys[j]]])
     f = evaluate(robot, p, tau)
     assert grid.margin[j, i] == pytest.approx(f.margin[0])
     assert grid.det_j[j, i] == pytest.approx(f.det_j[0])
-    assert grid.classes[j, i] == plots.classify(f)[0]
+    assert grid.classes[j, i] == slices.classify(f)[0]
     np.testing.assert_allclose(grid.xs[[0, -1]], [-np.pi + np.pi / 30, np.pi - np.pi / 30])
 
 
 def test_pi_tick_labels():
-    fmt = plots._pi_formatter(np.pi / 4)
+    fmt = slices._pi_formatter(np.pi / 4)
     assert [fmt(k * np.pi / 4, None) for k in (-4, -3, -2, 0, 1, 2)] == [
         r"$-\pi$", r"$-3\pi/4$", r"$-\pi/2$", "0", r"$\pi/4$", r"$\pi/2$"]
 

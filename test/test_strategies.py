@@ -1,4 +1,4 @@
-"""Search strategies are plug-ins: one registered class (search/search.py) is a choice of
+"""Search strategies are plug-ins: one registered class (search/strategies.py) is a choice of
 every edge (settings, CLI, node parameter, action check, docs, pictures) and plans."""
 
 from dataclasses import replace
@@ -9,9 +9,9 @@ import pytest
 
 from cdh_planner.cli import build_parser
 from cdh_planner.errors import InputError
-from cdh_planner.io.problem import load_problem
+from cdh_planner.parsing.problem import load_problem
 from cdh_planner.planner import Planner
-from cdh_planner.search.search import STRATEGIES, AStar, GreedyBestFirst, Strategy, register
+from cdh_planner.search.strategies import STRATEGIES, AStar, GreedyBestFirst, Strategy, register
 from cdh_planner.settings import SETTINGS, PlannerSettings, check_setting
 from cdh_planner.status import Status
 
@@ -56,7 +56,7 @@ def _choices(parser, dest):
 
 
 def test_a_new_strategy_is_one_class_and_a_choice_everywhere(registered):
-    from cdh_planner.ros import params, planning
+    from cdh_planner.ros import params, plan_requests
     from cdh_planner.ros.client import plan_path_goal
     pytest.importorskip("nav_msgs")
     from ros_harness import Q2, sphere_pose_msg
@@ -74,9 +74,9 @@ def test_a_new_strategy_is_one_class_and_a_choice_everywhere(registered):
     assert "wastar" in _choices(_sub_parser("call"), "strategy")
     # the action's check of a goal
     goal = plan_path_goal(None, sphere_pose_msg(Q2), use_current_start=True, strategy="wastar")
-    assert planning.goal_refusal(goal, "cdh_base", "astar") is None
+    assert plan_requests.goal_refusal(goal, "cdh_base", "astar") is None
     goal.strategy = "dijkstra"
-    assert planning.goal_refusal(goal, "cdh_base", "astar").reason is Status.BAD_STRATEGY
+    assert plan_requests.goal_refusal(goal, "cdh_base", "astar").reason is Status.BAD_STRATEGY
 
 
 def test_unregistered_it_is_no_choice():
@@ -94,11 +94,11 @@ def _plan(name, strategy, **settings):
 
 
 def test_it_plans_robot2_q2_q3_and_labels_the_picture(registered):
-    from cdh_planner.io import plan_plots
+    from cdh_planner.pictures import plans
     planner, pr, res = _plan("robot2_q2_q3", "wastar")
     assert res.success and res.strategy == "wastar" and res.charts > 0, res.message
     assert np.isfinite(res.cost) and res.cost > 0
-    assert plan_plots._title(planner, pr, res).count("weighted A*: path found") == 1
+    assert plans._title(planner, pr, res).count("weighted A*: path found") == 1
 
 
 def test_weight_one_is_a_star_exactly(registered):

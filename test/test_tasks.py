@@ -14,13 +14,13 @@ import pytest
 from conftest import CONFIG, PROBLEMS
 from cdh_planner.cli import main
 from cdh_planner.errors import InputError
-from cdh_planner.io.problem import load_problem
+from cdh_planner.parsing.problem import load_problem
 from cdh_planner.manifold.constraint import TaskConstraint
 from cdh_planner.model import task as T
 from cdh_planner.model.pose import rotation_tt
 from cdh_planner.model.robot import load_robot
 from cdh_planner.planner import Planner, task_cost
-from cdh_planner.trajectory.verify import check_motion
+from cdh_planner.trajectory.path_check import check_motion
 
 ROBOT2 = load_robot(CONFIG / "robot2.yaml")
 PIVOT = T.PivotTask(tool=(0.0, 0.0, 0.1), center=(0.0, 0.0, 0.35))

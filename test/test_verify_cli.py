@@ -10,7 +10,7 @@ from cdh_planner import cli
 from cdh_planner.feasibility import evaluate
 from cdh_planner.model.pose import quaternion_from_tau, rotation_angle_between, rotation_from_quaternion
 from cdh_planner.model.robot import load_robot
-from cdh_planner.trajectory import verify as tv
+from cdh_planner.trajectory import path_check as tv
 
 from conftest import REPO as ROOT
 ROBOT1_FILE = ROOT / "config" / "robot1.yaml"

@@ -9,7 +9,7 @@ where ``run(args) -> int`` returns the process exit code (0 ok, 1 no path / not
 feasible). Raise ``cdh_planner.errors.InputError`` for bad user input: the CLI prints it
 as one line and exits 2, with no traceback; any other exception is exit 3 (internal
 error), one line too (``cdh_planner.cli`` holds the contract). Check output paths before
-the work with ``cdh_planner.io.outputs.check_output``, giving it the command's input files
+the work with ``cdh_planner.commands.outputs.check_output``, giving it the command's input files
 (and its other outputs) as ``inputs`` so that no output overwrites them, and write them
 with its ``write_text`` / ``writing``.
 

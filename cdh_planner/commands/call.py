@@ -24,7 +24,7 @@ import argparse
 import math
 import sys
 
-from ..io.progress import chart_progress
+from ..progress import chart_progress
 from ..settings import STRATEGY_CHOICES
 
 EXIT_OK, EXIT_NO_PLAN = 0, 1
@@ -68,7 +68,7 @@ def add_parser(subparsers):
 
 def run(args):
     from ..errors import InputError, check_text
-    from ..io.poses import pose_values
+    from ..parsing.poses import pose_values
     if not (args.timeout > 0 and math.isfinite(args.timeout)):
         raise InputError("--timeout", args.timeout, "must be a positive number of seconds")
     if args.start is not None:   # bad input refused before importing ROS (seconds)

@@ -23,9 +23,9 @@ import json
 import math
 from dataclasses import replace
 
-from ..io.outputs import check_output, write_text, writing
-from ..io.problem import load_problem
-from ..io.progress import chart_progress
+from .outputs import check_output, write_text, writing
+from ..parsing.problem import load_problem
+from ..progress import chart_progress
 from ..planner import Planner
 from ..settings import SETTINGS, check_setting
 from ..status import Status
@@ -77,7 +77,7 @@ def run(args):
         write_text("--json", args.json, json.dumps(result_dict(result), indent=1))
         print(f"JSON: {args.json}")
     if args.plot:
-        from ..io.plan_plots import plot_plan
+        from ..pictures.plans import plot_plan
         with writing("--plot", args.plot):
             outs = plot_plan(planner, problem, result, args.plot)
         for out in outs:

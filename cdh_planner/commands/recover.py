@@ -7,7 +7,7 @@ summary and footer, perhaps with a torn last record: ``replay`` and the project'
 still read it, but rosbag2, rosbags and mcap's indexed reader refuse it. ``recover`` copies
 every complete message to a complete file (default ``RUN.recovered.mcap`` next to it),
 drops the torn tail, and renames the service-event schemas of files recorded with rosbag2's
-names (``pkg/srv/S_Event``) to the names every reader decodes (``io/ros_schemas.py``). The
+names (``pkg/srv/S_Event``) to the names every reader decodes (``recording/ros_schemas.py``). The
 output is written in full or not at all; the input is never changed. A complete file is
 copied the same way. Do not point it at the file of a node still running: it copies what
 is there so far.
@@ -43,8 +43,8 @@ def default_output(path):
 
 def run(args):
     from ..errors import InputError
-    from ..io.mcap_log import NotARecording, check_recording, recover
-    from ..io.outputs import check_output, writing
+    from ..recording.mcap_log import NotARecording, check_recording, recover
+    from .outputs import check_output, writing
     src = Path(args.run)
     try:
         check_recording(src)

@@ -93,7 +93,7 @@ def add_parser(subparsers):
 
 def run(args):
     from ..errors import InputError
-    from ..io.mcap_log import check_recording
+    from ..recording.mcap_log import check_recording
     from ..ros import replay as R
     for name in ("rate", "timeout", "tolerance", "delay", "max_gap"):
         value = getattr(args, name)

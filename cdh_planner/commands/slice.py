@@ -31,14 +31,14 @@ from typing import Optional
 
 from ..errors import InputError, check_text
 from ..cable_feasibility import feasibility_of as evaluate  # 6 cables: the closed form
-from ..io.outputs import check_output, writing
-from ..io.plots import FEASIBLE, Marker, SegmentOverlay, SliceGrid, SliceView, \
+from .outputs import check_output, writing
+from ..pictures.slices import FEASIBLE, Marker, SegmentOverlay, SliceGrid, SliceView, \
     compute_slice, plot_slice
-from ..io.poses import parse_angle, parse_length
+from ..parsing.poses import parse_angle, parse_length
 from ..model.pose import rotation_tt
 from ..model.robot import load_robot, read_yaml, ros_parameters
 from ..model.task import COORDINATES, POSE_NAMES, SliceTask, SphereTask, describe_value, task_from_dict
-from ..trajectory.verify import DEFAULT_STEP_M, DEFAULT_STEP_RAD, SegmentCheck, check_task_motion
+from ..trajectory.path_check import DEFAULT_STEP_M, DEFAULT_STEP_RAD, SegmentCheck, check_task_motion
 
 EXAMPLES = """examples:
   cdh-planner slice config/robot1.yaml --fixed x=0 y=0 z=0.35 sigma=34deg --free phi theta \\

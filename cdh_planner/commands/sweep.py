@@ -15,7 +15,7 @@ import os
 from pathlib import Path
 
 from ..errors import InputError
-from ..io.outputs import writing
+from .outputs import writing
 from ..studies import sweep as sw
 from ..studies.executors import make_executor
 from ..studies.progress import count_progress

@@ -27,7 +27,7 @@ def add_parser(subparsers):
 
 def run(args):
     from ..errors import InputError
-    from ..io.outputs import check_output, write_text
+    from .outputs import check_output, write_text
     from ..model.robot import load_robot
     from ..ros.description import urdf
     frames = {"--fixed-frame": args.fixed_frame, "--base-frame": args.base_frame,

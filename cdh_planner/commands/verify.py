@@ -6,13 +6,13 @@
 For every pose: feasible or not, normalised margin, binding constraint, cable lengths and
 the tension envelope (min / nominal / max over the wrench ellipsoid). For every pair of
 consecutive poses, the motion a controller executes (position linear, orientation slerp)
-is checked by dense sampling (see cdh_planner.trajectory.verify): worst point and first
+is checked by dense sampling (see cdh_planner.trajectory.path_check): worst point and first
 unsafe point. With ``--scene`` (a scene file, cdh_planner/scene/schema.py), a pose or
 sample is feasible only if it is also clear of the obstacles and of the other cables: its
 margin is the least of the wrench margin and the collision margin (m / 0.1 m, binding
 "collision winch_2 / ball"). Exit code 0 if everything is feasible, 1 if some pose or segment is not,
 2 for bad input (including a segment that would need more than
-``trajectory.verify.MAX_SEGMENT_SAMPLES`` samples at the given steps). Time and memory
+``trajectory.path_check.MAX_SEGMENT_SAMPLES`` samples at the given steps). Time and memory
 are linear in the number of poses.
 
 ``--json OUT`` writes (non-finite numbers as null)::
@@ -34,12 +34,12 @@ import numpy as np
 
 from ..errors import InputError
 from ..cable_feasibility import feasibility_of as evaluate  # 6 cables: the closed form
-from ..io.outputs import check_output, write_text
-from ..io.poses import load_poses, parse_angle, parse_length
+from .outputs import check_output, write_text
+from ..parsing.poses import load_poses, parse_angle, parse_length
 from ..model.robot import load_robot
 from ..scene.margin import combine
 from ..scene.schema import load_scene
-from ..trajectory.verify import DEFAULT_STEP_M, DEFAULT_STEP_RAD, check_motion
+from ..trajectory.path_check import DEFAULT_STEP_M, DEFAULT_STEP_RAD, check_motion
 
 EXIT_OK, EXIT_INFEASIBLE = 0, 1
 

@@ -20,8 +20,8 @@ from dataclasses import replace
 import numpy as np
 
 from ..errors import InputError
-from ..io.outputs import check_output, write_text, writing
-from ..io.poses import parse_angle, parse_length
+from .outputs import check_output, write_text, writing
+from ..parsing.poses import parse_angle, parse_length
 from ..model.robot import load_robot
 from ..planner import PlannerSettings
 from ..studies import workspace as ws

@@ -19,8 +19,8 @@ from pathlib import Path
 
 import numpy as np
 
-from .. import files
 from ..errors import MAX_FORCE_N, MAX_POSITION_M, InputError
+from ..parsing import files
 from .robot_schema import CHOICE, MATRIX, N_CABLES, NAME, NAMES, NUMBER, NUMBERS, check_groups, \
     read_fields, robot_field, schema_of
 
@@ -265,3 +265,11 @@ def _check_below(lo_name, lo, hi_name, hi):
         i = bad[0]
         raise InputError(f"{lo_name}[{i}]", float(lo[i]),
                          f"must be below {hi_name}[{i}] = {float(hi[i])!r}")
+
+
+def workspace_box(robot):
+    """(low, high) corners (m) of the box under the base anchors that the cables reach."""
+    a = robot.base_anchors
+    down = 1.0 if robot.force[2] >= 0 else -1.0  # the platform hangs along the load
+    z = sorted((float(a[:, 2].min()), float(a[:, 2].max() + down * robot.length_max.max())))
+    return np.array([a[:, 0].min(), a[:, 1].min(), z[0]]), np.array([a[:, 0].max(), a[:, 1].max(), z[1]])

@@ -15,10 +15,10 @@ import numpy as np
 
 from ..cable_feasibility import planning_feasibility as evaluate
 from ..model.pose import quaternion_from_tau, tau_from_rotation
-from ..search.search import STRATEGIES, run
+from ..search.strategies import STRATEGIES, run
 from ..status import Status
 from ..trajectory import clearance
-from ..trajectory.verify import TaskLinePath
+from ..trajectory.path_check import TaskLinePath
 
 CHORD_SAMPLES = 9  # poses probed between two link points before the dense check
 DIRECT_STEP_M, DIRECT_STEP_RAD = 5e-3, np.deg2rad(1.0)  # waypoint spacing on a direct motion

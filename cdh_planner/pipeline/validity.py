@@ -3,7 +3,7 @@
 A pose is valid when its margin is at least the planner's margin floor: the wrench
 feasibility margin (normalised, ``feasibility.evaluate``), with a scene the least of it
 and the collision margin (``scene.collision.combine``); a motion between two poses when
-it is, densely (``trajectory.verify``, with the same collision model). Poses are task
+it is, densely (``trajectory.path_check``, with the same collision model). Poses are task
 coordinate rows y (N, k) (``model.task``): M is
 the graph of the closed-form lift over the feasible poses of the task, so moving y and
 checking the pose keeps every point on M.
@@ -14,7 +14,7 @@ import numpy as np
 from ..cable_feasibility import planning_feasibility as evaluate  # m > 6: the rule's band
 from ..model.pose import quaternion_from_tau, rotation_tt, wrap_angle
 from ..scene.margin import COLLISION_UNIT_M, combine
-from ..trajectory.verify import SlerpPath, TaskLinePath, check_motion, check_path
+from ..trajectory.path_check import SlerpPath, TaskLinePath, check_motion, check_path
 
 COARSE_SAMPLES = 17  # a direct motion is first checked at these few points (a cheap "no")
 
@@ -89,7 +89,7 @@ class Validity:
     def segments(self, p, q):
         """The dense check of the waypoints p (N, 3) m, quaternions q (N, 4) and the
         motion between them (position linear, orientation slerp): one
-        ``trajectory.verify`` segment report per pair."""
+        ``trajectory.path_check`` segment report per pair."""
         return check_motion(self.robot, p, q, collision=self.collision, feasibility=evaluate)
 
 

@@ -37,7 +37,7 @@ from cdh_planner_interfaces.action import PlanPath
 from cdh_planner_interfaces.msg import TensionEnvelope
 
 from ..errors import InputError
-from ..io.poses import pose_values
+from ..parsing.poses import pose_values
 from . import messages as M
 from .context import init_context
 from .interface import ACTION_QOS, CABLE_COMMAND, EXECUTE, EXECUTION_RESULT, LATCHED, \
@@ -163,7 +163,7 @@ def check_node_name(name, field="--node"):
 
 def pose_stamped(values, frame_id, field="pose"):
     """PoseStamped of "x y z qx qy qz qw" (a string or 7 numbers; m, quaternion x y z w),
-    checked as a pose file's pose is (``io.poses.pose_values``: finite, within +-1e3 m, a
+    checked as a pose file's pose is (``parsing.poses.pose_values``: finite, within +-1e3 m, a
     unit quaternion); InputError naming ``field`` if not. The quaternion is sent as given."""
     values = pose_values(values, field)
     msg = PoseStamped()

@@ -33,9 +33,9 @@ from cdh_planner_interfaces.action import PlanPath
 from cdh_planner_interfaces.msg import TensionEnvelope
 
 from ..errors import InputError, exception_line
-from ..io.mcap_log import REQUEST_RECEIVED, RESPONSE_SENT
+from ..recording.mcap_log import REQUEST_RECEIVED, RESPONSE_SENT
 from ..status import Status
-from . import planning
+from . import plan_requests
 from .interface import ACTION_QOS, CABLE_COMMAND, EXECUTE, EXECUTION_RESULT, LATCHED, MARKERS, \
     NODE_NAME, PATH, PLAN, PLAN_PATH, PLAN_PROGRESS, PLAN_RESULT, PLANNED_TRAJECTORY, \
     SERVICE_QOS, STOP, TENSION_ENVELOPE
@@ -48,11 +48,11 @@ from .node_parameters import declare_parameters, refuse_unknown
 from .params import needs_new_planner, node_config, parameter_error
 from .plan_execution import PlanExecution
 from .plan_service import PlanService
-from .recording import NodeRecording, RunLog, log_limits
+from .run_log import NodeRecording, RunLog, log_limits
 
 # executor threads: the plan being computed, the requests waiting their turn, and spare ones
 # (busy answers, execute / stop, the stream timer, parameters) that are never all blocked
-EXECUTOR_THREADS = 1 + planning.PLAN_QUEUE_DEPTH + 3
+EXECUTOR_THREADS = 1 + plan_requests.PLAN_QUEUE_DEPTH + 3
 
 
 def default_planner_factory(robot, task, settings, scene=None):
@@ -168,7 +168,7 @@ class PlannerNode(LifecycleMixin, LifecycleNode):
         """A Planner for ``config`` (a fresh atlas, its kernel warm); InputError naming the
         parameter."""
         try:
-            return planning.warm_up(self._factory(config.robot, config.task, config.settings,
+            return plan_requests.warm_up(self._factory(config.robot, config.task, config.settings,
                                                   scene=config.scene))
         except InputError as exc:
             raise parameter_error(exc) from None
@@ -185,7 +185,7 @@ class PlannerNode(LifecycleMixin, LifecycleNode):
         seq, run_id, log_file = self._new_call()
         self.record.plan(self.srv_plan, REQUEST_RECEIVED, seq, request=request)
         refused = self.frames.to_base(request, ("start", "goal"), self.config.base_frame)
-        response.plan = self.plans.answer(planning.PlanCall.of_get_plan(request), run_id,
+        response.plan = self.plans.answer(plan_requests.PlanCall.of_get_plan(request), run_id,
                                           log_file, turn, refused).path
         self.record.plan(self.srv_plan, RESPONSE_SENT, seq, response=response)
         return response
@@ -213,7 +213,7 @@ class PlannerNode(LifecycleMixin, LifecycleNode):
             goal_handle.canceled()
         else:
             goal_handle.abort()
-        msg = planning.action_result(result, answer.outputs, answer.path)
+        msg = plan_requests.action_result(result, answer.outputs, answer.path)
         self.record.goal(action, RESPONSE_SENT, seq, goal_handle, result=msg)
         return msg
 
@@ -226,20 +226,20 @@ class PlannerNode(LifecycleMixin, LifecycleNode):
         if refused is not None:
             return None, refused
         if goal.use_current_start:
-            refused = planning.goal_refusal(goal, config.base_frame, config.settings.strategy)
+            refused = plan_requests.goal_refusal(goal, config.base_frame, config.settings.strategy)
             if refused is not None:       # not worth waiting for a start
                 return None, refused
             measured = self._execution.current_start(config, self.plans.with_last(lambda p: p),
                                                      self.plans.cancel_of(cancel).is_set)
             if measured.pose is None:
                 if cancel.is_set():
-                    return None, planning.refusal(Status.CANCELED, "canceled while waiting "
+                    return None, plan_requests.refusal(Status.CANCELED, "canceled while waiting "
                                                   "for the winches' joint states")
-                return None, planning.refusal(Status.NO_CURRENT_STATE,
+                return None, plan_requests.refusal(Status.NO_CURRENT_STATE,
                                               f"use_current_start: {measured.why}")
             start = measured.pose
-        return planning.PlanCall.of_plan_path(goal, start, cancel,
-                                              planning.feedback_sender(goal_handle)), None
+        return plan_requests.PlanCall.of_plan_path(goal, start, cancel,
+                                              plan_requests.feedback_sender(goal_handle)), None
 
     def _new_call(self):
         """(sequence number, run id, run file) of a new plan call."""

@@ -23,7 +23,7 @@ from tf2_msgs.msg import TFMessage
 
 from ..errors import InputError, exception_line
 from . import messages as M
-from . import planning
+from . import plan_requests
 from .description import urdf
 from .frames import Z_DOWN, TransformBook, pose_in_frame, transform_msg
 from .interface import LATCHED
@@ -86,7 +86,7 @@ class NodeFrames:
                 setattr(request, field,
                         pose_in_frame(self.book, getattr(request, field), base_frame, field))
         except InputError as exc:
-            return planning.input_refusal(exc)
+            return plan_requests.input_refusal(exc)
         return None
 
     def update(self):

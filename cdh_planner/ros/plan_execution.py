@@ -17,7 +17,7 @@ how it ended (the node's part behind ``~/execute``, ``~/stop`` and ``use_current
   ``execution.joint_order`` on ``execution.forward_command_topic`` (a ros2_control
   JointGroupPositionController's ``~/commands``).
 - ``follow_joint_trajectory``: the cable trajectory sent to a ros2_control controller's
-  FollowJointTrajectory action (``execution.TrajectoryExecutor``); its result ends the run.
+  FollowJointTrajectory action (``winches.TrajectoryExecutor``); its result ends the run.
 
 Every mode ``start`` first compares the measured lengths (``execution.joint_states_topic``)
 with the plan's first point; with none it refuses unless ``execution.allow_unchecked_start``. Each run is a token of the state machine ``runs``
@@ -37,7 +37,7 @@ from std_msgs.msg import Float64MultiArray
 from ..errors import InputError, exception_line
 from ..model.kinematics import cable_lengths
 from ..model.pose import rotation_from_quaternion
-from . import execution
+from . import winches
 from . import messages as M
 from .execution_runs import ExecutionRuns, Phase
 from .params import check_joint_order
@@ -75,9 +75,9 @@ class PlanExecution:
         self._last_pose = None         # (p, R) of the last forward kinematics, its next guess
         self.forward_kinematics_residual_m = None  # its largest cable length error, m
         values = config.values
-        self.joints = execution.JointStateMonitor(
+        self.joints = winches.JointStateMonitor(
             node, values["execution.joint_states_topic"], config.robot.winch_names)
-        self.controller = execution.TrajectoryExecutor(
+        self.controller = winches.TrajectoryExecutor(
             node, values["execution.controller_action"], callback_group=callback_group)
         self.forward = node.create_publisher(
             Float64MultiArray, values["execution.forward_command_topic"], FORWARD_QOS)
@@ -126,7 +126,7 @@ class PlanExecution:
         except Exception as exc:  # noqa: BLE001 - the run ends, the node stays ready
             self._node.get_logger().error(f"starting the execution failed: "
                                           f"{traceback.format_exc()}")
-            self._end(run, execution.FAILED, f"could not start: {exception_line(exc)}")
+            self._end(run, winches.FAILED, f"could not start: {exception_line(exc)}")
             return False, f"refused: {run.message}"
         if run.outcome:    # ended already: the first tick failed
             return False, f"refused: execution {run.outcome}: {run.message}"
@@ -138,7 +138,7 @@ class PlanExecution:
         none, refused unless ``execution.allow_unchecked_start`` (then noted)."""
         lengths, why = self.joints.lengths(values["execution.joint_states_max_age_s"])
         if lengths is not None:
-            mismatch = execution.start_mismatch(lengths, path.lengths[0],
+            mismatch = winches.start_mismatch(lengths, path.lengths[0],
                                                 values["execution.start_tolerance"],
                                                 robot.winch_names)
             return (f"refused: {mismatch}" if mismatch else ""), ""
@@ -173,12 +173,12 @@ class PlanExecution:
                 self._send(run, stream.hold(self._stamp()))
             message = (f"stopped at {stream.t:.3f} s of {stream.duration:.3f} s; "
                        f"holding the last setpoint" if stream is not None else "stopped")
-            self._end(run, execution.STOPPED, message)
+            self._end(run, winches.STOPPED, message)
             return message
         self.runs.advance(run, Phase.STOPPING)
         if not self.controller.cancel():   # nothing on the controller: end here
             message = f"stopped: nothing was running on {self.controller.action_name}"
-            self._end(run, execution.STOPPED, message)
+            self._end(run, winches.STOPPED, message)
             return message
         return (f"stopping: cancel sent to {self.controller.action_name} "
                 f"(the controller holds its position)")
@@ -196,7 +196,7 @@ class PlanExecution:
                 self.controller.cancel()
         except Exception:  # noqa: BLE001 - context already gone: nothing to tell
             pass
-        self._end(run, execution.STOPPED, "shutting down while executing: held the last setpoint",
+        self._end(run, winches.STOPPED, "shutting down while executing: held the last setpoint",
                   publish_pending=False)
 
     def release(self):
@@ -233,11 +233,11 @@ class PlanExecution:
             self._send(run, msg)
         except Exception as exc:  # noqa: BLE001 - never take the node down
             self._node.get_logger().error(f"streaming failed: {traceback.format_exc()}")
-            self._end(run, execution.FAILED,
+            self._end(run, winches.FAILED,
                       f"streaming stopped after an error: {exception_line(exc)}")
             return
         if finished:
-            self._end(run, execution.COMPLETED, f"execution finished: {stream.sent} "
+            self._end(run, winches.COMPLETED, f"execution finished: {stream.sent} "
                                                 f"commands over {stream.duration:.3f} s")
 
     def _publisher(self, run):
@@ -254,7 +254,7 @@ class PlanExecution:
     # ------------------------------------------------------------------ the end
 
     def _end(self, run, outcome, message, publish_pending=True):
-        """End ``run`` (``execution.COMPLETED``, ``STOPPED`` or ``FAILED``, and why): the
+        """End ``run`` (``winches.COMPLETED``, ``STOPPED`` or ``FAILED``, and why): the
         state machine's one terminal transition first, then, each on its own so that no
         failure can undo it, the stream's timer cancelled, a log line, the result published
         latched and ``on_end(publish_pending)``. Later calls for the same run do nothing."""
@@ -273,7 +273,7 @@ class PlanExecution:
     def _log_end(self, outcome, message):
         # one call site per severity: rclpy refuses a call site whose severity changes
         logger = self._node.get_logger()
-        if outcome == execution.FAILED:
+        if outcome == winches.FAILED:
             logger.error(f"execution {outcome}: {message}")
         else:
             logger.info(f"execution {outcome}: {message}")
@@ -315,8 +315,8 @@ class PlanExecution:
         """The pose (p (3,) m, R (3, 3)) of cable lengths ``lengths`` (m): Newton from the
         nearest known pose (the last forward kinematics, the ends of ``plan``), kept as the
         next one's guess. InputError when Newton finds none."""
-        guess = execution.nearest_pose(robot, lengths, self._known_poses(plan))
-        p, R = execution.current_pose(robot, lengths, guess)
+        guess = winches.nearest_pose(robot, lengths, self._known_poses(plan))
+        p, R = winches.current_pose(robot, lengths, guess)
         self._last_pose = (p, R)
         # m > 6: least squares; the residual (m) tells how consistent the lengths are
         self.forward_kinematics_residual_m = float(np.max(np.abs(cable_lengths(robot, p, R) - lengths)))

@@ -21,7 +21,7 @@ from typing import Optional, Protocol
 from ..errors import InputError, exception_line
 from ..planner import PlanResult
 from ..status import Status
-from . import planning
+from . import plan_requests
 
 PROGRESS_PERIOD_S = 0.1   # ~/plan_progress at most this often
 
@@ -51,7 +51,7 @@ class Outlet(Protocol):
 @dataclass
 class Answer:
     result: PlanResult
-    outputs: Optional[planning.PlanOutputs]   # the messages of a successful plan
+    outputs: Optional[plan_requests.PlanOutputs]   # the messages of a successful plan
     path: object                              # nav_msgs/Path: the plan's, or empty
 
 
@@ -67,9 +67,9 @@ class Cancel:
 
 class PlanService:
 
-    def __init__(self, config, planner, outlet, depth=planning.PLAN_QUEUE_DEPTH):
+    def __init__(self, config, planner, outlet, depth=plan_requests.PLAN_QUEUE_DEPTH):
         self._lock = threading.RLock()    # the plans, the configuration and the counter
-        self._queue = planning.PlanQueue(depth)
+        self._queue = plan_requests.PlanQueue(depth)
         self._config, self._planner = config, planner
         self._outlet = outlet
         self._calls = 0
@@ -118,12 +118,12 @@ class PlanService:
         except Exception as exc:  # noqa: BLE001 - never take the node down: answer no plan
             self._queue.drop(turn)
             self._outlet.error(f"[{run_id}] plan call failed: {traceback.format_exc()}")
-            result = planning.refusal(Status.INTERNAL_ERROR, f"internal error: "
+            result = plan_requests.refusal(Status.INTERNAL_ERROR, f"internal error: "
                                       f"{exception_line(exc)}", config.settings.strategy)
             answer = Answer(result, None, self._no_path(config))
             self._publish_result(result, config, run_id, log_file, answer.path)
         self._outlet.answered(answer.result.success,
-                              f"[{run_id}] {planning.result_line(answer.result)}")
+                              f"[{run_id}] {plan_requests.result_line(answer.result)}")
         return answer
 
     def _serve(self, call, run_id, log_file, turn, refused):
@@ -132,13 +132,13 @@ class PlanService:
             self._queue.drop(turn)
             result = refused
         elif turn is None:
-            result = planning.refusal(
+            result = plan_requests.refusal(
                 Status.BUSY, f"busy: {len(self._queue)} plan requests are being computed or "
                              f"wait (at most 1 + {self._queue.depth}); call again when one is "
                              f"answered", config.settings.strategy)
         elif not self._queue.wait(turn, call.cancel):
             why = "the node is shutting down" if self.shutting_down else "cancelled while queued"
-            result = planning.refusal(Status.CANCELED, f"canceled: {why}", config.settings.strategy)
+            result = plan_requests.refusal(Status.CANCELED, f"canceled: {why}", config.settings.strategy)
         else:
             try:
                 return self._plan(call, run_id, log_file)
@@ -153,9 +153,9 @@ class PlanService:
         with self._lock:
             config, planner = self._config, self._planner
         result = self.compute(call, planner, config, run_id)
-        result = planning.output_refusal(result) or result
+        result = plan_requests.output_refusal(result) or result
         if result.success:
-            out = planning.plan_outputs(result, config.robot, config.base_frame,
+            out = plan_requests.plan_outputs(result, config.robot, config.base_frame,
                                         self._outlet.stamp(), getattr(config, "scene", None))
             self._commit(result, config, out, run_id, log_file)
             return Answer(result, out, out.path)
@@ -166,9 +166,9 @@ class PlanService:
     def compute(self, call, planner, config, run_id):
         """The PlanResult of one call (never raising but for bugs)."""
         try:
-            start, goal = planning.request_poses(call, config.base_frame)
+            start, goal = plan_requests.request_poses(call, config.base_frame)
         except InputError as exc:
-            return planning.input_refusal(exc, config.settings.strategy)
+            return plan_requests.input_refusal(exc, config.settings.strategy)
         call.cancel = Cancel(self, call.cancel)
         last = [0.0]
 
@@ -176,13 +176,13 @@ class PlanService:
             now = time.monotonic()
             if now - last[0] >= PROGRESS_PERIOD_S:
                 last[0] = now
-                self._outlet.publish_progress(planning.progress_status(info, run_id))
+                self._outlet.publish_progress(plan_requests.progress_status(info, run_id))
             if call.feedback is not None:
                 call.feedback(info)
 
         self.planning = True
         try:
-            return planning.run_planner(planner, start, goal, call, progress,
+            return plan_requests.run_planner(planner, start, goal, call, progress,
                                         logger=self._outlet.error)
         finally:
             self.planning = False
@@ -196,9 +196,9 @@ class PlanService:
         previous last good plan) if building or publishing fails."""
         with self._lock:
             deferred = self.executing()
-            status = planning.result_status(
+            status = plan_requests.result_status(
                 result, config.robot, run_id, log_file, out.path.header.stamp,
-                outputs=planning.DEFERRED if deferred else planning.PUBLISHED)
+                outputs=plan_requests.DEFERRED if deferred else plan_requests.PUBLISHED)
             plan = (result.path, config.robot, out)
             if deferred:
                 self._pending = plan
@@ -225,7 +225,7 @@ class PlanService:
         failure is logged: the answer stands."""
         try:
             if status is None:
-                status = planning.result_status(result, config.robot, run_id, log_file,
+                status = plan_requests.result_status(result, config.robot, run_id, log_file,
                                                 path.header.stamp)
             self._outlet.publish_result(status)
         except Exception:  # noqa: BLE001 - a diagnostic, never the answer
@@ -233,7 +233,7 @@ class PlanService:
                                f"{traceback.format_exc()}")
 
     def _no_path(self, config):
-        return planning.empty_path(config.base_frame, self._outlet.stamp())
+        return plan_requests.empty_path(config.base_frame, self._outlet.stamp())
 
     # ------------------------------------------------------------------ execution
 

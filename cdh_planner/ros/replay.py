@@ -15,7 +15,7 @@
   by error code). ``goal_to_replay``: what is sent for a recorded goal (one with
   ``use_current_start`` starts from the recorded path's first pose).
 
-Killed runs (no summary, torn tail) are read too (``io.mcap_log``'s linear scan); what is
+Killed runs (no summary, torn tail) are read too (``recording.mcap_log``'s linear scan); what is
 not a recording is refused (InputError, with the reason).
 """
 
@@ -35,13 +35,13 @@ from cdh_planner_interfaces.action import PlanPath
 
 from ..errors import InputError, exception_line
 from ..model.pose import rotation_angle_between, rotation_from_quaternion
-from ..io.mcap_log import ACTION_INFIX, GET_RESULT, REQUEST_RECEIVED, RESPONSE_SENT, \
+from ..recording.mcap_log import ACTION_INFIX, GET_RESULT, REQUEST_RECEIVED, RESPONSE_SENT, \
     SEND_GOAL, SERVICE_EVENT_SUFFIX, NotARecording, check_recording
-from ..io.mcap_log import scan_records as scan_run  # raw records of a (possibly killed) run file
-from ..io.ros_schemas import rosidl_type
+from ..recording.mcap_log import scan_records as scan_run  # raw records of a (possibly killed) run file
+from ..recording.ros_schemas import rosidl_type
 from .messages import path_arrays
 from .interface import CABLE_COMMAND, SERVICE_QOS
-from .recording import PARAMETER_EVENTS
+from .run_log import PARAMETER_EVENTS
 
 
 MATCH_SETTLE_S = 0.3   # s after the publisher sees its subscribers, before the first message
@@ -51,7 +51,7 @@ ANSWER_PREFIXES = ("robot.", "task.", "planner.", "trajectory.")
 ANSWER_PARAMETERS = ("base_frame",)
 
 
-# the recorded PlanPath goals and results (io.mcap_log.RunRecorder.write_action_event)
+# the recorded PlanPath goals and results (recording.mcap_log.RunRecorder.write_action_event)
 PLAN_PATH_TYPE = "cdh_planner_interfaces/action/PlanPath"
 GOAL_SUFFIX = f"{ACTION_INFIX}{SEND_GOAL}{SERVICE_EVENT_SUFFIX}"
 RESULT_SUFFIX = f"{ACTION_INFIX}{GET_RESULT}{SERVICE_EVENT_SUFFIX}"

@@ -1,4 +1,4 @@
-"""Counted progress of a study on stderr, the way ``io.progress.chart_progress`` shows the
+"""Counted progress of a study on stderr, the way ``progress.chart_progress`` shows the
 atlas: a tqdm bar with rate and ETA on a terminal, else one plain line at most every
 ``LINE_INTERVAL_S`` seconds (a log file, a pipe), nothing when quiet.
 
@@ -9,7 +9,7 @@ atlas: a tqdm bar with rate and ETA on a terminal, else one plain line at most e
 import time
 from contextlib import contextmanager
 
-from ..io.progress import LINE_INTERVAL_S, displayed
+from ..progress import LINE_INTERVAL_S, displayed
 
 UNITS = {"points": "pose", "reach": "plan", "designs": "design"}
 

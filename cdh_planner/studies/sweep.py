@@ -37,9 +37,9 @@ from pathlib import Path
 
 import numpy as np
 
-from .. import files
+from ..parsing import files
 from ..errors import InputError, check_finite, check_keys, short_repr
-from ..io.problem import load_problem
+from ..parsing.problem import load_problem
 from ..model.robot import FIELDS, GRAVITY, ros_parameters, robot_from_dict
 from . import workspace as ws
 

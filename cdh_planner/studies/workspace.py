@@ -28,9 +28,9 @@ import numpy as np
 
 from ..errors import InputError
 from ..feasibility import evaluate
-from ..io.random_queries import workspace_box
 from ..model.pose import (Pose, quaternion_from_tau, rotation_from_quaternion, tau_from_quaternion,
                           tau_from_rotation)
+from ..model.robot import workspace_box
 from ..model.task import COORDINATES, FreeTask
 from ..planner import Planner, PlannerSettings
 from ..status import Status
@@ -80,7 +80,7 @@ class WorkspaceSpec:
 
 
 def default_box(robot):
-    """The box under the base anchors that the cables reach (``random_queries.workspace_box``)."""
+    """The box under the base anchors that the cables reach (``model.robot.workspace_box``)."""
     lo, hi = workspace_box(robot)
     return tuple(map(float, lo)), tuple(map(float, hi))
 

@@ -32,7 +32,7 @@ margin in N of a path, sampled as densely as ``verify`` checks it.
 import numpy as np
 
 from ..cable_feasibility import planning_feasibility as evaluate
-from .verify import DEFAULT_STEP_M, DEFAULT_STEP_RAD, SlerpPath
+from .path_check import DEFAULT_STEP_M, DEFAULT_STEP_RAD, SlerpPath
 
 MAX_MARGIN = 0.5  # no pose has a larger normalised margin
 MIN_MARGIN = 1e-9  # phi is capped here (about 20): a sample outside C is not a NaN

@@ -16,7 +16,7 @@ import time
 from pathlib import Path
 
 from ...errors import InputError
-from ...io.outputs import same_file
+from ..outputs import same_file
 from . import more_cables, paper, ros_story
 
 PACKAGE = "cdh_planner"

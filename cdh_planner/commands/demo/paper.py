@@ -14,11 +14,11 @@ import numpy as np
 
 from ...errors import InputError
 from ...feasibility import evaluate
-from ...io.plots import FEASIBLE, Marker, SliceView
+from ...pictures.slices import FEASIBLE, Marker, SliceView
 from ...model.pose import quaternion_from_tau
 from ...model.robot import load_robot
 from ...model.task import SliceTask
-from ...trajectory.verify import check_motion, check_task_motion
+from ...trajectory.path_check import check_motion, check_task_motion
 from ..slice import render_slice, task_in_yaml
 from .steps import Step, table
 

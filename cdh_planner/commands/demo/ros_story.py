@@ -2,14 +2,14 @@
 in a ROS domain of its own, recording to ``<out>/runs``; 6. a task sequencer plans
 q_1 -> q_2 through the ``~/plan_path`` action, checks the motion densely and streams it
 (``PlannerClient.execute_and_follow``); 7. ros2_control takes over: the simulated cable
-controller (``ros/sim_controller.py``, a FollowJointTrajectory server with the winches'
+controller (``ros/simulated_controller.py``, a FollowJointTrajectory server with the winches'
 JointState) starts where the winches are and the node switches to
 ``execution.mode: follow_joint_trajectory``; 8. q_2 -> q_3 planned from the pose of the
 measured cable lengths (``use_current_start``) and executed through the controller;
 9. replay: the recorded commands are republished and compared, the recorded goals re-sent
 to a fresh node (the planner keeps its atlas between requests, so only a node in its
 starting state answers the same); 10. SIGINT, the run file read back; 11. pictures
-(``io.plan_plots``) and a summary. The steps share ``demo.ros`` (a ``NodeStory``); the
+(``pictures.plans``) and a summary. The steps share ``demo.ros`` (a ``NodeStory``); the
 processes are stopped at exit whatever happens. rclpy is imported inside the steps only,
 so the paper's story runs without ROS.
 """
@@ -26,9 +26,9 @@ from typing import Optional
 
 import numpy as np
 
-from ...io.plan_plots import ExecutedMotion, plot_execution, plot_paths
-from ...io.plots import Marker, SegmentOverlay, SliceView
-from ...ros.domains import chosen_domain, claimed_domain, isolated_env, stop_process
+from ...pictures.plans import ExecutedMotion, plot_execution, plot_paths
+from ...pictures.slices import Marker, SegmentOverlay, SliceView
+from ...ros.isolation import chosen_domain, claimed_domain, isolated_env, stop_process
 from .paper import PICTURES, paper_pose
 from .steps import Step, table
 
@@ -143,7 +143,7 @@ def _leg(demo, start, goal, current_start=False):
     from ...model.pose import quaternion_from_tau, tau_from_quaternion
     from ...ros import messages as M
     from ...ros.client import path_duration, path_length, plan_path_goal, pose_stamped
-    from ...trajectory.verify import check_motion
+    from ...trajectory.path_check import check_motion
 
     story, robot, task = demo.ros, demo.robots["robot2"], demo.tasks["robot2"]
     leg = Leg(start, goal, current_start)
@@ -244,7 +244,7 @@ def start_controller(demo):
     if first is None or first.run is None or first.run.goal is None:
         raise NodeFailed("no executed first leg: the winches' lengths are unknown")
     params = story.parameters
-    args = ["-m", "cdh_planner.ros.sim_controller", *robot.winch_names,
+    args = ["-m", "cdh_planner.ros.simulated_controller", *robot.winch_names,
             "--action", params["execution.controller_action"],
             "--joint-states", params["execution.joint_states_topic"],
             "--initial", *(repr(float(x)) for x in first.run.goal)]

@@ -13,7 +13,7 @@ nor rosbags (nor ``rosbags-convert``) decodes (``ros_schemas`` explains).
 Every record decodes with mcap_ros2's stock ``DecoderFactory`` and rosbags' ``AnyReader``,
 and ``rosbags-convert`` turns a file into a rosbag2 directory.
 
-Messages are CDR-encoded from the schema text by rosbags' public typestore (``io/cdr.py``),
+Messages are CDR-encoded from the schema text by rosbags' public typestore (``recording/cdr.py``),
 never by ``rclpy.serialization`` (its buffers can carry rmw's padding, which rosbags
 rejects), nor by mcap_ros2's encoder (private: ``mcap_ros2._dynamic``). ``mcap_ros2.writer.Writer``
 can neither attach channel metadata nor finish a chunk on demand, so the container is

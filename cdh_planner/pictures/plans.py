@@ -4,7 +4,7 @@
 
 - ``out``: for tasks with two free coordinates, the atlas and the path over the C-space
   slice of the task (like the paper's Figs. 10 and 13). The background is the slice of
-  ``io.plots`` (green feasible, orange a length out of range, blue a tension out of range,
+  ``pictures.slices`` (green feasible, orange a length out of range, blue a tension out of range,
   red det J = 0). Every chart is drawn as its domain mapped to task coordinates (its ball
   cut by its neighbours' half-spaces, s -> x = centre + basis s -> pose -> task coordinates; the
   tangent-space polygon, not projected on M, which is what the atlas covers to first
@@ -37,11 +37,11 @@ from pathlib import Path
 import numpy as np
 
 from ..atlas.domain import outline_2d
-from . import plots
-from .plots import DPI, Marker, SliceView, compute_slice, plt
+from . import slices
+from .slices import DPI, Marker, SliceView, compute_slice, plt
 from ..model.pose import wrap_angle
 from ..model.task import COORDINATES
-from ..search.search import STRATEGIES
+from ..search.strategies import STRATEGIES
 
 TWO_PI = 2.0 * np.pi
 CLOSED_FACE, CLOSED_EDGE = "white", "#303030"
@@ -183,7 +183,7 @@ def plot_atlas(planner, problem, result, out, resolution=400, size=ATLAS_SIZE):
         if path is not None:
             _draw_path(ax, path, periodic)
         for label, (a, b) in zip(("start", "goal"), ends):
-            plots._draw_marker(ax, Marker(label, a, b), view)
+            slices._draw_marker(ax, Marker(label, a, b), view)
         handles += _chart_handles(polygons, path is not None)
 
 
@@ -255,10 +255,10 @@ def _slice_picture(grid, out, size, title):
     fig = plt.figure(figsize=(size[0] / DPI, size[1] / DPI), dpi=DPI, layout="constrained")
     try:
         ax = fig.add_subplot()
-        plots._draw_classes(ax, grid)
-        handles = _class_handles(plots._draw_singular(ax, grid))
+        slices._draw_classes(ax, grid)
+        handles = _class_handles(slices._draw_singular(ax, grid))
         yield ax, handles
-        plots._label_axes(ax, grid.view)
+        slices._label_axes(ax, grid.view)
         ax.set_xlim(*grid.view.ranges[0])  # markers outside must not widen the view
         ax.set_ylim(*grid.view.ranges[1])
         ax.set_title(title)
@@ -289,9 +289,9 @@ def _class_handles(has_singular):
     from matplotlib.lines import Line2D
     from matplotlib.patches import Patch
 
-    handles = [Patch(color=c, label=l) for c, l in zip(plots.CLASS_COLORS, CLASS_LABELS)]
+    handles = [Patch(color=c, label=l) for c, l in zip(slices.CLASS_COLORS, CLASS_LABELS)]
     if has_singular:
-        handles.append(Line2D([], [], color=plots.SINGULAR_COLOR, lw=1.5, label=r"$\det J = 0$"))
+        handles.append(Line2D([], [], color=slices.SINGULAR_COLOR, lw=1.5, label=r"$\det J = 0$"))
     return handles
 
 
@@ -368,23 +368,23 @@ def _draw_envelope(ax, x, low, nominal, high, color=BAND_COLOR, nominal_color="b
 def plot_paths(robot, view, paths, out, markers=(), segment=None, periodic=(False, False),
                title="", resolution=300, size=PATHS_SIZE):
     """Paths (label -> (N, 2) picture coordinates) over the classified slice of ``view``,
-    broken where a ``periodic`` axis wraps, with ``markers`` (plots.Marker) and the straight
-    ``segment`` (plots.SegmentOverlay)."""
+    broken where a ``periodic`` axis wraps, with ``markers`` (slices.Marker) and the straight
+    ``segment`` (slices.SegmentOverlay)."""
     from matplotlib.lines import Line2D
 
     grid = compute_slice(robot, view, resolution)
     with _slice_picture(grid, out, size, title) as (ax, handles):
         if segment is not None:
-            plots._draw_segment(ax, segment)
+            slices._draw_segment(ax, segment)
             leaves = ("" if segment.first_unsafe_s is None
                       else f", leaves C at {100 * segment.first_unsafe_s:.1f} %")
-            handles.append(Line2D([], [], color=plots.SEGMENT_COLOR, lw=1.5, ls="--",
+            handles.append(Line2D([], [], color=slices.SEGMENT_COLOR, lw=1.5, ls="--",
                                   label=f"straight segment{leaves}"))
         for (label, y), color in zip(paths.items(), itertools.cycle(PATH_COLORS)):
             _draw_path(ax, wrap(y, periodic), periodic, color)
             handles.append(Line2D([], [], color=color, lw=2.2, label=label))
         for m in markers:
-            plots._draw_marker(ax, m, view)
+            slices._draw_marker(ax, m, view)
 
 
 @dataclass(frozen=True)

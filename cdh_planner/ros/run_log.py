@@ -1,11 +1,11 @@
-"""The node's run log: MCAP files of one node run (``io.mcap_log.RunRecorder``).
+"""The node's run log: MCAP files of one node run (``recording.mcap_log.RunRecorder``).
 
 The first file is opened when the node starts, named
 ``<log_dir>/cdh_planner_<YYYYmmdd-HHMMSS>_<pid>.mcap``; later ones (rotation, or after a
 change of ``log_dir`` / ``log_enabled``) add ``_<n>`` to the name. The last one is closed
 when the node shuts down (SIGINT / SIGTERM included). Every message is flushed as it is
 written, so a killed node loses nothing already recorded; its file lacks the summary, and
-``cdh-planner recover FILE`` completes it (``io.mcap_log`` explains).
+``cdh-planner recover FILE`` completes it (``recording.mcap_log`` explains).
 
 Parameters: every file begins with a ``rcl_interfaces/msg/ParameterEvent`` on
 ``/parameter_events`` (the topic and type ROS itself publishes them on) listing all the
@@ -16,7 +16,7 @@ requests (``replay --requests`` applies them).
 Plan calls: a GetPlan call's request and response as service events
 (``<service>/_service_event``), a PlanPath goal and its result as rosbag2 records actions
 (``<action>/_action/send_goal/_service_event``, ``.../get_result/_service_event``;
-``io.mcap_log``). Both are numbered by the node's one call counter (``sequence_number``),
+``recording.mcap_log``). Both are numbered by the node's one call counter (``sequence_number``),
 which pairs a goal with its result (the node gives ``action_event`` neither the goal's UUID
 nor its final status: they are recorded as zeros and STATUS_UNKNOWN).
 
@@ -43,7 +43,7 @@ from pathlib import Path
 from rcl_interfaces.msg import ParameterEvent
 
 from ..errors import exception_line
-from ..io.mcap_log import REQUEST_RECEIVED, REQUEST_SENT, RESPONSE_RECEIVED, RESPONSE_SENT, \
+from ..recording.mcap_log import REQUEST_RECEIVED, REQUEST_SENT, RESPONSE_RECEIVED, RESPONSE_SENT, \
     RunRecorder
 from .run_pruning import prune
 

@@ -5,7 +5,7 @@
 The free-flight query a user makes most ("from this pose to that one") where the direct
 motion (position linear, orientation slerp) is not safe, so a planner has work to do.
 Poses are drawn by rejection: position uniform in the box under the base anchors that the
-cables can reach, orientation within ``max_tilt`` of the robot's home orientation (that of
+cables can reach (``model.robot.workspace_box``), orientation within ``max_tilt`` of the robot's home orientation (that of
 the pose with the largest margin among random ones: loads hang, they do not tumble), kept
 when the closed-form margin is at least ``min_margin``. Pairs are kept when the dense
 check of the straight motion fails.
@@ -17,9 +17,10 @@ from dataclasses import dataclass
 import numpy as np
 from scipy.spatial.transform import Rotation
 
-from ..feasibility import evaluate
-from ..model.pose import Pose, quaternion_from_tau, tau_from_rotation
-from ..trajectory.verify import SlerpPath, check_path
+from cdh_planner.feasibility import evaluate
+from cdh_planner.model.pose import Pose, quaternion_from_tau, tau_from_rotation
+from cdh_planner.model.robot import workspace_box
+from cdh_planner.trajectory.path_check import SlerpPath, check_path
 
 BATCH = 20_000  # poses drawn per rejection round
 PROBE_SAMPLES = 200  # points of a straight motion probed before the dense check
@@ -35,14 +36,6 @@ class FreeQuery:
     goal: Pose
     margins: tuple
     unsafe_at: float
-
-
-def workspace_box(robot):
-    """(low, high) corners (m) of the box under the base anchors that the cables reach."""
-    a = robot.base_anchors
-    down = 1.0 if robot.force[2] >= 0 else -1.0  # the platform hangs along the load
-    z = sorted((float(a[:, 2].min()), float(a[:, 2].max() + down * robot.length_max.max())))
-    return np.array([a[:, 0].min(), a[:, 1].min(), z[0]]), np.array([a[:, 0].max(), a[:, 1].max(), z[1]])
 
 
 def home_orientation(robot, draws=100_000, seed=0):

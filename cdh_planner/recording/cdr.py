@@ -5,7 +5,7 @@ rosbags all read the bytes. No rclpy.
 
     encoders = CdrEncoders()
     encode = encoders.encoder("sensor_msgs/msg/JointState", full_definition_text)
-    data = encode(plain)     # plain: io.ros_schemas.encodable's dicts, lists, bytes, scalars
+    data = encode(plain)     # plain: recording.ros_schemas.encodable's dicts, lists, bytes, scalars
 
 rosbags builds its message classes from the text; ``plain`` is shaped into them by the
 field definitions (primitive arrays as numpy arrays of the field's type; ``char`` values,

@@ -2,7 +2,7 @@
 
 No rclpy here: definitions are read from the installed ``share/<pkg>/msg|srv|action`` files
 through the ament index, and messages are handled by duck typing (rosidl-generated Python
-classes have ``get_fields_and_field_types``), so the io layer stays importable without a ROS
+classes have ``get_fields_and_field_types``), so the recording layer stays importable without a ROS
 graph.
 
 Schema text layout (rosbag2's ``LocalMessageDefinitionSource``, MCAP ``ros2msg``): the type's
@@ -35,7 +35,7 @@ no stock reader decodes that name:
 Foxglove). The cost: tools that go by the type name alone (``ros2 bag play``) do not find a
 ``pkg/msg/SEvent`` type and skip those topics. ``rosidl_type`` maps the recorded name back;
 files recorded before (``pkg/srv/S_Event``, halves ``pkg/S_Request``) are still read
-(``mcap_ros2_alias``), and ``io.mcap_log.recover_run`` rewrites them to the new names.
+(``mcap_ros2_alias``), and ``recording.mcap_log.recover_run`` rewrites them to the new names.
 
 Actions have no .msg files either. rosidl splits ``pkg/action/A.action`` at its ``---``
 lines into ``A_Goal``, ``A_Result`` and ``A_Feedback``, and derives the two services an

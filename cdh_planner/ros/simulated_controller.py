@@ -4,7 +4,7 @@ JointState, to try the node's ``follow_joint_trajectory`` execution without hard
 demo) and to test it (test/doubles). It is NOT a controller: no hardware, no PID, no
 tolerances; the joints move exactly as commanded.
 
-    python -m cdh_planner.ros.sim_controller JOINT [JOINT ...] [--action NAME]
+    python -m cdh_planner.ros.simulated_controller JOINT [JOINT ...] [--action NAME]
         [--joint-states TOPIC] [--initial X [X ...]] [--time-scale K]
         [--effort-interface] [--allow-nonzero-velocity-at-end] [--commands TOPIC]
 

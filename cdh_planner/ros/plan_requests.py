@@ -34,13 +34,12 @@ from nav_msgs.msg import Path
 from cdh_planner_interfaces.action import PlanPath
 
 from ..errors import InputError, exception_line
+from ..model.pose import on_singular_set
 from ..planner import PlanResult
 from ..settings import check_setting
 from ..status import Status
 from . import messages as M
 from .markers import markers_msg
-
-SINGULAR_SIN = 1e-9  # |sin theta| below this: phi is not determined by the orientation
 
 # keys that ``result_status`` adds to messages.plan_status's (strings; numbers by repr)
 EXTRA_KEYS = ("path_stamp", "waypoints", "path_length_m", "duration_s", "min_margin",
@@ -106,9 +105,9 @@ def request_poses(request, base_frame):
     """
     start = M.pose_from_msg(request.start, base_frame, "start")
     goal = M.pose_from_msg(request.goal, base_frame, "goal")
-    if _singular(start) and not _singular(goal):
+    if on_singular_set(start.tau) and not on_singular_set(goal.tau):
         start = M.pose_from_msg(request.start, base_frame, "start", phi_hint=goal.tau[0])
-    elif _singular(goal) and not _singular(start):
+    elif on_singular_set(goal.tau) and not on_singular_set(start.tau):
         goal = M.pose_from_msg(request.goal, base_frame, "goal", phi_hint=start.tau[0])
     return start, goal
 
@@ -118,10 +117,6 @@ def request_tolerance(request):
     node's ``task.tolerance``)."""
     t = float(request.tolerance)
     return t if math.isfinite(t) and 0.0 < t <= 0.1 else None
-
-
-def _singular(pose):
-    return abs(math.sin(float(pose.tau[1]))) <= SINGULAR_SIN
 
 
 def refusal(reason, message, strategy=""):
