@@ -1,6 +1,6 @@
 """Start-up: whole processes timed from outside (issue 18, item 2).
 
-    .venv/bin/python benchmarks/startup.py [--runs 5] [--skip-node]
+    .venv/bin/python benchmarks/startup.py [--runs 5] [--skip-node] [--before CHECKOUT]
 
 Rows, each a median over --runs fresh processes (wall seconds, and the CPU seconds the
 process used, user + system, which a loaded machine inflates less):
@@ -8,10 +8,15 @@ process used, user + system, which a loaded machine inflates less):
 - ``cdh-planner --help``;
 - ``cdh-planner plan config/problems/robot2_q1_q2.yaml`` (a query one direct motion
   answers, dynamically timed);
-- the floor under that plan: a bare interpreter importing only the libraries a
-  dynamically timed plan cannot do without (numpy; scipy's Rotation, which every pose
-  conversion uses; scipy.interpolate, which toppra imports at its top and which brings
-  scipy.optimize, sparse and special with it);
+- the floor under that plan: a bare interpreter importing only the library a dynamically
+  timed plan cannot do without, numpy (rotations and splines are numpy code,
+  model/rotation.py and trajectory/splines.py; toppra comes without scipy.interpolate and
+  sparse, trajectory/_toppra.py), and for comparison the scipy modules the plan imported
+  before (Rotation, which brings scipy.spatial and sparse; scipy.interpolate, which toppra
+  imports at its top, with scipy.optimize and special);
+- with ``--before CHECKOUT``: the same plan with another checkout first on PYTHONPATH
+  (e.g. the main branch's), its runs alternating with this checkout's, so both see the
+  same load;
 - the node: ``cdh-planner node --ros-args --params-file config/robot2.yaml`` started, timed
   until its ``/cdh_planner/plan`` service (nav_msgs/GetPlan) is seen from this process
   (rclpy initialised here before the node starts, so only the node's start-up is timed;
@@ -35,7 +40,8 @@ from pathlib import Path
 ROOT = Path(__file__).resolve().parents[1]
 CLI = Path(sys.executable).with_name("cdh-planner")
 TARGETS = {"--help": 0.15, "plan robot2_q1_q2": 0.4, "node to serving ~/plan": 2.0}
-FLOOR = "import numpy, scipy.spatial.transform, scipy.interpolate"
+FLOOR = "import numpy"
+BEFORE = "import numpy, scipy.spatial.transform, scipy.interpolate"
 
 
 def cli(*args):
@@ -47,10 +53,11 @@ def children_cpu():
     return r.ru_utime + r.ru_stime
 
 
-def timed_run(argv):
+def timed_run(argv, env=None):
     """(wall s, CPU s) of one process run to its end; output discarded."""
     cpu0, t0 = children_cpu(), time.perf_counter()
-    subprocess.run(argv, cwd=ROOT, stdout=subprocess.DEVNULL, stderr=subprocess.DEVNULL, check=True)
+    subprocess.run(argv, cwd=ROOT, stdout=subprocess.DEVNULL, stderr=subprocess.DEVNULL, check=True,
+                   env=env)
     return time.perf_counter() - t0, children_cpu() - cpu0
 
 
@@ -102,14 +109,24 @@ def main(argv=None):
     ap = argparse.ArgumentParser(description=__doc__, formatter_class=argparse.RawDescriptionHelpFormatter)
     ap.add_argument("--runs", type=int, default=5, help="fresh processes per row (median)")
     ap.add_argument("--skip-node", action="store_true", help="no ROS node row")
+    ap.add_argument("--before", metavar="CHECKOUT", help="also time the plan with this checkout's code")
     args = ap.parse_args(argv)
     print(f"load average {os.getloadavg()[0]:.2f} on {os.cpu_count()} CPUs; PYTHONDONTWRITEBYTECODE="
           f"{os.environ.get('PYTHONDONTWRITEBYTECODE', '')!r}", flush=True)
     print("| command | median wall s | range s | median CPU s | target s | |\n|---|---|---|---|---|---|")
     row("--help", [timed_run(cli("--help")) for _ in range(args.runs)])
     plan = cli("plan", "config/problems/robot2_q1_q2.yaml")
-    row("plan robot2_q1_q2", [timed_run(plan) for _ in range(args.runs)])
-    row(f"floor: python -c '{FLOOR}'", [timed_run([sys.executable, "-c", FLOOR]) for _ in range(args.runs)])
+    if args.before:
+        before_env = dict(os.environ, PYTHONPATH=str(Path(args.before).resolve()))
+        pairs = [(timed_run(plan), timed_run(plan, before_env)) for _ in range(args.runs)]
+        row("plan robot2_q1_q2", [a for a, _ in pairs])
+        row(f"plan robot2_q1_q2 ({args.before})", [b for _, b in pairs])
+    else:
+        row("plan robot2_q1_q2", [timed_run(plan) for _ in range(args.runs)])
+    one_thread = dict(os.environ, OPENBLAS_NUM_THREADS="1")  # as cdh-planner starts numpy
+    for code in (FLOOR, BEFORE):
+        row(f"python -c '{code}'", [timed_run([sys.executable, "-c", code], one_thread)
+                                    for _ in range(args.runs)])
     if not args.skip_node:
         row("node to serving ~/plan", node_to_serving(args.runs))
     return 0

@@ -147,6 +147,9 @@ def main(argv: list[str] | None = None) -> int:
     (the contract in this module's docstring)."""
     if argv is None:
         argv = sys.argv[1:]
+    # One BLAS thread, set before numpy loads OpenBLAS: planning runs its many small solves
+    # on one thread anyway (planner.py), and starting the pool costs 30 ms of every start.
+    os.environ.setdefault('OPENBLAS_NUM_THREADS', '1')
     debug = '--debug' in argv  # until the arguments are parsed
     try:
         command = requested_command(argv)

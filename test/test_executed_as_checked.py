@@ -300,3 +300,10 @@ def test_current_pose_prefers_what_the_feasibility_hook_accepts():
     assert rotation_angle_between(Q, twin.R) < 1e-9
     np.testing.assert_allclose(cable_lengths(pr.robot, q, Q), L, rtol=0, atol=1e-12)
     assert nearest_pose(pr.robot, L, [(twin.p, twin.R), (p + 0.01, R)])[0] is twin.p
+
+
+def test_unique_sorted_is_np_unique():
+    from cdh_planner.trajectory.executed import unique_sorted
+    rng = np.random.default_rng(4)
+    for a in (rng.integers(0, 20, 50), rng.normal(size=30).round(1), np.zeros(0), np.array([3.0])):
+        np.testing.assert_array_equal(unique_sorted(a), np.unique(a))

@@ -10,7 +10,9 @@ import pytest
 from cdh_planner import cli
 from conftest import REPO
 
-HEAVY = ("toppra", "matplotlib", "matplotlib.pyplot", "rclpy", "scipy.spatial", "numba", "numpy")
+HEAVY = ("toppra", "matplotlib", "matplotlib.pyplot", "rclpy", "scipy.spatial", "numba", "numpy",
+         "scipy", "scipy.interpolate", "scipy.sparse", "scipy.linalg", "scipy.optimize", "numpy.ma")
+SCIPY = {"scipy", "scipy.spatial", "scipy.interpolate", "scipy.sparse", "scipy.linalg", "scipy.optimize"}
 
 
 def _modules_after(code):
@@ -37,8 +39,10 @@ def test_plan_command_parser_loads_no_plotting_and_no_ros():
     assert not loaded & {"matplotlib", "matplotlib.pyplot", "rclpy", "numba"}
 
 
-def test_a_direct_motion_plan_loads_no_plotting_ros_or_numba():
-    """robot2_q1_q2: one direct motion, dynamically timed (toppra runs), no chart."""
+def test_a_direct_motion_plan_loads_no_plotting_ros_numba_or_scipy_module():
+    """robot2_q1_q2: one direct motion, dynamically timed (toppra runs), no chart: numpy
+    alone does its rotations, splines and small banded solves (issue 18: scipy's
+    submodules were 0.2 s of its 0.55 s)."""
     problem = REPO / "config" / "problems" / "robot2_q1_q2.yaml"
     code = ("import contextlib, io\nfrom cdh_planner import cli\n"
             "with contextlib.redirect_stdout(io.StringIO()) as out:\n"
@@ -46,7 +50,7 @@ def test_a_direct_motion_plan_loads_no_plotting_ros_or_numba():
             "assert 'dynamic timing' in out.getvalue()")
     loaded = _modules_after(code)
     assert "toppra" in loaded
-    assert not loaded & {"matplotlib", "matplotlib.pyplot", "rclpy", "numba"}
+    assert not loaded & ({"matplotlib", "matplotlib.pyplot", "rclpy", "numba", "numpy.ma"} | SCIPY)
 
 
 def test_toppra_is_imported_without_matplotlib_and_its_plt_still_works():
@@ -78,3 +82,59 @@ def test_top_level_help_lists_every_summary(capsys):
     out = " ".join(capsys.readouterr().out.split())
     for name, summary in cli.SUMMARIES.items():
         assert name in out and " ".join(summary.split()) in out
+
+
+def test_toppra_is_imported_without_scipy_interpolate_or_sparse_and_they_still_work():
+    """Its names from them are stand-ins that reach the real classes at first use."""
+    code = ("import cdh_planner.trajectory.dynamics\n"
+            "import toppra.interpolator as ti, toppra.simplepath as sp\n"
+            "import toppra.solverwrapper.ecos_solverwrapper as ecos\n"
+            "assert 'scipy.interpolate' not in sys.modules and 'scipy.sparse' not in sys.modules\n"
+            "assert 'scipy' not in sys.modules\n"
+            "import numpy as np\n"
+            "path = ti.SplineInterpolator([0.0, 1.0, 2.0], [[0.0], [1.0], [0.0]])\n"
+            "assert abs(path(0.5)[0] - ti.CubicSpline([0.0, 1.0, 2.0], [0.0, 1.0, 0.0])(0.5)) < 1e-15\n"
+            "import scipy.interpolate\n"
+            "assert type(path.cspl) is scipy.interpolate.CubicSpline\n"
+            "assert sp.BPoly.from_derivatives == scipy.interpolate.BPoly.from_derivatives\n"
+            "assert ecos.scipy.sparse.lil_matrix((2, 2)).shape == (2, 2)\n")
+    loaded = _modules_after(code)
+    assert {"toppra", "scipy.interpolate", "scipy.sparse"} <= loaded
+
+
+def test_a_planning_algorithm_that_needs_scipy_still_gets_it():
+    """The deferred imports stop at toppra: the first chart's k-d tree, a long path's
+    banded solve and other commands import scipy as usual."""
+    code = ("import cdh_planner.trajectory.dynamics\n"
+            "import numpy as np\n"
+            "from cdh_planner.trajectory import splines\n"
+            "n = splines.DENSE_MAX + 1\n"
+            "ab = np.vstack([np.ones(n), 4 * np.ones(n), np.ones(n)])\n"
+            "x = splines.solve_banded((1, 1), ab, np.ones(n))\n"
+            "assert abs(x[n // 2] - 1 / 6) < 1e-12\n"
+            "from scipy.spatial import cKDTree\n"
+            "assert cKDTree(np.eye(3)).query([1.0, 0.0, 0.0])[1] == 0\n")
+    assert {"scipy.linalg", "scipy.spatial"} <= _modules_after(code)
+
+
+def test_toppra_defers_scipy_interpolate_also_when_scipy_is_already_loaded():
+    code = ("import scipy.linalg\n"
+            "import cdh_planner.trajectory.dynamics\n"
+            "assert 'scipy.interpolate' not in sys.modules and 'scipy.sparse' not in sys.modules\n"
+            "import toppra.interpolator as ti\n"
+            "assert abs(ti.CubicSpline([0.0, 1.0], [0.0, 2.0])(0.5) - 1.0) < 1e-15\n")
+    assert "scipy.interpolate" in _modules_after(code)
+
+
+@pytest.mark.parametrize("given, expected", [(None, "1"), ("2", "2")])
+def test_the_cli_asks_for_one_blas_thread_unless_told_otherwise(given, expected):
+    """Set before numpy loads OpenBLAS (its thread pool's start is 30 ms of a plan)."""
+    import os
+    env = {k: v for k, v in os.environ.items() if k != "OPENBLAS_NUM_THREADS"}
+    if given is not None:
+        env["OPENBLAS_NUM_THREADS"] = given
+    code = ("import contextlib, io, os\nfrom cdh_planner import cli\n"
+            "with contextlib.redirect_stdout(io.StringIO()):\n    cli.main(['--help'])\n"
+            "print(os.environ['OPENBLAS_NUM_THREADS'])")
+    out = subprocess.run([sys.executable, "-c", code], capture_output=True, text=True, check=True, env=env)
+    assert out.stdout.strip() == expected

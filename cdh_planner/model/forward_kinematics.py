@@ -15,7 +15,7 @@ decides), never raised.
 from dataclasses import dataclass
 
 import numpy as np
-from scipy.spatial.transform import Rotation
+from .rotation import Rotation  # numpy: no scipy.spatial import (start-up)
 
 from ..errors import InputError
 from .kinematics import LSQ_RTOL, TOL_M, cable_lengths, forward_kinematics, rotation_vector_exp

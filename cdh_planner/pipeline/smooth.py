@@ -4,10 +4,10 @@ waypoint whose move would not be a valid pose stays where it was. The ends never
 """
 
 import numpy as np
-from scipy.linalg import solve_banded
 
 from ..model.task import COORDINATES
 from ..trajectory import clearance
+from ..trajectory.splines import solve_banded  # numpy when small: no scipy import (start-up)
 from .validity import wrapped
 
 SMOOTHING_ROUNDS = 12

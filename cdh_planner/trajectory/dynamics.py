@@ -7,8 +7,9 @@
 
 Model (SI units)
 ----------------
-The geometric path is C2 through the planned waypoints: p(s) a cubic spline, R(s) scipy's
-RotationSpline (C2 on SO(3)), s the cumulative pose distance |dp| + L |d angle| (m).
+The geometric path is C2 through the planned waypoints: p(s) a natural cubic spline, R(s)
+scipy's RotationSpline (C2 on SO(3); both in numpy, trajectory/splines.py), s the
+cumulative pose distance |dp| + L |d angle| (m).
 With u = s'' and x = s'^2, the centre of mass c = p + R g (g: the load point, platform
 frame) has c'' = c_s u + c_ss x; the body angular velocity is w s' and its derivative
 w u + w_s x (w = dR/ds in the body frame). Newton-Euler about O gives the inertial wrench
@@ -39,16 +40,16 @@ from dataclasses import dataclass, replace
 from functools import partial
 
 import numpy as np
-from scipy.interpolate import CubicSpline
-from scipy.spatial.transform import Rotation, RotationSpline
 
 from ..errors import InputError, check_finite
 from ..cable_feasibility import nominal_tensions, planning_feasibility as evaluate, tension_map
 from ..feasibility import cable_vectors, inverse_ellipsoid_factor, nominal_wrench, screw_jacobian
 from ..model.pose import tau_from_rotation
-from ._toppra import toppra  # toppra without matplotlib (0.25 s of start-up)
-from .executed import executable, spline_rates
+from ..model.rotation import Rotation
+from ._toppra import toppra  # toppra without matplotlib and scipy.interpolate (start-up)
+from .executed import executable, spline_rates, unique_sorted
 from .path import PlannedPath
+from .splines import CubicSpline, RotationSpline  # scipy's, in numpy (start-up time)
 
 GRID_POINTS = 400       # toppra gridpoints along the path (at least one per waypoint)
 CHECK_DT = 1e-3         # s: the dense check's time step
@@ -261,9 +262,9 @@ def _grid(geo, n):
     """The waypoints' s and n evenly spaced ones, none closer than a tenth of the spacing to
     a waypoint (a sliver interval would turn toppra's rounding into a huge s'')."""
     even = np.linspace(0.0, geo.length, n)
-    wp = np.unique(geo.s_wp)
+    wp = unique_sorted(geo.s_wp)
     gap = np.min(np.abs(even[:, None] - wp[None, :]), axis=1)
-    return np.unique(np.concatenate([wp, even[gap > 0.1 * geo.length / (n - 1)]]))
+    return unique_sorted(np.concatenate([wp, even[gap > 0.1 * geo.length / (n - 1)]]))
 
 
 def _infeasible(path, geo, grid, reason):

@@ -30,14 +30,14 @@ docstring of that function).
 from dataclasses import dataclass, replace
 
 import numpy as np
-from scipy.interpolate import CubicSpline
-from scipy.spatial.transform import Rotation, Slerp
 
 from ..cable_feasibility import nominal_tensions, tension_map
 from ..feasibility import (cable_vectors, inverse_ellipsoid_factor, load_point, nominal_wrench,
                            screw_jacobian)
 from ..model.forward_kinematics import forward_kinematics_many
 from ..model.pose import tau_from_rotation
+from ..model.rotation import Rotation, Slerp
+from .splines import CubicSpline
 
 CHECK_DT = 1e-3        # s: step of the check's central differences
 PHASES = 2             # samples per CHECK_DT: a violation narrower than the step is not
@@ -128,6 +128,14 @@ def _extremes(c):
 
 # ----------------------------------------------------------------------------- the check
 
+
+def unique_sorted(a):
+    """The distinct values of a 1-D array, ascending (np.unique's answer; np.unique itself
+    imports numpy.ma, 10 - 20 ms of a plan's start-up)."""
+    a = np.sort(np.asarray(a).ravel())
+    return a[np.concatenate([[True], a[1:] != a[:-1]])] if a.size else a
+
+
 @dataclass(frozen=True)
 class ExecutionCheck:
     """The check of one trajectory as executed: ``ok``; ``reason`` (what failed, one
@@ -203,14 +211,14 @@ def check_executed(robot, t_wp, L, V, A, seed, mass=None, inertia=None, max_cabl
                           least_margin=float(np.min(margin / span, initial=np.inf)),
                           worst_t=worst_t, speed_ratio=float(np.max(speed, initial=0.0)),
                           accel_ratio=float(np.max(accel, initial=0.0)),
-                          bad_segments=np.unique(bad_k), samples=int(np.sum(sel)))
+                          bad_segments=unique_sorted(bad_k), samples=int(np.sum(sel)))
 
 
 def _executed_margins(robot, t_wp, L, V, A, seed, ts, mid, q, mass, inertia):
     """Tension margins (M, 6) N at the samples ts[mid] of the executed motion (forward
     kinematics of the quintic's lengths, differences over ts[mid -+ q]), and where forward
     kinematics lost the platform (M,) (no convergence, or a twin far from the seed)."""
-    need = np.unique(np.concatenate([mid - q, mid, mid + q]))
+    need = unique_sorted(np.concatenate([mid - q, mid, mid + q]))
     pos, _, _ = quintic(t_wp, L, V, A, ts[need])
     p_seed, R_seed = seed(ts[need])
     fk = forward_kinematics_many(robot, pos, p_seed, R_seed)
