@@ -57,7 +57,7 @@ def segment_costs(lengths, margins, weight):
 
 
 def tension_margins(robot, f):
-    """Per pose and cable, min(f0 - v - fmin, fmax - f0 - v) (N, 6), N: how far the tension
+    """Per pose and cable, min(f0 - v - fmin, fmax - f0 - v) (N, m), N: how far the tension
     envelope of a ``Feasibility`` is from the tension limits (negative outside)."""
     return np.minimum(f.tension_min - robot.tension_min, robot.tension_max - f.tension_max)
 

@@ -227,7 +227,7 @@ def dynamic_timing(robot, path, mass, inertia, max_cable_speed, max_cable_accel,
 
 
 def tensions_over_time(robot, timing, mass, inertia, dt=CHECK_DT):
-    """(t (M,), dynamic f (M, 6), static f0 (M, 6), spread v (M, 6)) of a feasible timing,
+    """(t (M,), dynamic f (M, m), static f0 (M, m), spread v (M, m)) of a feasible timing,
     every dt s: what the cables carry with and without the motion's own accelerations (N)."""
     sample = _sampled(robot, timing.geometry, timing.s, timing.sd, mass, inertia, dt)
     return sample.t, sample.f, sample.f0, sample.v
@@ -236,7 +236,7 @@ def tensions_over_time(robot, timing, mass, inertia, dt=CHECK_DT):
 @dataclass
 class _Sample:
     """The timed motion every dt: times t, s' and s'' (M,), lengths L and their s-derivatives
-    L_s, L_ss, dynamic tensions f, static f0 and the ellipsoid's spread v (M, 6)."""
+    L_s, L_ss, dynamic tensions f, static f0 and the ellipsoid's spread v (M, m)."""
 
     t: np.ndarray
     sdot: np.ndarray

@@ -165,7 +165,7 @@ class ExecutionCheck:
 
 def check_executed(robot, t_wp, L, V, A, seed, mass=None, inertia=None, max_cable_speed=np.inf,
                    max_cable_accel=np.inf, dt=CHECK_DT, within=None):
-    """ExecutionCheck of the points (t_wp (N,) s; L, V, A (N, 6) m, m/s, m/s^2) executed by
+    """ExecutionCheck of the points (t_wp (N,) s; L, V, A (N, m) m, m/s, m/s^2) executed by
     a JTC (module docstring). ``seed(t)`` -> (p (M, 3), R (M, 3, 3)): a pose near the
     platform's at times t (the planned motion), where forward kinematics starts. ``mass``
     (kg) and ``inertia`` (3x3 kg m^2 about the load point) None: no inertial wrench.
@@ -215,7 +215,7 @@ def check_executed(robot, t_wp, L, V, A, seed, mass=None, inertia=None, max_cabl
 
 
 def _executed_margins(robot, t_wp, L, V, A, seed, ts, mid, q, mass, inertia):
-    """Tension margins (M, 6) N at the samples ts[mid] of the executed motion (forward
+    """Tension margins (M, m) N at the samples ts[mid] of the executed motion (forward
     kinematics of the quintic's lengths, differences over ts[mid -+ q]), and where forward
     kinematics lost the platform (M,) (no convergence, or a twin far from the seed)."""
     need = unique_sorted(np.concatenate([mid - q, mid, mid + q]))

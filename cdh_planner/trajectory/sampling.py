@@ -34,8 +34,8 @@ def check_timed_path(path):
 
 @dataclass(frozen=True)
 class CableSample:
-    """Cable command at one instant: ``lengths`` (6,) m, ``velocities`` (6,) m/s,
-    ``effort`` (6,) N (nominal tensions)."""
+    """Cable command at one instant: ``lengths`` (m,) m, ``velocities`` (m,) m/s,
+    ``effort`` (m,) N (nominal tensions)."""
 
     lengths: np.ndarray
     velocities: np.ndarray
