@@ -837,30 +837,46 @@ def _band_names(m):
     return np.array([f"{CONSTRAINTS[j // m]}[{j % m + 1}]" for j in range(4 * m)])
 
 
+def _band(robot, p, tau, R):
+    """lengths (N, m), unit vectors, sqrt(det J J^T), t0, v and the length and band margins
+    (N, 4, m) of poses: the kernel without the facet test."""
+    p = np.ascontiguousarray(np.atleast_2d(np.asarray(p, dtype=float)))
+    if R is None:
+        R = rotation_tt(np.atleast_2d(tau))
+    R = np.ascontiguousarray(np.asarray(R, dtype=float).reshape(-1, 3, 3))
+    lengths, u, J, c = pose_geometry(p, R, robot.base_anchors, robot.platform_anchors,
+                                     robot.load_point)
+    kernel = evaluate_kernel_parallel if len(p) >= PARALLEL_MIN else evaluate_kernel
+    scale, _, _, _, _, t0, v = kernel(
+        J, c, robot.wrench_center_local, _inverse_factor(robot.ellipsoid_matrix.tobytes()),
+        robot.ellipsoid_frame == "load", robot.tension_min, robot.tension_max, NO_SUBSETS,
+        SINGULAR_DET)
+    span_l = robot.length_max - robot.length_min
+    span_t = robot.tension_max - robot.tension_min
+    margins = np.stack([(lengths - robot.length_min) / span_l, (robot.length_max - lengths) / span_l,
+                        (t0 - v - robot.tension_min) / span_t, (robot.tension_max - t0 - v) / span_t],
+                       axis=1)
+    return lengths, u, scale, t0, v, margins
+
+
+def band_margin(robot, p, tau=None, R=None):
+    """``band_feasibility(...).margin`` (N,) alone: the atlas's domain test, where a
+    Feasibility record per pose would cost more than the kernel."""
+    lengths, _, scale, _, _, margins = _band(robot, p, tau, R)
+    margin = margins.reshape(len(margins), -1).min(axis=1)  # nan where singular
+    ok = (scale > SINGULAR_DET) & (lengths.min(axis=1) > 0) & ~np.isnan(margin)
+    return np.where(ok, margin, -np.inf)
+
+
 def band_feasibility(robot, p, tau=None, R=None):
     """The planner's feasibility of poses of an m-cable robot (``Feasibility``): ``margin``
     the least of the length margins and the centred rule's band margins ``margins``
     (N, 4, m), named as the closed form names them; positive iff the band t0 +- v is within
     the limits (which implies the facet test). One kernel call without the facet test
     (``rule_tensions``)."""
-    p = np.ascontiguousarray(np.atleast_2d(np.asarray(p, dtype=float)))
-    if R is None:
-        R = rotation_tt(np.atleast_2d(tau))
-    R = np.ascontiguousarray(np.asarray(R, dtype=float).reshape(-1, 3, 3))
-    n, m = p.shape[0], len(robot.base_anchors)
-    lengths, u, J, c = pose_geometry(p, R, robot.base_anchors, robot.platform_anchors,
-                                     robot.load_point)
-    kernel = evaluate_kernel_parallel if n >= PARALLEL_MIN else evaluate_kernel
-    scale, _, _, _, _, t0, v = kernel(
-        J, c, robot.wrench_center_local, _inverse_factor(robot.ellipsoid_matrix.tobytes()),
-        robot.ellipsoid_frame == "load", robot.tension_min, robot.tension_max, NO_SUBSETS,
-        SINGULAR_DET)
+    lengths, u, scale, t0, v, margins = _band(robot, p, tau, R)
+    n, m = margins.shape[0], margins.shape[2]
     singular = ~(scale > SINGULAR_DET) | (lengths.min(axis=1) <= 0)
-    span_l = robot.length_max - robot.length_min
-    span_t = robot.tension_max - robot.tension_min
-    margins = np.stack([(lengths - robot.length_min) / span_l, (robot.length_max - lengths) / span_l,
-                        (t0 - v - robot.tension_min) / span_t, (robot.tension_max - t0 - v) / span_t],
-                       axis=1)
     flat = margins.reshape(n, -1)
     k = np.argmin(np.where(np.isnan(flat), -np.inf, flat), axis=1)
     margin = flat[np.arange(n), k]

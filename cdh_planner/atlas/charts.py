@@ -97,6 +97,14 @@ class Atlas:
     def in_domain(self, x):
         return self._in_box(x) and (self._inside is None or bool(self._inside(x)))
 
+    def _all_in_domain(self, xs):
+        """Are all the points xs in the domain? (with the constraint's ``inside_many``, one
+        call for all)"""
+        many = getattr(self.c, "inside_many", None)
+        if many is None:
+            return all(self.in_domain(x) for x in xs)
+        return all(self._in_box(x) for x in xs) and bool(np.all(many(np.array(xs))))
+
     def _in_box(self, x):
         free = ~self.periodic
         return bool(np.all(x[free] >= self.c.lower[free]) and np.all(x[free] <= self.c.upper[free]))
@@ -334,7 +342,7 @@ class Atlas:
         gap = np.linalg.norm(self.diff(self.charts[a].x, self.charts[b].x))
         n = max(3, int(math.ceil(gap / (spacing * self.radius))) + 1)
         pts = self.segment(a, b, n)
-        if pts is None or not all(self.in_domain(x) for x in pts):
+        if pts is None or not self._all_in_domain(pts):
             return None
         steps = [np.linalg.norm(self.diff(u, v)) for u, v in zip(pts, pts[1:])]
         return pts if max(steps) <= 3.0 * gap / (n - 1) + 1e-12 else None

@@ -17,7 +17,6 @@ Same duck type as ``constraint.TaskConstraint`` (the atlas's, the planner's).
 
 import numpy as np
 
-from ..cable_feasibility import planning_feasibility
 from ..model.task import COORDINATES
 from .constraint import PHI, SIGMA, THETA
 
@@ -76,6 +75,11 @@ class ConfigurationConstraint:
         predicate part; the box is ``lower``, ``upper``)"""
         return self.margin(x) >= self.margin_floor
 
+    def inside_many(self, xs):
+        """``inside`` of the rows of xs (N, n_vars), in one call: (N,) bool."""
+        X = np.asarray(xs)[:, :N_POSE] * self.scale[:N_POSE]
+        return _band_margin(self.robot, X[:, :3], X[:, 3:N_POSE]) >= self.margin_floor
+
     def key(self, x):
         """Pose (and task variables) with angles as (cos, sin): 1-Lipschitz in x."""
         parts = [x[:3], [np.cos(x[PHI]), np.sin(x[PHI]), x[THETA], np.cos(x[SIGMA]), np.sin(x[SIGMA])]]
@@ -96,6 +100,14 @@ class ConfigurationConstraint:
         return X[:3].copy(), X[3:N_POSE].copy()
 
     def margin(self, x):
-        """The normalised margin the planner asks (``planning_feasibility``) of the pose of x."""
+        """The normalised margin the planner asks (``cable_feasibility.planning_feasibility``,
+        for m > 6 ``zonotope.band_margin``) of the pose of x."""
         p, tau = self.pose(x)
-        return float(planning_feasibility(self.robot, p[None], tau[None]).margin[0])
+        return float(_band_margin(self.robot, p[None], tau[None])[0])
+
+
+def _band_margin(robot, p, tau):
+    """``zonotope.band_margin``, imported on first use: the compiled kernels load numba,
+    which a six-cable planner never needs (test_startup_imports)."""
+    from ..zonotope import band_margin
+    return band_margin(robot, p, tau)
