@@ -17,7 +17,11 @@ from cdh_planner.model.forward_kinematics import forward_kinematics_many
 from cdh_planner.model.kinematics import forward_kinematics
 from cdh_planner.model.pose import rotation_tt
 from cdh_planner.model.robot import load_robot
+from cdh_planner.model.pose import Pose
+from cdh_planner.model.task import task_from_dict
 from cdh_planner.planner import Planner
+from cdh_planner.settings import PlannerSettings
+from cdh_planner.status import Status
 from cdh_planner.trajectory.path_check import SlerpPath
 
 from conftest import CONFIG
@@ -69,8 +73,6 @@ def test_cogiro_plans_and_the_lp_holds_its_samples():
     """A CoGiRo free-flight query (quasi-static, so the test stays short): the direct
     motion of a 2.5 m move with a 0.6 rad turn."""
     robot = load_robot(CONFIG / "cogiro.yaml")
-    from cdh_planner.model.task import task_from_dict  # noqa: PLC0415
-    from cdh_planner.model.pose import Pose  # noqa: PLC0415
     task = task_from_dict({"type": "free"})
     pl = Planner(robot, task, dataclasses.replace(
         load_problem(PROBLEMS / "cogiro_turn_at_edge.yaml").settings, dynamics="quasi_static"))
@@ -137,3 +139,22 @@ def test_forward_kinematics_many_is_least_squares_for_eight_cables():
         assert one.ok
         assert np.allclose(fk.p[k], one.p, atol=1e-7) and np.allclose(fk.R[k], one.R, atol=1e-7)
         assert fk.residual[k] == pytest.approx(one.residual, rel=1e-3)
+
+
+@pytest.mark.parametrize("strategy", ["astar", "gbf"])
+def test_no_path_out_of_an_island_of_the_band_domain(strategy):
+    """robot2_8's slice at p = (0, 0, 0.3) m, sigma = 0: the tilted poses around
+    (phi, theta) = (-1.55, 2.2) are an island where the band fits, apart from the level
+    poses. The domain predicate bounds the atlas: the island's side is exhausted (NO_PATH
+    at the chart radius, not a timeout), and every chart centre is inside the domain."""
+    robot = load_robot(CONFIG / "robot2_8.yaml")
+    task = task_from_dict({"type": "slice", "fixed": {"x": 0.0, "y": 0.0, "z": 0.3, "sigma": 0.0}})
+    planner = Planner(robot, task, dataclasses.replace(PlannerSettings(), strategy=strategy,
+                                                       timeout_s=60))
+    res = planner.plan(Pose(np.array([0.0, 0.0, 0.3]), np.array([-1.55, 2.2, 0.0])),
+                       Pose(np.array([0.0, 0.0, 0.3]), np.array([-2.9, 1.0, 0.0])))
+    assert (res.success, res.reason) == (False, Status.NO_PATH), res.message
+    assert "exhausted" in res.message and res.charts > 50
+    c = planner.constraint
+    centres = np.array([ch.x for ch in planner.atlas.charts])
+    assert np.all(c.inside_many(centres))
