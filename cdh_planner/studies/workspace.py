@@ -27,7 +27,7 @@ from dataclasses import dataclass, field, replace
 import numpy as np
 
 from ..errors import InputError
-from ..feasibility import evaluate
+from ..cable_feasibility import feasibility_of as evaluate  # m > 6: the facet test
 from ..model.pose import (Pose, quaternion_from_tau, rotation_from_quaternion, tau_from_quaternion,
                           tau_from_rotation)
 from ..model.robot import workspace_box
