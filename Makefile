@@ -54,11 +54,12 @@ test: venv
 	$(PY) -m pytest
 
 # Benchmark-only dependencies (OMPL for benchmarks/vs_ompl.py): only `make bench` installs them.
+# Every benchmarks/*.py script runs; a module without a __main__ block (random_queries.py) is skipped.
 bench: venv
 	$(PY) -m pip install -r benchmarks/requirements.txt
 	@set -e; shopt -s nullglob; files=(benchmarks/*.py); \
 	if [ $${#files[@]} -eq 0 ]; then echo "no benchmarks/*.py"; fi; \
-	for f in "$${files[@]}"; do echo "== $$f"; $(PY) "$$f"; done
+	for f in "$${files[@]}"; do grep -q '^if __name__ == "__main__":' "$$f" || continue; echo "== $$f"; $(PY) "$$f"; done
 
 clean:
 	rm -rf $(VENV) build install log .pytest_cache *.egg-info

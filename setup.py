@@ -27,6 +27,7 @@ setup(
         ('share/' + package_name + '/config', sorted(glob('config/*.yaml') + glob('config/*.rviz')
                                                       + glob('config/*.json'))),
         ('share/' + package_name + '/config/problems', sorted(glob('config/problems/*.yaml'))),
+        ('share/' + package_name + '/config/scenes', sorted(glob('config/scenes/*.yaml'))),
         ('share/' + package_name + '/launch', sorted(glob('launch/*.launch.py'))),
     ],
     install_requires=['setuptools', 'numpy', 'scipy', 'pyyaml', 'matplotlib', 'tqdm', 'threadpoolctl', 'numba', 'toppra',

@@ -15,7 +15,7 @@ The same seed gives the same queries on every machine (numpy's PCG64).
 from dataclasses import dataclass
 
 import numpy as np
-from scipy.spatial.transform import Rotation
+from cdh_planner.model.rotation import Rotation
 
 from cdh_planner.cable_feasibility import feasibility_of as evaluate  # m > 6: the facet test
 from cdh_planner.model.pose import Pose, quaternion_from_tau, tau_from_rotation
@@ -43,7 +43,7 @@ def home_orientation(robot, draws=100_000, seed=0):
     rng = np.random.default_rng(seed)
     lo, hi = workspace_box(robot)
     p = rng.uniform(lo, hi, size=(draws, 3))
-    R = Rotation.random(draws, random_state=rng)
+    R = Rotation.random(draws, rng)
     return R[int(np.argmax(evaluate(robot, p, R=R.as_matrix()).margin))]
 
 

@@ -60,6 +60,9 @@ class LiveChoices(Sequence):
     def __len__(self):
         return len(self.names())
 
+    def __iter__(self):  # one read of the registry per loop, not one per item
+        return iter(self.names())
+
     def __eq__(self, other):
         return isinstance(other, Sequence) and tuple(self) == tuple(other)
 

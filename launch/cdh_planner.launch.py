@@ -1,15 +1,15 @@
 """Start the cdh_planner node with a robot file.
 
     ros2 launch cdh_planner cdh_planner.launch.py [robot:=/path/to/robot.yaml]
-        [execution_mode:=stream|forward_command|follow_joint_trajectory]
+        [execution_mode:=stream|forward_command|follow_joint_trajectory|...]
         [namespace:=NS] [use_sim_time:=false|true] [log_level:=info]
 
 ``robot``: the robot file, a ROS 2 parameters file whose ``cdh_planner: ros__parameters:``
 hold the robot, its task and the planner settings (default: the installed
 ``config/robot2.yaml``, the paper's Robot 2). ``execution_mode``: the node's
-``execution.mode`` (stream: JointState setpoints on ~/cable_command for a custom driver;
-forward_command: Float64MultiArray to a JointGroupPositionController; follow_joint_trajectory:
-a JointTrajectoryController's action). ``namespace``: the node's namespace (its topics,
+``execution.mode``, one of the registered command outlets (its choices and description
+come from ``cdh_planner/ros/command_outlets.py``, so a new one needs no change here).
+``namespace``: the node's namespace (its topics,
 services and action follow it; /tf, /tf_static and /diagnostics stay absolute).
 ``use_sim_time``: the node's clock from /clock. ``log_level``: rcl's (debug, info, warn,
 error, fatal). The node runs as ``cdh-planner node --ros-args --params-file <robot>
@@ -22,6 +22,8 @@ from launch.substitutions import LaunchConfiguration, PathJoinSubstitution
 from launch_ros.actions import Node
 from launch_ros.substitutions import FindPackageShare
 
+from cdh_planner.ros.command_outlets import OUTLETS, modes_description
+
 
 def generate_launch_description():
     robot = DeclareLaunchArgument(
@@ -32,11 +34,7 @@ def generate_launch_description():
                     "planner settings)")
     mode = DeclareLaunchArgument(
         "execution_mode", default_value="stream",
-        choices=["stream", "forward_command", "follow_joint_trajectory"],
-        description="how ~/execute moves the winches: stream (JointState setpoints on "
-                    "~/cable_command), forward_command (a JointGroupPositionController's "
-                    "~/commands) or follow_joint_trajectory (a JointTrajectoryController's "
-                    "action)")
+        choices=list(OUTLETS), description=modes_description())
     namespace = DeclareLaunchArgument("namespace", default_value="",
                                       description="the node's namespace")
     sim_time = DeclareLaunchArgument("use_sim_time", default_value="false",

@@ -88,11 +88,26 @@ def test_demo_writes_the_two_slice_pictures(full_run):
         assert png_size(path) == (1000, 800)
         assert f"wrote {path}" in text
     assert re.search(rf"files in {re.escape(str(out.resolve()))}/: robot1_slice.png, "
-                     r"robot2_sphere.png, cdh_planner_\d{8}-\d{6}_\d+\.mcap, "
+                     r"robot2_sphere.png, robot2_sphere_ball.png, cdh_planner_\d{8}-\d{6}_\d+\.mcap, "
                      r"robot2_plans.png, robot2_execution.png\n", text)
     # The drawn segments are the ones verified: same first unsafe points.
     assert "segment q_s -> q_g leaves C at 3.2 %" in text
     assert "segment q_2 -> q_3 leaves C at 4.3 %" in text
+
+
+def test_demo_obstacle_step(full_run):
+    """Robot 2 free flight q_2 -> q_3 with a ball on cable 3: the straight motion is
+    wrench-feasible but hits the ball; the plan goes around it, dense-checked; the slice
+    shows the poses in collision."""
+    rc, text, out = full_run
+    assert rc == 0, text[-2500:]
+    step = text[text.index("== 5. An obstacle on the straight motion"):]
+    step = step[:step.index("\n== ")]
+    assert re.search(r"no scene: wrench-feasible; with the ball: hits at s = 0\.\d+ "
+                     r"\(collision winch_3 / ball\)", step), step
+    assert re.search(r"dense check against the ball and the wrench: clear; least clearance "
+                     r"at a waypoint [\d.]+ mm", step), step
+    assert png_size(out / "robot2_sphere_ball.png") == (1000, 800)
 
 
 def test_demo_ros_story(full_run):
@@ -105,7 +120,7 @@ def test_demo_ros_story(full_run):
     rc, text, out = full_run
     assert rc == 0, text[-3000:]
     assert "DIFFERS" not in text and "FAILED" not in text and "skipped" not in text
-    ros = text[text.index("== 5. The ROS 2 node"):]
+    ros = text[text.index("== 6. The ROS 2 node"):]
     assert re.search(r"node /cdh_planner ready in [\d.]+ s: base_frame cdh_base, task.type "
                      r"sphere, planner.strategy auto", ros)
     parts = {}

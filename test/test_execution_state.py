@@ -159,7 +159,7 @@ def test_a_failed_controller_run_after_a_completed_stream_does_not_wedge(node, m
     finish_stream(node, monkeypatch)
     assert outcomes(node) == ["completed"]
     node.set_parameters(FOLLOW)
-    node._execution.controller.server_wait_s = 0.2
+    node._execution.outlets["follow_joint_trajectory"].controller.server_wait_s = 0.2
     ok, message = execute(node)
     assert ok, message
     assert spin_until(node, lambda: len(node.results) == 2), node.results
@@ -175,7 +175,7 @@ def test_a_completed_stream_after_a_failed_controller_run_keeps_the_node(node, m
     end used to raise in the executor and take the node down)."""
     plan(node)
     node.set_parameters(FOLLOW)
-    node._execution.controller.server_wait_s = 0.2
+    node._execution.outlets["follow_joint_trajectory"].controller.server_wait_s = 0.2
     assert execute(node)[0]
     assert spin_until(node, lambda: len(node.results) == 1)
     node.set_parameters(STREAM)
@@ -216,7 +216,7 @@ class ScriptedController:
 
 def scripted(node, **kwargs):
     controller = ScriptedController(**kwargs)
-    node._execution.controller = controller
+    node._execution.outlets["follow_joint_trajectory"].controller = controller
     node.set_parameters(FOLLOW)
     plan(node)
     return controller

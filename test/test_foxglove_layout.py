@@ -26,7 +26,7 @@ NOTE_KEY = "_comment"   # the layout's one-paragraph note, not a Foxglove settin
 
 # the node's published topics, by their constants in ros/interface.py
 TOPIC_CONSTANTS = ("PATH", "MARKERS", "PLAN_RESULT", "PLAN_PROGRESS", "CABLE_COMMAND",
-                   "TENSION_ENVELOPE", "PLANNED_TRAJECTORY", "EXECUTION_RESULT")
+                   "TENSION_ENVELOPE", "PLANNED_TRAJECTORY", "EXECUTION_RESULT", "SCENE_MARKERS")
 # fields of the two standard types the envelope messages embed (not in this repository)
 STANDARD_FIELDS = {
     "std_msgs/Header": {"stamp": "builtin_interfaces/Time", "frame_id": "string"},
@@ -126,7 +126,7 @@ def test_every_topic_is_one_the_node_publishes_or_joint_states(layout):
 def test_the_3d_panel_renders_markers_and_path_in_the_default_fixed_frame(layout):
     (scene,) = [c for i, c in layout["configById"].items() if i.startswith("3D!")]
     assert scene["followTf"] == SPEC["fixed_frame"].default
-    for name in (interface.MARKERS, interface.PATH):
+    for name in (interface.MARKERS, interface.PATH, interface.SCENE_MARKERS):   # obstacles
         assert scene["topics"][f"/{interface.NODE_NAME}/{name}"]["visible"] is True
 
 

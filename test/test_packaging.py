@@ -34,7 +34,8 @@ THIRD_PARTY = {
 }
 ROS = {"rclpy", "ament_index_python", "builtin_interfaces", "rcl_interfaces", "action_msgs",
        "std_msgs", "std_srvs", "geometry_msgs", "nav_msgs", "trajectory_msgs", "sensor_msgs",
-       "diagnostic_msgs", "visualization_msgs", "service_msgs", "cdh_planner_interfaces",
+       "diagnostic_msgs", "visualization_msgs", "shape_msgs", "service_msgs",
+       "cdh_planner_interfaces",
        "control_msgs", "tf2_msgs"}
 # the interfaces of the PlanPath action server and the FollowJointTrajectory client
 ACTION_INTERFACES = {"action_msgs", "cdh_planner_interfaces", "control_msgs"}
@@ -155,8 +156,10 @@ def test_launch_file_declares_the_robot_argument_and_starts_the_node():
     declare, mode = _calls(tree, "DeclareLaunchArgument")[:2]
     assert ast.literal_eval(declare.args[0]) == "robot"
     assert ast.literal_eval(mode.args[0]) == "execution_mode"
-    from cdh_planner.ros.params import EXECUTION_MODES, SPEC
-    assert ast.literal_eval(_kwargs(mode)["choices"]) == list(EXECUTION_MODES)
+    from cdh_planner.ros.params import SPEC
+    # the mode's choices are the registry's (a new command outlet needs no change there)
+    assert ("cdh_planner.ros.command_outlets", "OUTLETS") in imported
+    assert ast.unparse(_kwargs(mode)["choices"]) == "list(OUTLETS)"
     assert ast.literal_eval(_kwargs(mode)["default_value"]) == SPEC["execution.mode"].default
     default = _kwargs(declare)["default_value"]
     parts = [ast.literal_eval(a) for a in default.elts[1:]] if isinstance(default, ast.List) \
@@ -220,8 +223,9 @@ def test_rviz_config_shows_the_nodes_latched_outputs(setup_kwargs):
     assert manager["Global Options"]["Fixed Frame"] == SPEC["fixed_frame"].default
     topics = {d["Topic"]["Value"]: d for d in manager["Displays"] if "Topic" in d}
     assert set(topics) == {"/cdh_planner/markers", "/cdh_planner/path",
-                           "/cdh_planner/live_markers"}
-    latched = {"/cdh_planner/markers", "/cdh_planner/path"}       # the plan's; live: volatile
+                           "/cdh_planner/live_markers", "/cdh_planner/scene_markers"}
+    # the plan's and the scene's; live: volatile
+    latched = {"/cdh_planner/markers", "/cdh_planner/path", "/cdh_planner/scene_markers"}
     assert all((d["Topic"]["Durability Policy"] == "Transient Local") == (t in latched)
                for t, d in topics.items())
     assert "config/cdh_planner.rviz" in dict(setup_kwargs["data_files"])["share/cdh_planner/config"]

@@ -280,6 +280,7 @@ def test_a_null_value_is_refused_naming_the_field_unless_the_field_is_optional(f
     naming the field, for every other one (a field with a default included)."""
     doc = _robot_block()
     doc.setdefault("contact_ellipsoid", {"matrix": [1e4] * 3 + [1e10] * 3})
+    doc.setdefault("platform_shape", {"type": "none"})
     group = doc[f.group] if f.group else doc
     group[f.name] = None
     if f.key == "load.mass":

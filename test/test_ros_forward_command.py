@@ -17,7 +17,7 @@ from cdh_planner.errors import InputError
 from cdh_planner.ros import messages as M
 from cdh_planner.ros.client import PlannerClient
 from cdh_planner.ros.params import node_config
-from cdh_planner.ros.plan_execution import forward_command
+from cdh_planner.ros.command_outlets import forward_command
 from ros_harness import (Q1, Q2, ROBOT2, ControllerDouble, NodeProcess, claimed_domain,
                          file_parameters, in_process_nodes, sphere_pose_msg, wait_node_measures)
 from test_ros_execution import _lengths
@@ -62,6 +62,12 @@ def test_forward_command_drives_a_joint_group_position_controller(tmp_path):
         np.testing.assert_allclose(commands[-1]["data"], expected, rtol=0, atol=1e-12)
         first = [start[n] for n in ORDER]      # sampled a few ms after the start
         np.testing.assert_allclose(commands[0]["data"], first, rtol=0, atol=1e-4)
+    # the recorded commands move the robot: replay leaves them out unless asked
+    from cdh_planner.ros import replay as R
+    [run] = node.run_files()
+    records = R.read_records(run)
+    assert TOPIC not in {r.topic for r in R.select_topics(records)}
+    assert TOPIC in {r.topic for r in R.select_topics(records, commands=True)}
 
 
 def test_forward_command_reorders_by_name():

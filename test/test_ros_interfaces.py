@@ -37,7 +37,8 @@ def test_generated_types_import_from_the_venv():
         "error_code": "int32", "error_msg": "string", "path": "nav_msgs/Path",
         "cable_trajectory": "trajectory_msgs/JointTrajectory",
         "tension_envelope": "cdh_planner_interfaces/TensionEnvelope",
-        "planning_time_s": "double", "charts": "int32", "min_margin": "double"}
+        "planning_time_s": "double", "charts": "int32", "min_margin": "double",
+        "scene_version": "uint64"}
 
 
 def test_error_codes_are_nav2s_where_they_fit_and_the_planners_own_beyond():
@@ -110,6 +111,33 @@ def test_plan_path_and_follow_joint_trajectory_messages_round_trip():
     fjt_result = FollowJointTrajectory.Result(
         error_code=FollowJointTrajectory.Result.INVALID_JOINTS, error_string="no effort")
     for msg in (goal, result, feedback, fjt, fjt_result):
+        assert deserialize_message(serialize_message(msg), type(msg)) == msg
+
+
+def test_obstacle_scene_messages_round_trip_and_use_the_standard_shapes():
+    """Obstacle is moveit_msgs/CollisionObject's applicable subset: an id, ADD / REMOVE, a
+    shape_msgs SolidPrimitive or Mesh, a geometry_msgs Pose; the scene service answers a
+    Scene with its version."""
+    from cdh_planner_interfaces.msg import Obstacle, ObstacleArray, Scene
+    from cdh_planner_interfaces.srv import GetScene
+    from geometry_msgs.msg import Point
+    from shape_msgs.msg import MeshTriangle, SolidPrimitive
+
+    assert (Obstacle.ADD, Obstacle.REMOVE) == (0, 1)
+    assert Obstacle.get_fields_and_field_types() == {
+        "id": "string", "operation": "uint8", "primitive": "shape_msgs/SolidPrimitive",
+        "mesh": "shape_msgs/Mesh", "pose": "geometry_msgs/Pose"}
+    ball = Obstacle(id="ball", operation=Obstacle.ADD,
+                    primitive=SolidPrimitive(type=SolidPrimitive.SPHERE, dimensions=[0.02]))
+    ball.pose.position.z, ball.pose.orientation.w = 0.2, 1.0
+    tet = Obstacle(id="tet")
+    tet.mesh.vertices = [Point(x=0.0), Point(x=0.1), Point(y=0.1), Point(z=0.1)]
+    tet.mesh.triangles = [MeshTriangle(vertex_indices=[0, 1, 2])]
+    array = ObstacleArray(obstacles=[ball, tet, Obstacle(id="old", operation=Obstacle.REMOVE)])
+    array.header.frame_id = "cdh_base"
+    scene = Scene(version=3, checked=True, cable_radius=0.001, obstacles=[ball, tet],
+                  platform=[Obstacle(id="platform")])
+    for msg in (array, scene, GetScene.Response(scene=scene)):
         assert deserialize_message(serialize_message(msg), type(msg)) == msg
 
 

@@ -149,3 +149,9 @@ def test_a_singular_tridiagonal_system_is_refused():
     ab = np.array([[0.0, 1.0, 1.0], [0.0, 0.0, 0.0], [1.0, 1.0, 0.0]]) * 0
     with pytest.raises(np.linalg.LinAlgError):
         splines.solve_banded((1, 1), ab, np.ones(3))
+
+
+def test_random_rotations_are_scipys():
+    ours = Rotation.random(9, np.random.default_rng(4)).as_quat()
+    theirs = ScipyRotation.random(9, random_state=np.random.default_rng(4)).as_quat()
+    assert np.array_equal(ours, theirs)

@@ -84,3 +84,41 @@ def test_plan_reports_the_least_clearance_and_what_binds(tmp_path, capsys):
     doc = json.loads((tmp_path / "plan.json").read_text())
     assert doc["least_clearance_m"] > 0 and " / " in doc["clearance_binding"]
     assert "least clearance" in capsys.readouterr().out
+
+
+def test_slice_colours_collision_apart_where_a_cable_meets_the_ball(tmp_path, capsys):
+    """``slice --scene``: a cell is COLLISION iff one of its pose's cables (capsules of
+    1 mm) meets the ball of config/scenes/robot2_ball.yaml, by the closed-form point-segment
+    distance (no collision library); the other cells keep their wrench classes; the PNG is
+    written with the collision legend."""
+    from cdh_planner.commands.slice import task_in_yaml
+    from cdh_planner.pictures.slices import COLLISION, SliceView, classify, compute_slice
+    from cdh_planner.cable_feasibility import feasibility_of
+    from cdh_planner.model.pose import rotation_tt
+    from cdh_planner.model.robot import load_robot
+    from cdh_planner.scene.collision import CollisionModel
+    from cdh_planner.scene.schema import load_scene
+    from test_scene_distances import point_segment
+
+    robot = load_robot(CONFIG / "robot2.yaml")
+    scene = load_scene(CONFIG / "scenes" / "robot2_ball.yaml", robot)
+    view = SliceView(task=task_in_yaml(CONFIG / "robot2.yaml"), axes=("alpha1", "alpha2"),
+                     ranges=((0.0, 3.0), (0.2, 1.4)))
+    grid = compute_slice(robot, view, 30, CollisionModel(robot, scene))
+    A, B = np.meshgrid(grid.xs, grid.ys)
+    p, tau = view.task.pose(view.coords(A, B))
+    R = rotation_tt(tau)
+    ball = scene.obstacles[0]
+    ends = p[:, None] + np.einsum("nij,kj->nki", R, robot.platform_anchors)
+    hit = np.array([min(point_segment(ball.position, robot.base_anchors[i], e[i])
+                        for i in range(6)) < ball.radius + scene.cable_radius for e in ends])
+    classes = grid.classes.ravel()
+    assert 0 < hit.sum() < hit.size
+    assert np.array_equal(classes == COLLISION, hit)
+    wrench = classify(feasibility_of(robot, p, R=R))
+    assert np.array_equal(classes[~hit], wrench[~hit])
+    out = tmp_path / "slice.png"
+    rc = cli.main(["slice", str(CONFIG / "robot2.yaml"), "--sphere", "0,0,0.306,0.13",
+                   "--range", "alpha1=0:3", "alpha2=0.2:1.4", "--resolution", "30",
+                   "--scene", str(CONFIG / "scenes" / "robot2_ball.yaml"), "-o", str(out)])
+    assert rc == 0 and out.stat().st_size > 10_000

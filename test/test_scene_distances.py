@@ -243,6 +243,72 @@ def test_the_pruned_least_distance_is_the_least_of_all_pairs_and_names_it():
             sorted(t[3] for t in every)[1] - least < 1e-12  # a tie may name either
 
 
+def test_cables_against_the_platforms_own_shape_match_the_closed_form():
+    """A spherical platform body (closed form: the distance of its centre to the cable
+    cut short by the exemption at its platform anchor, less both radii); a ball about the
+    anchors' centre is clear, a body reaching past an anchor is hit by its cable there."""
+    rng = np.random.default_rng(11)
+    rho, r = 0.01, R_CABLE
+    for body_r, hits in ((0.05, False), (0.12, True)):
+        cm = model([], platform={"type": "sphere", "radius": body_r, "position": [0, 0, 0.02]},
+                   shared_anchor_exemption=rho)
+        for _ in range(10):
+            p, R = random_pose(rng)
+            centre = p + R @ np.array([0.0, 0.0, 0.02])
+            Bw = platform_anchors(ROBOT2, p, R)
+            got = {c[0]: d for kind, _, c, d in cm.distances(p, R) if kind == "cable-platform"}
+            assert sorted(got) == list(range(6))
+            for i, d in got.items():
+                a, b = ROBOT2.base_anchors[i], Bw[i]
+                cut = b + rho * (a - b) / np.linalg.norm(a - b)
+                assert d == pytest.approx(point_segment(centre, a, cut) - body_r - r, abs=1e-7)
+            c = cm.clearance(p, R)
+            assert (c.kind == "cable-platform") == hits or c.distance > min(got.values())
+            if hits:
+                assert not c.ok and c.obstacle == "platform" and "/ platform" in c.binding
+
+
+@pytest.mark.parametrize("kind", ["box", "cylinder", "mesh"])
+def test_cables_against_a_box_cylinder_or_mesh_platform_match_sampled_distances(kind, tmp_path):
+    """Box and cylinder platforms: the kernel's golden-section search on the convex signed
+    distance (in contact: the deepest point of the cable's axis, less its radius); a mesh
+    platform (a box written to STL): coal (in contact: its penetration depth, deeper).
+    Against the signed distance sampled along each cable (cut short by the exemption),
+    rotated shapes, contacts too."""
+    trimesh = pytest.importorskip("trimesh")
+    rng = np.random.default_rng({"box": 12, "cylinder": 13, "mesh": 14}[kind])
+    size, rho, q_local = [0.2, 0.16, 0.03], 0.01, random_quaternion(rng)
+    shape = {"box": {"type": "box", "size": size},
+             "cylinder": {"type": "cylinder", "radius": 0.095, "height": 0.03},
+             "mesh": {"type": "mesh", "file": "plate.stl"}}[kind]
+    trimesh.creation.box(extents=size).export(tmp_path / "plate.stl")
+    platform = dict(shape, position=[0.0, 0.0, 0.01], quaternion=q_local)
+    scene = scene_from_dict({"cable_radius": R_CABLE, "obstacles": [], "platform": platform},
+                            base_dir=tmp_path)
+    cm = CollisionModel(ROBOT2, scene)
+    hits = 0
+    for _ in range(10):
+        p, R = random_pose(rng)
+        Rb, centre = R @ Rotation.from_quat(q_local).as_matrix(), p + R @ np.array([0, 0, 0.01])
+        signed = (lambda x: cylinder_signed(x, centre, Rb, 0.095, 0.03)) if kind == "cylinder" \
+            else (lambda x: box_signed(x, centre, Rb, size))
+        Bw = platform_anchors(ROBOT2, p, R)
+        got = {c[0]: d for k, _, c, d in cm.distances(p, R) if k == "cable-platform"}
+        assert sorted(got) == list(range(6))
+        for i, d in got.items():
+            a, b = ROBOT2.base_anchors[i], Bw[i]
+            cut = b + rho * (a - b) / np.linalg.norm(a - b)
+            sampled, err = sampled_capsule(a, cut, signed, R_CABLE)
+            if kind != "mesh" or sampled > err:
+                assert sampled - err - 1e-7 <= d <= sampled + 1e-7
+            else:   # coal's penetration depth (EPA): at least the deepest axis point's
+                assert d <= sampled + 1e-7 and d < 0
+            hits += d < 0
+        c = cm.clearance(p, R)
+        assert c.distance == pytest.approx(min(t[3] for t in cm.distances(p, R)), abs=1e-12)
+    assert hits > 0   # anchors inside the body's outline: some cables pass through it
+
+
 def test_lower_bounds_never_exceed_the_exact_distance():
     rng = np.random.default_rng(8)
     for _ in range(10):
@@ -252,10 +318,12 @@ def test_lower_bounds_never_exceed_the_exact_distance():
                       "position": near_cable_point(rng, ROBOT2, p, R, 0.05)} for k in range(6)]
         cm = model(obstacles, platform={"type": "box", "size": [0.14, 0.14, 0.01]})
         lb = cm.lower_bounds(p, R)
+        assert lb.shape == (7, 7) and lb[6, 6] == math.inf
         for kind, oid, cables, d in cm.distances(p, R):
-            row = cables[0] if kind == "cable-obstacle" else 6
-            if kind != "cable-cable":
+            row = cables[0] if kind in ("cable-obstacle", "cable-platform") else 6
+            if kind not in ("cable-cable", "cable-platform"):   # a box platform: exact, no bound
                 assert lb[row, int(oid[1:])] <= d + 1e-12
+        assert np.all(lb[:, 6] == math.inf)
 
 
 def test_an_empty_scene_binds_only_cable_pairs_and_robot2_cables_clear_each_other():

@@ -221,3 +221,60 @@ def test_a_problem_files_scene_reads_or_is_refused_cleanly(scene, tmp_path_facto
             problem_from_dict(doc, base_dir=tmp_path_factory.getbasetemp())
         except InputError as exc:
             assert "\n" not in str(exc) and len(str(exc)) <= MAX_MESSAGE_CHARS
+
+
+def _robot2_with(**platform_shape):
+    from conftest import CONFIG
+    from cdh_planner.parsing import files
+    from cdh_planner.model.robot import robot_from_dict
+    doc = files.read_yaml(CONFIG / "robot2.yaml", "robot")
+    (node,) = doc.values()
+    d = copy.deepcopy(node["ros__parameters"]["robot"])
+    d["platform_shape"] = platform_shape
+    return robot_from_dict(d, source="robot2.yaml")
+
+
+def test_the_robots_platform_shape_is_the_scenes_default_platform():
+    robot = _robot2_with(type="cylinder", size=[0.18, 0.18, 0.01], position=[0, 0, 0.005])
+    scene = scene_from_dict({"obstacles": []}, robot=robot)
+    p = scene.platform
+    assert (p.id, p.kind, p.radius, p.height) == ("platform", "cylinder", 0.09, 0.01)
+    assert np.allclose(p.position, [0, 0, 0.005]) and np.allclose(p.rotation, np.eye(3))
+    own = scene_from_dict({"platform": VALID["platform"]}, robot=robot).platform
+    assert own.kind == "box"                                 # the scene's own wins
+    box = scene_from_dict({}, robot=_robot2_with(type="box", size=[0.1, 0.2, 0.01])).platform
+    assert np.allclose(box.size, [0.1, 0.2, 0.01])
+    assert scene_from_dict({}, robot=_robot2_with(type="none")).platform is None
+    # without a scene file, a robot with a platform shape is checked against itself
+    from cdh_planner.scene.schema import default_scene
+    assert default_scene(_robot2_with(type="none")) is None
+    own = default_scene(robot)
+    assert own.platform.kind == "cylinder" and own.obstacles == ()
+
+
+def test_a_platform_shape_parameter_gives_the_nodes_scene_without_a_scene_file():
+    from conftest import CONFIG
+    from cdh_planner.ros import params
+    from ros_harness import file_parameters
+    values = dict(file_parameters(CONFIG / "robot2.yaml"),
+                  **{"robot.platform_shape.type": "box",
+                     "robot.platform_shape.size": [0.12, 0.12, 0.01]})
+    scene = params.node_config(values).scene
+    assert scene.platform.kind == "box" and np.allclose(scene.platform.size, [0.12, 0.12, 0.01])
+    with pytest.raises(InputError) as info:
+        params.node_config(dict(values, **{"robot.platform_shape.size": [0.1, 0.2, 0.01],
+                                           "robot.platform_shape.type": "cylinder"}))
+    assert info.value.field == "robot.platform_shape.size"
+
+
+@pytest.mark.parametrize("shape,field", [
+    ({"type": "box"}, "robot.platform_shape.size"),
+    ({"type": "cylinder", "size": [0.1, 0.2, 0.01]}, "robot.platform_shape.size"),
+    ({"type": "sphere", "size": [0.1, 0.1, 0.2]}, "robot.platform_shape.size"),
+    ({"type": "cone", "size": [0.1, 0.1, 0.1]}, "robot.platform_shape.type"),
+    ({"type": "box", "size": [0.1, 0.0, 0.1]}, "robot.platform_shape.size[1]"),
+])
+def test_a_bad_platform_shape_is_refused_naming_the_field(shape, field):
+    with pytest.raises(InputError) as info:
+        _robot2_with(**shape)
+    assert info.value.field == field, str(info.value)

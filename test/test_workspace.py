@@ -89,6 +89,17 @@ def test_counts_and_fractions_agree_with_the_poses(tmp_path, capsys):
     assert "feasible" in capsys.readouterr().out
 
 
+@pytest.mark.parametrize("n, workers", [(0, 2), (1, 2), (80, 2), (1000, 2), (10**5, 2), (10**5, 3200), (77, 5)])
+def test_reach_calls_plan_each_target_once_in_batches_of_bounded_size(n, workers):
+    targets = list(range(3, 3 + 2 * n, 2))
+    calls = ws.reach_calls(targets, workers)
+    assert [j for _, batch in calls for j in batch] == targets  # each once, in order
+    sizes = {len(batch) for _, batch in calls[:-1]}
+    assert len(sizes) <= 1 and max(sizes | {1}) <= ws.MAX_PLANS_PER_CALL
+    if max(sizes | {1}) > 1:  # batched only with enough calls left for every worker
+        assert len(calls) >= workers * ws.CALLS_PER_WORKER
+
+
 def test_home_itself_is_reachable_with_a_zero_tilt_sample_at_home(robot, home):
     """A box of one point (the home position, +-1 um) and no tilt: every sample is home."""
     p = np.asarray(home[0])

@@ -57,20 +57,41 @@ def test_one_and_two_ray_workers_answer_as_this_process(robot, spec):
         assert np.array_equal(res.position, serial.position)
 
 
+def test_two_ray_workers_answer_with_a_scene_as_this_process(robot, spec, tmp_path):
+    """The scene travels with the job: each actor builds its collision model once; points
+    and plans as in this process."""
+    from cdh_planner.scene.schema import scene_from_dict
+    centre = ((np.array(spec.box_low) + np.array(spec.box_high)) / 2).tolist()
+    scene = scene_from_dict({"cable_radius": 0.001, "platform": {"type": "sphere", "radius": 0.03},
+                             "obstacles": [{"id": "ball", "type": "sphere", "radius": 0.04,
+                                            "position": centre}]}, robot)
+    home = ws.default_home(robot, draws=5000, scene=scene)
+    small = ws.WorkspaceSpec(**{**spec.__dict__, "samples": 300, "home_position": home[0],
+                                "home_quaternion": home[1]})
+    serial = ws.run_workspace(robot, small, SerialExecutor(), scene=scene)
+    ex = RayExecutor(2)
+    try:
+        res = ws.run_workspace(robot, small, ex, scene=scene)
+    finally:
+        ex.close()
+    assert answers(res) == answers(serial)
+    assert any(b.startswith("collision") for b in res.binding) and res.counts()["planned"] > 0
+
+
 def test_a_killed_worker_loses_no_sample_and_counts_none_twice(robot, spec):
     """Plans to the feasible samples of 12000 on 2 actors; one actor process is killed
     (SIGKILL) after the first answers: every call is answered exactly once, as in-process."""
     points = ws.run_workspace(robot, ws.WorkspaceSpec(**{**spec.__dict__, "reach": False}),
                               SerialExecutor())
     targets = np.flatnonzero(points.feasible)[:60].tolist()
-    calls = [("reach", j) for j in targets]
+    calls = [("reach", (j,)) for j in targets]
     ex = RayExecutor(2)
     try:
         victim = ex.pids()[0]
         job = ws.Job(robot, spec)
         got = []
         for n, (i, out) in enumerate(ex.map(job, calls)):
-            got.append((i, out[:2]))
+            got.append((i, out[0][:2]))
             if n == 3:
                 os.kill(victim, signal.SIGKILL)
         assert victim not in ex.pids()  # the actor was restarted: another process
@@ -78,7 +99,7 @@ def test_a_killed_worker_loses_no_sample_and_counts_none_twice(robot, spec):
         ex.close()
     assert sorted(i for i, _ in got) == list(range(len(calls)))
     serial = dict(SerialExecutor().map(job, calls))
-    assert {i: out for i, out in got} == {i: out[:2] for i, out in serial.items()}
+    assert {i: out for i, out in got} == {i: out[0][:2] for i, out in serial.items()}
 
 
 def _free_port():
@@ -117,8 +138,12 @@ def test_a_cluster_started_outside_answers_as_a_local_ray(tmp_path, capsys):
         assert docs[0] == docs[1]
         assert docs[0]["counts"]["planned"] > 0
     finally:
-        os.killpg(head.pid, signal.SIGTERM)  # the head and the daemons it started
-        head.wait(timeout=60)
+        head.terminate()  # the head stops its daemons in 2 s (SIGTERM to all of them: 30 s)
+        try:
+            head.wait(timeout=60)
+        except subprocess.TimeoutExpired:
+            os.killpg(head.pid, signal.SIGKILL)
+            head.wait(timeout=30)
         if not had_file and address_file.exists() and f":{port}" in address_file.read_text():
             address_file.unlink()
 

@@ -7,7 +7,8 @@
 
 Without ``--requests``: republish the recorded topics with their original timing (scaled by
 ``--rate``; no wait between two messages longer than ``--max-gap``). The command topics
-(``cable_command``, ``cable_trajectory``) move the robot: they are republished only with
+(``cable_command``, a streamed mode's topic as recorded in its parameter, e.g.
+``execution.forward_command_topic``, and ``cable_trajectory``) move the robot: they are republished only with
 ``--commands``, e.g. ``--commands --topics /cdh_planner/cable_command`` to test a winch
 controller on a bench.
 With ``--requests``: re-send the recorded plan requests to a running node, in recorded
@@ -21,8 +22,10 @@ path's first pose as its start instead (its line says so); without a recorded pa
 recorded.
 Before each request the parameters recorded since the previous one (the file's snapshot,
 then each change) are set on the node, those that decide answers (``base_frame``,
-``robot.*``, ``task.*``, ``planner.*``, ``trajectory.*``), each recorded change in one atomic
-call; ``--keep-parameters`` leaves the node's own. The planner keeps its atlas between
+``scene_file``, ``robot.*``, ``task.*``, ``planner.*``, ``trajectory.*``), each recorded
+change in one atomic call; then the node's obstacles are made those of its last recorded
+``~/scene`` (REMOVE and ADD on its ``~/obstacles``); ``--keep-parameters`` leaves the node's
+own parameters and obstacles. The planner keeps its atlas between
 requests, so the answers are the recorded ones on a node in the state the recording started
 from: a freshly started node. A node that has already planned may answer with other
 (equally valid) paths.
@@ -64,7 +67,8 @@ def add_parser(subparsers):
                    help="only these topics (default: all but service events and "
                         "/parameter_events)")
     p.add_argument("--commands", action="store_true",
-                   help="also republish the command topics (cable_command, cable_trajectory): "
+                   help="also republish the command topics (cable_command, a streamed mode's "
+                        "topic such as execution.forward_command_topic, cable_trajectory): "
                         "they move the robot, so they are left alone unless asked for")
     p.add_argument("--delay", type=float, default=1.0, metavar="S",
                    help="wait up to S seconds for a subscriber on every replayed topic before "
@@ -79,7 +83,8 @@ def add_parser(subparsers):
                         "started node, since the planner keeps its atlas between requests)")
     p.add_argument("--node", help="node for --requests (default: the recorded one)")
     p.add_argument("--keep-parameters", dest="keep_parameters", action="store_true",
-                   help="--requests: do not set the recorded parameters on the node")
+                   help="--requests: do not set the recorded parameters (and obstacles) "
+                        "on the node")
     p.add_argument("--tolerance", type=float, default=1e-6, metavar="M",
                    help="--requests: largest pose difference that still matches, in m for "
                         "positions and rad for orientations (default: %(default)g)")
@@ -191,6 +196,7 @@ def replay_requests(args, records):
             setter = R.ParameterSetter(client, min(args.timeout, 30.0))
             for plan in plans:
                 problems = [] if args.keep_parameters else _apply(setter, plan)
+                problems += [] if args.keep_parameters else _apply_scene(client, plan)
                 note = ""
                 if plan.action:
                     goal, note = R.goal_to_replay(plan)
@@ -238,6 +244,25 @@ def _apply(setter, plan):
             problems.append(problem)
             print(f"{plan.label}: parameters not applied: {problem}")
     return problems
+
+
+def _apply_scene(client, plan):
+    """Bring the node's obstacles to those recorded before ``plan`` (the node's ~/scene);
+    print what changed; the problems."""
+    from ..ros.client import ClientError
+    from ..ros.scene_msgs import scene_change
+    if plan.scene is None:
+        return []
+    try:
+        change = scene_change(client.get_scene(), plan.scene)
+        if change.obstacles:
+            client.update_scene(change)
+            print(f"{plan.label}: obstacles as recorded (scene version "
+                  f"{plan.scene.version}): {len(change.obstacles)} added or removed")
+    except ClientError as exc:
+        print(f"{plan.label}: obstacles not applied: {exc}")
+        return [f"obstacles: {exc}"]
+    return []
 
 
 def _reasons(args, setter, plan, first, problems, first_call):

@@ -38,7 +38,8 @@ from ..parsing.poses import parse_angle, parse_length
 from ..model.pose import rotation_tt
 from ..model.robot import load_robot, read_yaml, ros_parameters
 from ..model.task import COORDINATES, POSE_NAMES, SliceTask, SphereTask, describe_value, task_from_dict
-from ..trajectory.path_check import DEFAULT_STEP_M, DEFAULT_STEP_RAD, SegmentCheck, check_task_motion
+from ..trajectory.path_check import DEFAULT_STEP_M, DEFAULT_STEP_RAD, SegmentCheck, \
+    TaskLinePath, check_path
 
 EXAMPLES = """examples:
   cdh-planner slice config/robot1.yaml --fixed x=0 y=0 z=0.35 sigma=34deg --free phi theta \\
@@ -83,6 +84,10 @@ def add_parser(subparsers):
                    help="further labelled points (a label like q_1 is drawn with a subscript)")
     p.add_argument("--segment", action="store_true",
                    help="draw the straight start -> goal segment and check it densely")
+    p.add_argument("--scene", metavar="FILE",
+                   help="scene file (YAML, scene: obstacles; cdh_planner/scene/schema.py): "
+                        "poses in collision are drawn dark grey, and the segment is checked "
+                        "against it too")
     p.add_argument("--resolution", type=int, default=400, metavar="N", help="N x N grid (default 400)")
     p.add_argument("--size", default="1000x800", metavar="WxH", help="picture size in pixels")
     p.add_argument("--title", help="picture title (default: robot and slice)")
@@ -110,9 +115,11 @@ def run(args):
         raise InputError("--segment", "start -> goal", "needs both --start and --goal")
     segment = (start, goal) if args.segment else None
 
+    collision = _collision(robot, args.scene)
     with writing("--output", out):
         result = render_slice(robot, view, out, resolution=resolution, size=size,
-                              title=args.title or _title(robot, view), markers=markers, segment=segment)
+                              title=args.title or _title(robot, view), markers=markers,
+                              segment=segment, collision=collision)
     if result.segment is not None:
         _print_segment(result.segment, args.start_label, args.goal_label)
     _report(robot, view, result.grid, result.elapsed, markers, out, size)
@@ -130,22 +137,34 @@ class SliceResult:
 
 
 def render_slice(robot, view, out, resolution=400, size=(1000, 800), title=None,
-                 markers=(), segment=None):
+                 markers=(), segment=None, collision=None):
     """Classify the view's grid, check the straight segment ``(start, goal)`` (picture
-    coordinates) densely when given, and draw the PNG ``out``. Prints nothing."""
+    coordinates) densely when given, and draw the PNG ``out``; ``collision``: a scene's
+    CollisionModel (poses in collision coloured apart). Prints nothing."""
     t0 = time.perf_counter()
-    grid = compute_slice(robot, view, resolution)
+    grid = compute_slice(robot, view, resolution, collision)
     elapsed = time.perf_counter() - t0
     check, overlay = None, None
     if segment is not None:
         start, goal = segment
-        check = check_task_motion(robot, view.task, view.coords([start[0], goal[0]], [start[1], goal[1]]),
-                                  DEFAULT_STEP_M, DEFAULT_STEP_RAD)[0]
+        coords = view.coords([start[0], goal[0]], [start[1], goal[1]])
+        check = check_path(robot, TaskLinePath(view.task, coords), DEFAULT_STEP_M,
+                           DEFAULT_STEP_RAD, collision)[0]
         s = None if check.first_unsafe is None else check.first_unsafe.s
         overlay = SegmentOverlay(start=tuple(start), goal=tuple(goal), first_unsafe_s=s)
     plot_slice(grid, out, size=size, title=title or _title(robot, view), markers=markers,
                segment=overlay)
     return SliceResult(grid=grid, elapsed=elapsed, segment=check)
+
+
+def _collision(robot, scene_file):
+    """The CollisionModel of ``--scene`` (None without it: the collision library loads only
+    with a scene)."""
+    if not scene_file:
+        return None
+    from ..scene.collision import CollisionModel
+    from ..scene.schema import load_scene
+    return CollisionModel(robot, load_scene(scene_file, robot))
 
 
 def build_view(args):

@@ -38,7 +38,7 @@ from .outputs import check_output, write_text
 from ..parsing.poses import load_poses, parse_angle, parse_length
 from ..model.robot import load_robot
 from ..scene.margin import combine
-from ..scene.schema import load_scene
+from ..scene.schema import default_scene, load_scene
 from ..trajectory.path_check import DEFAULT_STEP_M, DEFAULT_STEP_RAD, check_motion
 
 EXIT_OK, EXIT_INFEASIBLE = 0, 1
@@ -246,9 +246,10 @@ def _vec(v, fmt):
 
 
 def _collision(robot, scene_file):
-    """The CollisionModel of ``--scene`` (None without it; the collision library loads only
-    then)."""
-    if not scene_file:
+    """The CollisionModel of ``--scene`` (without it: of the robot's platform shape, if it
+    declares one, else None; the collision library loads only then)."""
+    scene = load_scene(scene_file, robot) if scene_file else default_scene(robot)
+    if scene is None:
         return None
     from ..scene.collision import CollisionModel
-    return CollisionModel(robot, load_scene(scene_file, robot))
+    return CollisionModel(robot, scene)

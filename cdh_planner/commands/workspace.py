@@ -1,13 +1,16 @@
 """``cdh-planner workspace``: where the robot holds its load, and what it reaches from home.
 
     cdh-planner workspace ROBOT.yaml [--samples N] [--seed S] [--box X0,Y0,Z0,X1,Y1,Z1]
-                          [--tilt A | --task-file T.yaml] [--reach [--home X Y Z PHI THETA SIGMA] [--timeout S]]
+                          [--tilt A | --task-file T.yaml] [--scene SCENE.yaml]
+                          [--reach [--home X Y Z PHI THETA SIGMA] [--timeout S]]
                           [--workers N | --no-ray] [--ray-address HOST:PORT]
                           [--max-seconds S] [--json OUT] [--plot OUT.png] [--quiet]
 
 Samples poses (``studies.workspace``: sample i of seed S is a function of (S, i) alone, so
-the answers do not depend on the workers), gives each its wrench feasibility and margin
-and, with ``--reach``, plans from the home pose to each feasible one (``reachable``: true,
+the answers do not depend on the workers), gives each its feasibility and margin as
+``verify`` does (wrench feasibility of any number of cables; with ``--scene``, also clear of
+the obstacles and of the other cables) and, with ``--reach``, plans from the home pose to
+each feasible one, around the scene's obstacles (``reachable``: true,
 false = no path at the planner's resolution, null = the plan's --timeout or another bound).
 Runs on a local Ray of ``--workers`` actors (default: the cores), on a cluster with
 ``--ray-address``, or in this process with ``--no-ray``. Exit 0 with the answer (also when
@@ -24,6 +27,7 @@ from .outputs import check_output, write_text, writing
 from ..parsing.poses import parse_angle, parse_length
 from ..model.robot import load_robot
 from ..planner import PlannerSettings
+from ..scene.schema import load_scene
 from ..studies import workspace as ws
 from ..studies.executors import make_executor
 from ..studies.progress import count_progress
@@ -53,6 +57,9 @@ def add_parser(subparsers):
                         "--reach then plans on the task")
     p.add_argument("--tilt", metavar="A",
                    help="largest rotation from the home orientation, rad or deg (default 30deg)")
+    p.add_argument("--scene", metavar="FILE",
+                   help="scene file (YAML: obstacles, cable radius, platform shape): a pose is "
+                        "feasible only if also clear of it (as verify --scene); plans keep clear")
     p.add_argument("--reach", action="store_true",
                    help="plan from the home pose to every feasible sample")
     p.add_argument("--home", nargs=6, metavar=("X", "Y", "Z", "PHI", "THETA", "SIGMA"),
@@ -74,16 +81,18 @@ def add_parser(subparsers):
 def run(args):
     """Sample, evaluate (and plan), print the summary, write the outputs; exit code 0."""
     robot = load_robot(args.robot)
-    spec = build_spec(args, robot)
+    scene = load_scene(args.scene, robot) if args.scene else None
+    spec = build_spec(args, robot, scene)
     workers = check_workers(args)
     max_seconds = _positive("--max-seconds", args.max_seconds, MAX_SECONDS)
-    inputs = [("the robot file ROBOT", args.robot)]
+    inputs = [("the robot file ROBOT", args.robot)] + ([("the --scene file", args.scene)] if args.scene else [])
     if args.json:
         check_output("--json", args.json, inputs=inputs)
         inputs.append(("the --json output", args.json))
     if args.plot:
         check_output("--plot", args.plot, suffixes=(".png",), inputs=inputs)
-    res = run_spec(robot, spec, workers, args.ray_address, not args.no_ray, max_seconds, args.quiet)
+    res = run_spec(robot, spec, workers, args.ray_address, not args.no_ray, max_seconds, args.quiet,
+                   scene)
     print_summary(robot, res)
     if args.json:
         write_text("--json", args.json, dump_rows(ws.result_dict(robot, res)))
@@ -97,19 +106,20 @@ def run(args):
     return 0
 
 
-def run_spec(robot, spec, workers, address, use_ray, max_seconds, quiet):
+def run_spec(robot, spec, workers, address, use_ray, max_seconds, quiet, scene=None):
     """``run_workspace`` on the executor of the options, closed afterwards."""
     executor = make_executor(workers, address, ray=use_ray)
     try:
         with count_progress(quiet) as update:
-            res = ws.run_workspace(robot, spec, executor, progress=update, max_seconds=max_seconds)
+            res = ws.run_workspace(robot, spec, executor, progress=update, max_seconds=max_seconds,
+                                   scene=scene)
         res.seconds["ray_start"] = getattr(executor, "start_s", 0.0)
         return res
     finally:
         executor.close()
 
 
-def build_spec(args, robot):
+def build_spec(args, robot, scene=None):
     """The WorkspaceSpec of the options, checked (InputError naming the option)."""
     low, high = parse_box(args.box) if args.box else ws.default_box(robot)
     if args.tilt is not None and args.task_file:
@@ -127,7 +137,7 @@ def build_spec(args, robot):
         tau = [parse_angle(v, f"--home {n}") for v, n in zip(args.home[3:], ("phi", "theta", "sigma"))]
         home = ws.home_from_tau(position, tau)
     else:
-        home = ws.default_home(robot) if task is None else None
+        home = ws.default_home(robot, scene=scene) if task is None else None
     if not math.isfinite(args.timeout):
         raise InputError("--timeout", args.timeout, "must be a finite number of seconds")
     spec = ws.WorkspaceSpec(samples=args.samples, seed=args.seed, box_low=low, box_high=high,
@@ -135,10 +145,12 @@ def build_spec(args, robot):
                             tilt=tilt, reach=args.reach, timeout_s=args.timeout,
                             settings=PlannerSettings(), task=task).check("--")
     if home is None:
-        home = ws.default_task_home(robot, spec)
+        home = ws.default_task_home(robot, spec, scene=scene)
     elif task is not None:
         ws.check_on_task(task, *home)
-    ws.check_home(robot, *home)
+    ws.check_home(robot, *home, scene=scene)
+    if spec.reach:
+        ws.check_planner(robot, spec, scene)
     return replace(spec, home_position=home[0], home_quaternion=home[1])
 
 
@@ -167,7 +179,8 @@ def _positive(option, value, limit):
 
 def title_of(robot, res):
     f = res.fractions()
-    head = f"{robot.name}: {res.spec.samples} samples, tilt {np.rad2deg(res.spec.tilt):.0f} deg, " \
+    scene = "" if res.job is None or res.job.scene is None else ", scene"
+    head = f"{robot.name}{scene}: {res.spec.samples} samples, tilt {np.rad2deg(res.spec.tilt):.0f} deg, " \
            f"{100 * f['feasible']:.1f} % feasible"
     if res.spec.reach:
         head += f", {100 * f['reachable']:.1f} % reachable (plan timeout {res.spec.timeout_s:g} s)"

@@ -30,7 +30,8 @@ MIN_SPREAD_M = 1e-6  # anchors closer than this to one line are collinear
 SINGULAR_RCOND = 1e-9  # J with smallest / largest singular value below this is singular
 JACOBIAN_PROBES = 16  # poses at which a robot's J must be regular at least once
 GRAVITY = 9.80665  # m/s^2: |force| of a load with a mass is its weight (within 2 %)
-OPTIONAL_GROUPS = ("contact_ellipsoid",)  # absent, or given with its required keys
+OPTIONAL_GROUPS = ("contact_ellipsoid",)
+PLATFORM_SHAPES = ("none", "box", "cylinder", "sphere")   # robot.platform_shape.type  # absent, or given with its required keys
 WINCH_NAMES = tuple(f"winch_{i + 1}" for i in range(N_CABLES))
 
 
@@ -80,6 +81,19 @@ class Robot:
         key="cable_radius", kind=NUMBER, unit="m", sign="non-negative", limit=MAX_CABLE_RADIUS_M,
         default=0.0, description="cable radius: each cable is a capsule of it in the collision "
                                  "checks (a scene's cable_radius overrides it)")
+    platform_shape: str = robot_field(
+        key="platform_shape.type", kind=CHOICE, unit="", choices=PLATFORM_SHAPES, default="none",
+        description="the platform's body in the collision checks (obstacles, its own cables), "
+                    "the default of a scene's platform; none: not checked")
+    platform_size: np.ndarray = robot_field(  # (3,)
+        key="platform_shape.size", kind=NUMBERS, unit="m", count=3, limit=MAX_POSITION_M,
+        sign="positive", default=None,
+        description="the body's full extent along the platform frame's x, y, z: a box's edges; "
+                    "a cylinder (axis z): diameter, diameter, height; a sphere: its diameter "
+                    "three times (required with a type)")
+    platform_center: np.ndarray = robot_field(  # (3,)
+        key="platform_shape.position", kind=NUMBERS, unit="m", count=3, limit=MAX_POSITION_M,
+        default=(0.0, 0.0, 0.0), description="the body's centre, platform frame")
     force: np.ndarray = robot_field(  # (3,)
         key="load.force", kind=NUMBERS, unit="N", count=3, limit=MAX_FORCE_N,
         description="load force, base frame")
@@ -175,6 +189,7 @@ def robot_from_dict(d, source=""):
     _check_below("robot.length_min", v["length_min"], "robot.length_max", v["length_max"])
     _check_below("robot.tension_min", v["tension_min"], "robot.tension_max", v["tension_max"])
     _check_mass_properties(v, d)
+    _check_platform_shape(v)
     if v["contact_ellipsoid.matrix"] is None:
         v["contact_ellipsoid.center"] = None
     check_not_degenerate(v["base_anchors"], v["platform_anchors"], v["length_min"], v["length_max"])
@@ -190,6 +205,20 @@ def _with_contact(robot):
     E = combine_contact_ellipsoid(robot.ellipsoid_matrix, robot.contact_matrix)
     return replace(robot, ellipsoid_matrix=0.5 * (E + E.T),
                    ellipsoid_offset=robot.ellipsoid_offset + robot.contact_center)
+
+
+def _check_platform_shape(v):
+    """A platform shape's size is given with its type; a cylinder's x and y extents are one
+    diameter, a sphere's three are."""
+    kind, size = v["platform_shape.type"], v["platform_shape.size"]
+    if kind == "none":
+        return
+    if size is None:
+        raise InputError("robot.platform_shape.size", None, f"required with type {kind}")
+    same = {"box": 1, "cylinder": 2, "sphere": 3}[kind]
+    if not np.allclose(size[:same], size[0], rtol=1e-9, atol=0.0):
+        raise InputError("robot.platform_shape.size", list(map(float, size)),
+                         f"a {kind}'s first {same} extents are one diameter")
 
 
 def _check_mass_properties(v, d):

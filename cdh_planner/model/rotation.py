@@ -44,6 +44,12 @@ class Rotation:
         return cls(_normalised(np.atleast_2d(q)), single)
 
     @classmethod
+    def random(cls, num, rng):
+        """``num`` rotations uniform in SO(3): normalised 4-D normal draws from the numpy
+        Generator ``rng``, the same draws and quaternions as scipy's ``Rotation.random``."""
+        return cls(_normalised(rng.normal(size=(num, 4))), False)
+
+    @classmethod
     def from_matrix(cls, matrix):
         """Rotation matrices (3, 3) or (N, 3, 3); a matrix not orthogonal to 1e-12 is
         replaced by its nearest rotation (U V^T of its SVD), as scipy does."""

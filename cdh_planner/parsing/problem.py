@@ -21,7 +21,7 @@ from ..errors import MAX_POSITION_M, InputError, check_keys
 from ..model.robot import load_robot, read_yaml
 from ..model.task import COORDINATES, task_from_dict
 from ..model.pose import Pose
-from ..scene.schema import load_scene, scene_from_dict
+from ..scene.schema import default_scene, load_scene, scene_from_dict
 from ..settings import SETTINGS, PlannerSettings, check_setting
 from .poses import number_list, pose_from_dict
 
@@ -73,7 +73,8 @@ def problem_from_dict(doc, base_dir=".", source=""):
             settings = replace(settings, **{key: check_setting(key, doc[key])})
     start = pose_in_task(doc["start"], task, "start")
     goal = pose_in_task(doc["goal"], task, "goal")
-    scene = _scene(doc["scene"], robot, base_dir) if doc.get("scene") is not None else None
+    scene = _scene(doc["scene"], robot, base_dir) if doc.get("scene") is not None \
+        else default_scene(robot)
     return Problem(robot, task, settings, start, goal, source, description, scene)
 
 

@@ -33,10 +33,11 @@ from ..cable_feasibility import feasibility_of as evaluate  # noqa: E402  (6 cab
 from ..model.pose import rotation_tt  # noqa: E402
 from ..model.task import COORDINATES  # noqa: E402
 
-FEASIBLE, LENGTH_OUT, TENSION_OUT = 0, 1, 2
-CLASS_COLORS = ("#4daf4a", "#ff8c1a", "#3778bf")  # green, orange, blue
+FEASIBLE, LENGTH_OUT, TENSION_OUT, COLLISION = 0, 1, 2, 3
+CLASS_COLORS = ("#4daf4a", "#ff8c1a", "#3778bf", "#4d4d4d")  # green, orange, blue, dark grey
 CLASS_LABELS = ("wrench-feasible (C)", "a cable length out of range (whatever the tensions)",
-                "a tension out of range (lengths in range)")
+                "a tension out of range (lengths in range)",
+                "in collision (closer than the scene's clearance, whatever the wrench)")
 SINGULAR_COLOR = "#e41a1c"
 SEGMENT_COLOR = "black"
 CHUNK = 20_000  # poses per feasibility call (bounds memory)
@@ -69,7 +70,8 @@ class SliceView:
 @dataclass(frozen=True)
 class SliceGrid:
     """Cell centres ``xs`` (nx,), ``ys`` (ny,); per cell (ny, nx): ``classes``
-    (FEASIBLE, LENGTH_OUT, TENSION_OUT), ``margin`` (normalised, -inf singular), ``det_j``."""
+    (FEASIBLE, LENGTH_OUT, TENSION_OUT, COLLISION), ``margin`` (normalised, -inf singular),
+    ``det_j``; ``scene``: whether collisions were checked."""
 
     view: SliceView
     xs: np.ndarray
@@ -77,6 +79,7 @@ class SliceGrid:
     classes: np.ndarray
     margin: np.ndarray
     det_j: np.ndarray
+    scene: bool = False
 
 
 def classify(feas):
@@ -85,8 +88,10 @@ def classify(feas):
     return np.where(feas.feasible, FEASIBLE, np.where(length_out, LENGTH_OUT, TENSION_OUT))
 
 
-def compute_slice(robot, view, resolution=400):
-    """Classify a resolution x resolution grid of cell centres over the view's ranges."""
+def compute_slice(robot, view, resolution=400, collision=None):
+    """Classify a resolution x resolution grid of cell centres over the view's ranges;
+    with ``collision`` (a scene's CollisionModel) a pose closer than the scene's clearance
+    is COLLISION, whatever its wrench feasibility."""
     (x0, x1), (y0, y1) = view.ranges
     xs = _cell_centres(x0, x1, resolution)
     ys = _cell_centres(y0, y1, resolution)
@@ -99,9 +104,13 @@ def compute_slice(robot, view, resolution=400):
         f = evaluate(robot, p[a:a + CHUNK], R=rotation_tt(tau[a:a + CHUNK]))
         classes[a:a + CHUNK] = classify(f)
         margin[a:a + CHUNK], det[a:a + CHUNK] = f.margin, f.det_j
+        if collision is not None:
+            hit = collision.margins(p[a:a + CHUNK], rotation_tt(tau[a:a + CHUNK]))[0] < 0
+            classes[a:a + CHUNK][hit] = COLLISION
     shape = A.shape
     return SliceGrid(view=view, xs=xs, ys=ys, classes=classes.reshape(shape),
-                     margin=margin.reshape(shape), det_j=det.reshape(shape))
+                     margin=margin.reshape(shape), det_j=det.reshape(shape),
+                     scene=collision is not None)
 
 
 def _cell_centres(lo, hi, n):
@@ -145,7 +154,9 @@ def plot_slice(grid, path, size=(1000, 800), title=None, markers=(), segment=Non
         ax.set_ylim(y0, y1)
         if title:
             ax.set_title(title)
-        handles = [Patch(color=c, label=l) for c, l in zip(CLASS_COLORS, CLASS_LABELS)]
+        shown = len(CLASS_COLORS) if grid.scene else COLLISION   # collision: with a scene
+        handles = [Patch(color=c, label=l) for c, l in zip(CLASS_COLORS[:shown],
+                                                            CLASS_LABELS[:shown])]
         if has_singular:
             handles.append(Line2D([], [], color=SINGULAR_COLOR, lw=1.5, label=r"$\det J = 0$"))
         if segment is not None:
@@ -163,7 +174,8 @@ def plot_slice(grid, path, size=(1000, 800), title=None, markers=(), segment=Non
 def _draw_classes(ax, grid):
     (x0, x1), (y0, y1) = grid.view.ranges
     ax.imshow(grid.classes, origin="lower", extent=(x0, x1, y0, y1), aspect="auto",
-              cmap=ListedColormap(CLASS_COLORS), vmin=-0.5, vmax=2.5, interpolation="nearest")
+              cmap=ListedColormap(CLASS_COLORS), vmin=-0.5, vmax=len(CLASS_COLORS) - 0.5,
+              interpolation="nearest")
 
 
 def _draw_singular(ax, grid):

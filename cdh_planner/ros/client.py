@@ -40,9 +40,9 @@ from ..errors import InputError
 from ..parsing.poses import pose_values
 from . import messages as M
 from .context import init_context
-from .interface import ACTION_QOS, CABLE_COMMAND, EXECUTE, EXECUTION_RESULT, LATCHED, \
-    NODE_NAME, PLAN, PLAN_PATH, PLAN_RESULT, PLANNED_TRAJECTORY, SERVICE_QOS, STOP, \
-    TENSION_ENVELOPE
+from .interface import ACTION_QOS, CABLE_COMMAND, EXECUTE, EXECUTION_RESULT, GET_SCENE, \
+    LATCHED, NODE_NAME, OBSTACLES, OBSTACLES_DEPTH, PLAN, PLAN_PATH, PLAN_RESULT, \
+    PLANNED_TRAJECTORY, SERVICE_QOS, STOP, TENSION_ENVELOPE
 
 DEFAULT_NODE = "/" + NODE_NAME
 RESULT_WAIT_S = 2.0  # after the response, how long to wait for its ~/plan_result
@@ -200,6 +200,7 @@ class PlannerClient:
         self.commands, self.trajectories, self.envelopes = None, None, None
         self._results_settled = False   # the latched ~/execution_result has had its time
         self._param_client = None
+        self._scene_client = self._obstacles = None
 
     def topic(self, name):
         """The absolute name of the node's topic or service ``name`` (interface.py's names)."""
@@ -348,6 +349,37 @@ class PlannerClient:
         if not self.spin_until(future.done, timeout_s):
             raise ClientError(f"{self.target}: set_parameters timed out")
         return [(r.successful, r.reason) for r in future.result().results]
+
+    def get_scene(self, timeout_s=5.0):
+        """The node's current cdh_planner_interfaces/Scene (``~/get_scene``)."""
+        from cdh_planner_interfaces.srv import GetScene
+        if self._scene_client is None:
+            self._scene_client = self.node.create_client(GetScene, self.topic(GET_SCENE),
+                                                         qos_profile=SERVICE_QOS)
+        if not self._scene_client.wait_for_service(timeout_sec=timeout_s):
+            raise ClientError(f"no service {self._scene_client.srv_name}")
+        return self.call(self._scene_client, GetScene.Request(), timeout_s).scene
+
+    def update_scene(self, array, timeout_s=5.0):
+        """Publish an ObstacleArray on the node's ``~/obstacles`` and wait until the node's
+        scene version has changed: the new Scene. ClientError if it has not (nothing
+        taken: the node's log names the refused items)."""
+        from cdh_planner_interfaces.msg import ObstacleArray
+        before = self.get_scene(timeout_s).version
+        if self._obstacles is None:
+            self._obstacles = self.node.create_publisher(ObstacleArray, self.topic(OBSTACLES),
+                                                         OBSTACLES_DEPTH)
+        if not self.spin_until(lambda: self._obstacles.get_subscription_count() > 0, timeout_s):
+            raise ClientError(f"no subscriber on {self.topic(OBSTACLES)}")
+        self._obstacles.publish(array)
+        end = time.monotonic() + timeout_s
+        while time.monotonic() < end:
+            scene = self.get_scene(timeout_s)
+            if scene.version != before:
+                return scene
+            self.spin(0.05)
+        raise ClientError(f"{self.topic(OBSTACLES)}: the scene did not change within "
+                          f"{timeout_s:g} s (refused items are named in the node's log)")
 
     def execute(self, timeout_s=10.0):
         """Call ``~/execute``: (success, message)."""

@@ -16,6 +16,9 @@ PATH, PLANNED_TRAJECTORY = "path", "planned_cable_trajectory"
 TENSION_ENVELOPE, MARKERS = "tension_envelope", "markers"
 PLAN_RESULT, PLAN_PROGRESS, EXECUTION_RESULT = "plan_result", "plan_progress", "execution_result"
 CABLE_COMMAND = "cable_command"
+# the scene: obstacles in (ADD / REMOVE), the current scene out (service; latched topics)
+OBSTACLES, GET_SCENE, SCENE, SCENE_MARKERS = "obstacles", "get_scene", "scene", "scene_markers"
+OBSTACLES_DEPTH = 100   # ObstacleArray updates not yet taken (each is applied at once)
 
 # latched outputs: for display and late joiners, never a command
 LATCHED = QoSProfile(depth=1, durability=DurabilityPolicy.TRANSIENT_LOCAL,

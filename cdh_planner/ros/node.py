@@ -2,20 +2,17 @@
 
     cdh-planner node --ros-args --params-file config/robot2.yaml [-p name:=value ...]
 
-It maps ROS callbacks onto three parts that hold the logic: ``plan_service.PlanService``
-(the queue of plan calls, the last good plan and one made while executing, the commit of
-outputs; no rclpy), ``plan_execution.PlanExecution`` (``~/execute``, ``~/stop``,
-``use_current_start``; its state machine in ``execution_runs``) and
-``recording.NodeRecording`` (the run file). Names and QoS: ``interface.py``; parameters:
-``params.py`` (declared by ``node_parameters.py``); the whole interface: docs/ros-node.md.
-Running it as a process (signals, executor, shutdown): ``node_main.py``.
+It maps ROS callbacks onto the parts that hold the logic: ``plan_service.PlanService``
+(plan calls' queue, the last good plan, the commit of outputs; no rclpy),
+``plan_execution.PlanExecution`` (``~/execute``, ``~/stop``, ``use_current_start``),
+``node_scene.NodeScene`` (``~/obstacles``, ``~/get_scene``: a plan uses the scene of its
+arrival), ``run_log.NodeRecording`` (the run file). Names, QoS: ``interface.py``;
+parameters: ``params.py``; the interface: docs/ros-node.md; the process: ``node_main.py``.
 
-A lifecycle node (``rclpy.lifecycle``, the standard ``~/change_state`` services): configure
-checks the parameters, loads the robot, warms the planner and opens the run file; activate
-serves (inactive, plan calls and goals are refused and ``~/execute`` too); deactivate stops
-an execution (holding); cleanup and shutdown close the run file. With ``autostart`` (the
-default) it configures and activates at start, as nav2's lifecycle_manager does, and a bad
-parameter stops it there. ``/diagnostics``: ``node_diagnostics.py``, in every state.
+A lifecycle node (``rclpy.lifecycle``): configure checks the parameters, loads the robot,
+warms the planner, opens the run file; activate serves (inactive: plan calls, goals and
+``~/execute`` refused); deactivate stops an execution (holding); cleanup and shutdown close
+the run file; ``autostart`` (default) configures and activates at start (as nav2 does).
 """
 
 from diagnostic_msgs.msg import DiagnosticStatus
@@ -45,6 +42,7 @@ from .node_frames import NodeFrames
 from .node_lifecycle import LifecycleMixin
 from .node_outlet import GoalCancel, Outlet, run_stem
 from .node_parameters import declare_parameters, refuse_unknown
+from .node_scene import NodeScene
 from .params import needs_new_planner, node_config, parameter_error
 from .plan_execution import PlanExecution
 from .plan_service import PlanService
@@ -74,6 +72,7 @@ class PlannerNode(LifecycleMixin, LifecycleNode):
         self._make_servers()
         self.diagnostics = NodeDiagnostics(self, ReentrantCallbackGroup())
         self.frames = NodeFrames(self, ReentrantCallbackGroup())
+        self.scene = NodeScene(self)
         if self._values["autostart"]:
             self.start()
 
@@ -113,7 +112,7 @@ class PlannerNode(LifecycleMixin, LifecycleNode):
     # ------------------------------------------------------------------ lifecycle
 
     def _configure(self, config):
-        planner = self._new_planner(config)     # first: nothing to undo if it fails
+        planner = self._new_planner(config, self.scene.effective(config))   # first: nothing to undo
         self.runlog = RunLog(config.log_dir, config.log_enabled,
                              warn=self.get_logger().warning, info=self.get_logger().info,
                              node_name=self.get_fully_qualified_name(), **log_limits(config.values))
@@ -121,7 +120,8 @@ class PlannerNode(LifecycleMixin, LifecycleNode):
         self.record.parameters(self.get_parameters_by_prefix("").values(), initial=True)
         log_file = self.record(self.runlog.open) or ""
         self.outlet = Outlet(self)
-        self.plans = PlanService(config, planner, self.outlet)
+        self.plans = PlanService(config, planner, self.outlet, make_planner=self._new_planner)
+        self.scene.configure(config)
         self._execution = PlanExecution(self, config, self.pub_command, self.pub_execution,
                                         self.record.publish, self.plans.execution_ended,
                                         callback_group=ReentrantCallbackGroup())
@@ -149,13 +149,14 @@ class PlannerNode(LifecycleMixin, LifecycleNode):
             planner = None
             if self.configured and needs_new_planner([p.name for p in params],
                                                      self.config.values, config.values):
-                planner = self._new_planner(config)
+                planner = self._new_planner(config, self.scene.effective(config))
         except InputError as exc:
             return SetParametersResult(successful=False, reason=str(exc))
         self._values = values
         if not self.configured:   # configure uses them
             return SetParametersResult(successful=True)
         self.plans.configure(config, planner)
+        self.scene.configure(config)
         self.frames.configure(config)
         self._execution.configure(config)
         self.record(self.runlog.configure, config.log_dir, config.log_enabled,
@@ -164,12 +165,12 @@ class PlannerNode(LifecycleMixin, LifecycleNode):
         self.get_logger().info(f"parameters set: {', '.join(p.name for p in params)}")
         return SetParametersResult(successful=True)
 
-    def _new_planner(self, config):
-        """A Planner for ``config`` (a fresh atlas, its kernel warm); InputError naming the
-        parameter."""
+    def _new_planner(self, config, scene):
+        """A Planner for ``config`` and ``scene`` (a fresh atlas, its kernel warm);
+        InputError naming the parameter."""
         try:
-            return plan_requests.warm_up(self._factory(config.robot, config.task, config.settings,
-                                                  scene=config.scene))
+            return plan_requests.warm_up(self._factory(config.robot, config.task,
+                                                       config.settings, scene=scene))
         except InputError as exc:
             raise parameter_error(exc) from None
 
@@ -182,11 +183,11 @@ class PlannerNode(LifecycleMixin, LifecycleNode):
             self.get_logger().warning(f"~/plan refused: the node is {self.lifecycle_state}")
             return response
         turn = self.plans.enter()   # first: the queue's order is the order calls are taken
-        seq, run_id, log_file = self._new_call()
+        seq, run_id, log_file, scene = self._new_call()
         self.record.plan(self.srv_plan, REQUEST_RECEIVED, seq, request=request)
         refused = self.frames.to_base(request, ("start", "goal"), self.config.base_frame)
-        response.plan = self.plans.answer(plan_requests.PlanCall.of_get_plan(request), run_id,
-                                          log_file, turn, refused).path
+        call = plan_requests.PlanCall.of_get_plan(request, scene)
+        response.plan = self.plans.answer(call, run_id, log_file, turn, refused).path
         self.record.plan(self.srv_plan, RESPONSE_SENT, seq, response=response)
         return response
 
@@ -201,10 +202,10 @@ class PlannerNode(LifecycleMixin, LifecycleNode):
         """~/plan_path: every goal ends with a result (succeeded, canceled or aborted with
         the error code and reason); feedback at most every 0.1 s."""
         turn = self.plans.enter()
-        seq, run_id, log_file = self._new_call()
+        seq, run_id, log_file, scene = self._new_call()
         action = f"{self.get_fully_qualified_name()}/{PLAN_PATH}"
         self.record.goal(action, REQUEST_RECEIVED, seq, goal_handle, goal=goal_handle.request)
-        call, refused = self._plan_path_call(goal_handle)
+        call, refused = self._plan_path_call(goal_handle, scene)
         answer = self.plans.answer(call, run_id, log_file, turn, refused)
         result = answer.result
         if result.success:
@@ -213,11 +214,11 @@ class PlannerNode(LifecycleMixin, LifecycleNode):
             goal_handle.canceled()
         else:
             goal_handle.abort()
-        msg = plan_requests.action_result(result, answer.outputs, answer.path)
+        msg = plan_requests.action_result(result, answer.outputs, answer.path, scene.version)
         self.record.goal(action, RESPONSE_SENT, seq, goal_handle, result=msg)
         return msg
 
-    def _plan_path_call(self, goal_handle):
+    def _plan_path_call(self, goal_handle, scene):
         """(PlanCall, None) of a goal, or (None, its refusal): a bad goal, or no measured
         start for ``use_current_start`` (after waiting for one, unless cancelled)."""
         goal, config, cancel = goal_handle.request, self.config, GoalCancel(goal_handle)
@@ -238,14 +239,14 @@ class PlannerNode(LifecycleMixin, LifecycleNode):
                 return None, plan_requests.refusal(Status.NO_CURRENT_STATE,
                                               f"use_current_start: {measured.why}")
             start = measured.pose
-        return plan_requests.PlanCall.of_plan_path(goal, start, cancel,
-                                              plan_requests.feedback_sender(goal_handle)), None
+        return plan_requests.PlanCall.of_plan_path(
+            goal, start, cancel, plan_requests.feedback_sender(goal_handle), scene), None
 
     def _new_call(self):
-        """(sequence number, run id, run file) of a new plan call."""
-        seq = self.plans.new_call()
+        """(sequence number, run id, run file, SceneVersion as of now) of a new plan call."""
+        seq, scene = self.plans.new_call(), self.scene.current()
         log_file = self.record(self.runlog.open) or ""
-        return seq, (f"{run_stem(log_file)}#{seq}" if log_file else str(seq)), log_file
+        return seq, (f"{run_stem(log_file)}#{seq}" if log_file else str(seq)), log_file, scene
 
     # ------------------------------------------------------------------ execute, stop
 

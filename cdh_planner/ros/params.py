@@ -14,8 +14,9 @@ YAML integer lists work; ``node_config`` checks their types and ranges itself.
 
 The parameters are ``SPECS``: the robot file's fields (``robot.*``, declared on
 ``model.robot.Robot``), the registered tasks' fields (``task.*``, ``model/task.py``), the
-planner settings (``settings.py``) and the node's own (below). Their table, with units,
-defaults and ranges, is docs/parameters.md, generated from ``SPECS`` by
+planner settings (``settings.py``), the node's own (below) and the registered command
+outlets' (``execution.mode`` and its modes' parameters, ``command_outlets.py``). Their
+table, with units, defaults and ranges, is docs/parameters.md, generated from ``SPECS`` by
 ``python -m cdh_planner.ros.params > docs/parameters.md`` (test_ros_params checks it is
 current).
 """
@@ -23,6 +24,7 @@ current).
 import math
 import os
 import re
+from collections.abc import Mapping
 from dataclasses import dataclass, field
 
 import numpy as np
@@ -32,38 +34,23 @@ from ..model import robot_schema as rs
 from ..model.robot import FIELDS as ROBOT_FIELDS, OPTIONAL_GROUPS, robot_from_dict
 from ..model.task import TASKS, task_from_dict, task_parameters
 from ..pipeline.metrics import task_cost
-from ..scene.schema import load_scene
-from ..settings import SETTINGS, Bounds, PlannerSettings, check_range
-
-STRING, BOOL, INT, DOUBLE, DOUBLES, STRINGS = "string", "bool", "int", "double", "doubles", \
-    "strings"
-REQUIRED = rs.REQUIRED  # default of a parameter that must come from the robot file
+from ..scene.schema import default_scene, load_scene
+from ..settings import SETTINGS, LiveChoices, PlannerSettings, check_range
+from .command_outlets import OUTLETS, modes_description, outlet_specs, reserve
+from .param_spec import BOOL, DOUBLE, DOUBLES, INT, REQUIRED, STRING, STRINGS, Spec  # noqa: F401
 
 # the groups whose change means a new Planner (the others only affect the node)
 PLANNER_PREFIXES = ("robot.", "task.", "planner.", "trajectory.", "scene_file")
 INTERPOLATIONS = ("linear", "quintic")
-EXECUTION_MODES = ("stream", "forward_command", "follow_joint_trajectory")
-# read once at start, read-only afterwards: the subscription and action client they name
-# are made then
-START_ONLY = ("execution.controller_action", "execution.joint_states_topic",
-              "execution.forward_command_topic")
-READ_ONLY = START_ONLY + ("autostart",)
+EXECUTION_MODES = LiveChoices(lambda: tuple(OUTLETS))  # the registered command outlets
+# read once at start, read-only afterwards: the subscription, publisher or action client
+# they name are made then (Spec.start_only)
+START_ONLY = LiveChoices(lambda: tuple(s.name for s in SPECS if s.start_only))
+READ_ONLY = LiveChoices(lambda: tuple(START_ONLY) + ("autostart",))
 FRAMES = ("base_frame", "fixed_frame", "platform_frame")
 # a ROS 2 topic or action name: tokens of letters, digits and _ (not starting with a digit)
 # between slashes, absolute or relative, or private (~/)
 ROS_NAME = re.compile(r"(~/|/)?[A-Za-z_][A-Za-z0-9_]*(/[A-Za-z_][A-Za-z0-9_]*)*")
-
-
-@dataclass(frozen=True)
-class Spec(Bounds):
-    """One parameter: ``kind`` (STRING, BOOL, INT, DOUBLE, DOUBLES, STRINGS), ``default``
-    (REQUIRED: no default; None for an optional array left empty), a description, and its
-    Bounds (settings.py)."""
-
-    name: str
-    kind: str
-    default: object
-    description: str
 
 
 _KINDS = {str: STRING, bool: BOOL, int: INT, float: DOUBLE}
@@ -113,7 +100,7 @@ def _task_specs():
     return specs
 
 
-SPECS = (
+_HEAD = tuple(
     [Spec("autostart", BOOL, True,
           "configure and activate at start, as nav2's lifecycle_manager autostart; false: "
           "the node waits unconfigured for lifecycle calls (~/change_state)"),
@@ -135,30 +122,16 @@ SPECS = (
             "between waypoints while streaming: quintic (as a JointTrajectoryController "
             "interpolates the same points: the motion the planner checked) or linear "
             "(straight in cable space at the mean speed; its velocity steps at every point, "
-            "which the check does not cover)", choices=INTERPOLATIONS),
-       Spec("execution.mode", STRING, "stream",
-            "how ~/execute moves the winches: stream (sensor_msgs/JointState setpoints on "
-            "~/cable_command at stream_rate_hz, for a custom winch driver: no stock "
-            "ros2_control controller reads it), forward_command (std_msgs/Float64MultiArray "
-            "cable lengths on execution.forward_command_topic at stream_rate_hz, in "
-            "execution.joint_order: a JointGroupPositionController) or "
-            "follow_joint_trajectory (the cable trajectory, without effort, to a "
-            "JointTrajectoryController's action)", choices=EXECUTION_MODES),
-       Spec("execution.forward_command_topic", STRING, "/cable_controller/commands",
-            "forward_command mode: the JointGroupPositionController's ~/commands "
-            "(std_msgs/Float64MultiArray, set at start)"),
-       Spec("execution.joint_order", STRINGS, None,
-            "forward_command mode: the controller's joints parameter, the order of the "
-            "command's data; the robot's winch names, each once (empty: robot.winch_names)"),
-       Spec("execution.allow_unchecked_start", BOOL, False,
+            "which the check does not cover)", choices=INTERPOLATIONS)])
+# then execution.mode and the command outlets' own parameters (_specs), then these
+_TAIL = tuple(
+    [Spec("execution.allow_unchecked_start", BOOL, False,
             "~/execute without measured cable lengths to compare with the trajectory's "
             "start: refused when false (the default), executed unchecked when true"),
-       Spec("execution.controller_action", STRING, "/cable_controller/follow_joint_trajectory",
-            "follow_joint_trajectory mode: the controller's control_msgs/FollowJointTrajectory "
-            "action (set at start)"),
        Spec("execution.joint_states_topic", STRING, "/joint_states",
             "sensor_msgs/JointState of the winches (cable lengths, m, by winch name): the "
-            "start state of ~/execute and of use_current_start (set at start)"),
+            "start state of ~/execute and of use_current_start (set at start)",
+            start_only=True),
        Spec("execution.start_tolerance", DOUBLE, 0.005,
             "~/execute refuses when a measured cable length is farther than this from the "
             "trajectory's first point (m)", low=0.0, open_low=True),
@@ -188,7 +161,43 @@ SPECS = (
             "in log_dir last written longer ago than this (days) are removed; 0: no limit",
             low=0.0)]
 )
-SPEC = {s.name: s for s in SPECS}
+reserve({s.name for s in _HEAD + _TAIL} | {"execution.mode"})
+_BUILT = {}  # the registered outlets -> the specs (rebuilt when an outlet is registered)
+
+
+def _built():
+    """(every parameter: _HEAD, execution.mode and the outlets' parameters, _TAIL; name ->
+    its Spec), for the outlets registered now."""
+    key = tuple(OUTLETS.values())
+    if key not in _BUILT:
+        mode = Spec("execution.mode", STRING, "stream", modes_description(),
+                    choices=EXECUTION_MODES)
+        specs = _HEAD + (mode,) + outlet_specs() + _TAIL
+        _BUILT.clear()
+        _BUILT[key] = specs, {s.name: s for s in specs}
+    return _BUILT[key]
+
+
+def _specs():
+    return _built()[0]
+
+
+class _SpecsByName(Mapping):
+    """name -> Spec of SPECS, as registered now."""
+
+    def __getitem__(self, name):
+        return _built()[1][name]
+
+    def __iter__(self):
+        return iter([s.name for s in _specs()])
+
+    def __len__(self):
+        return len(_specs())
+
+
+# the parameters (Spec), read from the command outlets' registry whenever used
+SPECS = LiveChoices(_specs)
+SPEC = _SpecsByName()
 
 
 @dataclass(frozen=True)
@@ -224,9 +233,9 @@ def check_value(spec, value):
             raise InputError(name, value, "expected a string")
         if spec.choices and value not in spec.choices:
             raise InputError(name, value, f"expected one of {', '.join(spec.choices)}")
-        if name in FRAMES + START_ONLY and not value:
+        if (name in FRAMES or spec.start_only) and not value:
             raise InputError(name, value, "must not be empty")
-        if name in START_ONLY and not ROS_NAME.fullmatch(value):
+        if spec.start_only and not ROS_NAME.fullmatch(value):
             raise InputError(name, value, "not a ROS name: letters, digits and _ between "
                                           "slashes, no token starting with a digit")
         return value
@@ -280,14 +289,15 @@ def node_config(values, source="ROS parameters"):
     robot = robot_from_dict(_robot_dict(checked), source=source)
     task = task_from_dict(_task_dict(checked), where="task")
     settings = PlannerSettings(**{name: checked[s.parameter] for name, (_, _, s) in SETTINGS.items()})
-    check_joint_order(checked["execution.joint_order"], robot.winch_names)
+    for outlet in OUTLETS.values():   # every mode's: a switch of mode finds them good
+        outlet.check(checked, robot)
     _check_frames(checked)
     try:
         task_cost(robot, task, settings.cost)   # e.g. great_circle needs the sphere task
     except InputError as exc:
         raise InputError("planner.cost", settings.cost, exc.reason) from None
     scene = load_scene(os.path.expanduser(checked["scene_file"]), robot) \
-        if checked["scene_file"] else None
+        if checked["scene_file"] else default_scene(robot)
     log_dir = checked["log_dir"]
     if not log_dir and checked["log_enabled"]:
         raise InputError("log_dir", log_dir, "must name a directory while log_enabled is true")
@@ -306,22 +316,6 @@ def _check_frames(checked):
         if checked[name] in seen:
             raise InputError(name, checked[name], f"must differ from {seen[checked[name]]}")
         seen[checked[name]] = name
-
-
-def check_joint_order(order, winch_names, name="execution.joint_order"):
-    """The command order of forward_command mode: ``order`` (None or empty:
-    ``winch_names``), else every winch name exactly once; InputError naming ``name``."""
-    if not order:
-        return list(winch_names)
-    if len(order) != len(winch_names) or set(order) != set(winch_names):
-        missing = [n for n in winch_names if n not in order]
-        unknown = [n for n in order if n not in winch_names]
-        twice = sorted({n for n in order if list(order).count(n) > 1})
-        why = "; ".join(f"{what} {', '.join(names)}" for what, names in
-                        (("missing", missing), ("not a winch", unknown), ("twice", twice))
-                        if names)
-        raise InputError(name, list(order), f"must list robot.winch_names, each once: {why}")
-    return list(order)
 
 
 def _robot_dict(checked):

@@ -10,14 +10,11 @@ how it ended (the node's part behind ``~/execute``, ``~/stop`` and ``use_current
     run.close()                               # shutting down: hold, end as stopped
     run.release()                             # lifecycle cleanup: close, then destroy
 
-- ``stream``: the plan's cable lengths sampled in real time (``streaming.Stream``) and sent
-  on the command topic (sensor_msgs/JointState, for a custom driver) at ``stream_rate_hz``
-  from a node timer.
-- ``forward_command``: the same samples' lengths as std_msgs/Float64MultiArray in
-  ``execution.joint_order`` on ``execution.forward_command_topic`` (a ros2_control
-  JointGroupPositionController's ``~/commands``).
-- ``follow_joint_trajectory``: the cable trajectory sent to a ros2_control controller's
-  FollowJointTrajectory action (``winches.TrajectoryExecutor``); its result ends the run.
+The modes are the registered command outlets (``command_outlets.py``), one of each made at
+configure: a streamed one (``stream``, ``forward_command``) gets the plan's cable state
+sampled in real time (``streaming.Stream``) at ``stream_rate_hz`` from a node timer, one
+command per sample; a trajectory one (``follow_joint_trajectory``) gets the cable
+trajectory, and the controller's result ends the run.
 
 Every mode ``start`` first compares the measured lengths (``execution.joint_states_topic``)
 with the plan's first point; with none it refuses unless ``execution.allow_unchecked_start``. Each run is a token of the state machine ``runs``
@@ -32,22 +29,15 @@ import traceback
 from dataclasses import dataclass
 
 import numpy as np
-from std_msgs.msg import Float64MultiArray
 
 from ..errors import InputError, exception_line
 from ..model.kinematics import cable_lengths
 from ..model.pose import rotation_from_quaternion
 from . import winches
 from . import messages as M
+from .command_outlets import OUTLETS, OutletContext
 from .execution_runs import ExecutionRuns, Phase
-from .params import check_joint_order
 from .streaming import Stream
-
-STREAM, FORWARD, FOLLOW = "stream", "forward_command", "follow_joint_trajectory"
-STREAMING = (STREAM, FORWARD)     # sampled on the node's timer
-# as forward_command_controller's subscription (rclcpp::SystemDefaultsQoS): reliable,
-# volatile; never latched (a controller that starts gets nothing old)
-FORWARD_QOS = 10
 
 
 @dataclass
@@ -64,7 +54,6 @@ class PlanExecution:
     def __init__(self, node, config, command_publisher, result_publisher, publish, on_end,
                  callback_group=None):
         self._node = node
-        self._commands = command_publisher
         self._results = result_publisher
         self._publish = publish
         self._on_end = on_end          # on_end(publish_pending), once per run
@@ -77,12 +66,8 @@ class PlanExecution:
         values = config.values
         self.joints = winches.JointStateMonitor(
             node, values["execution.joint_states_topic"], config.robot.winch_names)
-        self.controller = winches.TrajectoryExecutor(
-            node, values["execution.controller_action"], callback_group=callback_group)
-        self.forward = node.create_publisher(
-            Float64MultiArray, values["execution.forward_command_topic"], FORWARD_QOS)
-        self.joint_order = check_joint_order(values["execution.joint_order"],
-                                             config.robot.winch_names)
+        context = OutletContext(node, command_publisher, callback_group)
+        self.outlets = {mode: cls(context, config) for mode, cls in OUTLETS.items()}
 
     @property
     def running(self):
@@ -90,10 +75,10 @@ class PlanExecution:
 
     def configure(self, config):
         """A new configuration (parameters changed): the winch names to measure and the
-        forward_command order."""
+        outlets' parameters."""
         self.joints.winch_names = list(config.robot.winch_names)
-        self.joint_order = check_joint_order(config.values["execution.joint_order"],
-                                             config.robot.winch_names)
+        for outlet in self.outlets.values():
+            outlet.configure(config)
 
     # ------------------------------------------------------------------ start, stop
 
@@ -116,9 +101,10 @@ class PlanExecution:
         if run is None:
             return False, f"refused: already executing{self._where()}; call ~/stop first"
         try:
-            if run.mode == FOLLOW:
-                return self._start_following(run, out, f"{what} through "
-                                                       f"{self.controller.action_name}{note}")
+            outlet = self._outlet(run.mode)
+            if not outlet.streamed:
+                return self._start_following(run, outlet, out,
+                                             f"{what} through {outlet.target}{note}")
             self._stream = Stream(path, robot.winch_names, config.stream_interpolation,
                                   start=time.monotonic())
             self.runs.advance(run, Phase.RUNNING)
@@ -131,7 +117,14 @@ class PlanExecution:
         if run.outcome:    # ended already: the first tick failed
             return False, f"refused: execution {run.outcome}: {run.message}"
         return True, (f"executing: {what} at {config.stream_rate_hz:g} Hz on "
-                      f"{self._publisher(run).topic_name}{note}")
+                      f"{outlet.target}{note}")
+
+    def _outlet(self, mode):
+        """The outlet made at configure for ``mode``."""
+        if mode not in self.outlets:
+            raise RuntimeError(f"execution mode {mode!r} was registered after the node was "
+                               f"configured: configure it again")
+        return self.outlets[mode]
 
     def _check_start(self, values, path, robot):
         """(refusal or "", note): the measured lengths against the path's first point; with
@@ -147,18 +140,19 @@ class PlanExecution:
                     f"execution.allow_unchecked_start to execute unchecked"), ""
         return "", f" (start not checked: {why})"
 
-    def _start_following(self, run, out, what):
-        self.controller.start(out.cable_trajectory,
-                              lambda outcome, message: self._end(run, outcome, message),
-                              on_accepted=lambda: self.runs.advance(run, Phase.RUNNING))
+    def _start_following(self, run, outlet, out, what):
+        outlet.start(out.cable_trajectory,
+                     lambda outcome, message: self._end(run, outcome, message),
+                     lambda: self.runs.advance(run, Phase.RUNNING))
         if run.outcome:   # ended at once (no controller, a bad goal): the reason is logged
             return False, f"refused: execution {run.outcome}: {run.message}"
         return True, f"executing: {what}"
 
     def _where(self):
-        stream = self._stream
-        return (f" (at {stream.t:.2f} s of {stream.duration:.2f} s)" if stream is not None
-                else f" ({self.runs.phase.value} on {self.controller.action_name})")
+        stream, run = self._stream, self.runs.current
+        if stream is not None:
+            return f" (at {stream.t:.2f} s of {stream.duration:.2f} s)"
+        return f" ({self.runs.phase.value} on {self.outlets[run.mode].target})" if run else ""
 
     def stop(self):
         """Stop the running execution where it is; what happened (str). A stream holds its
@@ -167,8 +161,8 @@ class PlanExecution:
         run = self.runs.current
         if run is None:
             return "not executing: nothing to stop"
-        stream = self._stream
-        if run.mode in STREAMING:
+        stream, outlet = self._stream, self.outlets[run.mode]
+        if outlet.streamed:
             if stream is not None:
                 self._send(run, stream.hold(self._stamp()))
             message = (f"stopped at {stream.t:.3f} s of {stream.duration:.3f} s; "
@@ -176,11 +170,11 @@ class PlanExecution:
             self._end(run, winches.STOPPED, message)
             return message
         self.runs.advance(run, Phase.STOPPING)
-        if not self.controller.cancel():   # nothing on the controller: end here
-            message = f"stopped: nothing was running on {self.controller.action_name}"
+        if not outlet.cancel():   # nothing on the controller: end here
+            message = f"stopped: nothing was running on {outlet.target}"
             self._end(run, winches.STOPPED, message)
             return message
-        return (f"stopping: cancel sent to {self.controller.action_name} "
+        return (f"stopping: cancel sent to {outlet.target} "
                 f"(the controller holds its position)")
 
     def close(self):
@@ -189,26 +183,27 @@ class PlanExecution:
         run = self.runs.current
         if run is None:
             return
+        outlet = self.outlets[run.mode]
         try:
-            if run.mode in STREAMING and self._stream is not None:
+            if outlet.streamed and self._stream is not None:
                 self._send(run, self._stream.hold(self._stamp()))
-            elif run.mode == FOLLOW:
-                self.controller.cancel()
+            elif not outlet.streamed:
+                outlet.cancel()
         except Exception:  # noqa: BLE001 - context already gone: nothing to tell
             pass
         self._end(run, winches.STOPPED, "shutting down while executing: held the last setpoint",
                   publish_pending=False)
 
     def release(self):
-        """Lifecycle cleanup: ``close``, then the joint-state subscription, the action
-        client and the stream timer destroyed (a new configure makes new ones)."""
+        """Lifecycle cleanup: ``close``, then the joint-state subscription, the outlets'
+        publishers and clients and the stream timer destroyed (a new configure makes new
+        ones)."""
         self.close()
-        for what, step in (("the joint-state subscription", lambda: self.joints.destroy()),
-                           ("the action client", lambda: self.controller.destroy()),
-                           ("the forward_command publisher",
-                            lambda: self._node.destroy_publisher(self.forward)),
-                           ("the stream timer", lambda: self._timer is not None
-                            and self._node.destroy_timer(self._timer))):
+        steps = [("the joint-state subscription", self.joints.destroy)]
+        steps += [(f"the {mode} outlet", outlet.release) for mode, outlet in self.outlets.items()]
+        steps += [("the stream timer", lambda: self._timer is not None
+                   and self._node.destroy_timer(self._timer))]
+        for what, step in steps:
             self._quietly(f"destroying {what}", step)
         self._timer = None
 
@@ -226,7 +221,7 @@ class PlanExecution:
 
     def _tick(self):
         run, stream = self.runs.current, self._stream
-        if run is None or run.mode not in STREAMING or stream is None:
+        if run is None or not self.outlets[run.mode].streamed or stream is None:
             return
         try:
             msg, finished = stream.command(time.monotonic(), self._stamp())
@@ -240,16 +235,10 @@ class PlanExecution:
             self._end(run, winches.COMPLETED, f"execution finished: {stream.sent} "
                                                 f"commands over {stream.duration:.3f} s")
 
-    def _publisher(self, run):
-        return self.forward if run.mode == FORWARD else self._commands
-
     def _send(self, run, joint_state):
-        """Publish (and record) one streamed setpoint: the JointState itself (stream), or
-        its positions in ``joint_order`` (forward_command)."""
-        if run.mode == FORWARD:
-            self._publish(self.forward, forward_command(joint_state, self.joint_order))
-        else:
-            self._publish(self._commands, joint_state)
+        """Publish (and record) one streamed setpoint as the run's outlet's command."""
+        outlet = self.outlets[run.mode]
+        self._publish(outlet.publisher, outlet.message(joint_state))
 
     # ------------------------------------------------------------------ the end
 
@@ -333,10 +322,3 @@ class PlanExecution:
     def _stamp(self):
         return self._node.get_clock().now().to_msg()
 
-
-def forward_command(joint_state, order):
-    """std_msgs/Float64MultiArray of a JointState's positions (m) in the joint ``order``
-    (a JointGroupPositionController's ``joints``): data only, no layout (the controller
-    reads data and checks its size)."""
-    by_name = dict(zip(joint_state.name, joint_state.position))
-    return Float64MultiArray(data=[float(by_name[n]) for n in order])

@@ -43,7 +43,8 @@ from .markers import markers_msg
 
 # keys that ``result_status`` adds to messages.plan_status's (strings; numbers by repr)
 EXTRA_KEYS = ("path_stamp", "waypoints", "path_length_m", "duration_s", "min_margin",
-              "min_tension_margin_n", "least_margin", "least_tension_margin_n", "outputs")
+              "min_tension_margin_n", "least_margin", "least_tension_margin_n", "outputs",
+              "scene_version")   # the last: a call the planner answered (ros.scene_state)
 PROGRESS_NAME = "cdh_planner: planning"
 # ``outputs`` value of a successful result: the plan is on the latched topics now, or will be
 # when the running execution ends (``docs/ros-node.md``, "Planning while executing")
@@ -80,19 +81,20 @@ class PlanCall:
     timeout_s: Optional[float] = None   # s
     cancel: object = None               # is_set(): stop the search (answer canceled)
     feedback: Optional[Callable] = None  # called with each progress report (a dict)
+    scene: object = None   # scene_state.SceneVersion as of the call's arrival (None: the config's)
 
     @classmethod
-    def of_get_plan(cls, request):
-        return cls(request.start, request.goal, tolerance=request_tolerance(request))
+    def of_get_plan(cls, request, scene=None):
+        return cls(request.start, request.goal, tolerance=request_tolerance(request), scene=scene)
 
     @classmethod
-    def of_plan_path(cls, goal, start=None, cancel=None, feedback=None):
+    def of_plan_path(cls, goal, start=None, cancel=None, feedback=None, scene=None):
         """A PlanPath goal; ``start``: the measured start (use_current_start) instead of
         the goal's. Empty strategy and timeout_s 0 mean the node's parameters."""
         return cls(goal.start if start is None else start, goal.goal,
                    strategy=goal.strategy or None,
                    timeout_s=None if goal.timeout_s == 0.0 else float(goal.timeout_s),
-                   cancel=cancel, feedback=feedback)
+                   cancel=cancel, feedback=feedback, scene=scene)
 
 
 def request_poses(request, base_frame):
@@ -309,13 +311,14 @@ def plan_outputs(result, robot, base_frame, stamp, scene=None):
         markers=markers_msg(path, robot, base_frame, stamp, scene=scene))
 
 
-def action_result(result, out=None, path=None):
+def action_result(result, out=None, path=None, scene_version=0):
     """cdh_planner_interfaces/action/PlanPath's Result of a PlanResult and, on success, its
     PlanOutputs (path, cable trajectory, tension envelope); without them ``path`` (the
     empty answer: its stamp pairs the result with its ``~/plan_result``, as GetPlan's).
     min_margin: the least normalised margin over the path and the motion between its
-    waypoints (NaN without a path)."""
+    waypoints (NaN without a path). ``scene_version``: the scene it was planned under."""
     msg = PlanPath.Result(error_code=M.NONE if result.success else M.error_code(result.reason),
+                          scene_version=int(scene_version),
                           error_msg="" if result.success else (result.message or result.reason),
                           planning_time_s=float(result.time_s), charts=int(result.charts),
                           min_margin=float(result.least_margin) if result.success else math.nan)
@@ -360,6 +363,8 @@ def result_status(result, robot, run_id, log_file, stamp, outputs=PUBLISHED):
         extra["least_margin"] = repr(float(result.least_margin))
         extra["least_tension_margin_n"] = repr(float(result.least_tension_margin))
         extra["outputs"] = outputs
+    if "scene_version" in result.stats:   # planned under this scene (ros.scene_state)
+        extra["scene_version"] = str(result.stats["scene_version"])
     msg.values.extend(KeyValue(key=k, value=v) for k, v in extra.items())
     return msg
 

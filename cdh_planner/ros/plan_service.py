@@ -67,7 +67,8 @@ class Cancel:
 
 class PlanService:
 
-    def __init__(self, config, planner, outlet, depth=plan_requests.PLAN_QUEUE_DEPTH):
+    def __init__(self, config, planner, outlet, depth=plan_requests.PLAN_QUEUE_DEPTH,
+                 make_planner=None):
         self._lock = threading.RLock()    # the plans, the configuration and the counter
         self._queue = plan_requests.PlanQueue(depth)
         self._config, self._planner = config, planner
@@ -76,6 +77,9 @@ class PlanService:
         self._last = None      # (PlannedPath, Robot, PlanOutputs) of the last good plan
         self._pending = None   # the same, of a plan made while executing
         self.executing = lambda: False   # the node's: is an execution running
+        # make_planner(config, scene) -> a planner for another scene (None: the planner in
+        # force serves every scene)
+        self.make_planner = make_planner
         self.shutting_down = False
         self.planning = False
 
@@ -152,16 +156,33 @@ class PlanService:
         """Plan a call whose turn it is; a success is committed (``_commit``)."""
         with self._lock:
             config, planner = self._config, self._planner
+        planner, scene = self._for_scene(call, config, planner)
         result = self.compute(call, planner, config, run_id)
         result = plan_requests.output_refusal(result) or result
+        if call.scene is not None:
+            result.stats["scene_version"] = call.scene.version
         if result.success:
             out = plan_requests.plan_outputs(result, config.robot, config.base_frame,
-                                        self._outlet.stamp(), getattr(config, "scene", None))
+                                             self._outlet.stamp(), scene)
             self._commit(result, config, out, run_id, log_file)
             return Answer(result, out, out.path)
         path = self._no_path(config)
         self._publish_result(result, config, run_id, log_file, path)
         return Answer(result, None, path)
+
+    def _for_scene(self, call, config, planner):
+        """(planner, scene) for the call's scene (as of its arrival): the planner in force
+        if it was made for that scene, else a new one (a fresh atlas), which stays in force
+        while the configuration does."""
+        if call.scene is None or self.make_planner is None:
+            return planner, getattr(config, "scene", None)
+        scene = call.scene.scene
+        if getattr(planner, "scene", None) is not scene:
+            planner = self.make_planner(config, scene)
+            with self._lock:
+                if self._config is config:
+                    self._planner = planner
+        return planner, scene
 
     def compute(self, call, planner, config, run_id):
         """The PlanResult of one call (never raising but for bugs)."""

@@ -39,8 +39,9 @@ from ..recording.mcap_log import ACTION_INFIX, GET_RESULT, REQUEST_RECEIVED, RES
     SEND_GOAL, SERVICE_EVENT_SUFFIX, NotARecording, check_recording
 from ..recording.mcap_log import scan_records as scan_run  # raw records of a (possibly killed) run file
 from ..recording.ros_schemas import rosidl_type
+from .command_outlets import command_topic_parameters
 from .messages import path_arrays
-from .interface import CABLE_COMMAND, SERVICE_QOS
+from .interface import CABLE_COMMAND, OBSTACLES, SERVICE_QOS
 from .run_log import PARAMETER_EVENTS
 
 
@@ -48,7 +49,8 @@ MATCH_SETTLE_S = 0.3   # s after the publisher sees its subscribers, before the 
 MAX_GAP_S = 5.0        # default longest wait between two republished messages (s)
 # the parameters that decide a plan's answer (the others: streaming, recording)
 ANSWER_PREFIXES = ("robot.", "task.", "planner.", "trajectory.")
-ANSWER_PARAMETERS = ("base_frame",)
+ANSWER_PARAMETERS = ("base_frame", "scene_file")
+SCENE_TYPE = "cdh_planner_interfaces/msg/Scene"   # the node's ~/scene (node_scene.py)
 
 
 # the recorded PlanPath goals and results (recording.mcap_log.RunRecorder.write_action_event)
@@ -142,24 +144,53 @@ def is_command_topic(topic):
     return topic.rsplit("/", 1)[-1] in COMMAND_TOPICS
 
 
+def command_topics(records):
+    """The topics of ``records`` that move the robot: ``is_command_topic``, and those the
+    recorded parameters name as a streamed command outlet's topic (forward_command's
+    ``execution.forward_command_topic``, any registered outlet's: its value in the
+    parameter snapshot a run file begins with, or a later change), resolved as the node
+    resolved them (relative: in the node's namespace; ``~/``: under the node)."""
+    from rcl_interfaces.msg import ParameterEvent
+    names, named = command_topic_parameters(), set()
+    for r in records:
+        if r.topic == PARAMETER_EVENTS and r.type_name == "rcl_interfaces/msg/ParameterEvent":
+            event = deserialize_message(r.data, ParameterEvent)
+            named |= {_resolved(p.value.string_value, event.node)
+                      for p in (*event.new_parameters, *event.changed_parameters)
+                      if p.name in names}
+    return {r.topic for r in records if is_command_topic(r.topic) or r.topic in named}
+
+
+def _resolved(name, node):
+    """The topic ``name`` as the node ``node`` (/ns/node) resolves it."""
+    if name.startswith("/"):
+        return name
+    if name.startswith("~/"):
+        return f"{node.rstrip('/')}/{name[2:]}"
+    return f"{node.rsplit('/', 1)[0]}/{name}"
+
+
 def select_topics(records, topics=None, commands=False):
-    """The records to republish: no service events, no ``/parameter_events`` unless named,
-    and no command topic (``is_command_topic``) unless ``commands``: on a live system a
+    """The records to republish: no service events, no ``/parameter_events`` nor a node's
+    ``~/obstacles`` unless named (each would change a live node), and no command topic
+    (``command_topics``) unless ``commands``: on a live system a
     replayed command would move the robot. Only ``topics`` if given (InputError naming a
     topic that is not in the file, or a command topic without ``commands``)."""
     available = sorted({r.topic for r in records if not is_service_event(r)})
+    moving = command_topics(records)
     if topics:
         missing = [t for t in topics if t not in available]
         if missing:
             raise InputError("--topics", missing[0],
                              f"not a recorded topic (recorded: {', '.join(available)})")
-        blocked = [t for t in topics if is_command_topic(t) and not commands]
+        blocked = [t for t in topics if t in moving and not commands]
         if blocked:
             raise InputError("--topics", blocked[0], "a command topic (it moves the robot): "
                                                      "add --commands to republish it")
         wanted = set(topics)
     else:
-        wanted = {t for t in available if commands or not is_command_topic(t)} - {PARAMETER_EVENTS}
+        wanted = {t for t in available if commands or t not in moving} - {PARAMETER_EVENTS}
+        wanted = {t for t in wanted if not t.endswith(f"/{OBSTACLES}")}   # the node's input
     return [r for r in records if r.topic in wanted]
 
 
@@ -263,6 +294,7 @@ class RecordedPlan:
     # name -> rcl_interfaces/msg/Parameter in effect at this request (answer-deciding ones)
     parameters: dict = field(default_factory=dict)
     action: bool = False        # a PlanPath goal (through the action), not a GetPlan call
+    scene: object = None        # the node's last recorded Scene before it (None: none recorded)
 
     @property
     def label(self):
@@ -285,7 +317,12 @@ def recorded_plans(records):
     calls = {}
     pending = {}     # node -> parameter sets recorded since its last request
     state = {}       # node -> name -> Parameter
+    scenes = {}      # node -> its last recorded Scene
     for r in records:
+        if r.type_name == SCENE_TYPE and r.topic.endswith("/scene"):
+            from cdh_planner_interfaces.msg import Scene
+            scenes[node_of(r.topic)] = deserialize_message(r.data, Scene)
+            continue
         if r.topic == PARAMETER_EVENTS and r.type_name == "rcl_interfaces/msg/ParameterEvent":
             event = deserialize_message(r.data, ParameterEvent)
             params = [p for p in (*event.new_parameters, *event.changed_parameters)
@@ -316,7 +353,8 @@ def recorded_plans(records):
         if event.info.event_type == REQUEST_RECEIVED and request:
             node = node_of(service)
             calls[key] = RecordedPlan(seq, service, request[0], None, pending.pop(node, []),
-                                      dict(state.get(node, {})), action=action)
+                                      dict(state.get(node, {})), action=action,
+                                      scene=scenes.get(node))
         elif event.info.event_type == RESPONSE_SENT and response and key in calls:
             calls[key].response = response[0]
     return list(calls.values())

@@ -11,7 +11,8 @@ Parameters: every file begins with a ``rcl_interfaces/msg/ParameterEvent`` on
 ``/parameter_events`` (the topic and type ROS itself publishes them on) listing all the
 node's parameters as ``new_parameters``, and each accepted change is recorded as one with
 ``changed_parameters``. So any one file says which parameters were in effect at each of its
-requests (``replay --requests`` applies them).
+requests (``replay --requests`` applies them). Then the node's current scene
+(``~/scene``, written with ``snapshot``), so that each file also says which obstacles were.
 
 Plan calls: a GetPlan call's request and response as service events
 (``<service>/_service_event``), a PlanPath goal and its result as rosbag2 records actions
@@ -76,6 +77,7 @@ class RunLog:
         self._files = 0
         self._stem = f"cdh_planner_{time.strftime('%Y%m%d-%H%M%S')}_{os.getpid()}"
         self._parameters = {}       # name -> rcl_interfaces/msg/Parameter: current values
+        self._snapshots = {}        # topic -> (msg, transient_local): the node's current scene
         self._open_calls = set()    # (service, sequence) requested, not yet answered
         self._dropped = set()       # topics whose undecodable message was reported
         self._written = 0           # records in the current file after its snapshot
@@ -129,9 +131,14 @@ class RunLog:
         self._call("write", PARAMETER_EVENTS, _stamped(event, log_time_ns), log_time_ns,
                    at=log_time_ns)
 
-    def write(self, topic, msg, log_time_ns=None, transient_local=False):
+    def write(self, topic, msg, log_time_ns=None, transient_local=False, snapshot=False):
+        """Record ``msg``; with ``snapshot``, every later file also begins with it (after
+        the parameters) until the topic's next snapshot: the node's current scene."""
         self._call("write", topic, msg, log_time_ns, transient_local=transient_local,
                    at=log_time_ns)
+        if snapshot:   # after: a file this write opens does not begin with it twice
+            with self._lock:
+                self._snapshots[topic] = (msg, transient_local)
 
     def service_event(self, service, srv_type, event_type, request=None, response=None,
                       sequence_number=0, log_time_ns=None):
@@ -221,6 +228,8 @@ class RunLog:
                                            new_parameters=list(self._parameters.values()))
                     self._recorder.write(PARAMETER_EVENTS, _stamped(event, log_time_ns),
                                          log_time_ns)
+                for topic, (msg, latched) in self._snapshots.items():
+                    self._recorder.write(topic, msg, log_time_ns, transient_local=latched)
             except OSError as exc:
                 self._fail(f"cannot record to {path}: {exc}")
                 return ""
@@ -303,8 +312,9 @@ class NodeRecording:
                 f"{exception_line(exc)}", throttle_duration_sec=self.ERROR_PERIOD_S)
             return None
 
-    def publish(self, publisher, msg, latched=False):
-        self(self.runlog.write, publisher.topic_name, msg, self.now(), transient_local=latched)
+    def publish(self, publisher, msg, latched=False, snapshot=False):
+        self(self.runlog.write, publisher.topic_name, msg, self.now(), transient_local=latched,
+             snapshot=snapshot)
         publisher.publish(msg)
 
     def trigger(self, service, event, request=None, response=None):

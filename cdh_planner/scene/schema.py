@@ -7,7 +7,7 @@ One format everywhere (problem files' ``scene:`` key, ``verify --scene FILE``, t
       clearance: 0.0                 # m: the least distance kept everywhere
       shared_anchor_exemption: 0.01  # m: see below
       platform: {type: box, size: [0.14, 0.14, 0.01],
-                 position: [0, 0, 0], quaternion: [0, 0, 0, 1]}   # platform frame; absent: none
+                 position: [0, 0, 0], quaternion: [0, 0, 0, 1]}   # platform frame; absent: robot.platform_shape
       obstacles:                     # base frame
         - {id: ball, type: sphere, radius: 0.02, position: [x, y, z]}
         - {id: post, type: box, size: [sx, sy, sz], position: [...], quaternion: [x, y, z, w]}
@@ -128,7 +128,7 @@ def load_scene(path, robot=None):
 def scene_from_dict(d, robot=None, base_dir=".", where="scene", source=""):
     """A checked Scene from the ``scene:`` mapping ``d``; mesh files are relative to
     ``base_dir``. An absent cable_radius is the robot's (robot.cable_radius, else 0); an
-    absent platform is none (the platform is not checked)."""
+    absent platform is the robot's (robot.platform_shape: none, not checked, by default)."""
     check_keys(where, d, SCENE_KEYS)
     radius = d.get("cable_radius")
     if radius is None:
@@ -140,9 +140,31 @@ def scene_from_dict(d, robot=None, base_dir=".", where="scene", source=""):
     platform = d.get("platform")
     if platform is not None:
         platform = shape_from_dict(platform, f"{where}.platform", "platform", base_dir)
+    else:
+        platform = robot_platform(robot)
     return Scene(cable_radius=radius, clearance=clearance, shared_anchor_exemption=rho,
                  platform=platform, obstacles=_obstacles(d.get("obstacles", []), where, base_dir),
                  source=source)
+
+
+def default_scene(robot):
+    """The scene of a robot without a scene file: none (nothing checked), unless the robot
+    declares its platform's shape (robot.platform_shape), whose cables are then kept clear
+    of it and of each other."""
+    return scene_from_dict({}, robot) if robot_platform(robot) is not None else None
+
+
+def robot_platform(robot):
+    """The platform Shape of ``robot.platform_shape`` (platform frame), or None (no robot,
+    or type none)."""
+    kind = getattr(robot, "platform_shape", "none")
+    if kind == "none":
+        return None
+    size = np.asarray(robot.platform_size, dtype=float)
+    fields = {"box": dict(size=size), "sphere": dict(radius=0.5 * size[0]),
+              "cylinder": dict(radius=0.5 * size[0], height=size[2])}[kind]
+    return Shape(id="platform", kind=kind, position=np.asarray(robot.platform_center, float),
+                 quaternion=np.array(IDENTITY), **fields)
 
 
 def _obstacles(items, where, base_dir):
@@ -224,18 +246,35 @@ def mesh_hull(path, where):
                                            f"(at most {MAX_MESH_BYTES})")
     try:
         mesh = trimesh.load(str(path), force="mesh", process=False)
-        v = np.asarray(mesh.vertices, dtype=float)
-        if not 4 <= len(v) <= MAX_MESH_VERTICES or not np.all(np.isfinite(v)):
-            raise ValueError(f"{len(v)} vertices (need 4 to {MAX_MESH_VERTICES}, finite)")
-        hull = mesh.convex_hull
-        if not hull.volume > 0.0:
-            raise ValueError("encloses no volume")
-        return np.asarray(hull.vertices, dtype=float)
-    except InputError:
-        raise
+        return _hull(np.asarray(mesh.vertices, dtype=float))
     except Exception as exc:  # trimesh's many parsers raise many kinds: all are bad input
         raise InputError(where, str(path), f"not a mesh trimesh can read: "
                                            f"{type(exc).__name__}: {exc}") from None
+
+
+def hull_of_points(points, where):
+    """The vertices (n, 3) of the convex hull of ``points`` (m; a mesh given by its
+    vertices, as shape_msgs/Mesh gives it); InputError naming ``where`` if there are not 4
+    to MAX_MESH_VERTICES finite points enclosing a volume."""
+    try:
+        return _hull(np.asarray(points, dtype=float).reshape(-1, 3))
+    except Exception as exc:  # noqa: BLE001 - qhull and trimesh raise many kinds
+        raise InputError(where, f"{np.size(points) // 3} vertices", f"not a solid mesh: "
+                                                                    f"{exc}") from None
+
+
+def _hull(v):
+    """Convex hull vertices of the points v (n, 3); ValueError saying why there are none."""
+    import trimesh
+
+    if not 4 <= len(v) <= MAX_MESH_VERTICES or not np.all(np.isfinite(v)):
+        raise ValueError(f"{len(v)} vertices (need 4 to {MAX_MESH_VERTICES}, finite)")
+    with np.errstate(all="ignore"):  # a flat set's volume is 0 / 0: refused below
+        hull = trimesh.convex.convex_hull(v)
+        volume = hull.volume
+    if not volume > 0.0:
+        raise ValueError("encloses no volume")
+    return np.asarray(hull.vertices, dtype=float)
 
 
 def _positive(where, value):

@@ -18,6 +18,9 @@ from . import workspace
 
 MAX_LOST = 100            # answers lost to dead workers before the map gives up (each retried)
 IN_FLIGHT_PER_WORKER = 2  # calls queued per actor: one running, one ready
+QUIET = dict(include_dashboard=False, logging_level="ERROR", log_to_driver=False,
+             ignore_reinit_error=True)
+OBJECT_STORE_BYTES = 100 * 2 ** 20  # a local Ray's: a call's answer is < 1 MB (5000 poses)
 
 
 def default_workers():
@@ -65,10 +68,10 @@ class RayExecutor:
 
         self.ray, self.workers, self.module = ray, int(workers), module
         started = time.perf_counter()
-        # "local": a new Ray even when a cluster's address file is left in /tmp/ray
-        ray.init(address=address or "local", num_cpus=None if address else self.workers,
-                 include_dashboard=False, logging_level="ERROR", log_to_driver=False,
-                 ignore_reinit_error=True)  # a local Ray's workers inherit PYTHONPATH
+        if address:
+            ray.init(address=address, **QUIET)
+        else:
+            start_local_ray(self.workers)
         self.start_s = time.perf_counter() - started
         worker = ray.remote(num_cpus=1, max_restarts=-1, max_task_retries=-1)(_Worker)
         self.actors = [worker.remote(module.__name__) for _ in range(self.workers)]
@@ -77,6 +80,10 @@ class RayExecutor:
     def pids(self):
         """The worker processes' ids (tests kill one)."""
         return self.ray.get([a.pid.remote() for a in self.actors])
+
+    def cpu_seconds(self):
+        """Each worker process's CPU time so far, s (benchmarks: how much of a core each got)."""
+        return self.ray.get([a.cpu_seconds.remote() for a in self.actors])
 
     def map(self, job, calls, deadline=None, clock=time.monotonic):
         ray = self.ray
@@ -123,21 +130,40 @@ class RayExecutor:
 
 
 class _Worker:
-    """A Ray actor: the context of the current job, then calls."""
+    """A Ray actor: the context of the current job, then calls. One BLAS thread: a worker
+    is one core's share (more threads per worker only contend with the other workers)."""
 
     def __init__(self, module_name):
         import importlib
 
+        from threadpoolctl import threadpool_limits
+
+        self._limits = threadpool_limits(limits=1)  # kept for the actor's life
         self.module = importlib.import_module(module_name)
         self.key, self.context = None, None
 
     def pid(self):
         return os.getpid()
 
+    def cpu_seconds(self):
+        return time.process_time()
+
     def run(self, job_key, job, call):
         if self.key != job_key:
             self.key, self.context = job_key, self.module.make_context(job)
         return self.module.run_call(self.context, call)
+
+
+def start_local_ray(workers):
+    """Start a Ray of ``workers`` CPUs for this process (its workers inherit PYTHONPATH):
+    no dashboard, no usage statistics, no metrics, a small object store
+    (benchmarks/ray_startup.py measures each). "local": a new Ray even when a cluster's
+    address file is left in /tmp/ray."""
+    import ray
+
+    os.environ.setdefault("RAY_USAGE_STATS_ENABLED", "0")  # read by ray.init: no prompt, no upload
+    ray.init(address="local", num_cpus=workers, object_store_memory=OBJECT_STORE_BYTES,
+             _system_config={"enable_metrics_collection": False}, **QUIET)
 
 
 def make_executor(workers=None, address=None, ray=True, module=workspace):

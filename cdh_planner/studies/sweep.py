@@ -9,6 +9,11 @@ A SWEEP file (YAML)::
     workspace: {samples: 2000, seed: 1, reach: true, timeout: 5}
     queries: [config/problems/robot2_q2_q3.yaml]   # optional: planned on every design
 
+``workspace.scene`` (a scene file, relative to the SWEEP file's folder) makes every design's
+poses feasible only if clear of it, and its plans keep clear (``cdh-planner workspace
+--scene``); a query plans in its own problem file's scene. The robot may have any number
+of cables (the vary lists then hold that many values per cable key).
+
 Each design is the robot file with the varied values put in; it must be a robot the robot
 file's own checks accept (else the file is refused naming ``vary.<key>``). Varying
 ``robot.load.mass`` without ``robot.load.force`` scales the force to the new weight (its
@@ -41,12 +46,13 @@ from ..parsing import files
 from ..errors import InputError, check_finite, check_keys, short_repr
 from ..parsing.problem import load_problem
 from ..model.robot import FIELDS, GRAVITY, ros_parameters, robot_from_dict
+from ..scene.schema import load_scene
 from . import workspace as ws
 
 TOP_KEYS = ("robot", "vary", "workspace", "queries")
-WORKSPACE_KEYS = ("samples", "seed", "reach", "timeout", "tilt", "box")
+WORKSPACE_KEYS = ("samples", "seed", "reach", "timeout", "tilt", "box", "scene")
 WORKSPACE_DEFAULTS = {"samples": 2000, "seed": 0, "reach": False, "timeout": 10.0,
-                      "tilt": math.pi / 6, "box": None}
+                      "tilt": math.pi / 6, "box": None, "scene": None}
 MAX_DESIGNS = 1000
 MAX_VALUES = 100        # per varied key
 MAX_QUERIES = 20
@@ -89,13 +95,17 @@ def load_sweep(path):
     robot_file = _file(base, doc["robot"], "robot")
     mapping = _robot_mapping(robot_file)
     keys, lists = _vary(doc["vary"])
-    workspace = _workspace(doc.get("workspace") or {})
+    base_robot = robot_from_dict(copy.deepcopy(mapping), source=str(robot_file))
+    workspace = _workspace(doc.get("workspace") or {}, base, base_robot)
     queries = tuple((q, load_problem(_file(base, q, f"queries[{k}]")))
                     for k, q in enumerate(_list("queries", doc["queries"], MAX_QUERIES) if "queries" in doc else ()))
     designs = tuple(_design(k, dict(zip(keys, combo)), mapping, robot_file)
                     for k, combo in enumerate(itertools.product(*lists)))
-    base_robot = robot_from_dict(copy.deepcopy(mapping), source=str(robot_file))
-    return Sweep(str(path), str(robot_file), keys, designs, workspace, queries, base_robot)
+    sweep = Sweep(str(path), str(robot_file), keys, designs, workspace, queries, base_robot)
+    if workspace["reach"]:  # before any design runs: the planner plans for this robot
+        ws.check_planner(base_robot, design_spec(sweep, designs[0]), design_scene(sweep, designs[0]),
+                         "workspace.reach")
+    return sweep
 
 
 def _file(base, text, field):
@@ -139,7 +149,9 @@ def _vary(vary):
     return tuple(keys), lists
 
 
-def _workspace(d):
+def _workspace(d, base, robot):
+    """The ``workspace:`` mapping checked (``scene`` as a path, its file checked against
+    ``robot``)."""
     check_keys("workspace", d, WORKSPACE_KEYS)
     w = {**WORKSPACE_DEFAULTS, **d}
     for key in ("samples", "seed"):
@@ -157,6 +169,9 @@ def _workspace(d):
                                                        for v in flat):
             raise InputError("workspace.box", w["box"], "expected [X0, Y0, Z0, X1, Y1, Z1] (m)")
         w["box"] = (tuple(map(float, flat[:3])), tuple(map(float, flat[3:])))
+    if w["scene"] is not None:
+        w["scene"] = str(_file(base, w["scene"], "workspace.scene"))
+        load_scene(w["scene"], robot)  # refused here, naming the scene's field
     return w
 
 
@@ -200,26 +215,34 @@ def _scale_force(d):
 
 
 # ----- running ----------------------------------------------------------------------------
+def design_scene(sweep, design):
+    """The scene of ``workspace.scene`` for ``design`` (its cable radius the default), or None."""
+    path = sweep.workspace["scene"]
+    return None if path is None else load_scene(path, design.robot)
+
+
 def design_spec(sweep, design):
     """The WorkspaceSpec of a design: every design samples the same poses (the sweep's box,
     else the base robot's default; tilts about the base robot's default home orientation),
-    and plans from its own default home."""
+    and plans from its own default home (clear of the scene)."""
     w = sweep.workspace
     low, high = w["box"] or ws.default_box(sweep.base_robot)
-    home = _home(design.robot)
+    home = _home(design.robot, w["scene"])
     return ws.WorkspaceSpec(samples=w["samples"], seed=w["seed"], box_low=low, box_high=high,
                             home_position=home[0], home_quaternion=home[1], tilt=w["tilt"],
                             reach=w["reach"], timeout_s=w["timeout"],
                             tilt_about=_home(sweep.base_robot)[1]).check("workspace.")
 
 
-_HOMES = {}  # id(robot) -> (robot, home): default_home takes seconds; a design asks twice
+_HOMES = {}  # (id(robot), scene path) -> (robot, home): default_home takes seconds; asked twice
 
 
-def _home(robot):
-    if id(robot) not in _HOMES or _HOMES[id(robot)][0] is not robot:
-        _HOMES[id(robot)] = (robot, ws.default_home(robot))
-    return _HOMES[id(robot)][1]
+def _home(robot, scene_path=None):
+    key = (id(robot), scene_path)
+    if key not in _HOMES or _HOMES[key][0] is not robot:
+        scene = None if scene_path is None else load_scene(scene_path, robot)
+        _HOMES[key] = (robot, ws.default_home(robot, scene=scene))
+    return _HOMES[key][1]
 
 
 def design_path(out_dir, design):
@@ -240,8 +263,9 @@ def done_design(sweep, design, out_dir):
 def run_design(sweep, design, executor, progress=None):
     """The JSON document of one design: its workspace (every pose) and its queries."""
     spec = design_spec(sweep, design)
-    queries = tuple((p.task, p.settings, p.start, p.goal) for _, p in sweep.queries)
-    res = ws.run_workspace(design.robot, spec, executor, progress=progress, queries=queries)
+    queries = tuple((p.task, p.settings, p.start, p.goal, p.scene) for _, p in sweep.queries)
+    res = ws.run_workspace(design.robot, spec, executor, progress=progress, queries=queries,
+                           scene=design_scene(sweep, design))
     answers = dict(executor.map(res.job, [("query", k) for k in range(len(queries))]))
     doc = ws.result_dict(design.robot, res)
     return _plain({"index": design.index, "values": design.values, "settings": sweep.settings(),

@@ -9,13 +9,16 @@ any number of workers gives the same poses (and the same answers, timeouts apart
 Position: uniform in the box; orientation: the home orientation turned by a rotation vector
 uniform in the ball of radius ``tilt`` (axis uniform on the sphere, angle ``tilt u^(1/3)``).
 
-Feasibility and margin come from one function, ``pose_margins`` (the closed form of
-``feasibility.evaluate``, as ``verify`` reports them): where a scene or an m-cable robot
-exists, that function is the one to extend. With ``reach``, each feasible sample gets a
-plan from the home pose (free flight, a fresh planner per query so that the answer does not
-depend on what the worker planned before): ``reachable`` True (a path), False (no path at
-the planner's resolution, or the goal under the margin floor), None (a bound: timeout,
-chart or memory limit). Infeasible samples are not reachable (False, not planned).
+Feasibility and margin are the planner's validity at margin floor 0
+(``pipeline.validity.Validity.pose_margins``, ``pose_margins`` here): wrench feasibility of
+any number of cables (``cable_feasibility.feasibility_of``) and, with a scene, the least of
+it and the collision margin (``scene.margin.combine``), as ``verify --scene`` reports them.
+With ``reach``, each feasible sample gets a plan from the home pose (free flight, a fresh
+planner per query so that the answer does not depend on what the worker planned before; the
+scene's obstacles kept clear): ``reachable`` True (a path), False (no path at the planner's
+resolution, or the goal under the margin floor), None (a bound: timeout, chart or memory
+limit). Infeasible samples are not reachable (False, not planned). Nothing here assumes six
+cables: reach on a robot of more works where the planner plans for it (``check_planner``).
 
 This module imports no Ray: executors run its calls (``run_call``) where they like.
 """
@@ -26,18 +29,22 @@ from dataclasses import dataclass, field, replace
 
 import numpy as np
 
+from ..cable_feasibility import feasibility_of
 from ..errors import InputError
-from ..cable_feasibility import feasibility_of as evaluate  # m > 6: the facet test
 from ..model.pose import (Pose, quaternion_from_tau, rotation_from_quaternion, tau_from_quaternion,
                           tau_from_rotation)
 from ..model.robot import workspace_box
+from ..model.rotation import Rotation
 from ..model.task import COORDINATES, FreeTask
+from ..pipeline.validity import Validity
 from ..planner import Planner, PlannerSettings
 from ..status import Status
 
 MAX_SAMPLES = 1_000_000     # per run: the JSON holds every pose (~200 bytes each: <= 200 MB)
 MAX_TIMEOUT_S = 3600.0      # per plan
 POINT_CHUNK = 5_000         # samples per point call (~20 ms of closed form; fixed: not a knob)
+CALLS_PER_WORKER = 16       # reach calls per worker at least: the last one's tail is <= 1/16
+MAX_PLANS_PER_CALL = 32     # plans per reach call at most: 32x fewer calls for the driver
 HOME_DRAWS = 100_000        # random poses the default home is the best of
 BLOCKS_PER_SAMPLE = 2       # Philox blocks (4 uint64 each) per sample: 8 uniforms, 6 used
 
@@ -85,18 +92,17 @@ def default_box(robot):
     return tuple(map(float, lo)), tuple(map(float, hi))
 
 
-def default_home(robot, draws=HOME_DRAWS, seed=0):
-    """The documented default home: the pose of largest margin among ``draws`` random poses
-    in ``default_box`` (positions uniform, orientations uniform in SO(3), numpy seed 0), as
-    (position (3,) m, quaternion (4,) [x, y, z, w])."""
-    from scipy.spatial.transform import Rotation
-
+def default_home(robot, draws=HOME_DRAWS, seed=0, scene=None):
+    """The documented default home: the pose of largest margin (``pose_margins``: with a
+    scene, clear of it) among ``draws`` random poses in ``default_box`` (positions uniform,
+    orientations uniform in SO(3), numpy seed 0), as (position (3,) m, quaternion (4,)
+    [x, y, z, w])."""
     rng = np.random.default_rng(seed)
     lo, hi = workspace_box(robot)
     p = rng.uniform(lo, hi, size=(draws, 3))
-    R = Rotation.random(draws, random_state=rng)
-    k = int(np.argmax(evaluate(robot, p, R=R.as_matrix()).margin))
-    return tuple(map(float, p[k])), tuple(map(float, R[k].as_quat()))
+    q = Rotation.random(draws, rng).as_quat()
+    k = int(np.argmax(pose_margins(point_validity(robot, scene), p, q)[0]))
+    return tuple(map(float, p[k])), tuple(map(float, q[k]))
 
 
 def task_ranges(spec):
@@ -121,8 +127,6 @@ def task_ranges(spec):
 def sample_poses(spec, start, count):
     """Samples ``start .. start + count - 1``: positions (count, 3) m, quaternions (count, 4).
     With a task, its coordinates uniform in ``task_ranges``, mapped to poses."""
-    from scipy.spatial.transform import Rotation
-
     bitgen = np.random.Philox(key=spec.seed, counter=BLOCKS_PER_SAMPLE * start)
     u = np.random.Generator(bitgen).random((count, 4 * BLOCKS_PER_SAMPLE))
     if spec.task is not None:
@@ -142,30 +146,66 @@ def sample_poses(spec, start, count):
     return p, q
 
 
-def pose_margins(model, p, q):
+def point_validity(robot, scene=None):
+    """The validity the point test asks (``pose_margins``): the planner's, at margin floor 0
+    (a pose's validity does not depend on the task), with ``verify``'s wrench margin (for
+    m > 6 cables the facet test; the planner keeps to the tension rule's band, a subset:
+    docs/more-cables.md). Building it with a scene loads the collision library and compiles
+    its kernel: once per worker."""
+    return Validity(robot, FreeTask(), 0.0, scene, feasibility=feasibility_of)
+
+
+def pose_margins(validity, p, q):
     """The one feasibility call: (margin (N,), binding (N,) str) of poses p (N, 3) m,
-    quaternions q (N, 4), for ``model`` (today a Robot; a scene or an m-cable robot would
-    come in here). Feasible iff margin > 0."""
-    f = evaluate(model, p, R=rotation_from_quaternion(q))
-    return f.margin, f.binding
+    quaternions q (N, 4) under ``validity`` (``point_validity``): the wrench margin of any
+    number of cables, with a scene the least of it and the collision margin, exactly as
+    ``verify`` (``--scene``) gives them. Feasible iff margin > 0."""
+    return validity.pose_margins(p, R=rotation_from_quaternion(q))
 
 
-def point_call(model, spec, start, count):
+def check_planner(robot, spec, scene=None, field="--reach"):
+    """InputError naming ``field`` unless the planner plans for ``robot`` (with ``spec``'s
+    task and settings, and ``scene``): checked once before any worker plans."""
+    try:
+        Planner(robot, spec.task or FreeTask(), replace(spec.settings, timeout_s=spec.timeout_s),
+                scene=scene)
+    except InputError:
+        raise
+    except (ValueError, NotImplementedError) as exc:  # e.g. a robot of m != 6 cables today
+        raise InputError(field, f"{len(robot.base_anchors)} cables",
+                         f"the planner does not plan for this robot: {exc}") from None
+
+
+def point_call(context, start, count):
     """Feasibility of samples ``start ..``: a dict of plain arrays (picklable, small)."""
-    p, q = sample_poses(spec, start, count)
-    margin, binding = pose_margins(model, p, q)
+    p, q = sample_poses(context.job.spec, start, count)
+    margin, binding = pose_margins(context.validity, p, q)
     return {"start": start, "position": p, "quaternion": q, "margin": margin,
-            "binding": binding.astype(str)}
+            "binding": np.asarray(binding).astype(str)}
 
 
-def reach_call(model, spec, index):
-    """Plan from the home pose to sample ``index``: (index, status str, seconds)."""
+def reach_call(context, indices):
+    """Plan from the home pose to each sample of ``indices``: [(index, status str, seconds)]."""
+    return [_reach_one(context, int(i)) for i in indices]
+
+
+def _reach_one(context, index):
+    job, spec = context.job, context.job.spec
     p, q = sample_poses(spec, index, 1)
     home = _pose(spec.home_position, spec.home_quaternion)
     settings = replace(spec.settings, timeout_s=spec.timeout_s)
-    planner = Planner(model, spec.task or FreeTask(), settings)
+    planner = Planner(job.model, spec.task or FreeTask(), settings, scene=job.scene)
     result = planner.plan(home, _pose(p[0], q[0]))
     return index, str(result.reason), float(result.time_s)
+
+
+def reach_calls(targets, workers):
+    """The reach calls of sample indices ``targets`` on ``workers``: [("reach", (i, ..)), ..],
+    several plans per call when there are many per worker (fewer calls for the driver to
+    send and collect), at least CALLS_PER_WORKER calls per worker (a short tail)."""
+    per_call = max(1, min(MAX_PLANS_PER_CALL, len(targets) // (max(workers, 1) * CALLS_PER_WORKER)))
+    return [("reach", tuple(int(j) for j in targets[k:k + per_call]))
+            for k in range(0, len(targets), per_call)]
 
 
 def _pose(p, q):
@@ -184,38 +224,50 @@ def reachable_of(status):
 # ----- what a worker runs: one context per job, then calls ---------------------------------
 @dataclass(frozen=True)
 class Job:
-    """What workers need to answer calls: the model (robot), the spec and the queries
-    (``(task, settings, start, goal)`` each, planned on the model). Picklable."""
+    """What workers need to answer calls: the model (robot), the spec, the scene
+    (scene.schema.Scene or None) and the queries (``(task, settings, start, goal, scene)``
+    each, planned on the model). Picklable."""
 
     model: object
     spec: WorkspaceSpec
     queries: tuple = ()
+    scene: object = None
+
+
+@dataclass(frozen=True)
+class Context:
+    """A worker's state for one job: the job and its point validity (built once)."""
+
+    job: Job
+    validity: Validity
 
 
 def make_context(job):
-    """The worker-side state of a job (built once per worker: kernels compile on first plan)."""
-    return job
+    """The worker-side state of a job (built once per worker: the collision kernel compiles
+    here, the planner's on the first plan)."""
+    return Context(job, point_validity(job.model, job.scene))
 
 
 def query_call(model, query):
-    """Plan one query ``(task, settings, start, goal)`` on ``model``: a dict of the answer."""
-    task, settings, start, goal = query
-    result = Planner(model, task, settings).plan(start, goal)
+    """Plan one query ``(task, settings, start, goal, scene)`` on ``model``: a dict of the
+    answer."""
+    task, settings, start, goal, scene = query
+    result = Planner(model, task, settings, scene=scene).plan(start, goal)
     return {"success": bool(result.success), "reason": str(result.reason),
             "cost": float(result.cost) if result.success else None,
             "time_s": float(result.time_s), "charts": int(result.charts)}
 
 
 def run_call(context, call):
-    """Answer one call ``(kind, args)``: ("points", (start, count)), ("reach", index) or
-    ("query", k) (the job's k-th query)."""
+    """Answer one call ``(kind, args)``: ("points", (start, count)), ("reach", (index, ..))
+    or ("query", k) (the job's k-th query)."""
     kind, args = call
     if kind == "points":
-        return point_call(context.model, context.spec, *args)
+        return point_call(context, *args)
     if kind == "reach":
-        return reach_call(context.model, context.spec, args)
+        return reach_call(context, args)
     if kind == "query":
-        return query_call(context.model, context.queries[args])
+        return query_call(context.job.model, context.job.queries[args])
     raise ValueError(f"unknown call kind {kind!r}")
 
 
@@ -280,18 +332,19 @@ def point_calls(spec):
 
 
 def run_workspace(model, spec, executor, progress=None, max_seconds=None, clock=time.monotonic,
-                  queries=()):
+                  queries=(), scene=None):
     """Evaluate every sample (and plan the feasible ones with ``spec.reach``) on
     ``executor``; ``progress(stage, done, total)`` after each answer; stop early (an answer
     with ``stopped``) when ``max_seconds`` (s, None: no bound) have passed. ``spec`` is
-    checked by the caller (``WorkspaceSpec.check``). ``queries``: of the job (``Job``), for
+    checked by the caller (``WorkspaceSpec.check``). ``scene``: obstacles the poses and
+    paths keep clear of (scene.schema.Scene or None). ``queries``: of the job (``Job``), for
     the caller to plan on the same workers (``res.job``)."""
     t0 = clock()
     deadline = None if max_seconds is None else t0 + max_seconds
     n = spec.samples
     res = WorkspaceResult(spec, np.full((n, 3), np.nan), np.full((n, 4), np.nan),
                           np.full(n, np.nan), [""] * n, [None] * n, {}, executor.workers)
-    job = res.job = Job(model, spec, tuple(queries))
+    job = res.job = Job(model, spec, tuple(queries), scene)
     calls = point_calls(spec)
     done = 0
     for _key, out in executor.map(job, calls, deadline=deadline, clock=clock):
@@ -308,12 +361,14 @@ def run_workspace(model, spec, executor, progress=None, max_seconds=None, clock=
         res.stopped = "max_seconds"
     elif spec.reach:
         targets = np.flatnonzero(res.feasible).tolist()
-        for i, (_key, (index, status, _s)) in enumerate(
-                executor.map(job, [("reach", int(j)) for j in targets], deadline=deadline,
-                              clock=clock)):
-            res.reach_status[index] = status
+        planned = 0
+        for _key, answers in executor.map(job, reach_calls(targets, executor.workers),
+                                          deadline=deadline, clock=clock):
+            for index, status, _s in answers:
+                res.reach_status[index] = status
+            planned += len(answers)
             if progress:
-                progress("reach", i + 1, len(targets))
+                progress("reach", planned, len(targets))
         if sum(s is not None for s in res.reach_status) < len(targets):
             res.stopped = "max_seconds"
     res.seconds["reach"] = clock() - t1
@@ -337,6 +392,8 @@ def result_dict(robot, res):
             "home": {"position": list(spec.home_position),
                                             "quaternion": list(spec.home_quaternion)},
             "task": None if spec.task is None else spec.task.describe(),
+            "scene": None if res.job is None or res.job.scene is None else res.job.scene.source,
+            "cables": len(robot.base_anchors),
             "reach": spec.reach, "timeout_s": spec.timeout_s if spec.reach else None,
             "counts": res.counts(), "fractions": res.fractions(), "seconds": res.seconds,
             "workers": res.workers, "complete": res.stopped is None, "stopped": res.stopped,
@@ -347,11 +404,11 @@ def _rows(a):
     return [None if not np.all(np.isfinite(r)) else r for r in a.tolist()]
 
 
-def default_task_home(model, spec, draws=HOME_DRAWS // 5):
+def default_task_home(model, spec, draws=HOME_DRAWS // 5, scene=None):
     """The default home on ``spec.task``: the largest-margin of ``draws`` task samples of
     seed 0 (position (3,), quaternion (4,))."""
     p, q = sample_poses(replace(spec, seed=0), 0, draws)
-    k = int(np.argmax(pose_margins(model, p, q)[0]))
+    k = int(np.argmax(pose_margins(point_validity(model, scene), p, q)[0]))
     return tuple(map(float, p[k])), tuple(map(float, q[k]))
 
 
@@ -363,12 +420,15 @@ def check_on_task(task, position, quaternion, tol=1e-6):
         raise InputError("--home", list(position), f"{off:.3g} off the task ({task.describe()})")
 
 
-def check_home(model, position, quaternion):
-    """InputError naming --home unless the home pose is wrench-feasible."""
-    margin, binding = pose_margins(model, np.asarray([position], float), np.asarray([quaternion], float))
+def check_home(model, position, quaternion, scene=None):
+    """InputError naming --home unless the home pose is feasible (``pose_margins``: wrench
+    feasible and, with a scene, clear of it)."""
+    margin, binding = pose_margins(point_validity(model, scene), np.asarray([position], float),
+                                   np.asarray([quaternion], float))
     if not margin[0] > 0:
+        what = "feasible and clear of the scene" if scene is not None else "wrench-feasible"
         raise InputError("--home", list(position) + list(quaternion),
-                         f"not wrench-feasible (margin {margin[0]:+.4g}, {binding[0]})")
+                         f"not {what} (margin {margin[0]:+.4g}, {binding[0]})")
 
 
 def home_from_tau(position, tau):

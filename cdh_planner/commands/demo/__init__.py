@@ -1,5 +1,6 @@
 """``cdh-planner demo``: the paper's robots, poses and straight motions, checked, and
-C-space pictures (``paper.py``); then the ROS story (``ros_story.py``): the node plans Robot
+C-space pictures (``paper.py``); an obstacle the straight motion hits and the plan around it
+(``obstacle.py``); then the ROS story (``ros_story.py``): the node plans Robot
 2's sphere task q_1 -> q_2 -> q_3, streams it, records it, and the recording is replayed.
 
     cdh-planner demo [--out DIR] [--config-dir DIR]
@@ -17,12 +18,12 @@ from pathlib import Path
 
 from ...errors import InputError
 from ..outputs import same_file
-from . import more_cables, paper, ros_story
+from . import more_cables, obstacle, paper, ros_story
 
 PACKAGE = "cdh_planner"
 DEFAULT_OUT = "demo_out"
 EXIT_OK, EXIT_DIFFERS = 0, 1
-STEPS = paper.STEPS + ros_story.STEPS + more_cables.STEPS
+STEPS = paper.STEPS + obstacle.STEPS + ros_story.STEPS + more_cables.STEPS
 
 
 def add_parser(subparsers):
@@ -82,7 +83,8 @@ def prepare_out_dir(path, config_dir=None):
     if out.exists() and not out.is_dir():
         raise InputError("--out", str(path), "exists and is not a directory")
     if config_dir is not None:
-        outputs = [spec.file for spec in paper.PICTURES] + list(ros_story.OUTPUTS)
+        outputs = [spec.file for spec in paper.PICTURES] + [obstacle.PICTURE] \
+            + list(ros_story.OUTPUTS)
         for name, robot_file in ((o, config_dir / f) for o in outputs
                                  for f in paper.ROBOT_FILES.values()):
             if same_file(out / name, robot_file):
