@@ -17,7 +17,7 @@ from dataclasses import dataclass
 import numpy as np
 from cdh_planner.model.rotation import Rotation
 
-from cdh_planner.feasibility import evaluate
+from cdh_planner.cable_feasibility import feasibility_of as evaluate  # m > 6: the facet test
 from cdh_planner.model.pose import Pose, quaternion_from_tau, tau_from_rotation
 from cdh_planner.model.robot import workspace_box
 from cdh_planner.trajectory.path_check import SlerpPath, check_path

@@ -21,6 +21,7 @@ from typing import Callable, Optional
 from threadpoolctl import threadpool_limits
 
 from .atlas.charts import Atlas
+from .manifold.configuration import ConfigurationConstraint
 from .manifold.constraint import TaskConstraint
 from .model.pose import Pose
 from .pipeline.densify import Densify
@@ -77,6 +78,15 @@ def default_radius(dim):
     return 0.1 if dim <= 3 else 0.5
 
 
+def planning_manifold(robot, task, margin_floor):
+    """The manifold the atlas covers: the paper's navigation manifold for six cables; for
+    more, the task's configuration manifold with feasibility as its domain (the closed form
+    behind the navigation manifold's slack equations needs J square: docs/more-cables.md)."""
+    if len(robot.base_anchors) == 6:
+        return TaskConstraint(robot, task, margin_floor=margin_floor)
+    return ConfigurationConstraint(robot, task, margin_floor=margin_floor)
+
+
 class Planner:
     """Wrench-feasible paths for one robot and task (module docstring), by the stages of
     ``pipeline``: lift, route (direct motion or atlas search), smooth, densify, time."""
@@ -86,7 +96,7 @@ class Planner:
         self.task = task
         self.settings = s = (settings or PlannerSettings()).check()
         self.scene = scene  # scene.schema.Scene: collisions join validity (pipeline.validity)
-        self.constraint = TaskConstraint(robot, task, margin_floor=s.margin_floor)
+        self.constraint = planning_manifold(robot, task, s.margin_floor)
         self.radius = s.radius or default_radius(self.constraint.dim)
         self.clearance_weight = s.clearance_weight
         self.atlas = Atlas(self.constraint, radius=self.radius)

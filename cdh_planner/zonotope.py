@@ -376,18 +376,22 @@ def _centre(lo, hi, Q2, z):
             dec += g[a] * dx[a]
         if dec <= CENTRE_TOL * mu:
             break
-        phi = x[k]
+        phi = x[k] + mu * _log_product(r)
+        # the slacks are affine in x: start the line search inside (ratio test), so that
+        # it halves for the rise only, not to find the interior (21 halvings a pose before)
+        _slacks(lo, hi, Q2, dx, rt)  # rt = r(dx) = r(0) + slope, r(0) = (lo, hi)
+        step = 1.0
         for j in range(2 * m):
-            phi += mu * np.log(r[j])
-        step, accepted = 1.0, False
+            slope = rt[j] - (lo[j] if j < m else hi[j - m])
+            if slope < 0.0 and -0.99 * r[j] / slope < step:
+                step = -0.99 * r[j] / slope
+        accepted = False
         for _ in range(60):  # halve until inside and rising enough (Armijo)
             for a in range(n):
                 xt[a] = x[a] + step * dx[a]
             _slacks(lo, hi, Q2, xt, rt)
             if rt.min() > 0.0:
-                phit = xt[k]
-                for j in range(2 * m):
-                    phit += mu * np.log(rt[j])
+                phit = xt[k] + mu * _log_product(rt)
                 if phit >= phi + 0.25 * step * dec:
                     accepted = True
                     break
@@ -397,6 +401,25 @@ def _centre(lo, hi, Q2, z):
         x[:] = xt
     for a in range(k):
         z[a] = x[a]
+
+
+@njit(cache=True)
+def _log_product(r):
+    """sum_j log(r_j) of positive r, by one log per 8 factors (the line search's hot loop);
+    the sum of logs itself if a partial product leaves the double range."""
+    total, prod = 0.0, 1.0
+    for j in range(r.size):
+        prod *= r[j]
+        if j % 8 == 7:
+            total += np.log(prod)
+            prod = 1.0
+    total += np.log(prod)
+    if np.isfinite(total):
+        return total
+    total = 0.0
+    for j in range(r.size):
+        total += np.log(r[j])
+    return total
 
 
 @njit(cache=True)
@@ -804,6 +827,83 @@ def evaluate(robot, p, tau=None, R=None):
                              wrench_facet_up=hi,
                              tension_status=status.astype(str))
 
+
+NO_SUBSETS = np.empty((0, 5), dtype=np.int64)  # the kernel without the facet test
+
+
+@lru_cache(maxsize=None)
+def _band_names(m):
+    """Names of the 4m band and length margins, as the closed form names its 24."""
+    return np.array([f"{CONSTRAINTS[j // m]}[{j % m + 1}]" for j in range(4 * m)])
+
+
+def _band(robot, p, tau, R):
+    """lengths (N, m), unit vectors, sqrt(det J J^T), t0, v and the length and band margins
+    (N, 4, m) of poses: the kernel without the facet test."""
+    p = np.ascontiguousarray(np.atleast_2d(np.asarray(p, dtype=float)))
+    if R is None:
+        R = rotation_tt(np.atleast_2d(tau))
+    R = np.ascontiguousarray(np.asarray(R, dtype=float).reshape(-1, 3, 3))
+    lengths, u, J, c = pose_geometry(p, R, robot.base_anchors, robot.platform_anchors,
+                                     robot.load_point)
+    kernel = evaluate_kernel_parallel if len(p) >= PARALLEL_MIN else evaluate_kernel
+    scale, _, _, _, _, t0, v = kernel(
+        J, c, robot.wrench_center_local, _inverse_factor(robot.ellipsoid_matrix.tobytes()),
+        robot.ellipsoid_frame == "load", robot.tension_min, robot.tension_max, NO_SUBSETS,
+        SINGULAR_DET)
+    span_l = robot.length_max - robot.length_min
+    span_t = robot.tension_max - robot.tension_min
+    margins = np.stack([(lengths - robot.length_min) / span_l, (robot.length_max - lengths) / span_l,
+                        (t0 - v - robot.tension_min) / span_t, (robot.tension_max - t0 - v) / span_t],
+                       axis=1)
+    return lengths, u, scale, t0, v, margins
+
+
+def band_margin(robot, p, tau=None, R=None):
+    """``band_feasibility(...).margin`` (N,) alone: the atlas's domain test, where a
+    Feasibility record per pose would cost more than the kernel."""
+    lengths, _, scale, _, _, margins = _band(robot, p, tau, R)
+    margin = margins.reshape(len(margins), -1).min(axis=1)  # nan where singular
+    ok = (scale > SINGULAR_DET) & (lengths.min(axis=1) > 0) & ~np.isnan(margin)
+    return np.where(ok, margin, -np.inf)
+
+
+def band_feasibility(robot, p, tau=None, R=None):
+    """The planner's feasibility of poses of an m-cable robot (``Feasibility``): ``margin``
+    the least of the length margins and the centred rule's band margins ``margins``
+    (N, 4, m), named as the closed form names them; positive iff the band t0 +- v is within
+    the limits (which implies the facet test). One kernel call without the facet test
+    (``rule_tensions``)."""
+    lengths, u, scale, t0, v, margins = _band(robot, p, tau, R)
+    n, m = margins.shape[0], margins.shape[2]
+    singular = ~(scale > SINGULAR_DET) | (lengths.min(axis=1) <= 0)
+    flat = margins.reshape(n, -1)
+    k = np.argmin(np.where(np.isnan(flat), -np.inf, flat), axis=1)
+    margin = flat[np.arange(n), k]
+    singular |= np.isnan(margin)
+    return Feasibility(lengths=lengths, unit_vectors=u, det_j=scale,
+                       tension_nominal=np.where(singular[:, None], np.nan, t0),
+                       tension_spread=np.where(singular[:, None], np.inf, v), margins=margins,
+                       margin=np.where(singular, -np.inf, margin),
+                       binding=np.where(singular, "singular", _band_names(m)[k]).astype(str))
+
+
+def rule_tensions(robot, p, R):
+    """The tension rule's centred nominal t0 (N, m) N and band half-widths v (N, m) N at
+    poses (p (N, 3) m, R (N, 3, 3)), without the facet test: the kernel with no subset
+    centres every pose. Equal to ``evaluate``'s where the facet test holds (its only use:
+    along planned motions, dynamic timing and the executed check); nan / inf where singular."""
+    p = np.ascontiguousarray(np.atleast_2d(p), dtype=float)
+    R = np.ascontiguousarray(np.asarray(R, dtype=float).reshape(-1, 3, 3))
+    lengths, _, J, c = pose_geometry(p, R, robot.base_anchors, robot.platform_anchors,
+                                     robot.load_point)
+    kernel = evaluate_kernel_parallel if len(p) >= PARALLEL_MIN else evaluate_kernel
+    scale, _, _, _, _, t0, v = kernel(
+        J, c, robot.wrench_center_local, _inverse_factor(robot.ellipsoid_matrix.tobytes()),
+        robot.ellipsoid_frame == "load", robot.tension_min, robot.tension_max, NO_SUBSETS,
+        SINGULAR_DET)
+    singular = ~(scale > SINGULAR_DET) | (lengths.min(axis=1) <= 0)
+    return np.where(singular[:, None], np.nan, t0), np.where(singular[:, None], np.inf, v)
 
 
 def facet_normal(J, subset, up):

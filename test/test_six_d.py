@@ -93,7 +93,7 @@ def test_search_from_both_ends_finds_every_table1_path(name):
     np.testing.assert_allclose(out.points[0], planner.atlas.charts[out.charts[0]].x)
     for x in out.points:  # points on M
         F, _ = constraint.residual_and_jacobian(x)
-        assert np.max(np.abs(F)) < 1e-6
+        assert np.max(np.abs(F), initial=0.0) < 1e-6  # free flight, m > 6 cables: no equation
 
 
 @pytest.mark.parametrize("strategy", STRATEGIES)

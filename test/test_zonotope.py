@@ -18,6 +18,7 @@ from cdh_planner.model.pose import rotation_tt
 from cdh_planner.model.robot import load_robot, robot_from_dict
 
 from conftest import CONFIG
+from lp_oracle import lp_holds, pose_pieces
 
 P_REF = np.array([0.0, 0.0, 1.2])  # m: the random robots' reference pose (identity rotation)
 DECIDED = 1e-4  # |normalised margin| above which the LP's tolerance (1e-7) cannot blur the answer
@@ -53,24 +54,6 @@ def random_poses(rng, n, spread=None):
     tau = np.column_stack([rng.uniform(-np.pi, np.pi, n), rng.uniform(0, 1.5 * spread, n),
                            rng.uniform(-spread, spread, n)])
     return p, tau
-
-
-def pose_pieces(robot, p, tau):
-    """J (N, 6, m), w0 (N, 6), L (N, 6, 6) and zonotope.evaluate at the poses."""
-    R = rotation_tt(tau)
-    f = zt.evaluate(robot, p, R=R)
-    c = fz.load_point(robot, p, R)
-    J = fz.screw_jacobian(robot, f.unit_vectors)
-    L = np.broadcast_to(fz.inverse_ellipsoid_factor(robot, c), (len(p), 6, 6))
-    return J, fz.nominal_wrench(robot, c), L, f
-
-
-def lp_holds(J, w, robot):
-    """The oracle: True if some t with t_min <= t <= t_max has J t = w (HiGHS)."""
-    res = linprog(np.zeros(J.shape[1]), A_eq=J, b_eq=w,
-                  bounds=np.column_stack([robot.tension_min, robot.tension_max]), method="highs")
-    assert res.status in (0, 2), res.message
-    return res.status == 0
 
 
 def check_against_lp(robot, J, w0, L, f, rng, boundary=8):

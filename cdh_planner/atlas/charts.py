@@ -5,6 +5,8 @@ Knows nothing of robots. The constraint gives (duck-typed, like OMPL's Constrain
     residual_and_jacobian(x)         F (n_vars - dim,) and F_x (n_vars - dim, n_vars)
     periodic                         bool mask: coordinates that are 2 pi periodic
     lower, upper                     the bounded domain of x (periodic ones ignored)
+    inside(x)                        optional: a predicate further restricting the domain
+                                     (a region of M with no variable bound on it)
     key(x)                           a low-dimensional 1-Lipschitz embedding of x, for the
                                      spatial index (|key(x) - key(y)| <= |x - y|)
 
@@ -73,6 +75,7 @@ class Atlas:
         self.newton_iters = newton_iters
         self.charts = []
         self.periodic = np.asarray(constraint.periodic, dtype=bool)
+        self._inside = getattr(constraint, "inside", None)  # the domain's predicate part
         self._index = _KeyIndex()
         self._centres = _Rows()  # chart centres (N, n_vars), for vectorised distances
         self._radii = _Rows()  # chart radii (N,), kept equal to charts[i].radius
@@ -92,6 +95,17 @@ class Atlas:
         return x
 
     def in_domain(self, x):
+        return self._in_box(x) and (self._inside is None or bool(self._inside(x)))
+
+    def _all_in_domain(self, xs):
+        """Are all the points xs in the domain? (with the constraint's ``inside_many``, one
+        call for all)"""
+        many = getattr(self.c, "inside_many", None)
+        if many is None:
+            return all(self.in_domain(x) for x in xs)
+        return all(self._in_box(x) for x in xs) and bool(np.all(many(np.array(xs))))
+
+    def _in_box(self, x):
         free = ~self.periodic
         return bool(np.all(x[free] >= self.c.lower[free]) and np.all(x[free] <= self.c.upper[free]))
 
@@ -267,7 +281,15 @@ class Atlas:
                 other.neighbours.discard(i)
 
     def _inside_fraction(self, x0, x1):
-        """Fraction of the chord x0 -> x1 (x0 inside the domain) before it leaves the domain."""
+        """Fraction of the chord x0 -> x1 (x0 inside the domain) before it leaves the domain:
+        exact for the box; where only the predicate ``inside`` fails, its boundary found by
+        bisection on the chord to 1/16."""
+        if self._inside is not None and self._in_box(x1):
+            lo, hi, d = 0.0, 1.0, self.diff(x0, x1)
+            for _ in range(4):
+                mid = 0.5 * (lo + hi)
+                lo, hi = (mid, hi) if self._inside(x0 + mid * d) else (lo, mid)
+            return lo
         d = self.diff(x0, x1)
         free = ~self.periodic
         t = 1.0
@@ -320,7 +342,7 @@ class Atlas:
         gap = np.linalg.norm(self.diff(self.charts[a].x, self.charts[b].x))
         n = max(3, int(math.ceil(gap / (spacing * self.radius))) + 1)
         pts = self.segment(a, b, n)
-        if pts is None or not all(self.in_domain(x) for x in pts):
+        if pts is None or not self._all_in_domain(pts):
             return None
         steps = [np.linalg.norm(self.diff(u, v)) for u, v in zip(pts, pts[1:])]
         return pts if max(steps) <= 3.0 * gap / (n - 1) + 1e-12 else None

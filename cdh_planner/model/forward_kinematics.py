@@ -18,15 +18,17 @@ import numpy as np
 from .rotation import Rotation  # numpy: no scipy.spatial import (start-up)
 
 from ..errors import InputError
-from .kinematics import TOL_M, cable_lengths, forward_kinematics, rotation_vector_exp
+from .kinematics import LSQ_RTOL, TOL_M, cable_lengths, forward_kinematics, rotation_vector_exp
 
 MAX_ITERATIONS = 20
+LSQ_FLOOR_M = 1e-9  # m > 6 cables: a length error this small (per m of cable) is converged
 
 
 @dataclass(frozen=True)
 class ManyPoses:
     """Poses p (M, 3) m, R (M, 3, 3), the largest cable length error ``residual`` (M,) m
-    and ``ok`` (M,) where it is within the tolerance."""
+    and ``ok`` (M,) where it is within the tolerance (with m > 6 cables: where the
+    least-squares pose is reached, the residual telling how consistent the lengths are)."""
 
     p: np.ndarray
     R: np.ndarray
@@ -35,12 +37,17 @@ class ManyPoses:
 
 
 def forward_kinematics_many(robot, lengths, p0, R0, tol=TOL_M, max_iterations=MAX_ITERATIONS):
-    """The poses whose cable lengths are ``lengths`` (M, 6) m, by Newton from the seeds
-    (``p0`` (M, 3) m, ``R0`` (M, 3, 3)), to ``tol`` m per m of the longest cable."""
+    """The poses whose cable lengths are ``lengths`` (M, m) m, by Newton from the seeds
+    (``p0`` (M, 3) m, ``R0`` (M, 3, 3)), to ``tol`` m per m of the longest cable; with
+    m > 6 the least-squares poses (Gauss-Newton, as ``kinematics.forward_kinematics``:
+    converged when the length errors are orthogonal to the Jacobian's columns to LSQ_RTOL)."""
     L = np.asarray(lengths, dtype=float)
+    square = L.shape[1] == 6
+    stationary = np.zeros(len(L), dtype=bool)
     p = np.array(p0, dtype=float)
     R = np.array(R0, dtype=float)
-    tol = tol * np.maximum(1.0, np.max(L, axis=1))
+    # m > 6: rounding keeps |J^T e| from the stationarity test near e = 0: a nanometre is exact
+    tol = (tol if square else max(tol, LSQ_FLOOR_M)) * np.maximum(1.0, np.max(L, axis=1))
     idx = np.arange(len(L))    # the poses still iterating
     for _ in range(max_iterations):
         Rb = R[idx] @ robot.platform_anchors.T               # (m, 3, 6): R b_i as columns
@@ -48,20 +55,27 @@ def forward_kinematics_many(robot, lengths, p0, R0, tol=TOL_M, max_iterations=MA
         length = np.sqrt(np.einsum("nik,nik->nk", d, d))
         error = length - L[idx]
         active = np.max(np.abs(error), axis=1) > tol[idx]
+        u = d / length[:, None, :]
+        J = np.swapaxes(np.concatenate([u, np.cross(Rb, u, axis=1)], axis=1), 1, 2)  # (k, m, 6)
+        if not square:  # the least-squares pose is reached: |J^T e| small against |J| |e|
+            g = np.einsum("nij,ni->nj", J, error)
+            done = np.linalg.norm(g, axis=1) <= LSQ_RTOL * np.linalg.norm(J, axis=(1, 2)) * \
+                np.linalg.norm(error, axis=1)
+            stationary[idx[done]] = True
+            active &= ~done
         if not active.any():
             break
-        idx, d, Rb, error = idx[active], d[active], Rb[active], error[active]
-        u = d / length[active][:, None, :]
-        J = np.swapaxes(np.concatenate([u, np.cross(Rb, u, axis=1)], axis=1), 1, 2)  # (m, 6, 6)
+        idx, J, error = idx[active], J[active], error[active]
         try:
-            step = np.linalg.solve(J, -error[..., None])[..., 0]
+            step = np.linalg.solve(J, -error[..., None])[..., 0] if square else \
+                np.linalg.solve(np.swapaxes(J, 1, 2) @ J, -g[active][..., None])[..., 0]
         except np.linalg.LinAlgError:  # a singular Jacobian: the least-squares step
             step = (np.linalg.pinv(J) @ -error[..., None])[..., 0]
         p[idx] += step[:, :3]
         R[idx] = Rotation.from_rotvec(step[:, 3:]).as_matrix() @ R[idx]
     d = p[:, :, None] + R @ robot.platform_anchors.T - robot.base_anchors.T
     residual = np.max(np.abs(np.sqrt(np.einsum("nik,nik->nk", d, d)) - L), axis=1)
-    return ManyPoses(p=p, R=R, residual=residual, ok=residual <= tol)
+    return ManyPoses(p=p, R=R, residual=residual, ok=(residual <= tol) | stationary)
 
 
 # Seeds of a pose search without a guess: the platform level (R = I) first, then turned

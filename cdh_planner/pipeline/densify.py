@@ -4,7 +4,7 @@ dense-valid, then the PlannedPath through them (quasi-static cable-space timing)
 
 import numpy as np
 
-from ..feasibility import evaluate
+from ..cable_feasibility import planning_feasibility as evaluate
 from ..model.pose import quaternion_from_tau
 from ..trajectory.path import PlannedPath
 from ..trajectory.timing import time_path
@@ -57,7 +57,7 @@ class Densify:
                                     for seg in v.segments(p, q)):
             return None
         n = len(y)
-        zeros = np.zeros((n, 6))
+        zeros = np.zeros(f.lengths.shape)
         path = PlannedPath(p=p, quaternion=q, tau=tau, lengths=f.lengths,
                            tension_min=f.tension_min, tension_nominal=f.tension_nominal,
                            tension_max=f.tension_max, margin=f.margin, t=np.zeros(n),

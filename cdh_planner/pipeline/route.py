@@ -13,7 +13,7 @@ import math
 
 import numpy as np
 
-from ..feasibility import evaluate
+from ..cable_feasibility import planning_feasibility as evaluate
 from ..model.pose import quaternion_from_tau, tau_from_rotation
 from ..search.strategies import STRATEGIES, run
 from ..status import Status
@@ -139,11 +139,15 @@ class Route:
         return y
 
     def route_coords(self, out):
-        """Task coordinates of the search's points, direct motions sampled on the way."""
+        """Task coordinates of the search's points, direct motions sampled on the way; with
+        m > 6 cables every motion is (a controller's quintic of the lengths between points
+        far apart gives lengths no pose has: slack or overloaded cables)."""
         y = self.coords(out.points)
         parts = [y[:1]]
+        every = len(self.validity.robot.base_anchors) > 6
         for k in range(len(y) - 1):
-            parts.append(self.direct_points(y[k], y[k + 1])[1:] if k in out.direct else y[k + 1:k + 2])
+            parts.append(self.direct_points(y[k], y[k + 1])[1:] if every or k in out.direct
+                         else y[k + 1:k + 2])
         return np.concatenate(parts)
 
     def clearance_cost(self, xa, xb):

@@ -11,7 +11,7 @@ checking the pose keeps every point on M.
 
 import numpy as np
 
-from ..cable_feasibility import feasibility_of as evaluate  # 6 cables: the closed form
+from ..cable_feasibility import planning_feasibility as evaluate  # m > 6: the rule's band
 from ..model.pose import quaternion_from_tau, rotation_tt, wrap_angle
 from ..scene.margin import COLLISION_UNIT_M, combine
 from ..trajectory.path_check import SlerpPath, TaskLinePath, check_motion, check_path
@@ -22,9 +22,13 @@ COARSE_SAMPLES = 17  # a direct motion is first checked at these few points (a c
 class Validity:
     """Valid poses and motions of one robot and task (module docstring)."""
 
-    def __init__(self, robot, task, margin_floor, scene=None):
-        """``scene`` (scene.schema.Scene or None): obstacles the poses keep clear of."""
+    def __init__(self, robot, task, margin_floor, scene=None, feasibility=evaluate):
+        """``scene`` (scene.schema.Scene or None): obstacles the poses keep clear of;
+        ``feasibility(robot, p, tau, R)``: the wrench margin asked (default the planner's,
+        ``cable_feasibility.planning_feasibility``; ``feasibility_of`` gives ``verify``'s,
+        the facet test, for m > 6 cables)."""
         self.robot, self.task, self.margin_floor = robot, task, margin_floor
+        self.feasibility = feasibility
         self.periodic = np.array(task.periodic, dtype=bool)
         self.scene = scene
         self.collision = _collision_model(robot, scene)
@@ -33,7 +37,7 @@ class Validity:
         """Margins (N,) and bindings of poses (p (N, 3) m, tau (N, 3) rad or R (N, 3, 3)):
         wrench feasibility's (normalised) and, with a scene, the least of it and the
         collision margin (scene.collision.combine): positive iff valid at floor 0."""
-        f = evaluate(self.robot, p, tau, R)
+        f = self.feasibility(self.robot, p, tau, R)
         if self.collision is None:
             return f.margin, f.binding
         return combine(f.margin, f.binding, self.collision, p, rotation_tt(tau) if R is None else R)
@@ -82,14 +86,16 @@ class Validity:
         y = np.array([ya, yb])
         if not (self.probe(y, COARSE_SAMPLES) and self.probe(y, 8 * COARSE_SAMPLES)):
             return False
-        seg = check_path(self.robot, self.direct_motion(y), collision=self.collision)[0]
+        seg = check_path(self.robot, self.direct_motion(y), collision=self.collision,
+                         feasibility=self.feasibility)[0]
         return seg.feasible and seg.unresolved == 0 and seg.worst.margin >= self.margin_floor
 
     def segments(self, p, q):
         """The dense check of the waypoints p (N, 3) m, quaternions q (N, 4) and the
         motion between them (position linear, orientation slerp): one
         ``trajectory.path_check`` segment report per pair."""
-        return check_motion(self.robot, p, q, collision=self.collision)
+        return check_motion(self.robot, p, q, collision=self.collision,
+                            feasibility=self.feasibility)
 
 
 def wrapped(d, periodic):

@@ -33,6 +33,9 @@ class Health:
     recording: str = "off"           # RunLog.state: the run file, "off", "failed", ...
     joint_states_age_s: float = None
     joint_states_max_age_s: float = 1.0
+    # the largest cable length error (m) of the last forward kinematics: rounding with six
+    # cables; with more, how far the measured lengths are from any one pose (least squares)
+    forward_kinematics_residual_m: float = None
 
 
 def _level_and_message(h):
@@ -56,7 +59,9 @@ def health_status(h, name, hardware_id=""):
     values = {"state": h.state, "activity": h.activity, "queued": str(h.queued),
               "last_plan": h.last_plan or "none", "last_plan_ok": str(h.last_plan_ok).lower(),
               "last_plan_age_s": _age(h.last_plan_age_s), "recording": h.recording,
-              "joint_states_age_s": _age(h.joint_states_age_s)}
+              "joint_states_age_s": _age(h.joint_states_age_s),
+              "forward_kinematics_residual_m": "none" if h.forward_kinematics_residual_m is None
+              else f"{h.forward_kinematics_residual_m:.3g}"}
     return DiagnosticStatus(level=level, name=name, message=message, hardware_id=hardware_id,
                             values=[KeyValue(key=k, value=v) for k, v in values.items()])
 

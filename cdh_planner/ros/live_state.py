@@ -6,7 +6,8 @@ at rest.
   as positions, and the measured tensions (N) as efforts when the joint state carries one
   per winch (else none);
 - ``~/least_margin`` (std_msgs/Float64): the normalised feasibility margin of the measured
-  pose (feasibility.evaluate: positive inside, the least over lengths and tensions);
+  pose (cable_feasibility.feasibility_of: positive inside, the least over lengths and
+  tensions; with m > 6 cables the facet test's);
 - ``~/live_markers`` (visualization_msgs/MarkerArray): the platform and the cables at the
   measured pose, each cable coloured by its margin (ns ``platform_measured``,
   ``cables_measured``), beside the plan's markers (planned against measured).
@@ -17,7 +18,7 @@ from sensor_msgs.msg import JointState
 from std_msgs.msg import Float64
 from visualization_msgs.msg import MarkerArray
 
-from ..feasibility import evaluate
+from ..cable_feasibility import feasibility_of as evaluate
 from .markers import pose_markers
 
 CABLE_STATE, LEAST_MARGIN, LIVE_MARKERS = "cable_state", "least_margin", "live_markers"

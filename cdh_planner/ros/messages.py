@@ -30,7 +30,7 @@ from cdh_planner_interfaces.msg import TensionEnvelope, TensionEnvelopePoint
 
 from ..errors import InputError
 from ..model.pose import Pose, check_quaternion, quaternion_from_tau, tau_from_quaternion
-from ..model.robot import N_CABLES
+from ..model.robot_schema import MAX_CABLES, MIN_CABLES
 from ..status import Status
 from ..trajectory.sampling import check_timed_path, sample_cable_state
 
@@ -77,11 +77,12 @@ def _stamp_plus(stamp, seconds):
 # ----------------------------------------------------------------------------- checks
 
 def check_joint_names(names, field="joint_names"):
-    """Six distinct non-empty strings (the robot's winch_names) -> list."""
+    """MIN_CABLES to MAX_CABLES distinct non-empty strings (the robot's winch_names) -> list."""
     names = list(names)
-    if len(names) != N_CABLES or not all(isinstance(n, str) and n for n in names) \
-            or len(set(names)) != N_CABLES:
-        raise InputError(field, names, f"expected {N_CABLES} distinct non-empty names")
+    if not MIN_CABLES <= len(names) <= MAX_CABLES or len(set(names)) != len(names) \
+            or not all(isinstance(n, str) and n for n in names):
+        raise InputError(field, names, f"expected {MIN_CABLES} to {MAX_CABLES} distinct "
+                                       "non-empty names")
     return names
 
 

@@ -41,4 +41,5 @@ class NodeDiagnostics:
                       last_plan_age_s=now - last[1] if last else None,
                       recording=node.runlog.state,
                       joint_states_age_s=now - latest[1] if latest else None,
-                      joint_states_max_age_s=node.config.values["execution.joint_states_max_age_s"])
+                      joint_states_max_age_s=node.config.values["execution.joint_states_max_age_s"],
+                      forward_kinematics_residual_m=execution.forward_kinematics_residual_m)

@@ -28,7 +28,10 @@ import time
 import traceback
 from dataclasses import dataclass
 
+import numpy as np
+
 from ..errors import InputError, exception_line
+from ..model.kinematics import cable_lengths
 from ..model.pose import rotation_from_quaternion
 from . import winches
 from . import messages as M
@@ -59,6 +62,7 @@ class PlanExecution:
         self._timer = None
         self._timer_period = None
         self._last_pose = None         # (p, R) of the last forward kinematics, its next guess
+        self.forward_kinematics_residual_m = None  # its largest cable length error, m
         values = config.values
         self.joints = winches.JointStateMonitor(
             node, values["execution.joint_states_topic"], config.robot.winch_names)
@@ -303,6 +307,8 @@ class PlanExecution:
         guess = winches.nearest_pose(robot, lengths, self._known_poses(plan))
         p, R = winches.current_pose(robot, lengths, guess)
         self._last_pose = (p, R)
+        # m > 6: least squares; the residual (m) tells how consistent the lengths are
+        self.forward_kinematics_residual_m = float(np.max(np.abs(cable_lengths(robot, p, R) - lengths)))
         return p, R
 
     def _known_poses(self, plan):

@@ -32,7 +32,7 @@ from sensor_msgs.msg import JointState
 from trajectory_msgs.msg import JointTrajectory, JointTrajectoryPoint
 
 from ..errors import InputError, check_finite, exception_line
-from ..feasibility import evaluate
+from ..cable_feasibility import feasibility_of as evaluate
 from ..model.forward_kinematics import current_pose as _current_pose, nearest_pose  # noqa: F401 (API)
 from .interface import ACTION_QOS
 from .messages import check_joint_names, duration_msg

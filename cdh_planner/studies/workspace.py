@@ -29,6 +29,7 @@ from dataclasses import dataclass, field, replace
 
 import numpy as np
 
+from ..cable_feasibility import feasibility_of
 from ..errors import InputError
 from ..model.pose import (Pose, quaternion_from_tau, rotation_from_quaternion, tau_from_quaternion,
                           tau_from_rotation)
@@ -147,9 +148,11 @@ def sample_poses(spec, start, count):
 
 def point_validity(robot, scene=None):
     """The validity the point test asks (``pose_margins``): the planner's, at margin floor 0
-    (a pose's validity does not depend on the task). Building it with a scene loads the
-    collision library and compiles its kernel: once per worker."""
-    return Validity(robot, FreeTask(), 0.0, scene)
+    (a pose's validity does not depend on the task), with ``verify``'s wrench margin (for
+    m > 6 cables the facet test; the planner keeps to the tension rule's band, a subset:
+    docs/more-cables.md). Building it with a scene loads the collision library and compiles
+    its kernel: once per worker."""
+    return Validity(robot, FreeTask(), 0.0, scene, feasibility=feasibility_of)
 
 
 def pose_margins(validity, p, q):

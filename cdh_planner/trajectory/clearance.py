@@ -31,7 +31,7 @@ margin in N of a path, sampled as densely as ``verify`` checks it.
 
 import numpy as np
 
-from ..feasibility import evaluate
+from ..cable_feasibility import planning_feasibility as evaluate
 from .path_check import DEFAULT_STEP_M, DEFAULT_STEP_RAD, SlerpPath
 
 MAX_MARGIN = 0.5  # no pose has a larger normalised margin
@@ -57,7 +57,7 @@ def segment_costs(lengths, margins, weight):
 
 
 def tension_margins(robot, f):
-    """Per pose and cable, min(f0 - v - fmin, fmax - f0 - v) (N, 6), N: how far the tension
+    """Per pose and cable, min(f0 - v - fmin, fmax - f0 - v) (N, m), N: how far the tension
     envelope of a ``Feasibility`` is from the tension limits (negative outside)."""
     return np.minimum(f.tension_min - robot.tension_min, robot.tension_max - f.tension_max)
 

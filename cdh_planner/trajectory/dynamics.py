@@ -42,8 +42,8 @@ from functools import partial
 import numpy as np
 
 from ..errors import InputError, check_finite
-from ..feasibility import (cable_vectors, evaluate, inverse_ellipsoid_factor, nominal_wrench,
-                           screw_jacobian)
+from ..cable_feasibility import nominal_tensions, planning_feasibility as evaluate, tension_map
+from ..feasibility import cable_vectors, inverse_ellipsoid_factor, nominal_wrench, screw_jacobian
 from ..model.pose import tau_from_rotation
 from ..model.rotation import Rotation
 from ._toppra import toppra  # toppra without matplotlib and scipy.interpolate (start-up)
@@ -128,8 +128,12 @@ def _terms(robot, geo, s, mass, inertia):
     L = np.linalg.norm(d, axis=-1)
     u = d / L[..., None]
     J = screw_jacobian(robot, u)
-    J_inv = np.linalg.inv(J)
-    f0 = np.einsum("nij,nj->ni", J_inv, nominal_wrench(robot, c))
+    if J.shape[-1] == 6:
+        J_inv = np.linalg.inv(J)
+        f0 = np.einsum("nij,nj->ni", J_inv, nominal_wrench(robot, c))
+    else:  # m > 6: the published rule, t0 + P (w - w0) (cable_feasibility.tension_map)
+        J_inv = tension_map(robot, J)
+        f0 = nominal_tensions(robot, p, R)
     v = np.linalg.norm(J_inv @ inverse_ellipsoid_factor(robot, c), axis=-1)
     # the platform anchor q_i = p + R b_i: q_s = p_s + R (w x b), q_ss = p_ss + R (w_s x b +
     # w x (w x b)); L = |q - a| gives L_s = u . q_s and L_ss = (|q_s|^2 - L_s^2) / L + u . q_ss
@@ -158,12 +162,13 @@ class _WrenchConstraint(toppra.constraint.LinearConstraint):
         a = np.concatenate([L_s, a_f], axis=1)
         b = np.concatenate([L_ss, b_f], axis=1)
         c = np.concatenate([np.zeros_like(f0), f0], axis=1)
-        eye = np.eye(12)
-        F = np.broadcast_to(np.concatenate([eye, -eye]), (n, 24, 12)).copy()
+        m = f0.shape[1]
+        eye = np.eye(2 * m)
+        F = np.broadcast_to(np.concatenate([eye, -eye]), (n, 4 * m, 2 * m)).copy()
         r = self.robot
         reserve = DERATE * (r.tension_max - r.tension_min)
-        g = np.concatenate([np.broadcast_to(self.amax, (n, 6)), r.tension_max - v - reserve,
-                            np.broadcast_to(self.amax, (n, 6)), -(r.tension_min + v + reserve)], axis=1)
+        g = np.concatenate([np.broadcast_to(self.amax, (n, m)), r.tension_max - v - reserve,
+                            np.broadcast_to(self.amax, (n, m)), -(r.tension_min + v + reserve)], axis=1)
         with np.errstate(divide="ignore"):
             x_max = np.min(np.where(np.abs(L_s) > 1e-12, self.vmax ** 2 / L_s ** 2, np.inf), axis=1)
         xbound = np.column_stack([np.zeros(n), np.minimum(x_max, 1e12)])
@@ -176,9 +181,9 @@ class _WrenchConstraint(toppra.constraint.LinearConstraint):
 class _Interval:
     """The minimal geometric path toppra needs: its interval and dimension."""
 
-    def __init__(self, length):
+    def __init__(self, length, m=6):
         self.path_interval = np.array([0.0, length])
-        self.dof = 6
+        self.dof = m
         self.duration = length
 
 
@@ -190,8 +195,9 @@ def dynamic_timing(robot, path, mass, inertia, max_cable_speed, max_cable_accel,
     timing: ``feasible`` False with the reason."""
     mass = check_finite("load.mass", mass, positive=True)
     inertia = np.asarray(inertia, dtype=float).reshape(3, 3)
-    vmax = np.broadcast_to(np.asarray(max_cable_speed, dtype=float), (6,))
-    amax = np.broadcast_to(np.asarray(max_cable_accel, dtype=float), (6,))
+    m = len(robot.base_anchors)
+    vmax = np.broadcast_to(np.asarray(max_cable_speed, dtype=float), (m,))
+    amax = np.broadcast_to(np.asarray(max_cable_accel, dtype=float), (m,))
     geo = _Geometry(robot, path)
     grid = _grid(geo, grid_points)
     terms = _terms(robot, geo, grid, mass, inertia)
@@ -199,7 +205,7 @@ def dynamic_timing(robot, path, mass, inertia, max_cable_speed, max_cable_accel,
     # at the limit overshoots it by about 1e-4 (measured), which the dense check would refuse
     instance = toppra.algorithm.TOPPRA([_WrenchConstraint(terms, robot, vmax * (1 - DERATE),
                                                           amax * (1 - DERATE))],
-                                       _Interval(geo.length), gridpoints=grid)
+                                       _Interval(geo.length, m), gridpoints=grid)
     _, sd, _ = instance.compute_parameterization(0.0, 0.0)  # (s'', s', extra variables)
     limit = np.sqrt(np.maximum(instance.compute_feasible_sets()[:, 1], 0.0))
     if sd is None or not np.all(np.isfinite(sd)):
@@ -221,7 +227,7 @@ def dynamic_timing(robot, path, mass, inertia, max_cable_speed, max_cable_accel,
 
 
 def tensions_over_time(robot, timing, mass, inertia, dt=CHECK_DT):
-    """(t (M,), dynamic f (M, 6), static f0 (M, 6), spread v (M, 6)) of a feasible timing,
+    """(t (M,), dynamic f (M, m), static f0 (M, m), spread v (M, m)) of a feasible timing,
     every dt s: what the cables carry with and without the motion's own accelerations (N)."""
     sample = _sampled(robot, timing.geometry, timing.s, timing.sd, mass, inertia, dt)
     return sample.t, sample.f, sample.f0, sample.v
@@ -230,7 +236,7 @@ def tensions_over_time(robot, timing, mass, inertia, dt=CHECK_DT):
 @dataclass
 class _Sample:
     """The timed motion every dt: times t, s' and s'' (M,), lengths L and their s-derivatives
-    L_s, L_ss, dynamic tensions f, static f0 and the ellipsoid's spread v (M, 6)."""
+    L_s, L_ss, dynamic tensions f, static f0 and the ellipsoid's spread v (M, m)."""
 
     t: np.ndarray
     sdot: np.ndarray

@@ -31,8 +31,9 @@ from dataclasses import dataclass, replace
 
 import numpy as np
 
-from ..feasibility import (cable_vectors, evaluate, inverse_ellipsoid_factor, load_point,
-                           nominal_wrench, screw_jacobian)
+from ..cable_feasibility import nominal_tensions, tension_map
+from ..feasibility import (cable_vectors, inverse_ellipsoid_factor, load_point, nominal_wrench,
+                           screw_jacobian)
 from ..model.forward_kinematics import forward_kinematics_many
 from ..model.pose import tau_from_rotation
 from ..model.rotation import Rotation, Slerp
@@ -164,7 +165,7 @@ class ExecutionCheck:
 
 def check_executed(robot, t_wp, L, V, A, seed, mass=None, inertia=None, max_cable_speed=np.inf,
                    max_cable_accel=np.inf, dt=CHECK_DT, within=None):
-    """ExecutionCheck of the points (t_wp (N,) s; L, V, A (N, 6) m, m/s, m/s^2) executed by
+    """ExecutionCheck of the points (t_wp (N,) s; L, V, A (N, m) m, m/s, m/s^2) executed by
     a JTC (module docstring). ``seed(t)`` -> (p (M, 3), R (M, 3, 3)): a pose near the
     platform's at times t (the planned motion), where forward kinematics starts. ``mass``
     (kg) and ``inertia`` (3x3 kg m^2 about the load point) None: no inertial wrench.
@@ -189,10 +190,11 @@ def check_executed(robot, t_wp, L, V, A, seed, mass=None, inertia=None, max_cabl
         k = k[np.any((t_wp[1:, None] >= w[:, 0]) & (t_wp[:-1, None] <= w[:, 1]), axis=1)]
     lo, hi, vel, acc = quintic_bounds(t_wp, L, V, A, k)
     lengths_ok = (lo >= robot.length_min - TOL) & (hi <= robot.length_max + TOL)
-    speed = np.max(vel / np.broadcast_to(max_cable_speed, (6,)), axis=1, initial=0.0)
-    accel = np.max(acc / np.broadcast_to(max_cable_accel, (6,)), axis=1, initial=0.0)
+    m = L.shape[1]
+    speed = np.max(vel / np.broadcast_to(max_cable_speed, (m,)), axis=1, initial=0.0)
+    accel = np.max(acc / np.broadcast_to(max_cable_accel, (m,)), axis=1, initial=0.0)
     bad_k = k[~np.all(lengths_ok, axis=1) | (speed > 1 + TOL) | (accel > 1 + TOL)]
-    margin, lost, worst_t = np.full((0, 6), np.inf), np.zeros(0, dtype=bool), float("nan")
+    margin, lost, worst_t = np.full((0, m), np.inf), np.zeros(0, dtype=bool), float("nan")
     span = robot.tension_max - robot.tension_min
     if bad_k.size == 0:
         mid = np.flatnonzero(sel[q:n + 1 - q]) + q   # samples whose tensions are checked
@@ -213,7 +215,7 @@ def check_executed(robot, t_wp, L, V, A, seed, mass=None, inertia=None, max_cabl
 
 
 def _executed_margins(robot, t_wp, L, V, A, seed, ts, mid, q, mass, inertia):
-    """Tension margins (M, 6) N at the samples ts[mid] of the executed motion (forward
+    """Tension margins (M, m) N at the samples ts[mid] of the executed motion (forward
     kinematics of the quintic's lengths, differences over ts[mid -+ q]), and where forward
     kinematics lost the platform (M,) (no convergence, or a twin far from the seed)."""
     need = unique_sorted(np.concatenate([mid - q, mid, mid + q]))
@@ -236,12 +238,17 @@ def _executed_margins(robot, t_wp, L, V, A, seed, ts, mid, q, mass, inertia):
 
 
 def _tensions(robot, p, R, c, c_dd, omega, alpha, mass, inertia):
-    """Tensions f (M, 6) balancing the load wrench minus the inertial wrench, and the
-    ellipsoid's spread v (M, 6), N."""
+    """Tensions f (M, m) balancing the load wrench minus the inertial wrench, and the
+    ellipsoid's spread v (M, m), N. With m > 6, those of the published tension rule
+    (``cable_feasibility.tension_map``): its centred nominal t0 moved by P times the
+    inertial wrench, and its band v = |rows of P L|."""
     u = cable_vectors(robot, p, R)
     u /= np.linalg.norm(u, axis=-1)[..., None]
-    J_inv = np.linalg.inv(screw_jacobian(robot, u))
     w = nominal_wrench(robot, c)
+    if len(robot.base_anchors) > 6:
+        return _rule_tensions(robot, p, R, c, u, w, _inertial(R, c, c_dd, omega, alpha, mass,
+                                                                  inertia))
+    J_inv = np.linalg.inv(screw_jacobian(robot, u))
     if mass is not None:
         I = np.asarray(inertia, dtype=float).reshape(3, 3)
         Iw = omega @ I.T
@@ -251,6 +258,24 @@ def _tensions(robot, p, R, c, c_dd, omega, alpha, mass, inertia):
     f = np.einsum("nij,nj->ni", J_inv, w)
     v = np.linalg.norm(J_inv @ inverse_ellipsoid_factor(robot, c), axis=-1)
     return f, v
+
+
+def _inertial(R, c, c_dd, omega, alpha, mass, inertia):
+    """The inertial wrench (M, 6) of the load (zero without a mass), as ``_tensions``."""
+    if mass is None:
+        return np.zeros((len(c), 6))
+    I = np.asarray(inertia, dtype=float).reshape(3, 3)
+    moment = np.einsum("nij,nj->ni", R, alpha @ I.T + np.cross(omega, omega @ I.T))
+    force = mass * c_dd
+    return np.concatenate([force, np.cross(c, force) + moment], axis=1)
+
+
+def _rule_tensions(robot, p, R, c, u, w0, inertial):
+    """The tension rule's f = t0 + P (w - w0), w = w0 - inertial, and its band v (M, m) N."""
+    P = tension_map(robot, screw_jacobian(robot, u))
+    t0 = nominal_tensions(robot, p, R)
+    f = t0 - np.einsum("nij,nj->ni", P, inertial)
+    return f, np.linalg.norm(P @ inverse_ellipsoid_factor(robot, c), axis=-1)
 
 
 def _reason(least_n, lengths_ok, speed, accel, no_pose):
@@ -368,7 +393,7 @@ def slow_down(robot, path, scale):
     accelerations / scale^2, and the dynamic part of the tensions / scale^2 (the static
     tensions of each pose, f0, unchanged; the ellipsoid's spread unchanged)."""
     R = Rotation.from_quat(path.quaternion).as_matrix()
-    f0 = evaluate(robot, path.p, R=R).tension_nominal
+    f0 = nominal_tensions(robot, path.p, R)
     f = f0 + (path.tension_nominal - f0) / scale ** 2
     return replace(path, t=path.t * scale, velocities=path.velocities / scale,
                    accelerations=path.accelerations / scale ** 2, tension_nominal=f,

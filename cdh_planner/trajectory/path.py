@@ -19,14 +19,14 @@ class PlannedPath:
     p: np.ndarray  # (N, 3)
     quaternion: np.ndarray  # (N, 4)
     tau: np.ndarray  # (N, 3) phi, theta, sigma
-    lengths: np.ndarray  # (N, 6)
-    tension_min: np.ndarray  # (N, 6)
-    tension_nominal: np.ndarray  # (N, 6)
-    tension_max: np.ndarray  # (N, 6)
+    lengths: np.ndarray  # (N, m): one column per cable
+    tension_min: np.ndarray  # (N, m): one column per cable
+    tension_nominal: np.ndarray  # (N, m): one column per cable
+    tension_max: np.ndarray  # (N, m): one column per cable
     margin: np.ndarray  # (N,)
     t: np.ndarray  # (N,)
-    velocities: np.ndarray  # (N, 6)
-    accelerations: np.ndarray  # (N, 6)
+    velocities: np.ndarray  # (N, m): one column per cable
+    accelerations: np.ndarray  # (N, m): one column per cable
 
     def __len__(self):
         return self.p.shape[0]

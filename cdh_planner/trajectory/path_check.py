@@ -144,11 +144,11 @@ class TaskLinePath:
 
 
 def check_motion(robot, positions, quaternions, max_step_m=DEFAULT_STEP_M,
-                 max_step_rad=DEFAULT_STEP_RAD, collision=None):
+                 max_step_rad=DEFAULT_STEP_RAD, collision=None, feasibility=None):
     """Check the motion through waypoints (positions (N, 3) m, quaternions (N, 4)) with
     position linear and orientation slerp between consecutive ones: N - 1 SegmentChecks."""
     path = SlerpPath(np.asarray(positions, dtype=float), np.asarray(quaternions, dtype=float))
-    return check_path(robot, path, max_step_m, max_step_rad, collision)
+    return check_path(robot, path, max_step_m, max_step_rad, collision, feasibility)
 
 
 def check_task_motion(robot, task, coords, max_step_m=DEFAULT_STEP_M,
@@ -158,13 +158,14 @@ def check_task_motion(robot, task, coords, max_step_m=DEFAULT_STEP_M,
 
 
 def check_path(robot, path, max_step_m=DEFAULT_STEP_M, max_step_rad=DEFAULT_STEP_RAD,
-               collision=None):
+               collision=None, feasibility=None):
     """Dense check of every segment of ``path`` (SlerpPath, TaskLinePath or alike:
     ``path(seg, s) -> (p, R)``, ``path.speeds()``, ``path.n_segments``); ``collision``: a
-    scene's CollisionModel or None."""
+    scene's CollisionModel or None; ``feasibility(robot, p, R=R)``: the margin checked
+    (default ``feasibility_of``; the planner's is ``planning_feasibility``)."""
     if path.n_segments < 1:
         return []
-    samples = _Samples(robot, path, collision)
+    samples = _Samples(robot, path, collision, feasibility or evaluate)
     samples.add(*_initial_grid(path, max_step_m, max_step_rad))
     unresolved = _refine(samples)
     first = _first_unsafe(samples)
@@ -199,8 +200,9 @@ def _initial_grid(path, max_step_m, max_step_rad):
 class _Samples:
     """Evaluated samples of all segments, kept sorted by (segment, s)."""
 
-    def __init__(self, robot, path, collision=None):
+    def __init__(self, robot, path, collision=None, feasibility=evaluate):
         self.robot, self.path, self.collision = robot, path, collision
+        self.feasibility = feasibility
         self.seg = np.empty(0, dtype=int)
         self.s = np.empty(0)
         self.margin = np.empty(0)
@@ -211,7 +213,7 @@ class _Samples:
         margin, binding = np.empty(s.size), np.empty(s.size, dtype=object)
         for a in range(0, s.size, CHUNK):
             p, R = self.path(seg[a:a + CHUNK], s[a:a + CHUNK])
-            f = evaluate(self.robot, p, R=R)
+            f = self.feasibility(self.robot, p, R=R)
             margin[a:a + CHUNK], binding[a:a + CHUNK] = combine(f.margin, f.binding,
                                                                 self.collision, p, R)
         return np.where(np.isnan(margin), -np.inf, margin), binding

@@ -10,19 +10,21 @@ from dataclasses import dataclass
 import numpy as np
 
 from ..errors import InputError
-from ..model.robot import N_CABLES
+from ..model.robot_schema import MAX_CABLES, MIN_CABLES
 from .executed import quintic
 
 
 def check_timed_path(path):
-    """InputError unless ``path`` (PlannedPath) has per-cable arrays (N, 6) and times that
-    start >= 0 and strictly increase."""
+    """InputError unless ``path`` (PlannedPath) has per-cable arrays (N, m), m the number
+    of cables (MIN_CABLES to MAX_CABLES), and times that start >= 0 and strictly increase."""
     n = len(path)
+    shape = np.shape(path.lengths)
+    m = shape[1] if len(shape) == 2 and MIN_CABLES <= shape[1] <= MAX_CABLES else MIN_CABLES
     for name in ("lengths", "velocities", "accelerations", "tension_min", "tension_nominal",
                  "tension_max"):
         shape = np.shape(getattr(path, name))
-        if shape != (n, N_CABLES):
-            raise InputError(f"path.{name}", f"shape {shape}", f"expected ({n}, {N_CABLES})")
+        if shape != (n, m):
+            raise InputError(f"path.{name}", f"shape {shape}", f"expected ({n}, {m})")
     if np.shape(path.t) != (n,):
         raise InputError("path.t", f"shape {np.shape(path.t)}", f"expected ({n},)")
     if n and (not np.all(np.isfinite(path.t)) or path.t[0] < 0 or np.any(np.diff(path.t) <= 0)):
@@ -32,8 +34,8 @@ def check_timed_path(path):
 
 @dataclass(frozen=True)
 class CableSample:
-    """Cable command at one instant: ``lengths`` (6,) m, ``velocities`` (6,) m/s,
-    ``effort`` (6,) N (nominal tensions)."""
+    """Cable command at one instant: ``lengths`` (m,) m, ``velocities`` (m,) m/s,
+    ``effort`` (m,) N (nominal tensions)."""
 
     lengths: np.ndarray
     velocities: np.ndarray
@@ -61,7 +63,7 @@ def sample_cable_state(path, t, method="quintic"):
     if n == 1 or t <= T[0] or t >= T[-1]:
         k = 0 if (n == 1 or t <= T[0]) else n - 1
         inside = n > 1 and t == T[k]
-        vel = path.velocities[k] if inside else np.zeros(N_CABLES)
+        vel = path.velocities[k] if inside else np.zeros(np.shape(path.lengths)[1])
         return CableSample(lengths=np.array(path.lengths[k], dtype=float),
                            velocities=np.array(vel, dtype=float),
                            effort=np.array(path.tension_nominal[k], dtype=float))

@@ -77,6 +77,7 @@ import numpy as np
 
 from ..errors import InputError, check_finite
 from ..model.robot import N_CABLES
+from ..model.robot_schema import MAX_CABLES, MIN_CABLES
 
 DWELL_S = 1e-3  # s, duration of a zero-length segment (duplicated waypoint)
 ZERO_LENGTH_M = 1e-9  # m, a segment this short (Euclidean, all 6 cables) has length zero
@@ -112,8 +113,8 @@ class Timing:
 
 # ----------------------------------------------------------------------------- validation
 
-def check_limit(name, value):
-    """Per-winch limit: a positive finite scalar or 6 of them -> array (6,); InputError
+def check_limit(name, value, m=N_CABLES):
+    """Per-winch limit: a positive finite scalar or m of them -> array (m,); InputError
     naming ``name`` (e.g. ``max_cable_speed[2]``) and the value otherwise."""
     try:
         arr = np.asarray(value, dtype=float)
@@ -122,9 +123,9 @@ def check_limit(name, value):
     if arr.ndim == 0:
         if not (np.isfinite(arr) and arr > 0):
             raise InputError(name, float(arr), "must be a positive finite number")
-        return np.full(N_CABLES, float(arr))
-    if arr.shape != (N_CABLES,):
-        raise InputError(name, arr.tolist(), f"expected a number or {N_CABLES} numbers")
+        return np.full(m, float(arr))
+    if arr.shape != (m,):
+        raise InputError(name, arr.tolist(), f"expected a number or {m} numbers")
     bad = np.flatnonzero(~(np.isfinite(arr) & (arr > 0)))
     if bad.size:
         i = int(bad[0])
@@ -133,13 +134,15 @@ def check_limit(name, value):
 
 
 def check_lengths(lengths, name="lengths"):
-    """Waypoint cable lengths (N, 6) m, N >= 1, finite -> float array; InputError otherwise."""
+    """Waypoint cable lengths (N, m) m, N >= 1, MIN_CABLES <= m <= MAX_CABLES, finite ->
+    float array; InputError otherwise."""
     try:
         L = np.asarray(lengths, dtype=float)
     except (TypeError, ValueError):
         raise InputError(name, lengths, "expected an (N, 6) array of cable lengths (m)") from None
-    if L.ndim != 2 or L.shape[1] != N_CABLES or L.shape[0] < 1:
-        raise InputError(name, f"shape {L.shape}", "expected an (N, 6) array with N >= 1")
+    if L.ndim != 2 or not MIN_CABLES <= L.shape[1] <= MAX_CABLES or L.shape[0] < 1:
+        raise InputError(name, f"shape {L.shape}", f"expected an (N, m) array with N >= 1, "
+                         f"{MIN_CABLES} <= m <= {MAX_CABLES}")
     if L.shape[0] > MAX_WAYPOINTS:
         raise InputError(name, f"shape {L.shape}", f"at most {MAX_WAYPOINTS} waypoints")
     bad = np.argwhere(~np.isfinite(L))
@@ -188,8 +191,8 @@ def _geometry(L, vmax, amax, zero_length_m):
     cap[:-1] = np.minimum(cap[:-1], W ** 2)
     cap[1:] = np.minimum(cap[1:], W ** 2)
     cap[rest] = 0.0
-    a0 = np.full((n, N_CABLES), np.inf)
-    a1 = np.zeros((n, N_CABLES))
+    a0 = np.full((n, L.shape[1]), np.inf)
+    a1 = np.zeros((n, L.shape[1]))
     turn = np.flatnonzero(~rest)
     if turn.size:
         g = np.maximum(np.abs(u[turn - 1]), np.abs(u[turn]))
@@ -324,13 +327,13 @@ def time_parameterize(lengths, max_cable_speed, max_cable_accel, *, dwell_s=DWEL
     the speed limit when the trajectory would last over MAX_DURATION_S (or has more than
     MAX_WAYPOINTS waypoints)."""
     L = check_lengths(lengths)
-    vmax = check_limit("max_cable_speed", max_cable_speed)
-    amax = check_limit("max_cable_accel", max_cable_accel)
+    vmax = check_limit("max_cable_speed", max_cable_speed, L.shape[1])
+    amax = check_limit("max_cable_accel", max_cable_accel, L.shape[1])
     dwell_s = check_finite("dwell_s", dwell_s, positive=True)
     zero_length_m = check_finite("zero_length_m", zero_length_m, positive=True)
     n = L.shape[0]
     if n == 1:
-        zero = np.zeros((1, N_CABLES))
+        zero = np.zeros((1, L.shape[1]))
         return Timing(t=np.zeros(1), velocities=zero, accelerations=zero.copy(),
                       path_speed=np.zeros(1), rest=np.ones(1, dtype=bool))
     geo = _geometry(L, vmax, amax, zero_length_m)

@@ -18,12 +18,12 @@ from pathlib import Path
 
 from ...errors import InputError
 from ..outputs import same_file
-from . import obstacle, paper, ros_story
+from . import more_cables, obstacle, paper, ros_story
 
 PACKAGE = "cdh_planner"
 DEFAULT_OUT = "demo_out"
 EXIT_OK, EXIT_DIFFERS = 0, 1
-STEPS = paper.STEPS + obstacle.STEPS + ros_story.STEPS
+STEPS = paper.STEPS + obstacle.STEPS + ros_story.STEPS + more_cables.STEPS
 
 
 def add_parser(subparsers):

@@ -1,0 +1,147 @@
+"""The node with an 8-cable robot over real DDS (config/robot2_8.yaml with Robot 2's sphere
+task): it plans with the m-cable planner and executes in both modes, the 50 Hz stream of
+~/cable_command and a FollowJointTrajectory controller (the test double of
+test/doubles/follow_joint_trajectory_server.py), each message carrying 8 winches."""
+
+from pathlib import Path
+
+import numpy as np
+import pytest
+import yaml
+
+rclpy = pytest.importorskip("rclpy")
+
+from diagnostic_msgs.msg import DiagnosticArray  # noqa: E402
+from sensor_msgs.msg import JointState  # noqa: E402
+
+from cdh_planner.model.kinematics import cable_lengths  # noqa: E402
+from cdh_planner.model.pose import rotation_from_quaternion  # noqa: E402
+from cdh_planner.ros import messages as M  # noqa: E402
+from cdh_planner.ros.client import PlannerClient, plan_path_goal  # noqa: E402
+from cdh_planner.ros.params import node_config  # noqa: E402
+from ros_harness import (Q2, Q3, ROBOT2, Collector, ControllerDouble, NodeProcess,  # noqa: E402
+                         claimed_domain, file_parameters, sphere_pose_msg, wait_node_measures)
+
+from conftest import REPO  # noqa: E402
+
+ACTION = "/cable_controller/follow_joint_trajectory"
+JOINT_STATES = "/winches/joint_states"
+TIME_SCALE = 4.0
+
+
+def _params_file(tmp):
+    """robot2_8's robot with robot2.yaml's sphere task: one parameters file."""
+    doc = yaml.safe_load((REPO / "config" / "robot2_8.yaml").read_text())
+    task = yaml.safe_load(ROBOT2.read_text())["cdh_planner"]["ros__parameters"]["task"]
+    doc["cdh_planner"]["ros__parameters"]["task"] = task
+    path = Path(tmp) / "robot2_8_sphere.yaml"
+    path.write_text(yaml.safe_dump(doc))
+    return path
+
+
+def _lengths(robot, coords):
+    msg = sphere_pose_msg(coords)
+    p, o = msg.pose.position, msg.pose.orientation
+    R = rotation_from_quaternion(np.array([o.x, o.y, o.z, o.w]))
+    return cable_lengths(robot, np.array([p.x, p.y, p.z]), R)
+
+
+@pytest.fixture(scope="module")
+def ros(tmp_path_factory):
+    tmp = tmp_path_factory.mktemp("more_cables")
+    params_file = _params_file(tmp)
+    robot = node_config(file_parameters(params_file)).robot
+    assert len(robot.winch_names) == 8
+    params = [f"execution.controller_action:={ACTION}",
+              f"execution.joint_states_topic:={JOINT_STATES}"]
+    with claimed_domain() as domain:
+        double = ControllerDouble(domain, *robot.winch_names, "--action", ACTION,
+                                  "--joint-states", JOINT_STATES, "--time-scale", TIME_SCALE,
+                                  "--initial", *map(repr, _lengths(robot, Q2).tolist()))
+        node = NodeProcess(domain, tmp, params=params, params_file=params_file)
+        try:
+            assert double.ready.wait(30.0), "\n".join(double.lines)
+            with PlannerClient(domain_id=domain) as client:
+                client.wait_for_node(30.0)
+                client.double, client.process, client.robot = double, node, robot
+                client.measured = Collector(client.node, JointState, JOINT_STATES, 10)
+                client.diagnostics = Collector(client.node, DiagnosticArray, "/diagnostics", 10)
+                client.watch_execution()
+                assert client.spin_until(lambda: client.measured.items, 10.0)
+                answer = wait_node_measures(client, sphere_pose_msg(Q2))
+                assert answer.success, answer.result.error_msg
+                yield client
+        finally:
+            node.stop()
+            rc, log = double.stop()
+            assert rc == 0 and "Traceback" not in log, log
+
+
+def _measured(ros):
+    msg = ros.measured.messages[-1]
+    return np.array([msg.position[list(msg.name).index(n)] for n in ros.robot.winch_names])
+
+
+def _residual(ros):
+    """The node's last forward kinematics residual (m) on /diagnostics, or None."""
+    for array in reversed(ros.diagnostics.messages):
+        for status in array.status:
+            value = M.status_values(status).get("forward_kinematics_residual_m")
+            if value not in (None, "none"):
+                return float(value)
+    return None
+
+
+def _check_plan(ros, answer):
+    assert answer.success, answer.result.error_msg
+    names = list(ros.robot.winch_names)
+    traj = answer.result.cable_trajectory
+    assert list(traj.joint_names) == names
+    assert all(len(pt.positions) == 8 and len(pt.velocities) == 8 for pt in traj.points)
+    return traj
+
+
+def test_the_node_streams_an_eight_cable_plan(ros):
+    """Stream mode (the default): a plan q2 -> q3 on the sphere (the atlas: the direct
+    motion leaves C) is streamed at 50 Hz with 8 winches and ends at the last waypoint; the
+    envelope names the 8 winches with a band inside the limits."""
+    answer = ros.plan_path(plan_path_goal(sphere_pose_msg(Q2), sphere_pose_msg(Q3)), timeout_s=60)
+    traj = _check_plan(ros, answer)
+    run = ros.execute_and_follow(answer)
+    assert run.accepted, run.message
+    assert run.outcome == "completed" and run.arrived, (run.outcome, run.message,
+                                                         ros.process.log())
+    assert run.commands and all(len(M.winch_command_values(c)[1]) == 8 for c in run.commands)
+    env = run.envelope
+    assert env is not None and list(env.winch_names) == list(ros.robot.winch_names)
+    bands = M.envelope_from_msg(env)
+    assert bands.shape == (len(traj.points), 8, 3)
+    assert np.all(bands[..., 0] >= ros.robot.tension_min - 1e-6)
+    assert np.all(bands[..., 2] <= ros.robot.tension_max + 1e-6)
+
+
+def test_the_node_executes_an_eight_cable_plan_through_the_controller(ros):
+    """follow_joint_trajectory mode: the controller double accepts the 8 joints' goal, the
+    winches end at the plan's last point, and the measured pose's forward kinematics (least
+    squares on 8 lengths) is on /diagnostics with its residual."""
+    assert ros.set_parameters({"execution.mode": "follow_joint_trajectory"}) == [(True, "")]
+    try:
+        answer = ros.plan_path(plan_path_goal(None, sphere_pose_msg(Q3), use_current_start=True),
+                               timeout_s=60)
+        _check_plan(ros, answer)
+        seen = len(ros.execution_results)
+        accepted = len(ros.double.events("accepted"))
+        ok, message = ros.execute()
+        assert ok and ACTION in message, message
+        status = ros.wait_execution_result(seen, timeout_s=60.0)
+        assert status is not None, ros.process.log()
+        assert M.status_values(status)["outcome"] == "completed", status.message
+        [event] = ros.double.events("accepted")[accepted:]
+        assert event["joint_names"] == list(ros.robot.winch_names)
+        last = answer.result.cable_trajectory.points[-1].positions
+        assert ros.spin_until(lambda: np.allclose(_measured(ros), last, atol=1e-6), 10.0)
+        # at rest at q3 the 8 measured lengths are one pose's: the residual is rounding
+        assert ros.spin_until(lambda: _residual(ros) is not None and _residual(ros) < 1e-6, 10.0), \
+            _residual(ros)
+    finally:
+        assert ros.set_parameters({"execution.mode": "stream"}) == [(True, "")]
