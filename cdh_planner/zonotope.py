@@ -334,19 +334,27 @@ def _cholesky_solve(H, g, n, x):
 
 
 @njit(cache=True)
-def _centre(lo, hi, Q2, z):
+def _centre(lo, hi, Q2, z, warm=False):
     """The null-space shift z (k,) of the centred nominal (module doc): the maximiser of
     s + CENTRE_MU sum_j log(r_j) over (z, s), r the 2m slacks lo_i + Q2_i z - s and
     hi_i - Q2_i z - s (lo, hi: the normalised room below and above the band at z = 0), by
     Newton's method with an Armijo line search that stays inside. Strictly concave, so the
     maximiser is unique and smooth in the data; defined whether or not the band fits
-    (s < 0 then). At most CENTRE_ITERATIONS steps (about 12 for 8 cables)."""
+    (s < 0 then). At most CENTRE_ITERATIONS steps (about 12 for 8 cables from z = 0).
+    ``warm``: start from the given z (a neighbouring pose's answer: along a motion Newton
+    then needs a few steps; the maximiser is the same, the start only changes rounding)."""
     m, k = Q2.shape
     n = k + 1
     mu = CENTRE_MU
     x = np.zeros(n)  # (z, s)
-    x[k] = min(lo.min(), hi.min()) - mu  # strictly inside
     r = np.empty(2 * m)
+    if warm:
+        for a in range(k):
+            x[a] = z[a]
+        _slacks(lo, hi, Q2, x, r)
+        x[k] = r.min() - mu  # strictly inside
+    else:
+        x[k] = min(lo.min(), hi.min()) - mu  # strictly inside
     g = np.empty(n)
     H = np.empty((n, n))
     dx = np.empty(n)
@@ -375,6 +383,13 @@ def _centre(lo, hi, Q2, z):
         for a in range(n):
             dec += g[a] * dx[a]
         if dec <= CENTRE_TOL * mu:
+            # one more full step: Newton converges quadratically here, so the answer is the
+            # maximiser to rounding whatever the start (cold, or a neighbour's warm one)
+            for a in range(n):
+                xt[a] = x[a] + dx[a]
+            _slacks(lo, hi, Q2, xt, rt)
+            if rt.min() > 0.0:
+                x[:] = xt
             break
         phi = x[k] + mu * _log_product(r)
         # the slacks are affine in x: start the line search inside (ratio test), so that
@@ -563,6 +578,8 @@ def _evaluate_poses(q0, q1, J, c, w_local, L3, load_frame, tmin, tmax, subsets, 
     a = np.empty(6)
     mid = 0.5 * (tmin + tmax)
     sqd = tmax - tmin  # D^(1/2)
+    shift = np.zeros(m)  # the last centred pose's normalised null-space shift Q2 z
+    centred = q0 - 2     # which pose that was
     for q in range(q0, q1):
         Jq = J[q]
         # w0 and L (L L^T = E^-1) in the base frame; a load-frame ellipsoid moves with c
@@ -703,12 +720,23 @@ def _evaluate_poses(q0, q1, J, c, w_local, L3, load_frame, tmin, tmax, subsets, 
             for i in range(m):
                 room_lo[i] = (t0[q, i] - v[q, i] - tmin[i]) / sqd[i]
                 room_hi[i] = (tmax[i] - v[q, i] - t0[q, i]) / sqd[i]
-            _centre(room_lo, room_hi, Q2, zc)
+            # warm start from the previous pose's shift projected on this pose's null space
+            # (Householder bases of neighbours need not agree; the shift itself is smooth)
+            warm = centred == q - 1
+            if warm:
+                for kk in range(m - 6):
+                    d = 0.0
+                    for i in range(m):
+                        d += Q2[i, kk] * shift[i]
+                    zc[kk] = d
+            _centre(room_lo, room_hi, Q2, zc, warm)
             for i in range(m):
                 d = 0.0
                 for kk in range(m - 6):
                     d += Q2[i, kk] * zc[kk]
+                shift[i] = d
                 t0[q, i] += sqd[i] * d
+            centred = q
 
 
 @dataclass
