@@ -57,6 +57,8 @@ SLOWDOWN = 1.02         # time scale per failed dense check
 MAX_SLOWDOWNS = 40
 TOL = 1e-9              # N, m/s, m/s^2: rounding allowed in the dense check
 DERATE = 1e-3           # share of the winch limits and tension ranges kept in reserve
+SUSPECTS = 16           # failing runs of a dense check whose worst samples the next one
+                        # looks at first
 toppra.setup_logging("ERROR")  # its warnings repeat what feasible=False says
 
 
@@ -211,12 +213,17 @@ def dynamic_timing(robot, path, mass, inertia, max_cable_speed, max_cable_accel,
     if sd is None or not np.all(np.isfinite(sd)):
         return _infeasible(path, geo, grid, "no dynamically feasible timing: the path has no "
                                               "speed at which every tension stays in range")
+    suspects = np.empty(0)  # s of the worst samples of the last failed dense check
     for k in range(MAX_SLOWDOWNS + 1):
         scale = SLOWDOWN ** k
         t_grid = _grid_times(grid, sd / scale)
         if not np.all(np.isfinite(t_grid)):
             break
+        if k < MAX_SLOWDOWNS and _fails_near(robot, geo, grid, sd / scale, mass, inertia, vmax,
+                                             amax, check_dt, suspects):
+            continue  # a sample of this timing's own dense check fails: so would the check
         check = _dense_check(robot, geo, grid, sd / scale, mass, inertia, vmax, amax, check_dt)
+        suspects = check[4]
         if check[0]:
             timed = _retimed(robot, path, geo, grid, sd / scale, t_grid, mass, inertia)
             return DynamicTiming(path=timed, feasible=True, reason="", duration=float(t_grid[-1]),
@@ -249,9 +256,13 @@ class _Sample:
     v: np.ndarray
 
 
-def _sampled(robot, geo, s, sd, mass, inertia, dt):
+def _sampled(robot, geo, s, sd, mass, inertia, dt, pick=None):
+    """_Sample of the timing every dt s; ``pick``: only those sample indices (the same
+    samples, computed row by row as in the whole set)."""
     t_grid = _grid_times(s, sd)
     t = np.append(np.arange(0.0, t_grid[-1], dt), t_grid[-1])
+    if pick is not None:
+        t = t[pick]
     _, sdot, sddot = state = _state_at(t, s, sd, t_grid)
     L, L_s, L_ss, f0, v, a_f, b_f = _terms(robot, geo, state[0], mass, inertia)
     f = f0 + a_f * sddot[:, None] + b_f * (sdot ** 2)[:, None]
@@ -290,13 +301,49 @@ def _state_at(t, s, sd, t_grid):
     return s[k] + sd[k] * tau + 0.5 * u * tau ** 2, sd[k] + u * tau, u
 
 
-def _dense_check(robot, geo, s, sd, mass, inertia, vmax, amax, dt):
-    """(ok, least tension margin N, samples, what failed) of the timing, every dt s."""
-    m = _sampled(robot, geo, s, sd, mass, inertia, dt)
+def _limits(robot, m, vmax, amax):
+    """Per sample of a _Sample: tension margins (M, m) N, winch speeds and accelerations
+    (M, m) m/s, m/s^2, and which samples break a limit (M,) bool (beyond TOL)."""
     margin = np.minimum(m.f - m.v - robot.tension_min, robot.tension_max - m.f - m.v)
     speed = np.abs(m.L_s * m.sdot[:, None])
     accel = np.abs(m.L_s * m.sddot[:, None] + m.L_ss * (m.sdot ** 2)[:, None])
+    broken = (np.any(margin < -TOL, axis=1) | np.any(m.L < robot.length_min - TOL, axis=1)
+              | np.any(m.L > robot.length_max + TOL, axis=1) | np.any(speed > vmax + TOL, axis=1)
+              | np.any(accel > amax + TOL, axis=1))
+    return margin, speed, accel, broken
+
+
+def _fails_near(robot, geo, s, sd, mass, inertia, vmax, amax, dt, suspects):
+    """Does a sample of this timing's dense check (every dt s) break a limit, among the few
+    around the path parameters ``suspects`` (where a faster timing of the same path failed)?
+    True only when one does: then the whole check fails too (same samples, same rows), and
+    its ~10^4 samples need not be computed. False says nothing."""
+    if suspects.size == 0:
+        return False
+    t_grid = _grid_times(s, sd)
+    n = len(np.arange(0.0, t_grid[-1], dt)) + 1
+    near = np.floor(np.interp(suspects, s, t_grid) / dt).astype(int)
+    pick = unique_sorted(np.clip(near[:, None] + np.arange(-2, 4), 0, n - 1))
+    return bool(np.any(_limits(robot, _sampled(robot, geo, s, sd, mass, inertia, dt, pick),
+                               vmax, amax)[3]))
+
+
+def _dense_check(robot, geo, s, sd, mass, inertia, vmax, amax, dt):
+    """(ok, least tension margin N, samples, what failed, s of up to SUSPECTS of the worst
+    failing samples) of the timing, every dt s."""
+    m = _sampled(robot, geo, s, sd, mass, inertia, dt)
+    margin, speed, accel, broken = _limits(robot, m, vmax, amax)
     least = float(np.min(margin))
+    span = robot.tension_max - robot.tension_min
+    worst = np.max(np.maximum.reduce([-margin / span, speed / vmax - 1, accel / amax - 1]), axis=1)
+    worst = np.where(broken, worst, -np.inf)
+    # the worst sample of each run of failing samples (the worst runs first): a slower
+    # timing fails first where the margin was least, or somewhere else that failed
+    run = np.cumsum(np.concatenate([[True], broken[1:] != broken[:-1]]))
+    order = np.lexsort((-worst, run))
+    heads = order[np.concatenate([[True], run[order][1:] != run[order][:-1]])]
+    heads = heads[broken[heads]]
+    order = heads[np.argsort(-worst[heads])[:SUSPECTS]]
     bad = []
     if least < -TOL:
         bad.append(f"tension margin {least:.3g} N")
@@ -306,7 +353,8 @@ def _dense_check(robot, geo, s, sd, mass, inertia, vmax, amax, dt):
         bad.append(f"winch speed {np.max(speed / vmax):.4g} x the limit")
     if np.any(accel > amax + TOL):
         bad.append(f"winch acceleration {np.max(accel / amax):.4g} x the limit")
-    return not bad, least, len(m.t), ", ".join(bad)
+    return not bad, least, len(m.t), ", ".join(bad), _state_at(m.t[order], s, sd,
+                                                             _grid_times(s, sd))[0]
 
 
 def _retimed(robot, path, geo, s, sd, t_grid, mass, inertia):
