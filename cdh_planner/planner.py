@@ -45,7 +45,7 @@ class PlanResult:
     message: str
     strategy: str
     n: int  # manifold dimension
-    m: int  # number of variables
+    variables: int  # manifold variables (task coordinates and the lift's unknowns; not cables)
     charts: int
     time_s: float
     cost: float  # path cost in the task's metric (rad, or m for the sphere / free flight)

@@ -307,3 +307,29 @@ def test_unique_sorted_is_np_unique():
     rng = np.random.default_rng(4)
     for a in (rng.integers(0, 20, 50), rng.normal(size=30).round(1), np.zeros(0), np.array([3.0])):
         np.testing.assert_array_equal(unique_sorted(a), np.unique(a))
+
+
+def test_the_whole_check_after_added_points_reuses_the_unchanged_samples_exactly(problem, route):
+    """``executable``'s last whole check takes the previous whole check's margins outside
+    the intervals where points were added: the same answer, number for number, as checking
+    everything again."""
+    robot = problem.robot
+    timing = D.dynamic_timing(robot, time_path(route.path, *FAST), robot.mass, robot.inertia, *FAST)
+    first = E.check_path(robot, timing.path, robot.mass, robot.inertia, *FAST)
+    assert not first.ok and first.per_sample is not None
+    k = first.bad_segments
+    path = timing.path
+    t = 0.5 * (path.t[k] + path.t[k + 1])
+    windows = np.column_stack([path.t[k] - E.CHECK_DT, path.t[k + 1] + E.CHECK_DT])
+    added = E._merged(path, D.motion_rows(robot, timing, t, robot.mass, robot.inertia), k + 1)
+    whole = E.check_path(robot, added, robot.mass, robot.inertia, *FAST)
+    reused = E.check_path(robot, added, robot.mass, robot.inertia, *FAST, reuse=(first, windows))
+    changed = E._reusable((first, windows), None, np.arange(len(first.per_sample[1])) +
+                          min(E.PHASES, 4), np.linspace(path.t[0], path.t[-1], whole.samples))
+    assert 0 < changed[0].sum() < changed[0].size / 2                  # most samples reused
+    for name in ("ok", "reason", "least_tension_margin_n", "least_margin", "worst_t",
+                 "speed_ratio", "accel_ratio", "samples"):
+        assert getattr(reused, name) == getattr(whole, name), name
+    assert np.array_equal(reused.bad_segments, whole.bad_segments)
+    assert np.array_equal(reused.per_sample[0], whole.per_sample[0])
+    assert np.array_equal(reused.per_sample[1], whole.per_sample[1])

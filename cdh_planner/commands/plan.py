@@ -108,7 +108,7 @@ def plan_with_progress(planner, start, goal, quiet=False):
 def print_result(result, problem):
     head = "path found" if result.success else f"no path ({result.reason})"
     print(f"{head}: {result.message}")
-    print(f"  strategy {result.strategy}, n = {result.n}, m = {result.m}, "
+    print(f"  strategy {result.strategy}, n = {result.n}, {result.variables} variables, "
           f"{result.charts} charts, {result.time_s:.3f} s")
     if result.success:
         path = result.path
@@ -125,7 +125,7 @@ def print_result(result, problem):
 def result_dict(result):
     """The plan JSON contract (README); non-finite numbers become null."""
     out = {"success": result.success, "reason": result.reason, "message": result.message,
-           "strategy": result.strategy, "n": result.n, "m": result.m, "charts": result.charts,
+           "strategy": result.strategy, "n": result.n, "variables": result.variables, "charts": result.charts,
            "time_s": result.time_s, "cost": _num(result.cost),
            "least_margin": _num(result.least_margin),
            "least_tension_margin_n": _num(result.least_tension_margin),

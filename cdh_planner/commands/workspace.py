@@ -194,7 +194,8 @@ def print_summary(robot, res):
     if res.spec.reach:
         print(f"  reach from home: {c['reachable']} reachable ({100 * f['reachable']:.2f} % of the "
               f"samples, {100 * f['reachable_of_feasible']:.2f} % of the feasible), "
-              f"{c['unreachable_feasible']} without a path, {c['unknown']} unknown (a bound)")
+              f"{c['unreachable_feasible']} without a path, {c['refused']} refused as goals "
+              f"(the tension rule's band does not fit), {c['unknown']} unknown (a bound)")
     print(f"  {res.workers} worker(s); seconds: points {s['points']:.2f}, reach {s['reach']:.2f}, "
           f"total {s['total']:.2f} (Ray start {s.get('ray_start', 0.0):.2f})")
     if res.stopped:

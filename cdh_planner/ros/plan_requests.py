@@ -125,7 +125,7 @@ def refusal(reason, message, strategy=""):
     """A PlanResult for a request the node refuses (``reason``, a Status: BAD_FRAME, INVALID,
     BUSY, ...): no path, no charts, no time."""
     return PlanResult(success=False, reason=reason, message=message, strategy=strategy, n=0,
-                      m=0, charts=0, time_s=0.0, cost=math.nan, path=None)
+                      variables=0, charts=0, time_s=0.0, cost=math.nan, path=None)
 
 
 def output_refusal(result):

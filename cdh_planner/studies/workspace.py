@@ -16,8 +16,12 @@ it and the collision margin (``scene.margin.combine``), as ``verify --scene`` re
 With ``reach``, each feasible sample gets a plan from the home pose (free flight, a fresh
 planner per query so that the answer does not depend on what the worker planned before; the
 scene's obstacles kept clear): ``reachable`` True (a path), False (no path at the planner's
-resolution, or the goal under the margin floor), None (a bound: timeout, chart or memory
-limit). Infeasible samples are not reachable (False, not planned). Nothing here assumes six
+resolution, or the goal refused), None (a bound: timeout, chart or memory limit). A goal is
+refused (``reach_refused``, counted apart from "no path") when the planner does not accept
+the sample as a goal though it is feasible: with m > 6 cables the published tension rule's
+band t0 +- v leaves the limits where the facet test holds (the planner's validity is the
+band's, docs/more-cables.md), or its margin is under the planner's floor. Infeasible
+samples are not reachable (False, not planned). Nothing here assumes six
 cables: reach on a robot of more works where the planner plans for it (``check_planner``).
 
 This module imports no Ray: executors run its calls (``run_call``) where they like.
@@ -213,6 +217,13 @@ def _pose(p, q):
     return Pose(np.asarray(p, dtype=float), tau_from_rotation(R)[0])
 
 
+def refused_goal(status):
+    """Did the planner refuse the sample as its goal (``Status.GOAL_INFEASIBLE``: for m > 6
+    the tension rule's band does not fit, or the margin is under the floor)? False when not
+    planned (None)."""
+    return status is not None and Status(status) is Status.GOAL_INFEASIBLE
+
+
 def reachable_of(status):
     """True, False or None (a bound was hit) of a plan's status string."""
     status = Status(status)
@@ -303,15 +314,24 @@ class WorkspaceResult:
         return [None if s is None and f else (False if s is None else reachable_of(s))
                 for s, f in zip(self.reach_status, self.feasible.tolist())]
 
+    @property
+    def reach_refused(self):
+        """(N,) bool: planned samples the planner refused as a goal (module docstring)."""
+        return [refused_goal(s) for s in self.reach_status]
+
     def counts(self):
+        """Samples, evaluated, feasible; with reach: planned, reachable, refused (goals the
+        planner refused), unreachable_feasible (planned, not refused, no path), unknown."""
         reach = self.reachable
         out = {"samples": int(self.spec.samples), "evaluated": int(self.evaluated.sum()),
                "feasible": int(self.feasible.sum())}
         if self.spec.reach:
             planned = [s for s in self.reach_status if s is not None]
+            refused = self.reach_refused
             out.update(planned=len(planned), reachable=sum(r is True for r in reach),
-                       unreachable_feasible=sum(r is False for r, f in
-                                                zip(reach, self.feasible.tolist()) if f),
+                       refused=sum(refused),
+                       unreachable_feasible=sum(r is False and not x for r, x, f in
+                                                zip(reach, refused, self.feasible.tolist()) if f),
                        unknown=sum(r is None for r in reach))
         return out
 
@@ -382,7 +402,8 @@ def result_dict(robot, res):
     reach = res.reachable
     margin = [m if math.isfinite(m) else None for m in res.margin.tolist()]
     poses = [{"index": i, "position": p, "quaternion": q, "feasible": m is not None and m > 0,
-              "margin": m, "binding": b or None, "reachable": r, "reach_status": s}
+              "margin": m, "binding": b or None, "reachable": r, "reach_status": s,
+              "reach_refused": refused_goal(s)}
              for i, (p, q, m, b, r, s) in enumerate(zip(
                  _rows(res.position), _rows(res.quaternion), margin, res.binding, reach,
                  res.reach_status))]

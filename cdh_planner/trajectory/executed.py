@@ -27,7 +27,7 @@ acceleration jump): a violation narrower than dt is seen whatever its phase.
 docstring of that function).
 """
 
-from dataclasses import dataclass, replace
+from dataclasses import dataclass, field, replace
 
 import numpy as np
 
@@ -154,6 +154,9 @@ class ExecutionCheck:
     samples: int
     added: int = 0       # points ``executable`` added
     slowdown: float = 1.0  # the uniform slow-down ``executable`` applied
+    # a whole check's tension margins (M, m) N and lost poses (M,) at its samples (None when
+    # the tensions were not reached): what ``check_executed(reuse=...)`` takes over
+    per_sample: tuple = field(default=None, repr=False, compare=False)
 
     def describe(self):
         """One line: how the trajectory was made executable and its least margin."""
@@ -164,13 +167,20 @@ class ExecutionCheck:
 
 
 def check_executed(robot, t_wp, L, V, A, seed, mass=None, inertia=None, max_cable_speed=np.inf,
-                   max_cable_accel=np.inf, dt=CHECK_DT, within=None):
+                   max_cable_accel=np.inf, dt=CHECK_DT, within=None, reuse=None):
     """ExecutionCheck of the points (t_wp (N,) s; L, V, A (N, m) m, m/s, m/s^2) executed by
     a JTC (module docstring). ``seed(t)`` -> (p (M, 3), R (M, 3, 3)): a pose near the
     platform's at times t (the planned motion), where forward kinematics starts. ``mass``
     (kg) and ``inertia`` (3x3 kg m^2 about the load point) None: no inertial wrench.
     ``within`` (K, 2) s: check only the samples in these intervals (the same samples as a
-    whole check has there); None: all."""
+    whole check has there); None: all.
+    ``reuse`` (previous, changed): a whole check (``within`` None) of this trajectory before
+    points were inserted only inside the intervals ``changed`` (K, 2) s, with the same first
+    and last time. Its tension margins are taken over outside ``changed``: there the samples,
+    the quintic (each segment's own from its two end points) and the seed (interpolated
+    between the same two waypoints) are unchanged, so forward kinematics and the tensions
+    (row by row) are the same numbers (with m > 6 to rounding: the centred nominal's Newton
+    starts from the previous sample's, ``zonotope``). The answer is the whole check's."""
     t_wp, L, V, A = (np.asarray(x, dtype=float) for x in (t_wp, L, V, A))
     if len(t_wp) < 2:  # one point: the controller holds it
         return ExecutionCheck(True, "", np.inf, np.inf, float("nan"), 0.0, 0.0,
@@ -196,9 +206,18 @@ def check_executed(robot, t_wp, L, V, A, seed, mass=None, inertia=None, max_cabl
     bad_k = k[~np.all(lengths_ok, axis=1) | (speed > 1 + TOL) | (accel > 1 + TOL)]
     margin, lost, worst_t = np.full((0, m), np.inf), np.zeros(0, dtype=bool), float("nan")
     span = robot.tension_max - robot.tension_min
+    per_sample = None
     if bad_k.size == 0:
         mid = np.flatnonzero(sel[q:n + 1 - q]) + q   # samples whose tensions are checked
-        margin, lost = _executed_margins(robot, t_wp, L, V, A, seed, ts, mid, q, mass, inertia)
+        old = _reusable(reuse, within, mid, ts)
+        if old is None:
+            margin, lost = _executed_margins(robot, t_wp, L, V, A, seed, ts, mid, q, mass, inertia)
+        else:
+            changed, margin, lost = old
+            if changed.any():
+                margin[changed], lost[changed] = _executed_margins(
+                    robot, t_wp, L, V, A, seed, ts, mid[changed], q, mass, inertia)
+        per_sample = (margin, lost) if within is None else None
         t_bad = ts[mid[(np.min(margin, axis=1) < -TOL) | lost]]
         near = np.concatenate([t_bad - h, t_bad, t_bad + h])  # the stencil's segments
         bad_k = np.clip(np.searchsorted(t_wp, near, side="right") - 1, 0, len(t_wp) - 2)
@@ -211,7 +230,22 @@ def check_executed(robot, t_wp, L, V, A, seed, mass=None, inertia=None, max_cabl
                           least_margin=float(np.min(margin / span, initial=np.inf)),
                           worst_t=worst_t, speed_ratio=float(np.max(speed, initial=0.0)),
                           accel_ratio=float(np.max(accel, initial=0.0)),
-                          bad_segments=unique_sorted(bad_k), samples=int(np.sum(sel)))
+                          bad_segments=unique_sorted(bad_k), samples=int(np.sum(sel)),
+                          per_sample=per_sample)
+
+
+def _reusable(reuse, within, mid, ts):
+    """(changed (M,) bool: samples to compute again, margins, lost: copies of the previous
+    whole check's) when ``reuse`` applies to this whole check (``check_executed``), else None."""
+    if reuse is None or within is not None or reuse[0].per_sample is None:
+        return None
+    margin, lost = reuse[0].per_sample
+    if len(margin) != len(mid):
+        return None
+    w = np.asarray(reuse[1], dtype=float).reshape(-1, 2)
+    t = ts[mid]
+    changed = np.any((t[:, None] >= w[:, 0]) & (t[:, None] <= w[:, 1]), axis=1)
+    return changed, margin.copy(), lost.copy()
 
 
 def _executed_margins(robot, t_wp, L, V, A, seed, ts, mid, q, mass, inertia):
@@ -307,12 +341,12 @@ def path_seed(path):
 
 
 def check_path(robot, path, mass=None, inertia=None, max_cable_speed=np.inf,
-               max_cable_accel=np.inf, dt=CHECK_DT, within=None):
+               max_cable_accel=np.inf, dt=CHECK_DT, within=None, reuse=None):
     """check_executed of a timed PlannedPath's points (lengths, velocities, accelerations
     at path.t), forward kinematics seeded from its waypoint poses."""
     return check_executed(robot, path.t, path.lengths, path.velocities, path.accelerations,
                           path_seed(path), mass, inertia, max_cable_speed, max_cable_accel, dt,
-                          within)
+                          within, reuse)
 
 
 # ----------------------------------------------------------------------------- making it pass
@@ -335,10 +369,14 @@ def executable(robot, path, motion=None, mass=None, inertia=None, max_cable_spee
     planned pose)."""
     scale, rounds, winch_rounds, slowed, n = 1.0, 0, 0, 0, len(path)
     within = None  # after adding points, only the samples they change are checked again
+    whole, changed = None, []  # the last whole check, and where points were added since
     while True:
+        reuse = (whole, np.concatenate(changed)) if whole is not None and changed else None
         check = check_path(robot, path, mass, inertia, max_cable_speed, max_cable_accel,
-                           within=within)
+                           within=within, reuse=reuse)
         check = replace(check, added=len(path) - n, slowdown=scale)
+        if within is None:
+            whole, changed = check, []
         if check.ok and within is None:
             return path, check
         if check.ok:
@@ -351,11 +389,13 @@ def executable(robot, path, motion=None, mass=None, inertia=None, max_cable_spee
                 and winch_rounds <= WINCH_ROUNDS):
             t = 0.5 * (path.t[k] + path.t[k + 1])
             within = np.column_stack([path.t[k] - CHECK_DT, path.t[k + 1] + CHECK_DT])
+            changed.append(within)
             path = _merged(path, motion(t, scale), k + 1)
             rounds += 1
         elif slowed < SLOWDOWNS:
             c = max(SLOWDOWN, check.speed_ratio, np.sqrt(check.accel_ratio)) * (1 + 1e-6)
             path, scale, slowed, within = slow_down(robot, path, c), scale * c, slowed + 1, None
+            whole, changed = None, []  # every sample changes
             winch_rounds = 0
         else:
             return path, replace(check, reason=f"{check.reason} after {rounds} rounds of "
