@@ -71,10 +71,10 @@ class Validity:
         y[1:, per] = y[0, per] + np.cumsum(wrap_angle(np.diff(y[:, per], axis=0)), axis=0)  # short arcs
         return TaskLinePath(self.task, y)
 
-    def probe(self, y, n):
+    def probe(self, y, n, motion=None):
         """Are n evenly spaced poses of every direct motion between the rows of y valid?
-        (one vectorised closed-form call)"""
-        motion = self.direct_motion(y)
+        (one vectorised closed-form call; ``motion``: ``direct_motion(y)`` if already built)"""
+        motion = self.direct_motion(y) if motion is None else motion
         seg = np.repeat(np.arange(motion.n_segments), n)
         s = np.tile(np.linspace(0.0, 1.0, n), motion.n_segments)
         p, R = motion(seg, s)
@@ -84,9 +84,10 @@ class Validity:
         """Is the direct motion ya -> yb dense-valid? A few points first (most unsafe
         motions fail there), then the dense check."""
         y = np.array([ya, yb])
-        if not (self.probe(y, COARSE_SAMPLES) and self.probe(y, 8 * COARSE_SAMPLES)):
+        motion = self.direct_motion(y)  # built once for the three looks
+        if not (self.probe(y, COARSE_SAMPLES, motion) and self.probe(y, 8 * COARSE_SAMPLES, motion)):
             return False
-        seg = check_path(self.robot, self.direct_motion(y), collision=self.collision,
+        seg = check_path(self.robot, motion, collision=self.collision,
                          feasibility=self.feasibility)[0]
         return seg.feasible and seg.unresolved == 0 and seg.worst.margin >= self.margin_floor
 
