@@ -42,7 +42,7 @@ from functools import partial
 import numpy as np
 
 from ..errors import InputError, check_finite
-from ..cable_feasibility import nominal_tensions, planning_feasibility as evaluate, tension_map
+from ..cable_feasibility import planning_feasibility as evaluate, tension_map
 from ..feasibility import cable_vectors, inverse_ellipsoid_factor, nominal_wrench, screw_jacobian
 from ..model.pose import tau_from_rotation
 from ..model.rotation import Rotation
@@ -133,10 +133,12 @@ def _terms(robot, geo, s, mass, inertia):
     if J.shape[-1] == 6:
         J_inv = np.linalg.inv(J)
         f0 = np.einsum("nij,nj->ni", J_inv, nominal_wrench(robot, c))
-    else:  # m > 6: the published rule, t0 + P (w - w0) (cable_feasibility.tension_map)
+        v = np.linalg.norm(J_inv @ inverse_ellipsoid_factor(robot, c), axis=-1)
+    else:  # m > 6: the published rule, t0 + P (w - w0) (cable_feasibility.tension_map), its
+        # t0 and band v = |rows of P L| from the compiled kernel
+        from ..zonotope import rule_tensions  # six-cable commands load no numba
         J_inv = tension_map(robot, J)
-        f0 = nominal_tensions(robot, p, R)
-    v = np.linalg.norm(J_inv @ inverse_ellipsoid_factor(robot, c), axis=-1)
+        f0, v = rule_tensions(robot, p, R)
     # the platform anchor q_i = p + R b_i: q_s = p_s + R (w x b), q_ss = p_ss + R (w_s x b +
     # w x (w x b)); L = |q - a| gives L_s = u . q_s and L_ss = (|q_s|^2 - L_s^2) / L + u . q_ss
     b = robot.platform_anchors[None]

@@ -305,11 +305,12 @@ def _inertial(R, c, c_dd, omega, alpha, mass, inertia):
 
 
 def _rule_tensions(robot, p, R, c, u, w0, inertial):
-    """The tension rule's f = t0 + P (w - w0), w = w0 - inertial, and its band v (M, m) N."""
+    """The tension rule's f = t0 + P (w - w0), w = w0 - inertial, and its band v (M, m) N
+    (the compiled kernel's t0 and v = |rows of P L|; numpy's P for the inertial wrench)."""
+    from ..zonotope import rule_tensions  # m > 6 only: six-cable commands load no numba
     P = tension_map(robot, screw_jacobian(robot, u))
-    t0 = nominal_tensions(robot, p, R)
-    f = t0 - np.einsum("nij,nj->ni", P, inertial)
-    return f, np.linalg.norm(P @ inverse_ellipsoid_factor(robot, c), axis=-1)
+    t0, v = rule_tensions(robot, p, R)
+    return t0 - np.einsum("nij,nj->ni", P, inertial), v
 
 
 def _reason(least_n, lengths_ok, speed, accel, no_pose):
