@@ -211,7 +211,7 @@ def test_margin_colours():
 
 def _result(reason, success=False, message="what happened"):
     return PlanResult(success=success, reason=Status(reason), message=message, strategy="astar",
-                      n=2, m=8, charts=123, time_s=0.1 + 0.2,
+                      n=2, variables=8, charts=123, time_s=0.1 + 0.2,
                       cost=float("inf") if not success else 0.4321)
 
 

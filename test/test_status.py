@@ -22,7 +22,7 @@ CONTRACT = {"ok", "start_infeasible", "goal_infeasible", "start_in_collision",
 
 def _result(reason):
     return PlanResult(success=reason is Status.OK, reason=reason, message="m", strategy="gbf",
-                      n=2, m=90, charts=0, time_s=0.0, cost=math.nan)
+                      n=2, variables=90, charts=0, time_s=0.0, cost=math.nan)
 
 
 def test_the_strings_are_the_contract_and_compare_equal_to_the_members():

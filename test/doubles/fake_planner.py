@@ -32,7 +32,7 @@ class FakePlanner:
 
     def _result(self, ok, reason, message, path=None, t0=0.0):
         return PlanResult(success=ok, reason=reason, message=message,
-                          strategy=self.settings.strategy, n=len(self.task.names), m=0,
+                          strategy=self.settings.strategy, n=len(self.task.names), variables=0,
                           charts=WAYPOINTS if ok else 0, time_s=time.perf_counter() - t0,
                           cost=path.length_m() if path is not None else float("nan"), path=path)
 
