@@ -318,8 +318,9 @@ def _limits(robot, m, vmax, amax):
 def _fails_near(robot, geo, s, sd, mass, inertia, vmax, amax, dt, suspects):
     """Does a sample of this timing's dense check (every dt s) break a limit, among the few
     around the path parameters ``suspects`` (where a faster timing of the same path failed)?
-    True only when one does: then the whole check fails too (same samples, same rows), and
-    its ~10^4 samples need not be computed. False says nothing."""
+    True only when one does: then the whole check fails too (same samples, same rows; with
+    m > 6 the same to ~1e-12 N, the centring's rounding, against TOL = 1e-9), and its ~10^4
+    samples need not be computed. False says nothing."""
     if suspects.size == 0:
         return False
     t_grid = _grid_times(s, sd)
