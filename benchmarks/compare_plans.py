@@ -1,13 +1,17 @@
 """The plan JSON of two checkouts, compared: identical, or every number equal to a tolerance.
 
-    .venv/bin/python benchmarks/compare_plans.py OTHER_CHECKOUT [--tol 1e-12] [--timeout 20]
-        [problem.yaml ...]
+    .venv/bin/python benchmarks/compare_plans.py [--tol 1e-12] [--timeout 20]
+        [--strategies astar gbf] OTHER_CHECKOUT [problem.yaml ...]
 
 Runs ``cdh-planner plan PROBLEM --json OUT --quiet`` once with this checkout first on
 PYTHONPATH and once with OTHER_CHECKOUT's, for each problem (default: every
 config/problems/*.yaml), and prints one line each: identical, equal to --tol (every number
 within tol x max(1, |value|); the largest absolute difference), different (the first path
-that differs), or skipped (either run took longer than --timeout s). The planning time
+that differs), or skipped (either run took longer than --timeout s). ``--strategies``:
+plan each problem with each of these (``plan --strategy``) instead of the file's own; the
+six-cable check of issue 21 is ``--strategies astar gbf`` over Table 1's rows but free
+flight (robot1_qs_qg, robot1_qs1_qg, robot1_qs2_qg, robot2_q1_q2, robot2_q2_q3,
+robot2_q2_q3_sigma_free) and robot2_pivot: 14 plans. The planning time
 (``time_s``, a clock reading) is left out of the comparison. Exit code 0 when none
 differs.
 """
@@ -25,14 +29,15 @@ ROOT = Path(__file__).resolve().parents[1]
 CLOCK_KEYS = {"time_s"}
 
 
-def plan_json(checkout, problem, timeout):
+def plan_json(checkout, problem, timeout, strategy=None):
     """The plan's JSON (dict) with ``checkout`` first on PYTHONPATH, or None on time-out."""
     with tempfile.TemporaryDirectory() as tmp:
         out = Path(tmp) / "plan.json"
         env = dict(os.environ, PYTHONPATH=str(checkout))
         try:
             subprocess.run([sys.executable, "-m", "cdh_planner.cli", "plan", str(problem), "--json",
-                            str(out), "--quiet"], cwd=checkout, env=env, timeout=timeout,
+                            str(out), "--quiet", *(["--strategy", strategy] if strategy else [])],
+                           cwd=checkout, env=env, timeout=timeout,
                            stdout=subprocess.DEVNULL, stderr=subprocess.DEVNULL)
         except subprocess.TimeoutExpired:
             return None
@@ -64,13 +69,17 @@ def main(argv=None):
     ap.add_argument("problems", nargs="*", help="problem files (default: config/problems/*.yaml)")
     ap.add_argument("--tol", type=float, default=1e-12, help="largest number difference allowed")
     ap.add_argument("--timeout", type=float, default=20.0, help="s per plan; longer ones are skipped")
+    ap.add_argument("--strategies", nargs="+", choices=("astar", "gbf"), default=[None],
+                    help="plan each problem with each of these (default: the file's own)")
     args = ap.parse_args(argv)
     problems = [Path(p).resolve() for p in args.problems] or sorted((ROOT / "config" / "problems").glob("*.yaml"))
     bad = 0
-    for problem in problems:
-        ours, theirs = plan_json(ROOT, problem, args.timeout), plan_json(Path(args.other), problem, args.timeout)
+    for problem, strategy in ((p, s) for p in problems for s in args.strategies):
+        ours = plan_json(ROOT, problem, args.timeout, strategy)
+        theirs = plan_json(Path(args.other), problem, args.timeout, strategy)
+        name = problem.name + (f" {strategy}" if strategy else "")
         if ours is None or theirs is None:
-            print(f"{problem.name}: skipped (over {args.timeout:g} s)", flush=True)
+            print(f"{name}: skipped (over {args.timeout:g} s)", flush=True)
             continue
         diff = differences(ours, theirs)
         structural = [p for p, d, _ in diff if d is None]
@@ -84,7 +93,7 @@ def main(argv=None):
             bad += 1
             first = structural[0] if structural else max(diff, key=lambda pd: pd[1] / pd[2])[0]
             verdict = f"DIFFERENT: {len(diff)} values, largest {largest:.2e}, e.g. {first}"
-        print(f"{problem.name}: {verdict}", flush=True)
+        print(f"{name}: {verdict}", flush=True)
     return 1 if bad else 0
 
 
