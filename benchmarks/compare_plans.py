@@ -1,7 +1,7 @@
 """The plan JSON of two checkouts, compared: identical, or every number equal to a tolerance.
 
-    .venv/bin/python benchmarks/compare_plans.py [--tol 1e-12] [--timeout 20]
-        [--strategies astar gbf] OTHER_CHECKOUT [problem.yaml ...]
+    .venv/bin/python benchmarks/compare_plans.py OTHER_CHECKOUT [problem.yaml ...]
+        [--tol 1e-12] [--timeout 20] [--strategies astar gbf]
 
 Runs ``cdh-planner plan PROBLEM --json OUT --quiet`` once with this checkout first on
 PYTHONPATH and once with OTHER_CHECKOUT's, for each problem (default: every
