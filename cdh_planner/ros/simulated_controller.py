@@ -81,8 +81,16 @@ JOINT_STATE_QOS = QoSProfile(depth=10, reliability=ReliabilityPolicy.RELIABLE,
 Result = FollowJointTrajectory.Result
 
 
+_SAYING = threading.Lock()
+
+
 def say(event, **fields):
-    print(json.dumps({"event": event, **fields}), flush=True)
+    """One JSON event per stdout line: whole, under a lock (print writes the text and its
+    newline apart, and executor threads interleaved two events on one line)."""
+    line = json.dumps({"event": event, **fields}) + "\n"
+    with _SAYING:
+        sys.stdout.write(line)
+        sys.stdout.flush()
 
 
 def seconds(duration):

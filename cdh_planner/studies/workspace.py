@@ -175,7 +175,7 @@ def check_planner(robot, spec, scene=None, field="--reach"):
                 scene=scene)
     except InputError:
         raise
-    except (ValueError, NotImplementedError) as exc:  # e.g. a robot of m != 6 cables today
+    except (ValueError, NotImplementedError) as exc:  # a robot or task the planner refuses
         raise InputError(field, f"{len(robot.base_anchors)} cables",
                          f"the planner does not plan for this robot: {exc}") from None
 
