@@ -83,7 +83,7 @@ def main(argv=None):
             miss = "" if res.success and wall <= target_s else "  MISS"
             status, charts, search_s = search_only(pr, s)
             search = f"{search_s:.2f} ({charts})" if status == "ok" else status
-            print(f"{name:26s} {strategy:8s} {verdict:12s} {res.n:2d} {res.m:3d} {res.charts:7d} "
+            print(f"{name:26s} {strategy:8s} {verdict:12s} {res.n:2d} {res.variables:3d} {res.charts:7d} "
                   f"{wall:8.2f} {paper_s:>8s} {target_s:7g} "
                   f"{res.cost:8.4f} {search:>9s}  {straight}{miss}", flush=True)
     return 0

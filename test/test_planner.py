@@ -147,9 +147,9 @@ def test_plan_command_writes_the_json_contract(tmp_path, capsys):
     code = main(["plan", str(PROBLEMS / "robot2_q1_q2.yaml"), "--quiet", "--json", str(out)])
     assert code == 0
     doc = json.loads(out.read_text())
-    for key in ("success", "reason", "strategy", "n", "variables", "charts", "time_s", "cost", "path"):
+    for key in ("success", "reason", "strategy", "n", "m", "charts", "time_s", "cost", "path"):
         assert key in doc
-    assert doc["success"] and doc["n"] == 2 and doc["variables"] == 92
+    assert doc["success"] and doc["n"] == 2 and doc["m"] == 92
     w = doc["path"][0]
     for key in ("p", "quaternion", "tau", "lengths", "tension_min", "tension_nominal",
                 "tension_max", "t"):

@@ -125,7 +125,7 @@ def print_result(result, problem):
 def result_dict(result):
     """The plan JSON contract (README); non-finite numbers become null."""
     out = {"success": result.success, "reason": result.reason, "message": result.message,
-           "strategy": result.strategy, "n": result.n, "variables": result.variables, "charts": result.charts,
+           "strategy": result.strategy, "n": result.n, "m": result.variables, "charts": result.charts,
            "time_s": result.time_s, "cost": _num(result.cost),
            "least_margin": _num(result.least_margin),
            "least_tension_margin_n": _num(result.least_tension_margin),
