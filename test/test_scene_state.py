@@ -173,6 +173,27 @@ def test_a_planner_is_made_for_each_scene_a_plan_is_made_under():
     planner, scene = plans._for_scene(call, cfg, plans._planner)
     assert scene is s1 and planner.scene is s1 and made == [s1] and plans._planner is planner
     assert plans._for_scene(call, cfg, plans._planner)[0] is planner and made == [s1]
+    ball = {"obstacles": [{"id": "ball", "type": "sphere", "radius": 0.01, "position": [0, 0, 0.2]}]}
+    call.scene = SceneVersion(2, scene_from_dict(ball))
+    with_ball = plans._for_scene(call, cfg, plans._planner)[0]
+    assert with_ball is not planner and len(made) == 2
+    call.scene = SceneVersion(3, scene_from_dict({}))   # the ball removed: s1's geometry again
+    assert plans._for_scene(call, cfg, plans._planner)[0] is not with_ball and len(made) == 3
+    call.scene = SceneVersion(4, scene_from_dict({}))   # another version, the same geometry
+    assert len(made) == 3 and plans._for_scene(call, cfg, plans._planner)[0] is plans._planner
+    assert len(made) == 3
+
+
+def test_same_geometry_is_the_shapes_and_distances_not_the_objects():
+    one = {"cable_radius": 0.001, "obstacles": [
+        {"id": "post", "type": "box", "size": [0.01, 0.02, 0.03], "position": [0, 0.1, 0.2],
+         "quaternion": [0, 0, 0, 1]}]}
+    assert scene_from_dict(one).same_geometry(scene_from_dict(one, source="elsewhere.yaml"))
+    moved = {**one, "obstacles": [{**one["obstacles"][0], "position": [0, 0.1, 0.2001]}]}
+    assert not scene_from_dict(one).same_geometry(scene_from_dict(moved))
+    assert not scene_from_dict(one).same_geometry(scene_from_dict({**one, "cable_radius": 0.002}))
+    assert not scene_from_dict(one).same_geometry(scene_from_dict({}))
+    assert not scene_from_dict(one).same_geometry(None)
 
 
 # ----------------------------------------------------------------- hypothesis

@@ -172,12 +172,15 @@ class PlanService:
 
     def _for_scene(self, call, config, planner):
         """(planner, scene) for the call's scene (as of its arrival): the planner in force
-        if it was made for that scene, else a new one (a fresh atlas), which stays in force
-        while the configuration does."""
+        if it was made for a scene of the same geometry, else a new one (a fresh atlas),
+        which stays in force while the configuration does. Geometry, not the version: an
+        obstacle added then removed keeps the atlas, on the recorded node as on a replaying
+        one that never saw the two changes."""
         if call.scene is None or self.make_planner is None:
             return planner, getattr(config, "scene", None)
         scene = call.scene.scene
-        if getattr(planner, "scene", None) is not scene:
+        current = getattr(planner, "scene", None)
+        if current is not scene and not (current is not None and current.same_geometry(scene)):
             planner = self.make_planner(config, scene)
             with self._lock:
                 if self._config is config:

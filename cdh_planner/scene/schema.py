@@ -85,6 +85,14 @@ class Shape:
     def __post_init__(self):
         object.__setattr__(self, "rotation", rotation_from_quaternion(self.quaternion))
 
+    def same_geometry(self, other):
+        """True when ``other`` is the same shape in the same place (ids, kinds, sizes and
+        poses exactly equal; the source file's name aside)."""
+        arrays = ("position", "quaternion", "size", "vertices")
+        return (other is not None and (self.id, self.kind, self.radius, self.height, self.scale)
+                == (other.id, other.kind, other.radius, other.height, other.scale)
+                and all(_same_array(getattr(self, a), getattr(other, a)) for a in arrays))
+
     def bounding_radius(self):
         """Radius (m) of a sphere about ``position`` that holds the whole shape."""
         if self.kind == "sphere":
@@ -109,12 +117,30 @@ class Scene:
     obstacles: tuple = ()
     source: str = ""
 
+    def same_geometry(self, other):
+        """True when ``other`` keeps the same distances and obstacles: a plan made under one
+        is the plan under the other (where it was read from aside)."""
+        if other is None or (self.cable_radius, self.clearance, self.shared_anchor_exemption) != (
+                other.cable_radius, other.clearance, other.shared_anchor_exemption):
+            return False
+        if (self.platform is None) != (other.platform is None) or (
+                self.platform is not None and not self.platform.same_geometry(other.platform)):
+            return False
+        return len(self.obstacles) == len(other.obstacles) and all(
+            a.same_geometry(b) for a, b in zip(self.obstacles, other.obstacles))
+
     def obstacle(self, obstacle_id):
         """The obstacle named ``obstacle_id`` (KeyError if none)."""
         for o in self.obstacles:
             if o.id == obstacle_id:
                 return o
         raise KeyError(obstacle_id)
+
+
+def _same_array(a, b):
+    if a is None or b is None:
+        return a is None and b is None
+    return np.shape(a) == np.shape(b) and bool(np.array_equal(a, b))
 
 
 def load_scene(path, robot=None):
