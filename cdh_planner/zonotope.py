@@ -872,12 +872,10 @@ def _band_names(m):
     return np.array([f"{CONSTRAINTS[j // m]}[{j % m + 1}]" for j in range(4 * m)])
 
 
-def _band(robot, p, tau, R):
-    """lengths (N, m), unit vectors, sqrt(det J J^T), t0, v and the length and band margins
-    (N, 4, m) of poses: the kernel without the facet test."""
+def _centred(robot, p, R):
+    """lengths (N, m), unit vectors, sqrt(det J J^T), t0 and v of poses (p (N, 3) m,
+    R (N, 3, 3)): the kernel without the facet test."""
     p = np.ascontiguousarray(np.atleast_2d(np.asarray(p, dtype=float)))
-    if R is None:
-        R = rotation_tt(np.atleast_2d(tau))
     R = np.ascontiguousarray(np.asarray(R, dtype=float).reshape(-1, 3, 3))
     lengths, u, J, c = pose_geometry(p, R, robot.base_anchors, robot.platform_anchors,
                                      robot.load_point)
@@ -886,6 +884,14 @@ def _band(robot, p, tau, R):
         J, c, robot.wrench_center_local, _inverse_factor(robot.ellipsoid_matrix.tobytes()),
         robot.ellipsoid_frame == "load", robot.tension_min, robot.tension_max, NO_SUBSETS,
         SINGULAR_DET)
+    return lengths, u, scale, t0, v
+
+
+def _band(robot, p, tau, R):
+    """``_centred``'s and the length and band margins (N, 4, m) of poses."""
+    if R is None:
+        R = rotation_tt(np.atleast_2d(tau))
+    lengths, u, scale, t0, v = _centred(robot, p, R)
     span_l = robot.length_max - robot.length_min
     span_t = robot.tension_max - robot.tension_min
     margins = np.stack([(lengths - robot.length_min) / span_l, (robot.length_max - lengths) / span_l,
@@ -928,15 +934,7 @@ def rule_tensions(robot, p, R):
     poses (p (N, 3) m, R (N, 3, 3)), without the facet test: the kernel with no subset
     centres every pose. Equal to ``evaluate``'s where the facet test holds (its only use:
     along planned motions, dynamic timing and the executed check); nan / inf where singular."""
-    p = np.ascontiguousarray(np.atleast_2d(p), dtype=float)
-    R = np.ascontiguousarray(np.asarray(R, dtype=float).reshape(-1, 3, 3))
-    lengths, _, J, c = pose_geometry(p, R, robot.base_anchors, robot.platform_anchors,
-                                     robot.load_point)
-    kernel = evaluate_kernel_parallel if len(p) >= PARALLEL_MIN else evaluate_kernel
-    scale, _, _, _, _, t0, v = kernel(
-        J, c, robot.wrench_center_local, _inverse_factor(robot.ellipsoid_matrix.tobytes()),
-        robot.ellipsoid_frame == "load", robot.tension_min, robot.tension_max, NO_SUBSETS,
-        SINGULAR_DET)
+    lengths, _, scale, t0, v = _centred(robot, p, R)
     singular = ~(scale > SINGULAR_DET) | (lengths.min(axis=1) <= 0)
     return np.where(singular[:, None], np.nan, t0), np.where(singular[:, None], np.inf, v)
 

@@ -102,9 +102,8 @@ def load_sweep(path):
     designs = tuple(_design(k, dict(zip(keys, combo)), mapping, robot_file)
                     for k, combo in enumerate(itertools.product(*lists)))
     sweep = Sweep(str(path), str(robot_file), keys, designs, workspace, queries, base_robot)
-    if workspace["reach"]:  # before any design runs: the planner plans for this robot
-        ws.check_planner(base_robot, design_spec(sweep, designs[0]), design_scene(sweep, designs[0]),
-                         "workspace.reach")
+    if workspace["reach"]:  # before any design runs: the planner accepts the settings
+        ws.check_planner(base_robot, design_spec(sweep, designs[0]), design_scene(sweep, designs[0]))
     return sweep
 
 

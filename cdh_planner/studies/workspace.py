@@ -22,7 +22,7 @@ the sample as a goal though it is feasible: with m > 6 cables the published tens
 band t0 +- v leaves the limits where the facet test holds (the planner's validity is the
 band's, docs/more-cables.md), or its margin is under the planner's floor. Infeasible
 samples are not reachable (False, not planned). Nothing here assumes six
-cables: reach on a robot of more works where the planner plans for it (``check_planner``).
+cables.
 
 This module imports no Ray: executors run its calls (``run_call``) where they like.
 """
@@ -167,17 +167,11 @@ def pose_margins(validity, p, q):
     return validity.pose_margins(p, R=rotation_from_quaternion(q))
 
 
-def check_planner(robot, spec, scene=None, field="--reach"):
-    """InputError naming ``field`` unless the planner plans for ``robot`` (with ``spec``'s
-    task and settings, and ``scene``): checked once before any worker plans."""
-    try:
-        Planner(robot, spec.task or FreeTask(), replace(spec.settings, timeout_s=spec.timeout_s),
-                scene=scene)
-    except InputError:
-        raise
-    except (ValueError, NotImplementedError) as exc:  # a robot or task the planner refuses
-        raise InputError(field, f"{len(robot.base_anchors)} cables",
-                         f"the planner does not plan for this robot: {exc}") from None
+def check_planner(robot, spec, scene=None):
+    """Make the planner once for ``robot`` with ``spec``'s task and settings and ``scene``,
+    before any worker plans: its InputError (a cost the task has not, ...) is the command's."""
+    Planner(robot, spec.task or FreeTask(), replace(spec.settings, timeout_s=spec.timeout_s),
+            scene=scene)
 
 
 def point_call(context, start, count):
