@@ -1,4 +1,4 @@
-"""Time of a full collision check of a pose (issue 22 target: under 20 us).
+"""Time of a full collision check of a pose (target: under 20 us).
 
     python benchmarks/collision.py [--poses 2000] [--repeats 5] [--plans 5]
 

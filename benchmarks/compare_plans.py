@@ -9,7 +9,7 @@ config/problems/*.yaml), and prints one line each: identical, equal to --tol (ev
 within tol x max(1, |value|); the largest absolute difference), different (the first path
 that differs), or skipped (either run took longer than --timeout s). ``--strategies``:
 plan each problem with each of these (``plan --strategy``) instead of the file's own; the
-six-cable check of issue 21 is ``--strategies astar gbf`` over Table 1's rows but free
+six-cable check after m-cable changes is ``--strategies astar gbf`` over Table 1's rows but free
 flight (robot1_qs_qg, robot1_qs1_qg, robot1_qs2_qg, robot2_q1_q2, robot2_q2_q3,
 robot2_q2_q3_sigma_free) and robot2_pivot: 14 plans. The planning time
 (``time_s``, a clock reading) is left out of the comparison. Exit code 0 when none

@@ -1,4 +1,4 @@
-"""Ray's start-up (issue 24: under 3 s): ``ray.init`` of a local Ray and the first answer of
+"""Ray's start-up (target: under 3 s): ``ray.init`` of a local Ray and the first answer of
 every actor, per set of options, each in a fresh process, the variants interleaved round by
 round (loads vary on a shared machine), medians printed.
 

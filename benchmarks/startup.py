@@ -1,4 +1,4 @@
-"""Start-up: whole processes timed from outside (issue 18, item 2).
+"""Start-up: whole processes timed from outside.
 
     .venv/bin/python benchmarks/startup.py [--runs 5] [--skip-node] [--before CHECKOUT]
 
@@ -23,7 +23,7 @@ process used, user + system, which a loaded machine inflates less):
   its own ROS domain, discovery on localhost), then stopped with SIGINT. Its CPU seconds
   are the node's whole life, the short stop included.
 
-Targets (issue 18): under 0.15 s, 0.4 s and 2 s. Exit code 0 always (a benchmark).
+Targets: under 0.15 s, 0.4 s and 2 s. Exit code 0 always (a benchmark).
 """
 
 import argparse

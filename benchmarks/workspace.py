@@ -1,4 +1,4 @@
-"""Throughput of the workspace analysis (issue 24): poses/s of the point test, plans/s of
+"""Throughput of the workspace analysis: poses/s of the point test, plans/s of
 the reach map in this process and on a local Ray of 1 and 2 workers, and Ray's start-up.
 
     python benchmarks/workspace.py [--robot config/robot2.yaml] [--scene SCENE.yaml]

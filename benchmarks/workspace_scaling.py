@@ -1,4 +1,4 @@
-"""Reach-job scaling on a local Ray (issue 24: 2 workers >= 1.7x faster than 1): the same
+"""Reach-job scaling on a local Ray (target: 2 workers >= 1.7x faster than 1): the same
 plans on 1 and on 2 workers, alternated (1, 2, 1, 2, ...: each pair sees about the same load
 on a shared machine), medians printed, and the ratio.
 

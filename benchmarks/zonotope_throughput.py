@@ -1,5 +1,5 @@
 """Throughput of the m-cable wrench-feasibility test: poses per second of
-``cdh_planner.zonotope.evaluate`` on 10^5 random poses of the 8-cable robots (issue 21).
+``cdh_planner.zonotope.evaluate`` on 10^5 random poses of the 8-cable robots.
 
     python benchmarks/zonotope_throughput.py [--poses N] [--runs K]
 

@@ -1,9 +1,9 @@
 """Rotations as unit quaternions (x, y, z, w), in numpy alone: the part of scipy's
 ``scipy.spatial.transform.Rotation`` the planner uses, with scipy's formulas and its
-branch points, so that answers agree with scipy's to rounding (test_rotation.py).
+branch points, so that answers agree with scipy's to rounding (test_rotation_splines.py).
 
 Why not scipy's: importing ``scipy.spatial`` runs its package ``__init__`` (k-d trees,
-Qhull, distances, scipy.sparse: about 0.17 s of a 0.55 s plan, issue 18); a direct-motion
+Qhull, distances, scipy.sparse: about 0.17 s of a 0.55 s plan); a direct-motion
 plan needs none of it. Only stacks of rotations (N, 4) and single ones.
 
     r = Rotation.from_matrix(R)     # (N, 3, 3) or (3, 3)

@@ -1,9 +1,9 @@
 """C2 splines in numpy alone: scipy's ``CubicSpline`` (natural or clamped ends) and
 ``RotationSpline``, with scipy's formulas, so that answers agree with scipy's to rounding
-(test_splines.py).
+(test_rotation_splines.py).
 
 Why not scipy's: ``scipy.interpolate`` imports scipy.optimize, special and sparse (about
-0.1 s of a 0.55 s plan, issue 18), and RotationSpline lives in ``scipy.spatial``. The
+0.1 s of a 0.55 s plan), and RotationSpline lives in ``scipy.spatial``. The
 linear systems are banded: a tridiagonal one by LAPACK's own algorithm (``solve_tridiagonal``),
 a wider one up to ``DENSE_MAX`` unknowns densely by numpy (LU with partial pivoting, as
 LAPACK's banded solver), beyond it by ``scipy.linalg.solve_banded``, imported then: its
