@@ -14,53 +14,33 @@ pytest.importorskip("rclpy")
 from cdh_planner.model.pose import rotation_from_quaternion  # noqa: E402
 from cdh_planner.model.robot import load_robot  # noqa: E402
 from cdh_planner.ros.client import ClientError, plan_path_goal  # noqa: E402
+from cdh_planner.ros.messages import path_arrays  # noqa: E402
 from cdh_planner.ros.replay import SCENE_TYPE, read_records  # noqa: E402
-from cdh_planner_interfaces.msg import Obstacle, ObstacleArray  # noqa: E402
-from shape_msgs.msg import SolidPrimitive  # noqa: E402
+from cdh_planner_interfaces.msg import Obstacle  # noqa: E402
 
 from cdh_planner.ros.interface import LATCHED  # noqa: E402
 from visualization_msgs.msg import Marker, MarkerArray  # noqa: E402
 from ros_harness import FRAME, Q2, Q3, ROBOT2, Collector, NodeProcess, run_cli, \
     sphere_pose_msg  # noqa: E402
 from test_scene_distances import point_segment  # noqa: E402
+from test_scene_state import array, sphere  # noqa: E402
 
 FREE = ["task.type:=free", "planner.radius:=0.5"]   # Robot 2 free flight: Q2 -> Q3 direct
 CABLE_RADIUS = 0.0   # no scene_file: the robot's (robot2.yaml has none: 0)
 
 
-def poses(path_msg):
-    p = np.array([[s.pose.position.x, s.pose.position.y, s.pose.position.z]
-                  for s in path_msg.poses])
-    q = np.array([[s.pose.orientation.x, s.pose.orientation.y, s.pose.orientation.z,
-                   s.pose.orientation.w] for s in path_msg.poses])
-    return p, q
-
-
-def least_distance(robot, path_msg, centre, radius, steps=20):
-    """Least distance (m) of the cables' capsules to a sphere along the path: at every
-    waypoint and ``steps`` points between (closed form, no collision library)."""
-    p, q = poses(path_msg)
+def least_distance(robot, path_msg, centre, radius, cable_radius=CABLE_RADIUS, steps=20):
+    """Least distance (m) of the cables' capsules (``cable_radius`` m) to a sphere along
+    the nav_msgs/Path: at every waypoint and ``steps`` points between (closed form, no
+    collision library)."""
+    p, q = path_arrays(path_msg)
     t = np.linspace(0.0, 1.0, steps + 1)[:, None]
     pp = np.concatenate([p[k] + t * (p[k + 1] - p[k]) for k in range(len(p) - 1)])
     qq = np.concatenate([q[k] + t * (q[k + 1] - q[k]) for k in range(len(q) - 1)])
     R = rotation_from_quaternion(qq / np.linalg.norm(qq, axis=1, keepdims=True))
     ends = pp[:, None] + np.einsum("nij,kj->nki", R, robot.platform_anchors)
     return min(point_segment(centre, robot.base_anchors[i], b[i]) for b in ends
-               for i in range(len(robot.base_anchors))) - radius - CABLE_RADIUS
-
-
-def sphere(oid, centre, radius, op=Obstacle.ADD):
-    msg = Obstacle(id=oid, operation=op, primitive=SolidPrimitive(
-        type=SolidPrimitive.SPHERE, dimensions=[float(radius)]))
-    msg.pose.position.x, msg.pose.position.y, msg.pose.position.z = map(float, centre)
-    msg.pose.orientation.w = 1.0
-    return msg
-
-
-def array(*items, frame=FRAME):
-    out = ObstacleArray(obstacles=list(items))
-    out.header.frame_id = frame
-    return out
+               for i in range(len(robot.base_anchors))) - radius - cable_radius
 
 
 def test_obstacles_over_dds_change_the_next_plan_and_replay_reproduces_them(
@@ -74,12 +54,12 @@ def test_obstacles_over_dds_change_the_next_plan_and_replay_reproduces_them(
         first = client.plan(start, goal, timeout_s=60)
         assert first.success and first.values["scene_version"] == "0", first.values
         # a 3 mm bead on cable 3, half way along it, at the path's middle pose
-        p, q = poses(first.path)
+        p, q = path_arrays(first.path)
         k = len(p) // 2
         b = p[k] + rotation_from_quaternion(q[k]) @ robot.platform_anchors[2]
         centre, radius = 0.5 * (robot.base_anchors[2] + b), 0.003
         assert least_distance(robot, first.path, centre, radius) < 0
-        scene = client.update_scene(array(sphere("bead", centre, radius)))
+        scene = client.update_scene(array(sphere("bead", radius, centre)))
         assert scene.version == 1 and scene.checked and [o.id for o in scene.obstacles] == ["bead"]
         # the latched ~/scene_markers: DELETEALL, then the bead as a 6 mm SPHERE there
         drawn = Collector(client.node, MarkerArray, "/cdh_planner/scene_markers", LATCHED)
@@ -95,13 +75,13 @@ def test_obstacles_over_dds_change_the_next_plan_and_replay_reproduces_them(
         assert least_distance(robot, around.path, centre, radius) > 0
         # refused items are named, the others taken; the node goes on
         with pytest.raises(ClientError, match="did not change"):
-            client.update_scene(array(sphere("ghost", centre, 0.01, Obstacle.REMOVE)), 3.0)
-        scene = client.update_scene(array(sphere("bead", centre, radius, Obstacle.REMOVE),
-                                          sphere("bad", centre, -1.0)))
+            client.update_scene(array(sphere("ghost", 0.01, centre, Obstacle.REMOVE)), 3.0)
+        scene = client.update_scene(array(sphere("bead", radius, centre, Obstacle.REMOVE),
+                                          sphere("bad", -1.0, centre)))
         assert scene.version == 2 and scene.checked and not scene.obstacles
         again = client.plan(start, goal, timeout_s=60)
         assert again.values["scene_version"] == "2"
-        assert np.allclose(poses(again.path)[0], poses(first.path)[0], atol=1e-6)
+        assert np.allclose(path_arrays(again.path)[0], path_arrays(first.path)[0], atol=1e-6)
     finally:
         assert node.stop() == 0, node.log()
     log = node.log()

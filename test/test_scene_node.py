@@ -51,48 +51,31 @@ def test_a_scene_set_over_the_parameter_service_changes_the_next_plan(tmp_path):
     first plan back."""
     from rclpy.parameter import Parameter
     from test_ros_reliability import plan
-    from test_scene_distances import point_segment
     from cdh_planner.model.pose import rotation_from_quaternion
+    from cdh_planner.ros.messages import path_arrays
+    from test_ros_obstacles import least_distance
     from cdh_planner.model.robot import load_robot
     from ros_harness import Q2, Q3, in_process_nodes
 
     robot = load_robot(CONFIG / "robot2.yaml")
-
-    def poses(path_msg):
-        p = np.array([[s.pose.position.x, s.pose.position.y, s.pose.position.z]
-                      for s in path_msg.poses])
-        q = np.array([[s.pose.orientation.x, s.pose.orientation.y, s.pose.orientation.z,
-                       s.pose.orientation.w] for s in path_msg.poses])
-        return p, q
-
-    def least_bead_distance(path_msg, bead, r):
-        p, q = poses(path_msg)
-        t = np.linspace(0.0, 1.0, 21)[:, None]  # 20 steps between waypoints
-        pp = np.concatenate([p[k] + t * (p[k + 1] - p[k]) for k in range(len(p) - 1)])
-        qq = np.concatenate([q[k] + t * (q[k + 1] - q[k]) for k in range(len(q) - 1)])
-        R = rotation_from_quaternion(qq / np.linalg.norm(qq, axis=1, keepdims=True))
-        Bw = pp[:, None] + np.einsum("nij,kj->nki", R, robot.platform_anchors)
-        c = np.array(bead["position"])
-        return min(point_segment(c, robot.base_anchors[i], b[i]) for b in Bw
-                   for i in range(6)) - bead["radius"] - r
 
     with in_process_nodes(tmp_path / "runs") as make:
         node = make(factory=default_planner_factory,
                     params=["task.type:=free", "planner.radius:=0.5"])
         first, values = plan(node, Q2, Q3)
         assert values["error_code"] == "0"
-        p, q = poses(first)
+        p, q = path_arrays(first)
         k = len(p) // 2
         b = p[k] + rotation_from_quaternion(q[k]) @ robot.platform_anchors[2]
         bead = {"id": "bead", "type": "sphere", "radius": 0.003,
                 "position": (0.5 * (robot.base_anchors[2] + b)).tolist()}
-        assert least_bead_distance(first, bead, 0.001) < 0
+        assert least_distance(robot, first, bead["position"], bead["radius"], 0.001) < 0
         scene = tmp_path / "scene.yaml"
         scene.write_text(yaml.safe_dump({"scene": {"cable_radius": 0.001, "obstacles": [bead]}}))
         node.set_parameters([Parameter("scene_file", value=str(scene))])
         around, values = plan(node, Q2, Q3)
         assert values["error_code"] == "0", values
-        assert least_bead_distance(around, bead, 0.001) > 0
+        assert least_distance(robot, around, bead["position"], bead["radius"], 0.001) > 0
         node.set_parameters([Parameter("scene_file", value="")])
         again, _ = plan(node, Q2, Q3)
-        assert np.allclose(poses(again)[0], poses(first)[0])
+        assert np.allclose(path_arrays(again)[0], path_arrays(first)[0])
