@@ -270,3 +270,50 @@ def wait_node_measures(client, goal_msg, timeout_s=20.0):
         if code != PlanPath.Result.NO_CURRENT_STATE or time.monotonic() > end:
             return answer
         client.spin(0.2)
+
+
+CONTROLLER_ACTION = "/cable_controller/follow_joint_trajectory"
+WINCH_STATES = "/winches/joint_states"
+
+
+def pose_lengths(robot, coords):
+    """Cable lengths (m) of ``robot`` at the sphere-task pose ``coords``."""
+    from cdh_planner.model.kinematics import cable_lengths
+    from cdh_planner.model.pose import rotation_from_quaternion
+    msg = sphere_pose_msg(coords)
+    p, o = msg.pose.position, msg.pose.orientation
+    R = rotation_from_quaternion(np.array([o.x, o.y, o.z, o.w]))
+    return cable_lengths(robot, np.array([p.x, p.y, p.z]), R)
+
+
+@contextlib.contextmanager
+def node_with_controller(robot, start, tmp, params=(), params_file=None, time_scale=4.0):
+    """A ``cdh-planner node`` and the FollowJointTrajectory controller double (its winches
+    at the sphere-task pose ``start``, running ``time_scale`` x real time) in a domain of
+    their own; yields a PlannerClient once the node measures the winches, with ``double``,
+    ``process``, ``domain``, ``robot`` and ``measured`` (the winches' JointStates)."""
+    from sensor_msgs.msg import JointState
+    from cdh_planner.ros.client import PlannerClient
+    params = [f"execution.controller_action:={CONTROLLER_ACTION}",
+              f"execution.joint_states_topic:={WINCH_STATES}", *params]
+    with claimed_domain() as domain:
+        double = ControllerDouble(domain, *robot.winch_names, "--action", CONTROLLER_ACTION,
+                                  "--joint-states", WINCH_STATES, "--time-scale", time_scale,
+                                  "--initial", *map(repr, pose_lengths(robot, start).tolist()))
+        node = NodeProcess(domain, tmp, params=params, params_file=params_file)
+        try:
+            assert double.ready.wait(30.0), "\n".join(double.lines)
+            with PlannerClient(domain_id=domain) as client:
+                client.wait_for_node(30.0)
+                client.double, client.process, client.domain = double, node, domain
+                client.robot = robot
+                client.measured = Collector(client.node, JointState, WINCH_STATES, 10)
+                client.watch_execution()
+                assert client.spin_until(lambda: client.measured.items, 10.0)
+                answer = wait_node_measures(client, sphere_pose_msg(start))
+                assert answer.success, answer.result.error_msg
+                yield client
+        finally:
+            node.stop()
+            rc, log = double.stop()
+            assert rc == 0 and "Traceback" not in log, log
