@@ -333,3 +333,25 @@ def test_the_whole_check_after_added_points_reuses_the_unchanged_samples_exactly
     assert np.array_equal(reused.bad_segments, whole.bad_segments)
     assert np.array_equal(reused.per_sample[0], whole.per_sample[0])
     assert np.array_equal(reused.per_sample[1], whole.per_sample[1])
+
+
+def test_the_executed_poses_keep_the_scenes_clearance():
+    """With a scene, the executed motion (forward kinematics of the quintic) is checked
+    against it too: the ball plan's trajectory passes as planned, and the same trajectory
+    fails, naming the clearance, once a bead sits on a cable at a pose it executes."""
+    from cdh_planner.model.pose import rotation_from_quaternion
+    from cdh_planner.scene.collision import CollisionModel
+    from cdh_planner.scene.schema import scene_from_dict
+    pr = load_problem(PROBLEMS / "robot2_q2_q3_ball.yaml")
+    result = Planner(pr.robot, pr.task, pr.settings, scene=pr.scene).plan(pr.start, pr.goal)
+    assert result.success
+    path, robot = result.path, pr.robot
+    clear = E.check_path(robot, path, robot.mass, robot.inertia, collision=CollisionModel(robot, pr.scene))
+    assert clear.ok, clear.reason
+    k = len(path) // 2
+    anchor = path.p[k] + rotation_from_quaternion(path.quaternion[k]) @ robot.platform_anchors[0]
+    bead = scene_from_dict({"obstacles": [{"id": "bead", "type": "sphere", "radius": 0.002,
+                                           "position": (0.5 * (robot.base_anchors[0] + anchor)).tolist()}]})
+    hit = E.check_path(robot, path, robot.mass, robot.inertia, collision=CollisionModel(robot, bead))
+    assert not hit.ok and "clearance" in hit.reason and hit.bad_segments.size
+    assert E.check_path(robot, path, robot.mass, robot.inertia).ok   # the tensions alone pass

@@ -34,7 +34,7 @@ def time_stage(robot, path, settings, collision=None):
     least = clearance.path_margins(robot, path.p, path.quaternion)
     extra = least_clearance(collision, path)
     path, timing, executed = timed_path(robot, path, settings.dynamics, settings.max_cable_speed,
-                                        settings.max_cable_accel)
+                                        settings.max_cable_accel, collision)
     return Timed(path, timing, executed, least, extra)
 
 

@@ -410,7 +410,7 @@ def check_dynamics(robot, dynamics):
         raise InputError("dynamics", dynamics, "needs the load's mass (robot.load.mass)")
 
 
-def timed_path(robot, path, dynamics, max_cable_speed, max_cable_accel):
+def timed_path(robot, path, dynamics, max_cable_speed, max_cable_accel, collision=None):
     """(PlannedPath, note, ExecutionCheck): ``path`` (quasi-statically timed) re-timed by
     ``dynamics`` ("auto": dynamic when the robot has a load mass; "dynamic";
     "quasi_static"), then given the points a JointTrajectoryController needs to execute
@@ -418,7 +418,8 @@ def timed_path(robot, path, dynamics, max_cable_speed, max_cable_accel):
     load's inertia unless the timing is quasi-static by choice). The note says what was
     done ("" for quasi-static); when no dynamically feasible timing exists the quasi-static
     one is kept and the note says so. The check's ``ok`` False: no executable trajectory
-    within the bounds (its ``reason`` says why)."""
+    within the bounds (its ``reason`` says why). ``collision``: the scene's CollisionModel
+    (or None), which the executed motion keeps clear of too."""
     check_dynamics(robot, dynamics)
     note, motion, load = "", None, (None, None)
     if not (dynamics == "quasi_static" or (dynamics == "auto" and robot.mass is None)):
@@ -437,5 +438,6 @@ def timed_path(robot, path, dynamics, max_cable_speed, max_cable_accel):
                     f"{timing.least_tension_margin_n:.3g} N, checked every {CHECK_DT * 1e3:g} ms)")
     if motion is None:  # the quasi-static timing: hand out the C2 spline through its points
         path = spline_rates(path)
-    path, check = executable(robot, path, motion, *load, max_cable_speed, max_cable_accel)
+    path, check = executable(robot, path, motion, *load, max_cable_speed, max_cable_accel,
+                             collision=collision)
     return path, note, check

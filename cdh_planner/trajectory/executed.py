@@ -154,8 +154,9 @@ class ExecutionCheck:
     samples: int
     added: int = 0       # points ``executable`` added
     slowdown: float = 1.0  # the uniform slow-down ``executable`` applied
-    # a whole check's tension margins (M, m) N and lost poses (M,) at its samples (None when
-    # the tensions were not reached): what ``check_executed(reuse=...)`` takes over
+    # a whole check's tension margins (M, m) N, lost poses (M,) and poses in collision (M,)
+    # at its samples (None when the tensions were not reached): what
+    # ``check_executed(reuse=...)`` takes over
     per_sample: tuple = field(default=None, repr=False, compare=False)
 
     def describe(self):
@@ -167,7 +168,7 @@ class ExecutionCheck:
 
 
 def check_executed(robot, t_wp, L, V, A, seed, mass=None, inertia=None, max_cable_speed=np.inf,
-                   max_cable_accel=np.inf, dt=CHECK_DT, within=None, reuse=None):
+                   max_cable_accel=np.inf, dt=CHECK_DT, within=None, reuse=None, collision=None):
     """ExecutionCheck of the points (t_wp (N,) s; L, V, A (N, m) m, m/s, m/s^2) executed by
     a JTC (module docstring). ``seed(t)`` -> (p (M, 3), R (M, 3, 3)): a pose near the
     platform's at times t (the planned motion), where forward kinematics starts. ``mass``
@@ -180,7 +181,9 @@ def check_executed(robot, t_wp, L, V, A, seed, mass=None, inertia=None, max_cabl
     the quintic (each segment's own from its two end points) and the seed (interpolated
     between the same two waypoints) are unchanged, so forward kinematics and the tensions
     (row by row) are the same numbers (with m > 6 to rounding: the centred nominal's Newton
-    starts from the previous sample's, ``zonotope``). The answer is the whole check's."""
+    starts from the previous sample's, ``zonotope``). The answer is the whole check's.
+    ``collision``: the scene's CollisionModel (or None): the executed poses at the same
+    samples must keep its clearance too."""
     t_wp, L, V, A = (np.asarray(x, dtype=float) for x in (t_wp, L, V, A))
     if len(t_wp) < 2:  # one point: the controller holds it
         return ExecutionCheck(True, "", np.inf, np.inf, float("nan"), 0.0, 0.0,
@@ -204,28 +207,30 @@ def check_executed(robot, t_wp, L, V, A, seed, mass=None, inertia=None, max_cabl
     speed = np.max(vel / np.broadcast_to(max_cable_speed, (m,)), axis=1, initial=0.0)
     accel = np.max(acc / np.broadcast_to(max_cable_accel, (m,)), axis=1, initial=0.0)
     bad_k = k[~np.all(lengths_ok, axis=1) | (speed > 1 + TOL) | (accel > 1 + TOL)]
-    margin, lost, worst_t = np.full((0, m), np.inf), np.zeros(0, dtype=bool), float("nan")
+    margin, worst_t = np.full((0, m), np.inf), float("nan")
+    lost = blocked = np.zeros(0, dtype=bool)
     span = robot.tension_max - robot.tension_min
     per_sample = None
     if bad_k.size == 0:
         mid = np.flatnonzero(sel[q:n + 1 - q]) + q   # samples whose tensions are checked
         old = _reusable(reuse, within, mid, ts)
         if old is None:
-            margin, lost = _executed_margins(robot, t_wp, L, V, A, seed, ts, mid, q, mass, inertia)
+            margin, lost, blocked = _executed_margins(robot, t_wp, L, V, A, seed, ts, mid, q,
+                                                      mass, inertia, collision)
         else:
-            changed, margin, lost = old
+            changed, margin, lost, blocked = old
             if changed.any():
-                margin[changed], lost[changed] = _executed_margins(
-                    robot, t_wp, L, V, A, seed, ts, mid[changed], q, mass, inertia)
-        per_sample = (margin, lost) if within is None else None
-        t_bad = ts[mid[(np.min(margin, axis=1) < -TOL) | lost]]
+                margin[changed], lost[changed], blocked[changed] = _executed_margins(
+                    robot, t_wp, L, V, A, seed, ts, mid[changed], q, mass, inertia, collision)
+        per_sample = (margin, lost, blocked) if within is None else None
+        t_bad = ts[mid[(np.min(margin, axis=1) < -TOL) | lost | blocked]]
         near = np.concatenate([t_bad - h, t_bad, t_bad + h])  # the stencil's segments
         bad_k = np.clip(np.searchsorted(t_wp, near, side="right") - 1, 0, len(t_wp) - 2)
         if mid.size:
             worst_t = float(ts[mid][np.argmin(np.min(margin / span, axis=1))])
     least_n = float(np.min(margin, initial=np.inf))
     return ExecutionCheck(ok=bad_k.size == 0,
-                          reason=_reason(least_n, lengths_ok, speed, accel, lost),
+                          reason=_reason(least_n, lengths_ok, speed, accel, lost, blocked),
                           least_tension_margin_n=least_n,
                           least_margin=float(np.min(margin / span, initial=np.inf)),
                           worst_t=worst_t, speed_ratio=float(np.max(speed, initial=0.0)),
@@ -235,23 +240,25 @@ def check_executed(robot, t_wp, L, V, A, seed, mass=None, inertia=None, max_cabl
 
 
 def _reusable(reuse, within, mid, ts):
-    """(changed (M,) bool: samples to compute again, margins, lost: copies of the previous
-    whole check's) when ``reuse`` applies to this whole check (``check_executed``), else None."""
+    """(changed (M,) bool: samples to compute again, margins, lost, blocked: copies of the
+    previous whole check's) when ``reuse`` applies to this whole check (``check_executed``), else None."""
     if reuse is None or within is not None or reuse[0].per_sample is None:
         return None
-    margin, lost = reuse[0].per_sample
+    margin, lost, blocked = reuse[0].per_sample
     if len(margin) != len(mid):
         return None
     w = np.asarray(reuse[1], dtype=float).reshape(-1, 2)
     t = ts[mid]
     changed = np.any((t[:, None] >= w[:, 0]) & (t[:, None] <= w[:, 1]), axis=1)
-    return changed, margin.copy(), lost.copy()
+    return changed, margin.copy(), lost.copy(), blocked.copy()
 
 
-def _executed_margins(robot, t_wp, L, V, A, seed, ts, mid, q, mass, inertia):
+def _executed_margins(robot, t_wp, L, V, A, seed, ts, mid, q, mass, inertia, collision=None):
     """Tension margins (M, m) N at the samples ts[mid] of the executed motion (forward
-    kinematics of the quintic's lengths, differences over ts[mid -+ q]), and where forward
-    kinematics lost the platform (M,) (no convergence, or a twin far from the seed)."""
+    kinematics of the quintic's lengths, differences over ts[mid -+ q]), where forward
+    kinematics lost the platform (M,) (no convergence, or a twin far from the seed), and
+    where the pose is closer to the scene than its clearance (M,) (none without a
+    ``collision`` model)."""
     need = unique_sorted(np.concatenate([mid - q, mid, mid + q]))
     pos, _, _ = quintic(t_wp, L, V, A, ts[need])
     p_seed, R_seed = seed(ts[need])
@@ -268,7 +275,10 @@ def _executed_margins(robot, t_wp, L, V, A, seed, ts, mid, q, mass, inertia):
     alpha = (back - front) / h ** 2
     f, v = _tensions(robot, fk.p[at[1]], R[1], c[1], c_dd, omega, alpha, mass, inertia)
     margin = np.minimum(f - v - robot.tension_min, robot.tension_max - f - v)
-    return margin, lost[at[0]] | lost[at[1]] | lost[at[2]]
+    blocked = np.zeros(len(mid), dtype=bool)
+    if collision is not None:
+        blocked = collision.margins(fk.p[at[1]], R[1])[0] < 0
+    return margin, lost[at[0]] | lost[at[1]] | lost[at[2]], blocked
 
 
 def _tensions(robot, p, R, c, c_dd, omega, alpha, mass, inertia):
@@ -313,7 +323,7 @@ def _rule_tensions(robot, p, R, c, u, w0, inertial):
     return t0 - np.einsum("nij,nj->ni", P, inertial), v
 
 
-def _reason(least_n, lengths_ok, speed, accel, no_pose):
+def _reason(least_n, lengths_ok, speed, accel, no_pose, blocked=()):
     bad = []
     if least_n < -TOL:
         bad.append(f"tension margin {least_n:.3g} N")
@@ -325,6 +335,8 @@ def _reason(least_n, lengths_ok, speed, accel, no_pose):
         bad.append(f"winch acceleration {np.max(accel):.4g} x the limit")
     if np.any(no_pose):
         bad.append("forward kinematics lost the platform's pose")
+    if np.any(blocked):
+        bad.append("a pose within the scene's clearance")
     return ", ".join(bad)
 
 
@@ -342,18 +354,18 @@ def path_seed(path):
 
 
 def check_path(robot, path, mass=None, inertia=None, max_cable_speed=np.inf,
-               max_cable_accel=np.inf, dt=CHECK_DT, within=None, reuse=None):
+               max_cable_accel=np.inf, dt=CHECK_DT, within=None, reuse=None, collision=None):
     """check_executed of a timed PlannedPath's points (lengths, velocities, accelerations
     at path.t), forward kinematics seeded from its waypoint poses."""
     return check_executed(robot, path.t, path.lengths, path.velocities, path.accelerations,
                           path_seed(path), mass, inertia, max_cable_speed, max_cable_accel, dt,
-                          within, reuse)
+                          within, reuse, collision)
 
 
 # ----------------------------------------------------------------------------- making it pass
 
 def executable(robot, path, motion=None, mass=None, inertia=None, max_cable_speed=np.inf,
-               max_cable_accel=np.inf, max_points=MAX_POINTS):
+               max_cable_accel=np.inf, max_points=MAX_POINTS, collision=None):
     """(path, ExecutionCheck): the timed PlannedPath ``path`` with points added until a JTC
     executing it passes ``check_path``, or the last check (``ok`` False) if it does not
     within ``max_points`` points and the rounds allowed.
@@ -374,7 +386,7 @@ def executable(robot, path, motion=None, mass=None, inertia=None, max_cable_spee
     while True:
         reuse = (whole, np.concatenate(changed)) if whole is not None and changed else None
         check = check_path(robot, path, mass, inertia, max_cable_speed, max_cable_accel,
-                           within=within, reuse=reuse)
+                           within=within, reuse=reuse, collision=collision)
         check = replace(check, added=len(path) - n, slowdown=scale)
         if within is None:
             whole, changed = check, []
