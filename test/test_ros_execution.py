@@ -12,25 +12,56 @@ rclpy = pytest.importorskip("rclpy")
 
 from diagnostic_msgs.msg import DiagnosticStatus  # noqa: E402
 from nav_msgs.srv import GetPlan  # noqa: E402, F401 (the plan service's type)
+from sensor_msgs.msg import JointState  # noqa: E402
 
+from cdh_planner.model.kinematics import cable_lengths  # noqa: E402
+from cdh_planner.model.pose import rotation_from_quaternion  # noqa: E402
 from cdh_planner.ros import messages as M  # noqa: E402
-from cdh_planner.ros.client import plan_path_goal  # noqa: E402
+from cdh_planner.ros.client import PlannerClient, plan_path_goal  # noqa: E402
 from cdh_planner.ros.params import node_config  # noqa: E402
-from ros_harness import (CONTROLLER_ACTION, Q1, Q2, Q3, ROBOT2,  # noqa: E402
-                         file_parameters, node_with_controller, pose_lengths, pose_text,
-                         run_cli, sphere_pose_msg)
+from ros_harness import (Q1, Q2, Q3, ROBOT2, Collector, ControllerDouble,  # noqa: E402
+                         NodeProcess, claimed_domain, file_parameters, pose_text, run_cli,
+                         sphere_pose_msg, wait_node_measures)
 
 CONFIG = node_config(file_parameters(ROBOT2))
 ROBOT = CONFIG.robot
+ACTION = "/cable_controller/follow_joint_trajectory"
+JOINT_STATES = "/winches/joint_states"
+TIME_SCALE = 4.0   # the double runs 4x faster than real time
+
+
 def _lengths(coords):
-    return pose_lengths(ROBOT, coords)
+    msg = sphere_pose_msg(coords)
+    p, o = msg.pose.position, msg.pose.orientation
+    R = rotation_from_quaternion(np.array([o.x, o.y, o.z, o.w]))
+    return cable_lengths(ROBOT, np.array([p.x, p.y, p.z]), R)
 
 
 @pytest.fixture(scope="module")
 def ros(tmp_path_factory):
-    with node_with_controller(ROBOT, Q1, tmp_path_factory.mktemp("execution"),
-                              ["execution.mode:=follow_joint_trajectory"]) as client:
-        yield client
+    params = ["execution.mode:=follow_joint_trajectory",
+              f"execution.controller_action:={ACTION}",
+              f"execution.joint_states_topic:={JOINT_STATES}"]
+    with claimed_domain() as domain:
+        double = ControllerDouble(domain, *ROBOT.winch_names, "--action", ACTION,
+                                  "--joint-states", JOINT_STATES, "--time-scale", TIME_SCALE,
+                                  "--initial", *map(repr, _lengths(Q1).tolist()))
+        node = NodeProcess(domain, tmp_path_factory.mktemp("execution"), params=params)
+        try:
+            assert double.ready.wait(30.0), "\n".join(double.lines)
+            with PlannerClient(domain_id=domain) as client:
+                client.wait_for_node(30.0)
+                client.double, client.process, client.domain = double, node, domain
+                client.measured = Collector(client.node, JointState, JOINT_STATES, 10)
+                client.watch_execution()
+                assert client.spin_until(lambda: client.measured.items, 10.0)
+                answer = wait_node_measures(client, sphere_pose_msg(Q1))
+                assert answer.success, answer.result.error_msg
+                yield client
+        finally:
+            node.stop()
+            rc, log = double.stop()
+            assert rc == 0 and "Traceback" not in log, log
 
 
 def _measured(ros):
@@ -44,7 +75,7 @@ def _execute_to_the_end(ros, result):
     accepted = len(ros.double.events("accepted"))
     ok, message = ros.execute()
     assert ok, message
-    assert CONTROLLER_ACTION in message and "start not checked" not in message, message
+    assert ACTION in message and "start not checked" not in message, message
     status = ros.wait_execution_result(seen, timeout_s=30.0)
     assert status is not None, ros.process.log()
     [event] = ros.double.events("accepted")[accepted:]
@@ -122,7 +153,7 @@ def test_call_from_where_the_winches_stopped_to_the_goal_and_execute(ros):
     winches stopped part way, above) and execute through the controller to the end."""
     r = run_cli(ros.domain, "call", "--current-start", "--goal", pose_text(Q3), "--execute")
     assert r.returncode == 0, r.stdout + r.stderr
-    for line in ("outcome: planned", f"through {CONTROLLER_ACTION}", "execution completed"):
+    for line in ("outcome: planned", f"through {ACTION}", "execution completed"):
         assert line in r.stdout, r.stdout
     assert ros.spin_until(lambda: np.allclose(_measured(ros), _lengths(Q3), rtol=0, atol=1e-6),
                           10.0), (_measured(ros), _lengths(Q3))

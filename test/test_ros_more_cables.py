@@ -12,14 +12,22 @@ import yaml
 rclpy = pytest.importorskip("rclpy")
 
 from diagnostic_msgs.msg import DiagnosticArray  # noqa: E402
+from sensor_msgs.msg import JointState  # noqa: E402
 
+from cdh_planner.model.kinematics import cable_lengths  # noqa: E402
+from cdh_planner.model.pose import rotation_from_quaternion  # noqa: E402
 from cdh_planner.ros import messages as M  # noqa: E402
-from cdh_planner.ros.client import plan_path_goal  # noqa: E402
+from cdh_planner.ros.client import PlannerClient, plan_path_goal  # noqa: E402
 from cdh_planner.ros.params import node_config  # noqa: E402
-from ros_harness import (CONTROLLER_ACTION, Q2, Q3, ROBOT2, Collector, file_parameters,  # noqa: E402
-                         node_with_controller, sphere_pose_msg)
+from ros_harness import (Q2, Q3, ROBOT2, Collector, ControllerDouble, NodeProcess,  # noqa: E402
+                         claimed_domain, file_parameters, sphere_pose_msg, wait_node_measures)
 
 from conftest import REPO  # noqa: E402
+
+ACTION = "/cable_controller/follow_joint_trajectory"
+JOINT_STATES = "/winches/joint_states"
+TIME_SCALE = 4.0
+
 
 def _params_file(tmp):
     """robot2_8's robot with robot2.yaml's sphere task: one parameters file."""
@@ -31,15 +39,42 @@ def _params_file(tmp):
     return path
 
 
+def _lengths(robot, coords):
+    msg = sphere_pose_msg(coords)
+    p, o = msg.pose.position, msg.pose.orientation
+    R = rotation_from_quaternion(np.array([o.x, o.y, o.z, o.w]))
+    return cable_lengths(robot, np.array([p.x, p.y, p.z]), R)
+
+
 @pytest.fixture(scope="module")
 def ros(tmp_path_factory):
     tmp = tmp_path_factory.mktemp("more_cables")
     params_file = _params_file(tmp)
     robot = node_config(file_parameters(params_file)).robot
     assert len(robot.winch_names) == 8
-    with node_with_controller(robot, Q2, tmp, params_file=params_file) as client:
-        client.diagnostics = Collector(client.node, DiagnosticArray, "/diagnostics", 10)
-        yield client
+    params = [f"execution.controller_action:={ACTION}",
+              f"execution.joint_states_topic:={JOINT_STATES}"]
+    with claimed_domain() as domain:
+        double = ControllerDouble(domain, *robot.winch_names, "--action", ACTION,
+                                  "--joint-states", JOINT_STATES, "--time-scale", TIME_SCALE,
+                                  "--initial", *map(repr, _lengths(robot, Q2).tolist()))
+        node = NodeProcess(domain, tmp, params=params, params_file=params_file)
+        try:
+            assert double.ready.wait(30.0), "\n".join(double.lines)
+            with PlannerClient(domain_id=domain) as client:
+                client.wait_for_node(30.0)
+                client.double, client.process, client.robot = double, node, robot
+                client.measured = Collector(client.node, JointState, JOINT_STATES, 10)
+                client.diagnostics = Collector(client.node, DiagnosticArray, "/diagnostics", 10)
+                client.watch_execution()
+                assert client.spin_until(lambda: client.measured.items, 10.0)
+                answer = wait_node_measures(client, sphere_pose_msg(Q2))
+                assert answer.success, answer.result.error_msg
+                yield client
+        finally:
+            node.stop()
+            rc, log = double.stop()
+            assert rc == 0 and "Traceback" not in log, log
 
 
 def _measured(ros):
@@ -97,7 +132,7 @@ def test_the_node_executes_an_eight_cable_plan_through_the_controller(ros):
         seen = len(ros.execution_results)
         accepted = len(ros.double.events("accepted"))
         ok, message = ros.execute()
-        assert ok and CONTROLLER_ACTION in message, message
+        assert ok and ACTION in message, message
         status = ros.wait_execution_result(seen, timeout_s=60.0)
         assert status is not None, ros.process.log()
         assert M.status_values(status)["outcome"] == "completed", status.message
