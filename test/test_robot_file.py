@@ -70,6 +70,15 @@ BAD_ROBOTS = [
     ("inertia_without_mass", "load.inertia", [0.001, 0.001, 0.001], "robot.load.inertia", "needs robot.load.mass"),
     ("unknown_ellipsoid_key", "wrench_ellipsoid.centre", [0.0] * 6, "robot.wrench_ellipsoid.centre", "unknown key"),
     ("missing_tension_max", "tension_max", None, "robot.tension_max", "missing"),
+    ("stiffness_below_tension_max", "cable_stiffness", [1000.0, 1000.0, 0.4, 1000.0, 1000.0, 1000.0],
+     "robot.cable_stiffness[2]", "must exceed robot.tension_max[2]"),
+    ("zero_stiffness", "cable_stiffness", 0.0, "robot.cable_stiffness[0]", "must be positive"),
+    ("nan_stiffness", "cable_stiffness", float("nan"), "robot.cable_stiffness[0]", "finite"),
+    ("absurd_stiffness", "cable_stiffness", 1e12, "robot.cable_stiffness[0]", "1e+10"),
+    ("seven_stiffnesses", "cable_stiffness", [1000.0] * 7, "robot.cable_stiffness", "expected 6 numbers"),
+    ("negative_length_error", "length_error", -1e-4, "robot.length_error[0]", "must be non-negative"),
+    ("length_error_over_range", "length_error", [1e-4, 1e-4, 1e-4, 1e-4, 0.5, 1e-4], "robot.length_error[4]",
+     "below the cable's length range"),
     ("text_instead_of_number", "length_max", [0.55, "long", 0.55, 0.55, 0.55, 0.55], "robot.length_max[1]",
      "expected a number"),
 ]
@@ -291,3 +300,17 @@ def test_a_null_value_is_refused_naming_the_field_unless_the_field_is_optional(f
     with pytest.raises(InputError) as exc:
         robot_from_dict(doc)
     assert exc.value.field == f"robot.{f.key}" and exc.value.value is None
+
+
+def test_elastic_fields_are_optional_per_cable_or_one_number(tmp_path):
+    """cable_stiffness and length_error: absent is rigid cables and exact winches; one number
+    stands for every cable."""
+    rigid = load_robot(write_bad_robot(tmp_path, "cable_stiffness", None))
+    assert rigid.cable_stiffness is None
+    doc = set_robot(copy.deepcopy(robot_doc()), "cable_stiffness", 2500.0)
+    doc = set_robot(doc, "length_error", [1e-4, 2e-4, 1e-4, 1e-4, 1e-4, 1e-4])
+    path = tmp_path / "elastic.yaml"
+    path.write_text(yaml.safe_dump(doc))
+    r = load_robot(path)
+    assert r.cable_stiffness.tolist() == [2500.0] * 6
+    assert r.length_error[1] == 2e-4

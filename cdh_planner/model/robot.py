@@ -25,6 +25,7 @@ from .robot_schema import CHOICE, MATRIX, N_CABLES, NAME, NAMES, NUMBER, NUMBERS
     read_fields, robot_field, schema_of
 
 MAX_CABLE_RADIUS_M = 1.0  # m: a thicker "cable" is a unit mistake
+MAX_STIFFNESS_N = 1e10  # N: EA of a 100 mm steel rope is about 1e9 N; more is a unit mistake
 MAX_ELLIPSOID = 1e18  # largest |entry| of an ellipsoid matrix (1/N^2, 1/(N m)^2)
 MIN_SPREAD_M = 1e-6  # anchors closer than this to one line are collinear
 SINGULAR_RCOND = 1e-9  # J with smallest / largest singular value below this is singular
@@ -77,6 +78,17 @@ class Robot:
     tension_max: np.ndarray = robot_field(
         key="tension_max", kind=NUMBERS, unit="N", per_cable=True, broadcast=True,
         limit=MAX_FORCE_N, sign="positive", description="greatest cable tension")
+    cable_stiffness: np.ndarray = robot_field(  # (m,) EA_i, or None: rigid cables
+        key="cable_stiffness", kind=NUMBERS, unit="N", per_cable=True, broadcast=True,
+        limit=MAX_STIFFNESS_N, sign="positive", default=None,
+        description="axial stiffness EA of each cable: of unstretched length L0 under tension t "
+                    "it is L0 (1 + t / EA) long; above the cable's greatest tension (absent: "
+                    "rigid cables; required to execute by lengths alone with more than 6 cables)")
+    length_error: np.ndarray = robot_field(  # (m,) e_i, or None: exact winches
+        key="length_error", kind=NUMBERS, unit="m", per_cable=True, broadcast=True,
+        limit=MAX_POSITION_M, sign="non-negative", default=None,
+        description="bound e_i on the error of the cable length each winch realises, below its "
+                    "length range (absent: exact winches; gives the pose accuracy)")
     cable_radius: float = robot_field(
         key="cable_radius", kind=NUMBER, unit="m", sign="non-negative", limit=MAX_CABLE_RADIUS_M,
         default=0.0, description="cable radius: each cable is a capsule of it in the collision "
@@ -188,6 +200,7 @@ def robot_from_dict(d, source=""):
     v = read_fields(d, FIELDS, defaults={"name": Path(source).stem or "robot"})
     _check_below("robot.length_min", v["length_min"], "robot.length_max", v["length_max"])
     _check_below("robot.tension_min", v["tension_min"], "robot.tension_max", v["tension_max"])
+    _check_elastic(v)
     _check_mass_properties(v, d)
     _check_platform_shape(v)
     if v["contact_ellipsoid.matrix"] is None:
@@ -205,6 +218,27 @@ def _with_contact(robot):
     E = combine_contact_ellipsoid(robot.ellipsoid_matrix, robot.contact_matrix)
     return replace(robot, ellipsoid_matrix=0.5 * (E + E.T),
                    ellipsoid_offset=robot.ellipsoid_offset + robot.contact_center)
+
+
+def _check_elastic(v):
+    """A cable's stiffness EA above its greatest tension (else it would stretch past twice its
+    length within its limits: a unit mistake); a winch error below its cable's length range."""
+    EA, t_max = v["cable_stiffness"], v["tension_max"]
+    if EA is not None:
+        bad = np.flatnonzero(EA <= t_max)
+        if bad.size:
+            i = bad[0]
+            raise InputError(f"robot.cable_stiffness[{i}]", float(EA[i]),
+                             f"must exceed robot.tension_max[{i}] = {float(t_max[i])!r} N (EA is "
+                             f"the force that doubles the cable's length)")
+    e = v["length_error"]
+    if e is not None:
+        span = v["length_max"] - v["length_min"]
+        bad = np.flatnonzero(e >= span)
+        if bad.size:
+            i = bad[0]
+            raise InputError(f"robot.length_error[{i}]", float(e[i]),
+                             f"must be below the cable's length range, {float(span[i]):.6g} m")
 
 
 def _check_platform_shape(v):
