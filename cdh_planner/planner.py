@@ -106,7 +106,8 @@ class Planner:
         pose = self.constraint.pose
         self.length = lambda xa, xb: self.pose_cost(*pose(xa), *pose(xb))
         # the stages; every one asks the same Validity
-        self.validity = Validity(robot, task, s.margin_floor, scene)
+        self.validity = Validity(robot, task, s.margin_floor, scene,
+                                 accuracy=(s.accuracy_position_m, s.accuracy_orientation_rad))
         self.collision = self.validity.collision
         self.lift = Lift(self.validity, self.constraint, self.atlas.in_domain)
         self.densify = Densify(self.validity, s.max_cable_speed, s.max_cable_accel)

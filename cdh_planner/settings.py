@@ -130,6 +130,18 @@ class PlannerSettings:
                     "saves 0.69 w per unit of its length, at any margin (0: the shortest path, "
                     "the paper's cost)",
         low=0.0, high=1000.0)
+    accuracy_position_m: float = _setting(
+        0.0, parameter="planner.accuracy_position_m", flag="--accuracy-position", unit="m",
+        description="largest platform position error the winches' length errors "
+                    "(robot.length_error, required) may cause at every pose of the path, "
+                    "waypoints and the motion between them (0: off)",
+        low=0.0, high=1.0)
+    accuracy_orientation_rad: float = _setting(
+        0.0, parameter="planner.accuracy_orientation_rad", flag="--accuracy-orientation",
+        unit="rad", description="largest platform rotation error the winches' length errors "
+                                "(robot.length_error, required) may cause at every pose of the "
+                                "path (0: off)",
+        low=0.0, high=3.141592653589793)
     max_cable_speed: float = _setting(
         0.05, parameter="trajectory.max_cable_speed", flag="--max-cable-speed", unit="m/s",
         description="per-winch cable speed limit of the trajectory",

@@ -67,6 +67,10 @@ class Lift:
         collides = self._collision(label, p, tau)
         if collides is not None:
             return None, collides
+        inaccurate = self.validity.accuracy_violation(p, tau)
+        if inaccurate is not None:
+            return None, (Status.infeasible(label), f"{label} pose is outside the accuracy "
+                          f"limit: {inaccurate} at {describe(p, tau)}")
         x = self.constraint.lift(p, tau)
         if not self.in_domain(x):
             return None, (Status.infeasible(label), f"{label} pose is feasible but closer to the "

@@ -51,15 +51,16 @@ class Route:
         return self.blocked(self.length if admissible else self.greedy_heuristic)
 
     def blocked(self, cost):
-        """``cost`` between points of M, inf when either is in collision: chart transitions
-        into collision cost inf (the paper's Sec. 6), so A* never takes them and GBF tries
+        """``cost`` between points of M, inf when either is in collision or outside the
+        accuracy limits (``Validity.clear``): chart transitions into collision cost inf (the paper's Sec. 6), so A* never takes them and GBF tries
         them last; the search's lazy link check cuts any that are still used."""
-        if self.validity.collision is None:
+        if not self.validity.blocks:
             return cost
         return lambda xa, xb: cost(xa, xb) if self._clear(xa) and self._clear(xb) else math.inf
 
     def _clear(self, x):
-        """Is the pose of the point x of M clear of collision by the margin floor? (cached)"""
+        """Is the pose of the point x of M clear of collision and within the accuracy limits
+        by the margin floor? (cached)"""
         key = x.tobytes()
         if key not in self._clear_cache:
             self._clear_cache[key] = self.validity.clear(*self.constraint.pose(x))

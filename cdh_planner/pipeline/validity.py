@@ -2,8 +2,10 @@
 
 A pose is valid when its margin is at least the planner's margin floor: the wrench
 feasibility margin (normalised, ``feasibility.evaluate``), with a scene the least of it
-and the collision margin (``scene.collision.combine``); a motion between two poses when
-it is, densely (``trajectory.path_check``, with the same collision model). Poses are task
+and the collision margin (``scene.collision.combine``) and, with accuracy limits
+(``accuracy.AccuracyLimits``: planner.accuracy_position_m / _orientation_rad), the accuracy
+margin; a motion between two poses when it is, densely (``trajectory.path_check``, with the
+same collision model and margins). Poses are task
 coordinate rows y (N, k) (``model.task``): M is
 the graph of the closed-form lift over the feasible poses of the task, so moving y and
 checking the pose keeps every point on M.
@@ -11,6 +13,9 @@ checking the pose keeps every point on M.
 
 import numpy as np
 
+import dataclasses
+
+from ..accuracy import accuracy_limits
 from ..cable_feasibility import planning_feasibility as evaluate  # m > 6: the rule's band
 from ..model.pose import quaternion_from_tau, rotation_tt, wrap_angle
 from ..scene.margin import COLLISION_UNIT_M, combine
@@ -22,13 +27,18 @@ COARSE_SAMPLES = 17  # a direct motion is first checked at these few points (a c
 class Validity:
     """Valid poses and motions of one robot and task (module docstring)."""
 
-    def __init__(self, robot, task, margin_floor, scene=None, feasibility=evaluate):
+    def __init__(self, robot, task, margin_floor, scene=None, feasibility=evaluate,
+                 accuracy=(0.0, 0.0)):
         """``scene`` (scene.schema.Scene or None): obstacles the poses keep clear of;
         ``feasibility(robot, p, tau, R)``: the wrench margin asked (default the planner's,
         ``cable_feasibility.planning_feasibility``; ``feasibility_of`` gives ``verify``'s,
-        the facet test, for m > 6 cables)."""
+        the facet test, for m > 6 cables); ``accuracy``: the largest position (m) and
+        rotation (rad) error of a pose from the winches' errors, 0 for none (InputError
+        without robot.length_error)."""
         self.robot, self.task, self.margin_floor = robot, task, margin_floor
-        self.feasibility = feasibility
+        self.accuracy = accuracy_limits(robot, *accuracy)
+        self.feasibility = (feasibility if self.accuracy is None
+                            else _within_accuracy(feasibility, self.accuracy))
         self.periodic = np.array(task.periodic, dtype=bool)
         self.scene = scene
         self.collision = _collision_model(robot, scene)
@@ -47,13 +57,34 @@ class Validity:
         p, tau = self.task.pose(y)
         return self.pose_margins(p, tau)[0]
 
+    @property
+    def blocks(self):
+        """Do poses have constraints beyond the atlas's domain (wrench feasibility): a
+        scene's collisions or accuracy limits? (``clear`` then tells)"""
+        return self.collision is not None or self.accuracy is not None
+
     def clear(self, p, tau):
-        """Is the pose (p (3,) m, tau (3,) rad) clear of collision by the margin floor?
-        (True without a scene)"""
+        """Is the pose (p (3,) m, tau (3,) rad) clear of collision and within the accuracy
+        limits by the margin floor? (True without a scene and limits)"""
+        R = rotation_tt(tau)
+        if self.accuracy is not None:
+            if self.accuracy.margins(self.robot, p[None], R[None])[0][0] < self.margin_floor:
+                return False
         if self.collision is None:
             return True
-        c = self.collision.clearance(p, rotation_tt(tau))
+        c = self.collision.clearance(p, R)
         return c.margin / COLLISION_UNIT_M >= self.margin_floor
+
+    def accuracy_violation(self, p, tau):
+        """None, or one line saying which accuracy limit the pose (p (3,) m, tau (3,) rad)
+        exceeds (below the margin floor counts as exceeding)."""
+        if self.accuracy is None:
+            return None
+        R = rotation_tt(tau)
+        if self.accuracy.margins(self.robot, p[None], R[None])[0][0] >= self.margin_floor:
+            return None
+        return self.accuracy.describe(self.robot, p, R) or (
+            f"accuracy within the margin floor ({self.margin_floor:g}) of its limit")
 
     def pose(self, y):
         """Which rows of y (N, k) are valid poses: margin at least the floor (N,) bool."""
@@ -104,6 +135,21 @@ def wrapped(d, periodic):
     d = d.copy()
     d[:, periodic] = wrap_angle(d[:, periodic])
     return d
+
+
+def _within_accuracy(feasibility, limits):
+    """``feasibility`` with each pose's margin the least of its own and the accuracy
+    margin (``accuracy.AccuracyLimits.combine``), as the collision margin is joined."""
+
+    def checked(robot, p, tau=None, R=None):
+        f = feasibility(robot, p, tau, R)
+        R = rotation_tt(np.atleast_2d(tau)) if R is None else np.asarray(R).reshape(-1, 3, 3)
+        margin, binding = limits.combine(f.margin, f.binding, robot, np.atleast_2d(p), R,
+                                         f.tension_nominal)
+        return dataclasses.replace(f, margin=np.where(np.isnan(margin), -np.inf, margin),
+                                   binding=binding.astype(str))
+
+    return checked
 
 
 def _collision_model(robot, scene):

@@ -1,0 +1,252 @@
+"""Pose accuracy from the winches (numpy only): how far the platform can be from a planned
+pose when every winch realises its cable length only within +- e_i (``robot.length_error``,
+m). The paper's first item of future work ("propagating known bounds on the position error
+of the actuators to a bound on the platform pose").
+
+The map. At a pose let A (6 x m) have columns [u_i; r_i x u_i], u_i the unit cable vector
+from the base anchor to the platform anchor and r_i = R b_i the platform anchor from the
+platform's origin, so that a small motion dx = [dp; dw] (dp m of the platform origin, dw
+rad a rotation vector, both in the base frame) changes the lengths by A^T dx. A cable of
+unstretched length L0_i carries t_i = k_i (L_i(x) - L0_i), k_i = EA_i / L0_i
+(``model.elastic``; L0 from the nominal tensions, ``cable_feasibility.nominal_tensions``),
+and the platform is in equilibrium when A t balances the load. A winch error dl in L0
+moves the platform, to first order and leaving out the geometric stiffness (the tensions'
+own change of direction, t / L against EA / L0), by
+
+    dx = G dl,   G = (A K A^T)^-1 A K,   K = diag(k_i).
+
+(The issue writes -(A K A^T)^-1 A K with u_i pointing to the winch; the norms are the same.)
+For six cables G = A^-T whatever K is (rigid and elastic agree). A rigid robot with more
+than six cables has no K: we take equal EA (K = diag(1 / L_i), EA cancels), the limit of
+stiff equal cables.
+
+The accuracy at the pose is max ||G_p dl|| (m, position rows) and max ||G_w dl|| (rad,
+rotation rows) over the box |dl_i| <= e_i, computed EXACTLY (``box_max_norm``): a convex
+function's maximum over the box is at a vertex of the zonotope Z = M box (M 3 x m), and Z
+in R^3 has O(m^2) vertices: each maximises c . z for c in a cell of the arrangement of the
+great circles c . g_i = 0 (g_i = e_i M[:, i]); every cell has a corner c = +-(g_i x g_j), and
+the vertices of Z around that corner are sign(M^T c) with the signs of g_i and g_j free
+(4 per pair; -c gives their negatives, the same norms). Poses where that is not reliable in
+floating point (two generators within PARALLEL_TOL of parallel, a third within ORTHO_TOL of
+the plane of two) are searched over all 2^m vertices when m <= BRUTE_FORCE_MAX_CABLES, else
+given the upper bound sum_i |g_i| (never below the exact value). Generators shorter than
+TINY of the largest are left out and their lengths added: the result is then above the
+exact value by at most that sum (1e-13 of it).
+"""
+
+from dataclasses import dataclass
+from itertools import combinations
+
+import numpy as np
+
+from .cable_feasibility import nominal_tensions
+from .errors import InputError
+from .feasibility import cable_vectors
+from .model import elastic
+from .model.pose import rotation_tt
+
+PARALLEL_TOL = 1e-6   # sin of the angle between two generators below which they count as parallel
+ORTHO_TOL = 1e-9      # |g_k . c| / (|g_k| |c|) below which g_k counts as in the plane of a pair
+TINY = 1e-13          # generators shorter than this times the largest are left out (added)
+BRUTE_FORCE_MAX_CABLES = 16  # degenerate poses: all 2^m vertices up to here, else the bound
+SINGULAR_SCALE = 1e-12  # sqrt(det A A^T) below this: A singular, the accuracy is inf
+CHUNK = 256           # poses per vectorised block (memory ~ CHUNK m^3 floats)
+
+
+@dataclass(frozen=True)
+class Accuracy:
+    """The worst platform error over the winch error box at N poses: ``position_m`` (N,) m
+    (the platform origin), ``orientation_rad`` (N,) rad (the rotation angle); inf where
+    the pose is singular."""
+
+    position_m: np.ndarray
+    orientation_rad: np.ndarray
+
+
+def has_accuracy(robot):
+    """Does the robot file give its winches an error bound (``robot.length_error``)?"""
+    return robot.length_error is not None
+
+
+def structure_matrix(robot, p, R):
+    """A (N, 6, m): columns [u_i; (R b_i) x u_i] at poses (p (N, 3) m, R (N, 3, 3)), and the
+    cable lengths L (N, m) m; dL = A^T [dp; dw] (module docstring)."""
+    d = cable_vectors(robot, p, R)
+    L = np.linalg.norm(d, axis=-1)
+    u = d / np.where(L > 0, L, 1.0)[..., None]
+    r = np.einsum("nij,kj->nki", R, robot.platform_anchors)
+    A = np.concatenate([np.swapaxes(u, -1, -2), np.swapaxes(np.cross(r, u), -1, -2)], axis=-2)
+    return A, L
+
+
+def cable_stiffness_matrix(robot, p, R, L, tensions=None):
+    """k (N, m) N/m, the diagonal of K: EA_i / L0_i with L0 the unstretched lengths that
+    carry the nominal tensions (``tensions`` (N, m) N, else ``nominal_tensions``) at the
+    poses; rigid cables: 1 / L (equal EA)."""
+    if not elastic.is_elastic(robot):
+        return 1.0 / L
+    t = nominal_tensions(robot, p, R) if tensions is None else tensions
+    L0 = elastic.unstretched_lengths(robot, L, t)
+    return elastic.axial_stiffness(robot, L0)
+
+
+def error_map(robot, p, R, tensions=None):
+    """G (N, 6, m): dx = G dl, the platform motion [dp m; dw rad] of winch errors dl (m) in
+    the unstretched lengths (module docstring); nan where the pose is singular.
+    ``tensions`` (N, m) N: the nominal tensions if known (a Feasibility's), else computed."""
+    p = np.atleast_2d(np.asarray(p, dtype=float))
+    R = np.asarray(R, dtype=float).reshape(-1, 3, 3)
+    A, L = structure_matrix(robot, p, R)
+    n, m = L.shape
+    with np.errstate(invalid="ignore", over="ignore"):
+        scale = np.sqrt(np.abs(np.linalg.det(A @ np.swapaxes(A, -1, -2))))
+    bad = ~(scale > SINGULAR_SCALE) | (L.min(axis=1) <= 0)
+    if m == 6:
+        At = np.where(bad[:, None, None], np.eye(6), np.swapaxes(A, -1, -2))
+        G = np.linalg.solve(At, np.broadcast_to(np.eye(6), At.shape))
+    else:
+        k = cable_stiffness_matrix(robot, p, R, L, tensions)
+        bad |= ~np.all(np.isfinite(k) & (k > 0), axis=1)
+        AK = np.where(bad[:, None, None], np.eye(6, m), A * np.where(bad[:, None], 1.0, k)[:, None, :])
+        At = np.where(bad[:, None, None], np.eye(m, 6), np.swapaxes(A, -1, -2))
+        G = np.linalg.solve(AK @ At, AK)
+    G[bad] = np.nan
+    return G
+
+
+def pose_accuracy(robot, p, tau=None, R=None, tensions=None):
+    """The Accuracy of poses (p (N, 3) m, tau (N, 3) rad or R (N, 3, 3)) of a robot with
+    ``length_error`` (module docstring); ``tensions``: as ``error_map``'s."""
+    if R is None:
+        R = rotation_tt(np.atleast_2d(np.asarray(tau, dtype=float)))
+    G = error_map(robot, p, R, tensions)
+    return Accuracy(box_max_norm(G[:, :3], robot.length_error),
+                    box_max_norm(G[:, 3:], robot.length_error))
+
+
+@dataclass(frozen=True)
+class AccuracyLimits:
+    """The planner's accuracy constraint: ``position_m`` (m) and ``orientation_rad`` (rad),
+    0 where off. A pose's accuracy margin is 1 - error / limit (normalised like the wrench
+    margin: 1 exact, 0 at the limit), the least of the two set."""
+
+    position_m: float
+    orientation_rad: float
+
+    def margins(self, robot, p, R, tensions=None):
+        """Margins (N,) and bindings (N,) ("accuracy_position" or "accuracy_orientation")
+        of poses (p (N, 3) m, R (N, 3, 3)); -inf where singular."""
+        acc = pose_accuracy(robot, p, R=R, tensions=tensions)
+        terms = [(1.0 - err / limit, name) for err, limit, name in (
+            (acc.position_m, self.position_m, "accuracy_position"),
+            (acc.orientation_rad, self.orientation_rad, "accuracy_orientation")) if limit > 0]
+        margin, binding = terms[0][0], np.full(len(acc.position_m), terms[0][1], dtype=object)
+        for m, name in terms[1:]:
+            binding = np.where(m < margin, name, binding)
+            margin = np.minimum(margin, m)
+        return margin, binding
+
+    def combine(self, margin, binding, robot, p, R, tensions=None):
+        """The least of wrench margins (N,) and these accuracy margins, with its binding,
+        as ``scene.margin.combine`` joins the collision margin."""
+        am, ab = self.margins(robot, p, R, tensions)
+        worse = am < margin
+        return np.where(worse, am, margin), np.where(worse, ab, binding)
+
+    def describe(self, robot, p, R):
+        """None if the pose (p (3,) m, R (3, 3)) keeps the limits, else one line saying which
+        error exceeds which setting."""
+        acc = pose_accuracy(robot, p[None], R=R[None])
+        for err, limit, what, unit, scale in (
+                (acc.position_m[0], self.position_m, "position", "mm", 1e3),
+                (acc.orientation_rad[0], self.orientation_rad, "orientation", "mrad", 1e3)):
+            if limit > 0 and not err < limit:
+                return (f"{what} error {err * scale:.4g} {unit} over the winches' length error "
+                        f"exceeds planner.accuracy_{what}_{'m' if unit == 'mm' else 'rad'} "
+                        f"({limit * scale:g} {unit})")
+        return None
+
+
+def accuracy_limits(robot, position_m, orientation_rad):
+    """The AccuracyLimits of the planner settings (m, rad; 0: off), None when both are off;
+    InputError naming the setting when the robot has no ``length_error``."""
+    if not (position_m > 0 or orientation_rad > 0):
+        return None
+    if not has_accuracy(robot):
+        name, value = (("planner.accuracy_position_m", position_m) if position_m > 0
+                       else ("planner.accuracy_orientation_rad", orientation_rad))
+        raise InputError(name, value, "needs robot.length_error (the winches' length error "
+                                      "bound, m) in the robot file")
+    return AccuracyLimits(float(position_m), float(orientation_rad))
+
+
+def bound(M, e):
+    """The cheap upper bound sum_i e_i |M[:, i]| (N,) of ``box_max_norm``."""
+    return np.sum(np.abs(e) * np.linalg.norm(M, axis=-2), axis=-1)
+
+
+def box_max_norm(M, e):
+    """max ||M dl|| over |dl_i| <= e_i, exact (module docstring): M (N, 3, m), e (m,) or
+    scalar, result (N,); inf where M is not finite."""
+    M = np.asarray(M, dtype=float)
+    g = M * np.broadcast_to(np.asarray(e, dtype=float), M.shape[-1:])
+    out = np.full(len(g), np.inf)
+    ok = np.all(np.isfinite(g), axis=(1, 2))
+    idx = np.flatnonzero(ok)
+    for s in range(0, len(idx), CHUNK):
+        rows = idx[s:s + CHUNK]
+        out[rows] = _zonotope_max(g[rows])
+    return out
+
+
+def _zonotope_max(g):
+    """max ||sum_i s_i g_i|| over signs s, g (N, 3, m) finite generators (module docstring)."""
+    n, _, m = g.shape
+    norms = np.linalg.norm(g, axis=1)  # (N, m)
+    tiny = norms <= TINY * norms.max(axis=1, keepdims=True)
+    g = np.where(tiny[:, None, :], 0.0, g)
+    extra = np.where(tiny, norms, 0.0).sum(axis=1)
+    if m < 2:
+        return norms.sum(axis=1)
+    i, j = np.array(list(combinations(range(m), 2))).T  # pairs (P,)
+    gi, gj = g[:, :, i], g[:, :, j]  # (N, 3, P)
+    c = np.cross(gi, gj, axis=1)  # (N, 3, P)
+    cn = np.linalg.norm(c, axis=1)  # (N, P)
+    live = ~(tiny[:, i] | tiny[:, j])  # pairs of two real generators
+    with np.errstate(invalid="ignore", divide="ignore"):
+        sin = cn / (norms[:, i] * norms[:, j])
+        chat = c / cn[:, None, :]
+        D = np.swapaxes(chat, 1, 2) @ g  # (N, P, m): c . g_k
+        rel = np.abs(D) / norms[:, None, :]
+    parallel = live & ~(sin > PARALLEL_TOL)
+    pair_cols = np.zeros((len(i), m), dtype=bool)
+    pair_cols[np.arange(len(i)), i] = pair_cols[np.arange(len(i)), j] = True
+    in_plane = live[:, :, None] & ~pair_cols & ~tiny[:, None, :] & ~(rel > ORTHO_TOL)
+    degenerate = parallel.any(axis=1) | in_plane.any(axis=(1, 2))
+    use = live & ~parallel
+    signs = np.where(pair_cols | tiny[:, None, :] | ~use[:, :, None], 0.0, np.sign(D))
+    base = np.nan_to_num(signs) @ np.swapaxes(g, 1, 2)  # (N, P, 3)
+    best = np.zeros(n)
+    for a in (1.0, -1.0):
+        for b in (1.0, -1.0):
+            v = np.linalg.norm(base + a * np.swapaxes(gi, 1, 2) + b * np.swapaxes(gj, 1, 2), axis=2)
+            best = np.maximum(best, np.where(use, v, 0.0).max(axis=1))
+    single = ~use.any(axis=1) & ~degenerate  # at most one real generator: its length
+    best = np.where(single, norms.sum(axis=1), best)
+    for r in np.flatnonzero(degenerate):
+        best[r] = (brute_force_max(g[r:r + 1])[0] if m <= BRUTE_FORCE_MAX_CABLES
+                   else norms[r].sum())
+    return best + extra
+
+
+def brute_force_max(g):
+    """max ||sum_i s_i g_i|| over all 2^m sign vectors s, g (N, 3, m): the exact value by
+    enumeration (degenerate poses; 2^16 vertices take ~10 ms)."""
+    m = g.shape[-1]
+    out = np.zeros(len(g))
+    step = 1 << min(m, 14)
+    for start in range(0, 1 << m, step):
+        codes = np.arange(start, min(start + step, 1 << m))
+        S = 1.0 - 2.0 * ((codes[:, None] >> np.arange(m)) & 1)  # (V, m)
+        out = np.maximum(out, np.linalg.norm(np.einsum("vk,nxk->nvx", S, g), axis=2).max(axis=1))
+    return out
