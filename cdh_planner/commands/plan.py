@@ -15,7 +15,8 @@ or goal), 2 for bad input
 ``--json OUT`` writes the plan JSON contract (README, the plan command): success, reason, message, strategy,
 n, m, charts, time_s, cost, least_margin, least_tension_margin_n, and path: [{p, quaternion,
 tau, lengths, tension_min, tension_nominal, tension_max, margin, t, velocities,
-accelerations}] (m, rad, N, s; cable rates m/s and m/s^2: a JointTrajectoryController's
+accelerations, and with robot.length_error position_error_m, orientation_error_rad}]
+(m, rad, N, s; cable rates m/s and m/s^2: a JointTrajectoryController's
 quintic through these points is the motion that was checked, ``trajectory.executed``).
 """
 
@@ -23,6 +24,8 @@ import json
 import math
 from dataclasses import replace
 
+from ..accuracy import has_accuracy, pose_accuracy
+from ..model.pose import rotation_from_quaternion
 from .outputs import check_output, write_text, writing
 from ..parsing.problem import load_problem
 from ..progress import chart_progress
@@ -74,7 +77,7 @@ def run(args):
     result = plan_with_progress(planner, problem.start, problem.goal, quiet=args.quiet)
     print_result(result, problem)
     if args.json:
-        write_text("--json", args.json, json.dumps(result_dict(result), indent=1))
+        write_text("--json", args.json, json.dumps(result_dict(result, problem.robot), indent=1))
         print(f"JSON: {args.json}")
     if args.plot:
         from ..pictures.plans import plot_plan
@@ -122,8 +125,10 @@ def print_result(result, problem):
                   f"({result.stats['clearance_binding']})")
 
 
-def result_dict(result):
-    """The plan JSON contract (README); non-finite numbers become null."""
+def result_dict(result, robot=None):
+    """The plan JSON contract (README); non-finite numbers become null. With a ``robot``
+    that has ``length_error``, each waypoint also has ``position_error_m`` and
+    ``orientation_error_rad`` (``accuracy.pose_accuracy``: the worst over the winch errors)."""
     out = {"success": result.success, "reason": result.reason, "message": result.message,
            "strategy": result.strategy, "n": result.n, "m": result.variables, "charts": result.charts,
            "time_s": result.time_s, "cost": _num(result.cost),
@@ -145,7 +150,19 @@ def result_dict(result):
                 "tension_max": path.tension_max[k].tolist(), "margin": float(path.margin[k]),
                 "t": float(path.t[k]), "velocities": path.velocities[k].tolist(),
                 "accelerations": path.accelerations[k].tolist()})
+        _add_accuracy(out["path"], robot, path)
     return out
+
+
+def _add_accuracy(rows, robot, path):
+    """Each waypoint row's ``position_error_m`` (m) and ``orientation_error_rad`` (rad), when
+    the robot has ``length_error`` (its winches' error bound)."""
+    if robot is None or not has_accuracy(robot):
+        return
+    acc = pose_accuracy(robot, path.p, R=rotation_from_quaternion(path.quaternion),
+                        tensions=path.tension_nominal)
+    for row, e_p, e_w in zip(rows, acc.position_m.tolist(), acc.orientation_rad.tolist()):
+        row["position_error_m"], row["orientation_error_rad"] = _num(e_p), _num(e_w)
 
 
 def _num(x):

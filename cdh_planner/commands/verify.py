@@ -19,11 +19,16 @@ are linear in the number of poses.
 
     {"robot": name, "robot_file": path, "max_step_m": .., "max_step_rad": ..,
      "poses": [{"position", "quaternion", "tau", "feasible", "margin", "binding",
-                "lengths", "tension_min", "tension_nominal", "tension_max"}],
+                "lengths", "tension_min", "tension_nominal", "tension_max",
+                "position_error_m", "orientation_error_rad"}],
      "segments": [{"from", "to", "feasible", "samples", "unresolved",
                    "worst": {"s", "margin", "binding", "position", "quaternion"},
                    "first_unsafe": null or {same keys}}],
      "all_feasible": bool}
+
+``position_error_m`` (m) and ``orientation_error_rad`` (rad), present when the robot has
+``length_error``: the largest platform error the winches' length errors can cause at the
+pose (``accuracy.pose_accuracy``, exact over the box of errors).
 """
 
 import dataclasses
@@ -32,6 +37,7 @@ import math
 
 import numpy as np
 
+from ..accuracy import has_accuracy, pose_accuracy
 from ..errors import InputError
 from ..cable_feasibility import feasibility_of as evaluate  # 6 cables: the closed form
 from .outputs import check_output, write_text
@@ -86,9 +92,10 @@ def run(args):
                             collision)
     ok = bool(np.all(feas.feasible)) and all(s.feasible for s in segments)
 
-    print_report(robot, poses, feas, segments, ok)
+    acc = pose_accuracy(robot, poses.positions, R=poses.rotations) if has_accuracy(robot) else None
+    print_report(robot, poses, feas, segments, ok, acc)
     if json_out:
-        doc = result_dict(robot, poses, feas, segments, ok, step_m, step_rad)
+        doc = result_dict(robot, poses, feas, segments, ok, step_m, step_rad, acc)
         write_text("--json", json_out, dump_rows(doc))
         print(f"wrote {json_out}")
     return EXIT_OK if ok else EXIT_INFEASIBLE
@@ -100,14 +107,18 @@ def _positive(value, option, text):
     return value
 
 
-def result_dict(robot, poses, feas, segments, ok, step_m, step_rad):
-    """The JSON document (plain Python types; non-finite floats still present)."""
+def result_dict(robot, poses, feas, segments, ok, step_m, step_rad, accuracy=None):
+    """The JSON document (plain Python types; non-finite floats still present);
+    ``accuracy``: the poses' ``accuracy.Accuracy`` (robots with length_error), or None."""
     columns = {"position": poses.positions, "quaternion": poses.quaternions, "tau": poses.tau,
                "feasible": feas.feasible, "margin": feas.margin, "binding": feas.binding,
                "lengths": feas.lengths, "tension_min": feas.tension_min,
                "tension_nominal": feas.tension_nominal, "tension_max": feas.tension_max}
     if hasattr(feas, "tension_status"):  # m > 6: whether the band is controller-usable
         columns["tension_status"] = feas.tension_status
+    if accuracy is not None:
+        columns["position_error_m"] = accuracy.position_m
+        columns["orientation_error_rad"] = accuracy.orientation_rad
     columns = {k: _finite_list(v) for k, v in columns.items()}  # Python types, once
     pose_rows = [{k: v[i] for k, v in columns.items()} for i in range(len(poses))]
     seg_rows = [{
@@ -172,12 +183,17 @@ def finite_or_none(obj):
     return obj
 
 
-def print_report(robot, poses, feas, segments, ok):
+def print_report(robot, poses, feas, segments, ok, accuracy=None):
     """Human-readable tables on stdout (linear in the number of poses: the arrays are
     turned into Python lists once)."""
     print(f"robot {robot.name} ({robot.source}): {len(poses)} poses, {len(segments)} segments")
+    if accuracy is None:
+        print("accuracy: not given (the robot file has no robot.length_error)")
+    else:
+        print(f"accuracy: the largest platform error over winch length errors up to "
+              f"{_vec(1e3 * robot.length_error, '.3g')} mm")
     print()
-    rows = _PoseRows(robot, poses, feas)
+    rows = _PoseRows(robot, poses, feas, accuracy)
     lines = []
     for i in range(len(poses)):
         lines.extend(rows.lines(i))
@@ -198,8 +214,10 @@ def print_report(robot, poses, feas, segments, ok):
 class _PoseRows:
     """The report lines of each pose, from Python lists made once."""
 
-    def __init__(self, robot, poses, feas):
+    def __init__(self, robot, poses, feas, accuracy=None):
         self.feasible, self.margin = feas.feasible.tolist(), feas.margin.tolist()
+        self.accuracy = None if accuracy is None else (accuracy.position_m.tolist(),
+                                                       accuracy.orientation_rad.tolist())
         self.binding = [str(b) for b in feas.binding]
         self.p, self.q, self.tau = (a.tolist() for a in (poses.positions, poses.quaternions, poses.tau))
         self.lengths, self.f_min = feas.lengths.tolist(), feas.tension_min.tolist()
@@ -213,12 +231,22 @@ class _PoseRows:
         out = [f"pose {i}: {state}, margin {_num(self.margin[i], '+.4f')}, binding {self.binding[i]}",
                f"  position {_vec(self.p[i], '.4f')} m, quaternion {_vec(self.q[i], '.4f')}, "
                f"tau {_vec(self.tau[i], '.4f')} rad",
+               *self.accuracy_line(i),
                f"  {'cable':<10} {'length m':>9} {'f_min N':>9} {'f_nom N':>9} {'f_max N':>9}   limits"]
         for c, (name, lim) in enumerate(self.cables):
             out.append(f"  {name:<10} {self.lengths[i][c]:9.4f} {_num(self.f_min[i][c], '9.4f')} "
                        f"{_num(self.f_nom[i][c], '9.4f')} {_num(self.f_max[i][c], '9.4f')}   {lim}")
         out.append("")
         return out
+
+
+    def accuracy_line(self, i):
+        """The pose's accuracy line (none without length_error)."""
+        if self.accuracy is None:
+            return []
+        e_p, e_w = self.accuracy[0][i], self.accuracy[1][i]
+        return [f"  accuracy: position error {_num(1e3 * e_p, '.4g')} mm, orientation error "
+                f"{_num(1e3 * e_w, '.4g')} mrad"]
 
 
 def _print_segment(s):
