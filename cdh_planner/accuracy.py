@@ -167,14 +167,15 @@ class AccuracyLimits:
         return None
 
 
-def accuracy_limits(robot, position_m, orientation_rad):
+def accuracy_limits(robot, position_m, orientation_rad,
+                    names=("planner.accuracy_position_m", "planner.accuracy_orientation_rad")):
     """The AccuracyLimits of the planner settings (m, rad; 0: off), None when both are off;
-    InputError naming the setting when the robot has no ``length_error``."""
+    InputError naming the setting (``names``: of the position and orientation limits) when
+    the robot has no ``length_error``."""
     if not (position_m > 0 or orientation_rad > 0):
         return None
     if not has_accuracy(robot):
-        name, value = (("planner.accuracy_position_m", position_m) if position_m > 0
-                       else ("planner.accuracy_orientation_rad", orientation_rad))
+        name, value = ((names[0], position_m) if position_m > 0 else (names[1], orientation_rad))
         raise InputError(name, value, "needs robot.length_error (the winches' length error "
                                       "bound, m) in the robot file")
     return AccuracyLimits(float(position_m), float(orientation_rad))

@@ -29,10 +29,11 @@ from dataclasses import dataclass
 from pathlib import Path
 from typing import Optional
 
+from ..accuracy import accuracy_limits
 from ..errors import InputError, check_text
 from ..cable_feasibility import feasibility_of as evaluate  # 6 cables: the closed form
 from .outputs import check_output, writing
-from ..pictures.slices import FEASIBLE, Marker, SegmentOverlay, SliceGrid, SliceView, \
+from ..pictures.slices import FEASIBLE, INACCURATE, Marker, SegmentOverlay, SliceGrid, SliceView, \
     compute_slice, plot_slice
 from ..parsing.poses import parse_angle, parse_length
 from ..model.pose import rotation_tt
@@ -88,6 +89,11 @@ def add_parser(subparsers):
                    help="scene file (YAML, scene: obstacles; cdh_planner/scene/schema.py): "
                         "poses in collision are drawn dark grey, and the segment is checked "
                         "against it too")
+    p.add_argument("--accuracy-position", metavar="M",
+                   help="colour wrench-feasible poses apart (purple) whose position error over the "
+                        "winches' length errors (robot.length_error) exceeds M (m or mm)")
+    p.add_argument("--accuracy-orientation", metavar="A",
+                   help="likewise for the orientation error, A (rad or deg)")
     p.add_argument("--resolution", type=int, default=400, metavar="N", help="N x N grid (default 400)")
     p.add_argument("--size", default="1000x800", metavar="WxH", help="picture size in pixels")
     p.add_argument("--title", help="picture title (default: robot and slice)")
@@ -116,10 +122,11 @@ def run(args):
     segment = (start, goal) if args.segment else None
 
     collision = _collision(robot, args.scene)
+    accuracy = _accuracy(robot, args)
     with writing("--output", out):
         result = render_slice(robot, view, out, resolution=resolution, size=size,
                               title=args.title or _title(robot, view), markers=markers,
-                              segment=segment, collision=collision)
+                              segment=segment, collision=collision, accuracy=accuracy)
     if result.segment is not None:
         _print_segment(result.segment, args.start_label, args.goal_label)
     _report(robot, view, result.grid, result.elapsed, markers, out, size)
@@ -137,12 +144,13 @@ class SliceResult:
 
 
 def render_slice(robot, view, out, resolution=400, size=(1000, 800), title=None,
-                 markers=(), segment=None, collision=None):
+                 markers=(), segment=None, collision=None, accuracy=None):
     """Classify the view's grid, check the straight segment ``(start, goal)`` (picture
     coordinates) densely when given, and draw the PNG ``out``; ``collision``: a scene's
-    CollisionModel (poses in collision coloured apart). Prints nothing."""
+    CollisionModel (poses in collision coloured apart); ``accuracy``: AccuracyLimits
+    (feasible poses beyond them coloured apart). Prints nothing."""
     t0 = time.perf_counter()
-    grid = compute_slice(robot, view, resolution, collision)
+    grid = compute_slice(robot, view, resolution, collision, accuracy)
     elapsed = time.perf_counter() - t0
     check, overlay = None, None
     if segment is not None:
@@ -155,6 +163,25 @@ def render_slice(robot, view, out, resolution=400, size=(1000, 800), title=None,
     plot_slice(grid, out, size=size, title=title or _title(robot, view), markers=markers,
                segment=overlay)
     return SliceResult(grid=grid, elapsed=elapsed, segment=check)
+
+
+def _accuracy(robot, args):
+    """The AccuracyLimits of --accuracy-position / --accuracy-orientation, or None;
+    InputError naming the option for a bad value or a robot without length_error."""
+    position = (0.0 if args.accuracy_position is None
+                else _positive_limit("--accuracy-position", parse_length(
+                    args.accuracy_position, "--accuracy-position")))
+    orientation = (0.0 if args.accuracy_orientation is None
+                   else _positive_limit("--accuracy-orientation", parse_angle(
+                       args.accuracy_orientation, "--accuracy-orientation")))
+    return accuracy_limits(robot, position, orientation,
+                           names=("--accuracy-position", "--accuracy-orientation"))
+
+
+def _positive_limit(option, value):
+    if not value > 0:
+        raise InputError(option, value, "must be positive")
+    return value
 
 
 def _collision(robot, scene_file):
@@ -356,6 +383,9 @@ def _report(robot, view, grid, elapsed, markers, out, size):
     share = (grid.classes == FEASIBLE).sum() / n
     print(f"{robot.name}: {grid.classes.shape[1]} x {grid.classes.shape[0]} grid over "
           f"{view.axes[0]} x {view.axes[1]} classified in {elapsed:.2f} s; {100 * share:.1f} % feasible")
+    if grid.accuracy is not None:
+        print(f"  {100 * (grid.classes == INACCURATE).sum() / n:.1f} % wrench-feasible but "
+              f"outside the accuracy limit (purple)")
     if markers:
         coords = view.coords([m.a for m in markers], [m.b for m in markers])
         p, tau = view.task.pose(coords)

@@ -8,7 +8,10 @@ feasibility test:
 - orange: some cable length out of range (this rule wins when a tension is also out of
   range: the geometry alone already excludes the pose);
 - blue: lengths in range but some tension bound violated (including singular J, where
-  the tension envelope is unbounded).
+  the tension envelope is unbounded);
+- purple, with accuracy limits (``accuracy.AccuracyLimits``): wrench-feasible but the
+  winches' length errors can move the platform beyond a limit (outside what a plan with
+  those settings may use).
 
 Red curves are det J = 0 (the zero contour of det J over the grid, computed with no
 constraint on lengths or tensions, as in the paper). Axes are in radians for angles and
@@ -33,11 +36,13 @@ from ..cable_feasibility import feasibility_of as evaluate  # noqa: E402  (6 cab
 from ..model.pose import rotation_tt  # noqa: E402
 from ..model.task import COORDINATES  # noqa: E402
 
-FEASIBLE, LENGTH_OUT, TENSION_OUT, COLLISION = 0, 1, 2, 3
-CLASS_COLORS = ("#4daf4a", "#ff8c1a", "#3778bf", "#4d4d4d")  # green, orange, blue, dark grey
+FEASIBLE, LENGTH_OUT, TENSION_OUT, COLLISION, INACCURATE = 0, 1, 2, 3, 4
+# green, orange, blue, dark grey, purple
+CLASS_COLORS = ("#4daf4a", "#ff8c1a", "#3778bf", "#4d4d4d", "#b05cc6")
 CLASS_LABELS = ("wrench-feasible (C)", "a cable length out of range (whatever the tensions)",
                 "a tension out of range (lengths in range)",
-                "in collision (closer than the scene's clearance, whatever the wrench)")
+                "in collision (closer than the scene's clearance, whatever the wrench)",
+                "wrench-feasible, outside the accuracy limit (winch length errors)")
 SINGULAR_COLOR = "#e41a1c"
 SEGMENT_COLOR = "black"
 CHUNK = 20_000  # poses per feasibility call (bounds memory)
@@ -71,7 +76,8 @@ class SliceView:
 class SliceGrid:
     """Cell centres ``xs`` (nx,), ``ys`` (ny,); per cell (ny, nx): ``classes``
     (FEASIBLE, LENGTH_OUT, TENSION_OUT, COLLISION), ``margin`` (normalised, -inf singular),
-    ``det_j``; ``scene``: whether collisions were checked."""
+    ``det_j``; ``scene``: whether collisions were checked; ``accuracy``: the
+    AccuracyLimits checked (INACCURATE cells), or None."""
 
     view: SliceView
     xs: np.ndarray
@@ -80,6 +86,7 @@ class SliceGrid:
     margin: np.ndarray
     det_j: np.ndarray
     scene: bool = False
+    accuracy: object = None
 
 
 def classify(feas):
@@ -88,10 +95,11 @@ def classify(feas):
     return np.where(feas.feasible, FEASIBLE, np.where(length_out, LENGTH_OUT, TENSION_OUT))
 
 
-def compute_slice(robot, view, resolution=400, collision=None):
+def compute_slice(robot, view, resolution=400, collision=None, accuracy=None):
     """Classify a resolution x resolution grid of cell centres over the view's ranges;
     with ``collision`` (a scene's CollisionModel) a pose closer than the scene's clearance
-    is COLLISION, whatever its wrench feasibility."""
+    is COLLISION, whatever its wrench feasibility; with ``accuracy``
+    (``accuracy.AccuracyLimits``) a feasible pose beyond a limit is INACCURATE."""
     (x0, x1), (y0, y1) = view.ranges
     xs = _cell_centres(x0, x1, resolution)
     ys = _cell_centres(y0, y1, resolution)
@@ -104,13 +112,25 @@ def compute_slice(robot, view, resolution=400, collision=None):
         f = evaluate(robot, p[a:a + CHUNK], R=rotation_tt(tau[a:a + CHUNK]))
         classes[a:a + CHUNK] = classify(f)
         margin[a:a + CHUNK], det[a:a + CHUNK] = f.margin, f.det_j
+        if accuracy is not None:
+            _mark_inaccurate(classes[a:a + CHUNK], accuracy, robot, p[a:a + CHUNK],
+                             rotation_tt(tau[a:a + CHUNK]))
         if collision is not None:
             hit = collision.margins(p[a:a + CHUNK], rotation_tt(tau[a:a + CHUNK]))[0] < 0
             classes[a:a + CHUNK][hit] = COLLISION
     shape = A.shape
     return SliceGrid(view=view, xs=xs, ys=ys, classes=classes.reshape(shape),
                      margin=margin.reshape(shape), det_j=det.reshape(shape),
-                     scene=collision is not None)
+                     scene=collision is not None, accuracy=accuracy)
+
+
+def _mark_inaccurate(classes, accuracy, robot, p, R):
+    """Set the FEASIBLE entries of ``classes`` (in place) whose poses (p, R) are beyond the
+    AccuracyLimits ``accuracy`` to INACCURATE."""
+    ok = classes == FEASIBLE
+    if ok.any():
+        beyond = accuracy.margins(robot, p[ok], R[ok])[0] < 0
+        classes[np.flatnonzero(ok)[beyond]] = INACCURATE
 
 
 def _cell_centres(lo, hi, n):
@@ -154,9 +174,9 @@ def plot_slice(grid, path, size=(1000, 800), title=None, markers=(), segment=Non
         ax.set_ylim(y0, y1)
         if title:
             ax.set_title(title)
-        shown = len(CLASS_COLORS) if grid.scene else COLLISION   # collision: with a scene
-        handles = [Patch(color=c, label=l) for c, l in zip(CLASS_COLORS[:shown],
-                                                            CLASS_LABELS[:shown])]
+        shown = [FEASIBLE, LENGTH_OUT, TENSION_OUT] + [COLLISION] * grid.scene + (
+            [INACCURATE] if grid.accuracy is not None else [])
+        handles = [Patch(color=CLASS_COLORS[k], label=_class_label(k, grid)) for k in shown]
         if has_singular:
             handles.append(Line2D([], [], color=SINGULAR_COLOR, lw=1.5, label=r"$\det J = 0$"))
         if segment is not None:
@@ -169,6 +189,16 @@ def plot_slice(grid, path, size=(1000, 800), title=None, markers=(), segment=Non
         fig.savefig(path, dpi=DPI, format="png")
     finally:
         plt.close(fig)
+
+
+def _class_label(k, grid):
+    """The legend's label of class k (INACCURATE names the limits)."""
+    if k != INACCURATE:
+        return CLASS_LABELS[k]
+    a = grid.accuracy
+    limits = [f"{1e3 * a.position_m:g} mm"] * (a.position_m > 0) + [
+        f"{1e3 * a.orientation_rad:g} mrad"] * (a.orientation_rad > 0)
+    return f"wrench-feasible, error over {' / '.join(limits)} (winch length errors)"
 
 
 def _draw_classes(ax, grid):

@@ -8,7 +8,9 @@ an answer (on ~/plan_result), not a fault of the node: it shows in the values on
 Values (strings): state (lifecycle), activity (idle, planning, executing), queued (plan
 calls waiting), last_plan (its message, or "none"), last_plan_ok, last_plan_age_s (s),
 recording (the run file, "off" or "failed"), joint_states_age_s (s since the last
-JointState, or "none"). No rclpy: the node fills ``Health`` and publishes the message.
+JointState, or "none"), position_error_m (m) and orientation_error_rad (rad): the accuracy
+of the last measured pose over the winches' length errors (``accuracy.pose_accuracy``;
+"none" before a pose, "not given" without robot.length_error). No rclpy: the node fills ``Health`` and publishes the message.
 """
 
 from dataclasses import dataclass
@@ -36,6 +38,10 @@ class Health:
     # the largest cable length error (m) of the last forward kinematics: rounding with six
     # cables; with more, how far the measured lengths are from any one pose (least squares)
     forward_kinematics_residual_m: float = None
+    # the last measured pose's accuracy (m, rad); None: no pose yet; accuracy_given False:
+    # the robot has no length_error
+    accuracy: tuple = None
+    accuracy_given: bool = False
 
 
 def _level_and_message(h):
@@ -53,6 +59,15 @@ def _age(seconds):
     return "none" if seconds is None else f"{seconds:.3f}"
 
 
+def _accuracy_values(h):
+    """position_error_m and orientation_error_rad of Health ``h`` as strings."""
+    if not h.accuracy_given:
+        return {"position_error_m": "not given", "orientation_error_rad": "not given"}
+    if h.accuracy is None:
+        return {"position_error_m": "none", "orientation_error_rad": "none"}
+    return {"position_error_m": f"{h.accuracy[0]:.4g}", "orientation_error_rad": f"{h.accuracy[1]:.4g}"}
+
+
 def health_status(h, name, hardware_id=""):
     """diagnostic_msgs/DiagnosticStatus of Health ``h``."""
     level, message = _level_and_message(h)
@@ -61,7 +76,8 @@ def health_status(h, name, hardware_id=""):
               "last_plan_age_s": _age(h.last_plan_age_s), "recording": h.recording,
               "joint_states_age_s": _age(h.joint_states_age_s),
               "forward_kinematics_residual_m": "none" if h.forward_kinematics_residual_m is None
-              else f"{h.forward_kinematics_residual_m:.3g}"}
+              else f"{h.forward_kinematics_residual_m:.3g}",
+              **_accuracy_values(h)}
     return DiagnosticStatus(level=level, name=name, message=message, hardware_id=hardware_id,
                             values=[KeyValue(key=k, value=v) for k, v in values.items()])
 

@@ -6,6 +6,7 @@ import time
 
 from diagnostic_msgs.msg import DiagnosticArray, DiagnosticStatus
 
+from ..accuracy import has_accuracy
 from .diagnostics import PERIOD_S, TOPIC, Health, diagnostic_array
 
 
@@ -42,4 +43,6 @@ class NodeDiagnostics:
                       recording=node.runlog.state,
                       joint_states_age_s=now - latest[1] if latest else None,
                       joint_states_max_age_s=node.config.values["execution.joint_states_max_age_s"],
-                      forward_kinematics_residual_m=execution.forward_kinematics_residual_m)
+                      forward_kinematics_residual_m=execution.forward_kinematics_residual_m,
+                      accuracy=execution.pose_accuracy(node.config.robot),
+                      accuracy_given=has_accuracy(node.config.robot))

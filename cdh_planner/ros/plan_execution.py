@@ -30,6 +30,7 @@ from dataclasses import dataclass
 
 import numpy as np
 
+from ..accuracy import has_accuracy, pose_accuracy
 from ..errors import InputError, exception_line
 from ..model.kinematics import cable_lengths
 from ..model.pose import rotation_from_quaternion
@@ -310,6 +311,16 @@ class PlanExecution:
         # m > 6: least squares; the residual (m) tells how consistent the lengths are
         self.forward_kinematics_residual_m = float(np.max(np.abs(cable_lengths(robot, p, R) - lengths)))
         return p, R
+
+    def pose_accuracy(self, robot):
+        """(position error m, orientation error rad) of the last forward kinematics' pose
+        (``accuracy.pose_accuracy``: the worst over the winches' length errors), None
+        before any pose or without robot.length_error."""
+        if self._last_pose is None or not has_accuracy(robot):
+            return None
+        p, R = self._last_pose
+        acc = pose_accuracy(robot, p[None], R=R[None])
+        return float(acc.position_m[0]), float(acc.orientation_rad[0])
 
     def _known_poses(self, plan):
         """Platform poses (p, R): the last forward kinematics and the ends of ``plan``."""
