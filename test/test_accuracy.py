@@ -30,6 +30,7 @@ from cdh_planner.planner import Planner
 from cdh_planner.ros.diagnostics import Health, health_status
 from cdh_planner.settings import PlannerSettings
 from cdh_planner.status import Status
+from cdh_planner.trajectory.path_check import check_path
 
 ROBOTS = ("robot1", "robot2", "robot2_8", "cogiro")
 
@@ -116,6 +117,18 @@ def test_degenerate_columns_are_exact_or_bounded_above():
     got = box_max_norm(M, e)
     np.testing.assert_allclose(got, want, rtol=1e-12, atol=1e-300)
     assert np.all(got >= want * (1 - 1e-15))
+
+
+def test_seventeen_cables_exact_or_the_bound_where_degenerate():
+    """Above BRUTE_FORCE_MAX_CABLES a degenerate map gets the upper bound (never below the
+    exact value); a generic one is still exact."""
+    rng = np.random.default_rng(17)
+    M = rng.normal(size=(2, 3, 17))
+    M[1, :, 3] = 3.0 * M[1, :, 2]  # parallel columns: degenerate
+    e = np.full(17, 1e-4)
+    want, got = brute_force(M, e), box_max_norm(M, e)
+    np.testing.assert_allclose(got[0], want[0], rtol=1e-12)
+    assert got[1] >= want[1] and got[1] == pytest.approx(bound(M[1:], e)[0], rel=1e-12)
 
 
 def test_singular_pose_is_infinitely_inaccurate():
@@ -245,6 +258,24 @@ def test_plan_keeps_the_position_limit_at_every_dense_sample():
     np.testing.assert_allclose(errors, pose_accuracy(
         robot, res.path.p, R=rotation_from_quaternion(res.path.quaternion)).position_m, rtol=1e-12)
     assert all("orientation_error_rad" in w for w in doc["path"])
+
+
+def test_dense_motion_check_keeps_the_limit():
+    """A wrench-feasible motion over the hump at alpha2 = 1.2 peaks at 0.244 mm: invalid
+    under a 0.23 mm limit, its first unsafe point bound by accuracy_position; 0.1 rad higher
+    it peaks at 0.208 mm and is valid."""
+    from cdh_planner.pipeline.validity import Validity
+    robot = load_robot(CONFIG / "robot2.yaml")
+    free = Validity(robot, SPHERE, 1e-3)
+    limited = Validity(robot, SPHERE, 1e-3, accuracy=(0.23e-3, 0.0))
+    low, high = np.array([[0.6, 1.2], [2.6, 1.2]]), np.array([[0.6, 1.3], [2.6, 1.3]])
+    assert free.motion(*low) and limited.pose(low).all()
+    assert not limited.motion(*low) and limited.motion(*high)
+    seg = check_path(robot, limited.direct_motion(low), feasibility=limited.feasibility)[0]
+    assert not seg.feasible and seg.first_unsafe.binding == "accuracy_position"
+    err = pose_accuracy(robot, seg.first_unsafe.position[None],
+                        R=rotation_from_quaternion(seg.first_unsafe.quaternion)[None]).position_m[0]
+    assert err == pytest.approx(0.23e-3 * (1 - seg.first_unsafe.margin), rel=1e-9)
 
 
 def test_tight_limit_is_no_path_with_the_reason():
