@@ -41,7 +41,7 @@ import numpy as np
 
 from .cable_feasibility import nominal_tensions
 from .errors import InputError
-from .feasibility import cable_vectors
+from .feasibility import cable_vectors, screw_jacobian
 from .model import elastic
 from .model.pose import rotation_tt
 
@@ -74,8 +74,9 @@ def structure_matrix(robot, p, R):
     d = cable_vectors(robot, p, R)
     L = np.linalg.norm(d, axis=-1)
     u = d / np.where(L > 0, L, 1.0)[..., None]
-    r = np.einsum("nij,kj->nki", R, robot.platform_anchors)
-    A = np.concatenate([np.swapaxes(u, -1, -2), np.swapaxes(np.cross(r, u), -1, -2)], axis=-2)
+    A = screw_jacobian(robot, u)  # [u_i; a_i x u_i]: moments about the base origin
+    # about the platform origin: R b_i = a_i + L_i u_i - p, so (R b_i) x u_i = (a_i - p) x u_i
+    A[..., 3:, :] -= np.swapaxes(np.cross(p[:, None, :], u), -1, -2)
     return A, L
 
 
