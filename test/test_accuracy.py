@@ -17,7 +17,7 @@ from cdh_planner import cli
 from cdh_planner.accuracy import (AccuracyLimits, bound, box_max_norm, error_map,
                                   pose_accuracy)
 from cdh_planner.cable_feasibility import nominal_tensions, planning_feasibility
-from cdh_planner.commands.plan import result_dict
+from cdh_planner.commands.plan import plan_document
 from cdh_planner.errors import InputError
 from cdh_planner.feasibility import load_point, nominal_wrench, screw_jacobian
 from cdh_planner.model import elastic
@@ -252,7 +252,7 @@ def test_plan_keeps_the_position_limit_at_every_dense_sample():
     assert res.success, res.message
     acc = _dense_accuracy(robot, res.path)
     assert acc.position_m.max() <= limit
-    doc = result_dict(res, robot)  # the plan JSON carries it per waypoint
+    doc = plan_document(res, robot)  # the plan JSON carries it per waypoint
     errors = np.array([w["position_error_m"] for w in doc["path"]])
     assert errors.max() <= limit and len(errors) == len(res.path)
     np.testing.assert_allclose(errors, pose_accuracy(
@@ -292,7 +292,7 @@ def test_limits_off_without_length_error_and_refused_when_set():
     with pytest.raises(InputError, match=r"planner\.accuracy_position_m.*robot\.length_error") as e:
         Planner(robot, SPHERE, PlannerSettings(accuracy_position_m=1e-3))
     assert "\n" not in str(e.value)
-    assert result_dict(_plan_result_stub(), robot)["path"] == []
+    assert plan_document(_plan_result_stub(), robot)["path"] == []
 
 
 def _plan_result_stub():

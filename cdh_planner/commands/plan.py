@@ -77,7 +77,7 @@ def run(args):
     result = plan_with_progress(planner, problem.start, problem.goal, quiet=args.quiet)
     print_result(result, problem)
     if args.json:
-        write_text("--json", args.json, json.dumps(result_dict(result, problem.robot), indent=1))
+        write_text("--json", args.json, json.dumps(plan_document(result, problem.robot), indent=1))
         print(f"JSON: {args.json}")
     if args.plot:
         from ..pictures.plans import plot_plan
@@ -125,10 +125,23 @@ def print_result(result, problem):
                   f"({result.stats['clearance_binding']})")
 
 
-def result_dict(result, robot=None):
-    """The plan JSON contract (README); non-finite numbers become null. With a ``robot``
-    that has ``length_error``, each waypoint also has ``position_error_m`` and
-    ``orientation_error_rad`` (``accuracy.pose_accuracy``: the worst over the winch errors)."""
+def plan_document(result, robot):
+    """The plan JSON (``result_dict``) with, for a ``robot`` that has ``length_error``, each
+    waypoint's ``position_error_m`` (m) and ``orientation_error_rad`` (rad): the worst
+    platform error over the winches' length errors (``accuracy.pose_accuracy``)."""
+    doc = result_dict(result)
+    path = result.path
+    if path is None or not has_accuracy(robot):
+        return doc
+    acc = pose_accuracy(robot, path.p, R=rotation_from_quaternion(path.quaternion),
+                        tensions=path.tension_nominal)
+    for row, e_p, e_w in zip(doc["path"], acc.position_m.tolist(), acc.orientation_rad.tolist()):
+        row["position_error_m"], row["orientation_error_rad"] = _num(e_p), _num(e_w)
+    return doc
+
+
+def result_dict(result):
+    """The plan JSON contract (README); non-finite numbers become null."""
     out = {"success": result.success, "reason": result.reason, "message": result.message,
            "strategy": result.strategy, "n": result.n, "m": result.variables, "charts": result.charts,
            "time_s": result.time_s, "cost": _num(result.cost),
@@ -150,19 +163,7 @@ def result_dict(result, robot=None):
                 "tension_max": path.tension_max[k].tolist(), "margin": float(path.margin[k]),
                 "t": float(path.t[k]), "velocities": path.velocities[k].tolist(),
                 "accelerations": path.accelerations[k].tolist()})
-        _add_accuracy(out["path"], robot, path)
     return out
-
-
-def _add_accuracy(rows, robot, path):
-    """Each waypoint row's ``position_error_m`` (m) and ``orientation_error_rad`` (rad), when
-    the robot has ``length_error`` (its winches' error bound)."""
-    if robot is None or not has_accuracy(robot):
-        return
-    acc = pose_accuracy(robot, path.p, R=rotation_from_quaternion(path.quaternion),
-                        tensions=path.tension_nominal)
-    for row, e_p, e_w in zip(rows, acc.position_m.tolist(), acc.orientation_rad.tolist()):
-        row["position_error_m"], row["orientation_error_rad"] = _num(e_p), _num(e_w)
 
 
 def _num(x):
