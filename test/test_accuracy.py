@@ -243,21 +243,25 @@ def _dense_accuracy(robot, path, per_segment=40):
     return pose_accuracy(robot, np.concatenate(ps), R=np.concatenate(Rs))
 
 
-def test_plan_keeps_the_position_limit_at_every_dense_sample():
-    limit = 0.24e-3  # m; the shortest path passes 0.27 mm (README)
+@pytest.mark.parametrize("setting,limit,field", [
+    ("accuracy_position_m", 0.24e-3, "position"),        # the shortest path: 0.27 mm (README)
+    ("accuracy_orientation_rad", 4.4e-3, "orientation"),  # the shortest path: 4.5 mrad
+])
+def test_plan_keeps_the_limit_at_every_dense_sample(setting, limit, field):
+    attr, key = {"position": ("position_m", "position_error_m"),
+                 "orientation": ("orientation_rad", "orientation_error_rad")}[field]
     robot, free = _plan(PlannerSettings())
     assert free.success
-    assert _dense_accuracy(robot, free.path).position_m.max() > limit  # the limit binds
-    robot, res = _plan(PlannerSettings(accuracy_position_m=limit))
+    assert getattr(_dense_accuracy(robot, free.path), attr).max() > limit  # the limit binds
+    robot, res = _plan(PlannerSettings(**{setting: limit}))
     assert res.success, res.message
-    acc = _dense_accuracy(robot, res.path)
-    assert acc.position_m.max() <= limit
+    assert getattr(_dense_accuracy(robot, res.path), attr).max() <= limit
     doc = plan_document(res, robot)  # the plan JSON carries it per waypoint
-    errors = np.array([w["position_error_m"] for w in doc["path"]])
+    errors = np.array([w[key] for w in doc["path"]])
     assert errors.max() <= limit and len(errors) == len(res.path)
-    np.testing.assert_allclose(errors, pose_accuracy(
-        robot, res.path.p, R=rotation_from_quaternion(res.path.quaternion)).position_m, rtol=1e-12)
-    assert all("orientation_error_rad" in w for w in doc["path"])
+    np.testing.assert_allclose(errors, getattr(pose_accuracy(
+        robot, res.path.p, R=rotation_from_quaternion(res.path.quaternion)), attr), rtol=1e-12)
+    assert all("position_error_m" in w and "orientation_error_rad" in w for w in doc["path"])
 
 
 def test_dense_motion_check_keeps_the_limit():
