@@ -27,4 +27,9 @@ run python benchmarks/dynamics.py --picture docs/robot2_dynamics.png
 run python benchmarks/clearance.py --picture docs/clearance.png
 run cdh-planner slice config/cogiro.yaml --fixed z=2.5 phi=0 theta=0 sigma=0 --free x y \
     --range x=-7.5:7.5 y=-5.5:5.5 --resolution 300 -o docs/cogiro_slice.png
+# accuracy from the winches (accuracy.md)
+run cdh-planner slice config/robot2.yaml --sphere 0,0,0.306,0.13 --range alpha1=0:pi alpha2=0.6:pi/2 \
+    --start 0.6 1.0 --goal 2.6 1.0 --start-label q_a --goal-label q_b --accuracy-position 0.24mm \
+    --title "Robot 2, sphere task: e = 0.1 mm per winch, position error over 0.24 mm in purple" \
+    -o docs/robot2_accuracy.png
 echo "pictures: $(ls docs/*.png | wc -l) in docs/"
