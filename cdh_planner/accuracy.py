@@ -108,7 +108,8 @@ def error_map(robot, p, R, tensions=None):
     else:
         k = cable_stiffness_matrix(robot, p, R, L, tensions)
         bad |= ~np.all(np.isfinite(k) & (k > 0), axis=1)
-        AK = np.where(bad[:, None, None], np.eye(6, m), A * np.where(bad[:, None], 1.0, k)[:, None, :])
+        k = np.where(bad[:, None], 1.0, k)
+        AK = np.where(bad[:, None, None], np.eye(6, m), A * k[:, None, :])  # singular: I
         At = np.where(bad[:, None, None], np.eye(m, 6), np.swapaxes(A, -1, -2))
         G = np.linalg.solve(AK @ At, AK)
     G[bad] = np.nan

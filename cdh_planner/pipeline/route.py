@@ -52,8 +52,9 @@ class Route:
 
     def blocked(self, cost):
         """``cost`` between points of M, inf when either is in collision or outside the
-        accuracy limits (``Validity.clear``): chart transitions into collision cost inf (the paper's Sec. 6), so A* never takes them and GBF tries
-        them last; the search's lazy link check cuts any that are still used."""
+        accuracy limits (``Validity.clear``): chart transitions into collision cost inf (the
+        paper's Sec. 6), so A* never takes them and GBF tries them last; the search's lazy
+        link check cuts any that are still used."""
         if not self.validity.blocks:
             return cost
         return lambda xa, xb: cost(xa, xb) if self._clear(xa) and self._clear(xb) else math.inf

@@ -11,9 +11,9 @@ the graph of the closed-form lift over the feasible poses of the task, so moving
 checking the pose keeps every point on M.
 """
 
-import numpy as np
-
 import dataclasses
+
+import numpy as np
 
 from ..accuracy import accuracy_limits
 from ..cable_feasibility import planning_feasibility as evaluate  # m > 6: the rule's band
