@@ -131,16 +131,18 @@ def _shape_geom(parent, shape, name, assets, **attrs):
 def _camera(robot):
     """pos (3,) and xyaxes (6,) of a camera that sees every base anchor, upright."""
     A = np.asarray(robot.base_anchors, dtype=float)
-    centre = A.mean(axis=0)
+    p, _ = home_pose(robot)
+    points = np.vstack([A, p + np.asarray(robot.platform_anchors, dtype=float)])
+    centre = 0.5 * (points.min(axis=0) + points.max(axis=0))
     up = -gravity(robot) / max(np.linalg.norm(gravity(robot)), 1e-300)
-    radius = max(float(np.max(np.linalg.norm(A - centre, axis=1))), platform_radius(robot))
+    radius = max(float(np.max(np.linalg.norm(points - centre, axis=1))), platform_radius(robot))
     side = np.cross(up, [1.0, 0.0, 0.0])
     if np.linalg.norm(side) < 0.5:
         side = np.cross(up, [0.0, 1.0, 0.0])
     side /= np.linalg.norm(side)
     view = side - 0.35 * up                       # looking slightly down
     view /= np.linalg.norm(view)
-    pos = centre - view * radius / math.tan(math.radians(22.5)) * 1.25
+    pos = centre - view * radius / math.tan(math.radians(22.5)) * 1.05
     z = -view                                     # a camera looks along its -z
     y = up - np.dot(up, z) * z
     y /= np.linalg.norm(y)
@@ -158,10 +160,13 @@ def mjcf(robot, scene=None):
                   gravity=_num(gravity(robot)))
     vis = ET.SubElement(root, "visual")
     ET.SubElement(vis, "global", offwidth="960", offheight="720")
+    ET.SubElement(vis, "headlight", ambient="0.5 0.5 0.5", diffuse="0.6 0.6 0.6")
     scale = max(float(np.max(np.abs(robot.base_anchors))), 0.05)
     ET.SubElement(vis, "map", znear="0.01", zfar="50")
     ET.SubElement(vis, "scale", framelength=_num([0.2]), framewidth=_num([0.02]))
     assets = ET.SubElement(root, "asset")
+    ET.SubElement(assets, "texture", type="skybox", builtin="gradient", rgb1="0.95 0.95 0.97",
+                  rgb2="0.75 0.78 0.82", width="64", height="64")
     world = ET.SubElement(root, "worldbody")
     up = -gravity(robot) / max(np.linalg.norm(gravity(robot)), 1e-300)
     ET.SubElement(world, "light", name="top", directional="true", dir=_num(-up),
