@@ -45,6 +45,7 @@ def ros(tmp_path_factory):
     with claimed_domain() as domain:
         double = ControllerDouble(domain, *ROBOT.winch_names, "--action", ACTION,
                                   "--joint-states", JOINT_STATES, "--time-scale", TIME_SCALE,
+                                  "--robot", ROBOT2,   # the simulated robot (MuJoCo)
                                   "--initial", *map(repr, _lengths(Q1).tolist()))
         node = NodeProcess(domain, tmp_path_factory.mktemp("execution"), params=params)
         try:
@@ -157,3 +158,35 @@ def test_call_from_where_the_winches_stopped_to_the_goal_and_execute(ros):
         assert line in r.stdout, r.stdout
     assert ros.spin_until(lambda: np.allclose(_measured(ros), _lengths(Q3), rtol=0, atol=1e-6),
                           10.0), (_measured(ros), _lengths(Q3))
+
+
+def test_the_simulated_robot_measures_the_tensions_and_the_run_file_records_them(ros):
+    """The double is the simulated robot (MuJoCo): /joint_states carries each cable's
+    measured tension in effort; at rest at q2 they balance the platform's weight (the sum
+    of the tension vectors = the load, within the cables' stretch), and the node's run file
+    records them (~/cable_state with effort)."""
+    answer = ros.plan_path(plan_path_goal(None, sphere_pose_msg(Q2), use_current_start=True),
+                           timeout_s=60)
+    assert answer.success, answer.result.error_msg
+    _, status = _execute_to_the_end(ros, answer.result)
+    assert M.status_values(status)["outcome"] == "completed"
+    msg = ros.measured.messages[-1]
+    effort = np.array([msg.effort[list(msg.name).index(n)] for n in ROBOT.winch_names])
+    assert effort.shape == (6,) and np.all(effort > 0), msg
+    # statics at q2 from the measured lengths: J(x) t = w0 to the cables' compliance
+    from cdh_planner.feasibility import cable_vectors, load_point, nominal_wrench, screw_jacobian
+    q2 = sphere_pose_msg(Q2).pose
+    p = np.array([q2.position.x, q2.position.y, q2.position.z])
+    R = rotation_from_quaternion(np.array([q2.orientation.x, q2.orientation.y,
+                                           q2.orientation.z, q2.orientation.w]))
+    d = cable_vectors(ROBOT, p[None], R[None])
+    u = d / np.linalg.norm(d, axis=-1)[..., None]
+    expected = np.linalg.solve(screw_jacobian(ROBOT, u)[0],
+                               nominal_wrench(ROBOT, load_point(ROBOT, p[None], R[None]))[0])
+    assert np.allclose(effort, expected, rtol=0.05, atol=0.02), (effort, expected)
+    ros.process.stop(timeout=15.0)
+    from mcap_ros2.reader import read_ros2_messages
+    recorded = [m.ros_msg for f in ros.process.run_files()
+                for m in read_ros2_messages(str(f), topics=["/cdh_planner/cable_state"])]
+    assert recorded and all(len(m.effort) == 6 for m in recorded)
+    assert any(np.allclose(list(m.effort), effort, rtol=0.05) for m in recorded[-20:])

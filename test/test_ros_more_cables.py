@@ -57,6 +57,7 @@ def ros(tmp_path_factory):
     with claimed_domain() as domain:
         double = ControllerDouble(domain, *robot.winch_names, "--action", ACTION,
                                   "--joint-states", JOINT_STATES, "--time-scale", TIME_SCALE,
+                                  "--robot", params_file,   # the simulated robot (MuJoCo)
                                   "--initial", *map(repr, _lengths(robot, Q2).tolist()))
         node = NodeProcess(domain, tmp, params=params, params_file=params_file)
         try:

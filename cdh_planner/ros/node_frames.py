@@ -117,7 +117,10 @@ class NodeFrames:
                           config.values["platform_frame"])
         state, margin, markers = live_messages(config.robot, lengths, p, R, msg,
                                                config.base_frame, stamp)
-        self.pub_cables.publish(state)
+        if state.effort:    # measured tensions (load cells): the run file records them
+            node.record.publish(self.pub_cables, state)
+        else:
+            self.pub_cables.publish(state)
         self.pub_margin.publish(margin)
         self.pub_markers.publish(markers)
 

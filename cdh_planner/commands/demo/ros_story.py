@@ -247,6 +247,7 @@ def start_controller(demo):
     args = ["-m", "cdh_planner.ros.simulated_controller", *robot.winch_names,
             "--action", params["execution.controller_action"],
             "--joint-states", params["execution.joint_states_topic"],
+            "--robot", robot.source,     # the simulated robot: MuJoCo, elastic cables
             "--initial", *(repr(float(x)) for x in first.run.goal)]
     log = demo.out_dir / CONTROLLER_LOG
     out = story.stack.enter_context(open(log, "w"))
@@ -254,8 +255,10 @@ def start_controller(demo):
                                stdout=out, stderr=subprocess.STDOUT)
     story.stack.callback(stop_process, process)
     print(f"$ python {' '.join(args)}")
-    print(f"  (a simulated ros2_control JointTrajectoryController: it checks goals as the "
-          f"Jazzy controller does and publishes the winches' JointState; log {log})")
+    print(f"  (a simulated ros2_control JointTrajectoryController driving the simulated robot "
+          f"(MuJoCo: the platform on elastic cables, 1 kHz): it checks goals as the Jazzy "
+          f"controller does and publishes the winches' JointState with the measured tensions "
+          f"in effort; log {log})")
     client.node.create_subscription(JointState, params["execution.joint_states_topic"],
                                     lambda msg: story.joint_states.append(
                                         (time.monotonic(), msg)), 10)
