@@ -21,16 +21,30 @@ def render_strip(plant, record, out, frames=FRAMES):
     """Render the recorded poses of ``record`` (run.Record) at ``frames`` evenly spaced
     times with ``plant``'s model (plant.SimulatedRobot) and write them side by side to
     ``out`` (PNG). Returns the times (s) shown."""
-    import mujoco
+    from .plant import GL_FAILURE
+    picks = np.linspace(0, len(record.t) - 1, frames).round().astype(int)
+    if GL_FAILURE:
+        raise NoRendering(f"no OpenGL for offscreen rendering ({GL_FAILURE[0]}); headless: "
+                          f"apt-get install libegl1 libegl-mesa0 libgl1-mesa-dri, MUJOCO_GL=egl")
     try:
-        renderer = mujoco.Renderer(plant.model, HEIGHT, WIDTH)
-    except Exception as exc:   # ImportError (no backend), mujoco.FatalError, RuntimeError
-        raise NoRendering(f"no OpenGL for offscreen rendering ({type(exc).__name__}: "
-                          f"{str(exc).splitlines()[0] if str(exc) else ''}); headless: "
-                          f"apt-get install libegl1 libegl-mesa0 libgl1-mesa-dri, "
+        images = _render(plant, record, picks)
+    except Exception as exc:   # noqa: BLE001 - ImportError (no backend), mujoco.FatalError,
+        # RuntimeError, AttributeError from PyOpenGL without its library: all "no OpenGL"
+        text = str(exc).splitlines()[0] if str(exc) else ""
+        raise NoRendering(f"no OpenGL for offscreen rendering ({type(exc).__name__}: {text}); "
+                          f"headless: apt-get install libegl1 libegl-mesa0 libgl1-mesa-dri, "
                           f"MUJOCO_GL=egl") from None
+    import matplotlib.image
+    matplotlib.image.imsave(out, np.concatenate(images, axis=1))
+    return record.t[picks]
+
+
+def _render(plant, record, picks):
+    """The frames (list of (HEIGHT, WIDTH, 3) uint8) of the recorded poses at ``picks``."""
+    from .plant import _mujoco
+    mujoco = _mujoco()
+    renderer = mujoco.Renderer(plant.model, HEIGHT, WIDTH)
     try:
-        picks = np.linspace(0, len(record.t) - 1, frames).round().astype(int)
         images = []
         for k in picks:
             q = record.quaternion[k]
@@ -39,8 +53,6 @@ def render_strip(plant, record, out, frames=FRAMES):
             mujoco.mj_forward(plant.model, plant.data)
             renderer.update_scene(plant.data, camera="workspace")
             images.append(renderer.render().copy())
+        return images
     finally:
         renderer.close()
-    import matplotlib.image
-    matplotlib.image.imsave(out, np.concatenate(images, axis=1))
-    return record.t[picks]

@@ -36,7 +36,31 @@ OMEGA_DT = 0.5            # largest (natural frequency x MuJoCo step) allowed
 MAX_SUBSTEPS = 64
 
 
+GL_FAILURE = []           # why mujoco's OpenGL backend did not load (then disabled)
+
+
 def _mujoco():
+    """The mujoco module. With MUJOCO_GL naming a backend whose library is absent, ``import
+    mujoco`` itself fails (PyOpenGL raises while loading): then the backend is disabled
+    (MUJOCO_GL=disable), the physics imported without it, and why kept in GL_FAILURE (the
+    rendering says so in one line)."""
+    import os
+    import sys
+    try:
+        import mujoco
+    except ImportError as exc:
+        if exc.name == "mujoco":
+            raise
+        failure = exc
+    except Exception as exc:   # noqa: BLE001 - PyOpenGL's AttributeError without its library
+        failure = exc
+    else:
+        return mujoco
+    for name in [n for n in sys.modules if n.split(".")[0] in ("mujoco", "OpenGL")]:
+        del sys.modules[name]
+    GL_FAILURE.append(f"MUJOCO_GL={os.environ.get('MUJOCO_GL', '')}: {type(failure).__name__}: "
+                      f"{str(failure).splitlines()[0] if str(failure) else ''}")
+    os.environ["MUJOCO_GL"] = "disable"
     import mujoco
     return mujoco
 
@@ -140,12 +164,15 @@ class SimulatedRobot:
         return self.data.qpos[:3].copy(), np.array([q[1], q[2], q[3], q[0]])
 
     def rotation(self):
-        """The platform's rotation matrix (3, 3), base frame."""
-        return self.data.xmat[self.body].reshape(3, 3).copy()
+        """The platform's rotation matrix (3, 3), base frame, now (from qpos: MuJoCo's xmat
+        is of the last step's start)."""
+        from ..model.pose import rotation_from_quaternion
+        return rotation_from_quaternion(self.pose()[1])
 
     @property
     def lengths(self):
-        """The cables' lengths L (m,) m, anchor to anchor (as of the last step's start)."""
+        """The cables' lengths L (m,) m, anchor to anchor, at the last step's start: the
+        state the load cells' ``tensions`` belong to."""
         return self.data.ten_length.copy()
 
     def contacts(self):

@@ -142,10 +142,9 @@ def run(plant, command, duration, on_step=None):
                  p=np.empty((steps, 3)), quaternion=np.empty((steps, 4)), substeps=plant.substeps)
     for k in range(steps):
         plant.command(L0[k], rate[k])
-        rec.length[k] = plant.data.ten_length
         rec.p[k], rec.quaternion[k] = plant.pose()
         plant.step()
-        rec.tension[k] = plant.tensions
+        rec.tension[k], rec.length[k] = plant.tensions, plant.data.ten_length
         if plant.data.ncon:
             rec.contacts += [(float(ts[k]), o) for o in plant.contacts()]
         if on_step is not None:
