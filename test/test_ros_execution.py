@@ -106,7 +106,15 @@ def test_execute_refuses_when_the_winches_are_not_at_the_start(ros):
     accepted = len(ros.double.events("accepted"))
     ok, message = ros.execute()
     assert not ok and message.startswith("refused:"), message
-    gap = float(np.max(np.abs(_measured(ros) - _lengths(Q1))))
+    # against the trajectory's first point: the commanded (unstretched) lengths at q1, within
+    # the cables' stretch of the geometric ones (this plan's latched ~/planned_cable_trajectory)
+    def this_plan():
+        points = ros.trajectories[-1].points if ros.trajectories else []
+        return points and all(np.max(np.abs(np.array(points[k].positions) - _lengths(q))) < 5e-3
+                              for k, q in ((0, Q1), (-1, Q3)))
+    assert ros.spin_until(this_plan, 10.0)
+    first = np.array(ros.trajectories[-1].points[0].positions)
+    gap = float(np.max(np.abs(_measured(ros) - first)))
     assert f"{gap:.4g}" in message or f"{gap:.3g}" in message, (gap, message)
     assert any(name in message for name in ROBOT.winch_names), message
     # nothing was sent, shown by a later goal rather than by a quiet while: a plan that

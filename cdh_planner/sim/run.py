@@ -12,9 +12,9 @@ the motion the plant holds the first command for SETTLE_S (a robot rests at its 
 before it executes; not recorded), after it the last for TAIL_S (recorded).
 
 Verdicts (``Report``), per cable: the least margin (N) of the measured tension against
-the robot's limits, min(t - tension_min, tension_max - t), and against the published
-envelope (tension_min .. tension_max per waypoint, linear in time between waypoints, held
-beyond the ends); the time (s) slack (tension 0), below the least tension and above the
+the robot's limits, min(t - tension_min, tension_max - t), and, during the motion (first
+to last waypoint), against the published envelope (tension_min .. tension_max per
+waypoint, linear in time between waypoints); the time (s) slack (tension 0), below the least tension and above the
 greatest; the measured cable lengths against the length limits; the tracking error
 (platform pose against the plan's at each waypoint's time); contacts with obstacles: the
 platform's from MuJoCo, every cable's from the scene's collision model at the measured
@@ -214,8 +214,9 @@ def judge(robot, plan, record, scene=None):
     fmin, fmax = np.asarray(robot.tension_min, float), np.asarray(robot.tension_max, float)
     span = fmax - fmin
     limit = np.min(np.minimum(f - fmin, fmax - f), axis=0)
-    low, high = envelope_at(plan, record.t)
-    env = np.min(np.minimum(f - low, high - f), axis=0)
+    motion = record.t <= plan.t[-1]     # the envelope is published for the motion
+    low, high = envelope_at(plan, record.t[motion])
+    env = np.min(np.minimum(f[motion] - low, high - f[motion]), axis=0)
     lengths_out = (record.length < robot.length_min) | (record.length > robot.length_max)
     pos, rot = tracking(plan, record)
     return Report(names=tuple(robot.winch_names), limit_margin=limit,
