@@ -326,3 +326,28 @@ def test_bad_input_is_one_line_exit_2(plans, tmp_path, capsys):
     for argv, field in _bad(tmp_path, plans):
         rc, _, err = _cli(capsys, *argv)
         assert rc == 2 and len(err) == 1 and field in err[0], (argv, err)
+
+
+def test_mjcf_has_every_obstacle_shape_and_the_platform_collides_with_them(tmp_path, capsys):
+    (tmp_path / "tet.obj").write_text("v 0 0 0\nv 0.02 0 0\nv 0 0.02 0\nv 0 0 0.02\n"
+                                      "f 1 3 2\nf 1 2 4\nf 1 4 3\nf 2 3 4\n")
+    scene = tmp_path / "scene.yaml"
+    scene.write_text("""scene:
+  platform: {type: box, size: [0.1, 0.1, 0.01]}
+  obstacles:
+    - {id: post, type: box, size: [0.02, 0.04, 0.1], position: [0.2, 0.2, 0.3],
+       quaternion: [0, 0, 0.3826834, 0.9238795]}
+    - {id: pipe, type: cylinder, radius: 0.01, height: 0.1, position: [-0.2, 0.2, 0.3]}
+    - {id: tet, type: mesh, file: tet.obj, position: [0, -0.2, 0.3]}
+""")
+    out = tmp_path / "scene.xml"
+    assert _cli(capsys, "mjcf", CONFIG / "robot2.yaml", "--scene", scene, "-o", out)[0] == 0
+    model = mujoco.MjModel.from_xml_path(str(out))
+    post, pipe, tet = (model.geom(f"obstacle_{n}") for n in ("post", "pipe", "tet"))
+    assert np.allclose(post.size, [0.01, 0.02, 0.05]) and np.allclose(pipe.size[:2], [0.01, 0.05])
+    assert np.allclose(post.quat, [0.9238795, 0, 0, 0.3826834], atol=1e-6)   # w x y z
+    assert tet.type[0] == mujoco.mjtGeom.mjGEOM_MESH and model.nmesh == 1
+    platform = model.geom("platform")
+    for g in (post, pipe, tet):     # MuJoCo's contact filter: platform x obstacle only
+        assert (platform.contype & g.conaffinity) or (g.contype & platform.conaffinity)
+    assert not (post.contype & pipe.conaffinity) and not (pipe.contype & post.conaffinity)
