@@ -351,3 +351,35 @@ def test_mjcf_has_every_obstacle_shape_and_the_platform_collides_with_them(tmp_p
     for g in (post, pipe, tet):     # MuJoCo's contact filter: platform x obstacle only
         assert (platform.contype & g.conaffinity) or (g.contype & platform.conaffinity)
     assert not (post.contype & pipe.conaffinity) and not (pipe.contype & post.conaffinity)
+
+
+def test_the_live_plant_follows_goals_setpoints_and_holds():
+    """sim.live, as the controller double drives it (20x real time): a trajectory's end is
+    reached exactly by the winches, a setpoint in a straight line over the setpoint period,
+    a hold keeps them; the platform rests on taut cables throughout."""
+    import time
+    from cdh_planner.sim.live import LivePlant
+    robot = load_robot(CONFIG / "robot2.yaml")
+    p, R = np.array([0.0, 0.0, 0.306]), np.eye(3)
+    L = cable_lengths(robot, p, R)
+    live = LivePlant(robot, L, time_scale=20.0)
+    try:
+        live.start()
+        target = cable_lengths(robot, p + [0.01, 0.0, 0.01], R)
+        _, end = live.follow([0.0, 0.5], [L, target], np.zeros((2, 6)), np.zeros((2, 6)))
+        deadline = time.monotonic() + 10.0
+        while live.state()[0] < end + 0.05 and time.monotonic() < deadline:
+            time.sleep(0.01)
+        now, winch, tensions, _, _ = live.state()
+        assert now >= end and np.array_equal(winch, target)
+        assert np.all(tensions > robot.tension_min)
+        live.setpoint(L)
+        while live.state()[0] < now + 0.1 and time.monotonic() < deadline:
+            time.sleep(0.01)
+        assert np.array_equal(live.state()[1], L)
+        live.hold()
+        held = live.state()[1]
+        time.sleep(0.05)
+        assert np.array_equal(live.state()[1], held)
+    finally:
+        live.stop()
