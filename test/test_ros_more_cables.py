@@ -67,6 +67,7 @@ def ros(tmp_path_factory):
         double = ControllerDouble(domain, *robot.winch_names, "--action", ACTION,
                                   "--joint-states", JOINT_STATES, "--time-scale", TIME_SCALE,
                                   "--robot", params_file,   # the simulated robot (MuJoCo)
+                                  "--stream", "/cdh_planner/cable_command",   # its driver
                                   "--initial", *map(repr, _lengths(robot, Q2).tolist()))
         node = NodeProcess(domain, tmp, params=params, params_file=params_file)
         try:
@@ -128,6 +129,11 @@ def test_the_node_streams_an_eight_cable_plan(ros):
     assert bands.shape == (len(traj.points), 8, 3)
     assert np.all(bands[..., 0] >= ros.robot.tension_min - 1e-6)
     assert np.all(bands[..., 2] <= ros.robot.tension_max + 1e-6)
+    # the simulated robot, driven by the stream, ends at the last command, on taut cables
+    last = M.winch_command_values(run.commands[-1])[1]
+    assert ros.spin_until(lambda: np.allclose(_measured(ros), last, atol=1e-9), 10.0)
+    effort = np.array(ros.measured.messages[-1].effort)
+    assert effort.shape == (8,) and np.all(effort > 0), effort
 
 
 def test_the_node_executes_an_eight_cable_plan_through_the_controller(ros):
