@@ -15,6 +15,7 @@ from diagnostic_msgs.msg import DiagnosticArray  # noqa: E402
 from sensor_msgs.msg import JointState  # noqa: E402
 
 from cdh_planner.model.forward_kinematics import forward_kinematics_many  # noqa: E402
+from cdh_planner.sim.plant import rest_lengths  # noqa: E402
 from cdh_planner.model.kinematics import cable_lengths  # noqa: E402
 from cdh_planner.model.pose import rotation_from_quaternion  # noqa: E402
 from cdh_planner.ros import messages as M  # noqa: E402
@@ -48,13 +49,6 @@ def _pose(coords):
                                                o.orientation.z, o.orientation.w])))
 
 
-def _lengths(robot, coords):
-    msg = sphere_pose_msg(coords)
-    p, o = msg.pose.position, msg.pose.orientation
-    R = rotation_from_quaternion(np.array([o.x, o.y, o.z, o.w]))
-    return cable_lengths(robot, np.array([p.x, p.y, p.z]), R)
-
-
 @pytest.fixture(scope="module")
 def ros(tmp_path_factory):
     tmp = tmp_path_factory.mktemp("more_cables")
@@ -68,7 +62,7 @@ def ros(tmp_path_factory):
                                   "--joint-states", JOINT_STATES, "--time-scale", TIME_SCALE,
                                   "--robot", params_file,   # the simulated robot (MuJoCo)
                                   "--stream", "/cdh_planner/cable_command",   # its driver
-                                  "--initial", *map(repr, _lengths(robot, Q2).tolist()))
+                                  "--initial", *map(repr, rest_lengths(robot, *_pose(Q2)).tolist()))
         node = NodeProcess(domain, tmp, params=params, params_file=params_file)
         try:
             assert double.ready.wait(30.0), "\n".join(double.lines)

@@ -441,7 +441,7 @@ def plot_execution(robot, motions, out, size=EXECUTION_SIZE):
         measured = any(m.tensions is not None for m in motions.values())
         bottom.set_title("tension envelope over the wrench ellipsoid: nominal (line), "
                          "min..max (band); dashed: limits"
-                         + ("; black dotted: measured (load cells)" if measured else ""))
+                         + ("\nblack dotted: measured tensions (load cells)" if measured else ""))
         fig.savefig(out, dpi=DPI, format="png")
     finally:
         plt.close(fig)

@@ -65,6 +65,16 @@ def _mujoco():
     return mujoco
 
 
+def rest_lengths(robot, p, R):
+    """The winch lengths (m,) m at which the platform rests at pose (p (3,) m, R (3, 3)):
+    the unstretched lengths that carry the tension rule's nominal tensions there,
+    L0 = L / (1 + t / EA) (the plant's stiffness, ``mjcf.cable_stiffness``)."""
+    from ..cable_feasibility import nominal_tensions
+    from ..model.kinematics import cable_lengths
+    t = nominal_tensions(robot, np.asarray(p, float)[None], np.asarray(R, float)[None])[0]
+    return cable_lengths(robot, p, R) / (1.0 + t / cable_stiffness(robot))
+
+
 class SimulatedRobot:
     """MuJoCo's model of ``robot`` (model.robot.Robot) and ``scene`` (obstacles), stepped at
     TIMESTEP_S under a length command. Time ``time`` (s) counts control periods."""
