@@ -146,7 +146,9 @@ def test_use_current_start_plans_from_where_the_winches_are_and_executes(ros):
                                _measured(ros), atol=1e-4)
     first = answer.result.path.poses[0].pose.position
     q2 = sphere_pose_msg(Q2).pose.position
-    np.testing.assert_allclose([first.x, first.y, first.z], [q2.x, q2.y, q2.z], atol=1e-6)
+    # where the simulated platform rests (its measured lengths stretched by the measured
+    # tensions): at q2 to the few um the end's commanded (unstretched) lengths make
+    np.testing.assert_allclose([first.x, first.y, first.z], [q2.x, q2.y, q2.z], atol=1e-5)
     _, status = _execute_to_the_end(ros, answer.result)
     assert M.status_values(status)["outcome"] == "completed"
 
