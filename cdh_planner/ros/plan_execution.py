@@ -68,6 +68,7 @@ class PlanExecution:
             node, values["execution.joint_states_topic"], config.robot.winch_names)
         context = OutletContext(node, command_publisher, callback_group)
         self.outlets = {mode: cls(context, config) for mode, cls in OUTLETS.items()}
+        self._warn_refusal(config)
 
     @property
     def running(self):
@@ -79,6 +80,15 @@ class PlanExecution:
         self.joints.winch_names = list(config.robot.winch_names)
         for outlet in self.outlets.values():
             outlet.configure(config)
+        self._warn_refusal(config)
+
+    def _warn_refusal(self, config):
+        """Say at configure when execution.mode cannot execute the robot's plans
+        (``CommandOutlet.refusal``); an execution then refuses with the same line."""
+        mode = config.values["execution.mode"]
+        refusal = self.outlets[mode].refusal(config.robot) if mode in self.outlets else ""
+        if refusal:
+            self._node.get_logger().warning(f"plans will not be executed: {refusal}")
 
     # ------------------------------------------------------------------ start, stop
 
@@ -93,6 +103,9 @@ class PlanExecution:
         if plan is None:
             return False, "refused: no plan to execute; call ~/plan first"
         path, robot, out = plan
+        refusal = self._outlet(values["execution.mode"]).refusal(robot)
+        if refusal:
+            return False, f"refused: {refusal}"
         refused, note = self._check_start(values, path, robot)
         if refused:
             return False, refused
@@ -127,11 +140,12 @@ class PlanExecution:
         return self.outlets[mode]
 
     def _check_start(self, values, path, robot):
-        """(refusal or "", note): the measured lengths against the path's first point; with
+        """(refusal or "", note): the measured lengths against the path's first commanded
+        point (the winches' lengths: unstretched with elastic cables); with
         none, refused unless ``execution.allow_unchecked_start`` (then noted)."""
         lengths, why = self.joints.lengths(values["execution.joint_states_max_age_s"])
         if lengths is not None:
-            mismatch = winches.start_mismatch(lengths, path.lengths[0],
+            mismatch = winches.start_mismatch(lengths, path.commanded()[0][0],
                                                 values["execution.start_tolerance"],
                                                 robot.winch_names)
             return (f"refused: {mismatch}" if mismatch else ""), ""

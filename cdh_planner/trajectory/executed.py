@@ -34,9 +34,11 @@ import numpy as np
 from ..cable_feasibility import nominal_tensions, tension_map
 from ..feasibility import (cable_vectors, inverse_ellipsoid_factor, load_point, nominal_wrench,
                            screw_jacobian)
+from ..model.elastic import equilibrium_poses, is_elastic
 from ..model.forward_kinematics import forward_kinematics_many
 from ..model.pose import tau_from_rotation
 from ..model.rotation import Rotation, Slerp
+from .path import with_commands
 from .splines import CubicSpline
 
 CHECK_DT = 1e-3        # s: step of the check's central differences
@@ -262,7 +264,11 @@ def _executed_margins(robot, t_wp, L, V, A, seed, ts, mid, q, mass, inertia, col
     need = unique_sorted(np.concatenate([mid - q, mid, mid + q]))
     pos, _, _ = quintic(t_wp, L, V, A, ts[need])
     p_seed, R_seed = seed(ts[need])
-    fk = forward_kinematics_many(robot, pos, p_seed, R_seed)
+    elastic = is_elastic(robot)
+    if elastic:  # the static equilibrium first: the motion's accelerations from it
+        fk = _equilibria(robot, pos, p_seed, R_seed)
+    else:
+        fk = forward_kinematics_many(robot, pos, p_seed, R_seed)
     lost = ~fk.ok | (np.linalg.norm(fk.p - p_seed, axis=1) > SEED_TOL_M)
     c_all = load_point(robot, fk.p, fk.R)
     at = [np.searchsorted(need, mid + o) for o in (-q, 0, q)]
@@ -273,19 +279,55 @@ def _executed_margins(robot, t_wp, L, V, A, seed, ts, mid, q, mass, inertia, col
     front = Rotation.from_matrix(np.swapaxes(R[0], 1, 2) @ R[1]).as_rotvec()
     omega = (back + front) / (2 * h)
     alpha = (back - front) / h ** 2
-    f, v = _tensions(robot, fk.p[at[1]], R[1], c[1], c_dd, omega, alpha, mass, inertia)
+    p_mid, lost_mid = fk.p[at[1]], lost[at[1]]
+    if elastic:  # the equilibrium with the inertial wrench, from the static one
+        eq = _equilibria(robot, pos[at[1]], p_mid, R[1],
+                         _inertial(R[1], c[1], c_dd, omega, alpha, mass, inertia))
+        p_mid, R[1] = eq.p, eq.R
+        lost_mid = lost_mid | ~eq.ok | (np.linalg.norm(eq.p - p_seed[at[1]], axis=1) > SEED_TOL_M)
+        f, v = eq.tensions, _band(robot, p_mid, R[1])
+    else:
+        f, v = _tensions(robot, p_mid, R[1], c[1], c_dd, omega, alpha, mass, inertia)
     margin = np.minimum(f - v - robot.tension_min, robot.tension_max - f - v)
     blocked = np.zeros(len(mid), dtype=bool)
     if collision is not None:
-        blocked = collision.margins(fk.p[at[1]], R[1])[0] < 0
-    return margin, lost[at[0]] | lost[at[1]] | lost[at[2]], blocked
+        blocked = collision.margins(p_mid, R[1])[0] < 0
+    return margin, lost[at[0]] | lost_mid | lost[at[2]], blocked
+
+
+def _equilibria(robot, L0, p, R, inertial=None):
+    """``model.elastic.equilibrium_poses`` of cables of unstretched lengths L0 (M, m) m
+    under the load wrench (``feasibility.nominal_wrench``'s force at the load point and
+    moment) minus ``inertial`` (M, 6), the motion's wrench about the origin (None: at rest),
+    from the poses (p (M, 3) m, R (M, 3, 3))."""
+    w = np.broadcast_to(robot.wrench_center_local, (len(p), 6))
+    force, moment = w[:, :3], w[:, 3:]
+    arm = force if robot.ellipsoid_frame == "load" else np.zeros_like(force)
+    if inertial is not None:  # [m c''; c x m c'' + R (I alpha + omega x I omega)]
+        c = load_point(robot, p, R)
+        moment = moment - (inertial[:, 3:] - np.cross(c, inertial[:, :3]))
+        force, arm = force - inertial[:, :3], arm - inertial[:, :3]
+    return equilibrium_poses(robot, L0, p, R, force, moment, arm)
+
+
+def _band(robot, p, R):
+    """The ellipsoid's spread v (M, m) N of the tensions at poses (p (M, 3) m,
+    R (M, 3, 3)): |rows of J^-1 L| for six cables, the rule's band for more."""
+    if len(robot.base_anchors) > 6:
+        from ..zonotope import rule_tensions  # m > 6 only: six-cable commands load no numba
+        return rule_tensions(robot, p, R)[1]
+    u = cable_vectors(robot, p, R)
+    u /= np.linalg.norm(u, axis=-1)[..., None]
+    J_inv = np.linalg.inv(screw_jacobian(robot, u))
+    return np.linalg.norm(J_inv @ inverse_ellipsoid_factor(robot, load_point(robot, p, R)), axis=-1)
 
 
 def _tensions(robot, p, R, c, c_dd, omega, alpha, mass, inertia):
     """Tensions f (M, m) balancing the load wrench minus the inertial wrench, and the
     ellipsoid's spread v (M, m), N. With m > 6, those of the published tension rule
     (``cable_feasibility.tension_map``): its centred nominal t0 moved by P times the
-    inertial wrench, and its band v = |rows of P L|."""
+    inertial wrench, and its band v = |rows of P L| (P_K's with elastic cables,
+    ``zonotope.stiffness_band``)."""
     u = cable_vectors(robot, p, R)
     u /= np.linalg.norm(u, axis=-1)[..., None]
     w = nominal_wrench(robot, c)
@@ -355,11 +397,12 @@ def path_seed(path):
 
 def check_path(robot, path, mass=None, inertia=None, max_cable_speed=np.inf,
                max_cable_accel=np.inf, dt=CHECK_DT, within=None, reuse=None, collision=None):
-    """check_executed of a timed PlannedPath's points (lengths, velocities, accelerations
-    at path.t), forward kinematics seeded from its waypoint poses."""
-    return check_executed(robot, path.t, path.lengths, path.velocities, path.accelerations,
-                          path_seed(path), mass, inertia, max_cable_speed, max_cable_accel, dt,
-                          within, reuse, collision)
+    """check_executed of a timed PlannedPath's points as a length controller receives them
+    (``path.with_commands``: lengths, velocities, accelerations at path.t), forward
+    kinematics seeded from its waypoint poses."""
+    L, V, A = with_commands(robot, path).commanded()  # the robot's stiffness
+    return check_executed(robot, path.t, L, V, A, path_seed(path), mass, inertia,
+                          max_cable_speed, max_cable_accel, dt, within, reuse, collision)
 
 
 # ----------------------------------------------------------------------------- making it pass
@@ -433,6 +476,9 @@ def _merged(path, rows, at):
     each new row's tau continues its left neighbour's azimuth (phi at a pole)."""
     fields = {}
     for name in path.__dataclass_fields__:
+        if name == "cable_stiffness":  # per cable, not per waypoint
+            fields[name] = path.cable_stiffness
+            continue
         new = np.asarray(getattr(rows, name))
         if name == "tau":
             R = Rotation.from_quat(rows.quaternion).as_matrix()
