@@ -1,7 +1,7 @@
 """The plan JSON of two checkouts, compared: identical, or every number equal to a tolerance.
 
     .venv/bin/python benchmarks/compare_plans.py OTHER_CHECKOUT [problem.yaml ...]
-        [--tol 1e-12] [--timeout 20] [--strategies astar gbf]
+        [--tol 1e-12] [--timeout 20] [--strategies astar gbf] [--new-keys KEY ...]
 
 Runs ``cdh-planner plan PROBLEM --json OUT --quiet`` once with this checkout first on
 PYTHONPATH and once with OTHER_CHECKOUT's, for each problem (default: every
@@ -12,8 +12,9 @@ plan each problem with each of these (``plan --strategy``) instead of the file's
 six-cable check after m-cable changes is ``--strategies astar gbf`` over Table 1's rows but free
 flight (robot1_qs_qg, robot1_qs1_qg, robot1_qs2_qg, robot2_q1_q2, robot2_q2_q3,
 robot2_q2_q3_sigma_free) and robot2_pivot: 14 plans. The planning time
-(``time_s``, a clock reading) is left out of the comparison. Exit code 0 when none
-differs.
+(``time_s``, a clock reading) is left out of the comparison, and so are keys that only
+this checkout writes and ``--new-keys`` names (e.g. ``commanded_lengths`` against a
+checkout from before it). Exit code 0 when none differs.
 """
 
 import argparse
@@ -44,17 +45,21 @@ def plan_json(checkout, problem, timeout, strategy=None):
         return json.loads(out.read_text()) if out.exists() else {"no output": True}
 
 
-def differences(a, b, path=""):
+def differences(a, b, path="", new_keys=()):
     """[(path, |a - b|, scale) of numbers that differ, (path, None, None) of anything else]
-    over the two JSON values."""
+    over the two JSON values; keys of ``a`` named in ``new_keys`` that ``b`` lacks are left
+    out."""
     if isinstance(a, dict) and isinstance(b, dict):
+        a = {k: v for k, v in a.items() if k in b or k not in new_keys}
         if set(a) != set(b):
             return [(f"{path} keys {sorted(set(a) ^ set(b))}", None, None)]
-        return [d for k in a if k not in CLOCK_KEYS for d in differences(a[k], b[k], f"{path}.{k}")]
+        return [d for k in a if k not in CLOCK_KEYS
+                for d in differences(a[k], b[k], f"{path}.{k}", new_keys)]
     if isinstance(a, list) and isinstance(b, list):
         if len(a) != len(b):
             return [(f"{path} length {len(a)} != {len(b)}", None, None)]
-        return [d for i, (x, y) in enumerate(zip(a, b)) for d in differences(x, y, f"{path}[{i}]")]
+        return [d for i, (x, y) in enumerate(zip(a, b))
+                for d in differences(x, y, f"{path}[{i}]", new_keys)]
     numbers = (int, float)
     if isinstance(a, numbers) and isinstance(b, numbers) and not isinstance(a, bool):
         if a == b or (math.isnan(a) and math.isnan(b)):
@@ -71,6 +76,8 @@ def main(argv=None):
     ap.add_argument("--timeout", type=float, default=20.0, help="s per plan; longer ones are skipped")
     ap.add_argument("--strategies", nargs="+", choices=("astar", "gbf"), default=[None],
                     help="plan each problem with each of these (default: the file's own)")
+    ap.add_argument("--new-keys", nargs="+", default=(),
+                    help="keys only this checkout writes, left out of the comparison")
     args = ap.parse_args(argv)
     problems = [Path(p).resolve() for p in args.problems] or sorted((ROOT / "config" / "problems").glob("*.yaml"))
     bad = 0
@@ -81,7 +88,7 @@ def main(argv=None):
         if ours is None or theirs is None:
             print(f"{name}: skipped (over {args.timeout:g} s)", flush=True)
             continue
-        diff = differences(ours, theirs)
+        diff = differences(ours, theirs, new_keys=set(args.new_keys))
         structural = [p for p, d, _ in diff if d is None]
         largest = max((d for _, d, _ in diff if d is not None), default=0.0)
         within = all(d <= args.tol * scale for _, d, scale in diff if d is not None)

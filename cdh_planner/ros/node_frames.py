@@ -104,7 +104,8 @@ class NodeFrames:
         if lengths is None:
             return
         try:
-            p, R = node.execution.forward_kinematics(config.robot, lengths)
+            p, R = node.execution.forward_kinematics(config.robot, lengths,
+                                                     tensions=node.execution.joints.tensions)
         except InputError:
             return              # no pose for these lengths: nothing to show
         except Exception as exc:  # noqa: BLE001 - never take the node down

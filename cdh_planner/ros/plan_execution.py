@@ -31,6 +31,8 @@ from dataclasses import dataclass
 import numpy as np
 
 from ..errors import InputError, exception_line
+from ..model.elastic import is_elastic
+from ..model.forward_kinematics import measured_cable_lengths
 from ..model.kinematics import cable_lengths
 from ..model.pose import rotation_from_quaternion
 from . import winches
@@ -63,6 +65,7 @@ class PlanExecution:
         self._timer_period = None
         self._last_pose = None         # (p, R) of the last forward kinematics, its next guess
         self.forward_kinematics_residual_m = None  # its largest cable length error, m
+        self._said_rigid = False       # logged that joint states without efforts are rigid
         values = config.values
         self.joints = winches.JointStateMonitor(
             node, values["execution.joint_states_topic"], config.robot.winch_names)
@@ -306,7 +309,7 @@ class PlanExecution:
         if lengths is None:
             return MeasuredStart(why=why)
         try:
-            p, R = self.forward_kinematics(config.robot, lengths, plan)
+            p, R = self.forward_kinematics(config.robot, lengths, plan, self.joints.tensions)
         except InputError as exc:
             return MeasuredStart(why=str(exc))
         except Exception as exc:  # noqa: BLE001 - the goal still gets a result, with why
@@ -314,10 +317,19 @@ class PlanExecution:
             return MeasuredStart(why=f"forward kinematics failed: {exception_line(exc)}")
         return MeasuredStart(pose=M.pose_stamped_msg(p, R, config.base_frame, self._stamp()))
 
-    def forward_kinematics(self, robot, lengths, plan=None):
-        """The pose (p (3,) m, R (3, 3)) of cable lengths ``lengths`` (m): Newton from the
-        nearest known pose (the last forward kinematics, the ends of ``plan``), kept as the
-        next one's guess. InputError when Newton finds none."""
+    def forward_kinematics(self, robot, lengths, plan=None, tensions=None):
+        """The pose (p (3,) m, R (3, 3)) of the winches' cable lengths ``lengths`` (m),
+        stretched by the measured ``tensions`` (N) when the cables are elastic (without
+        them: taken as rigid, said once in the log): Newton from the nearest known pose
+        (the last forward kinematics, the ends of ``plan``), kept as the next one's guess.
+        InputError when Newton finds none."""
+        if is_elastic(robot):
+            if tensions is None and not self._said_rigid:
+                self._said_rigid = True
+                self._node.get_logger().warning(
+                    "the joint states carry no efforts (measured tensions): forward kinematics "
+                    "takes the cables as rigid, not stretched by robot.cable_stiffness")
+            lengths = measured_cable_lengths(robot, lengths, tensions)
         guess = winches.nearest_pose(robot, lengths, self._known_poses(plan))
         p, R = winches.current_pose(robot, lengths, guess)
         self._last_pose = (p, R)
