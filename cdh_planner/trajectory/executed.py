@@ -23,6 +23,14 @@ dt / PHASES s from dt after the start to dt before the end, each sample with its
 stencil t - dt, t, t + dt (one never straddles an end, where the JTC's hold makes the
 acceleration jump): a violation narrower than dt is seen whatever its phase.
 
+Elastic cables (``robot.cable_stiffness``): the JTC interpolates the commanded,
+unstretched lengths L0 (``PlannedPath.commanded``), and the platform's pose is the elastic
+equilibrium of those cables (``model.elastic.equilibrium_poses``: the cables' tensions
+max(0, EA (L - L0) / L0) balance the load wrench), first at rest, then, with the inertial
+wrench of the motion those static poses make (the same central differences), again; its
+tensions are the ones checked (with the same spread v). A slack cable (tension 0) fails
+as a tension below its minimum; an equilibrium not found is a lost pose.
+
 ``executable`` adds points to a timed PlannedPath until this check passes (module
 docstring of that function).
 """
