@@ -126,11 +126,16 @@ def _newton(robot, L0, p, R, load, bilateral, max_iterations):
     ok = np.zeros(len(p), dtype=bool)
     todo = np.arange(len(p))
     for _ in range(max_iterations):
-        part = tuple(x[todo] for x in load)
-        res, jac, _ = wrench_balance(robot, L0[todo], p[todo], R[todo], *part, bilateral)
+        res, _, _ = wrench_balance(robot, L0[todo], p[todo], R[todo],
+                                   *(x[todo] for x in load), bilateral, jacobian=False)
         done = np.max(np.abs(res), axis=1) <= scale[todo]
         ok[todo[done]] = True
-        keep = ~done & (np.linalg.matrix_rank(jac) == 6)
+        todo, res = todo[~done], res[~done]
+        if todo.size == 0:
+            break
+        _, jac, _ = wrench_balance(robot, L0[todo], p[todo], R[todo],
+                                   *(x[todo] for x in load), bilateral)
+        keep = np.linalg.matrix_rank(jac) == 6
         todo, res, jac = todo[keep], res[keep], jac[keep]
         if todo.size == 0:
             break

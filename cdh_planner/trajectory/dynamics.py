@@ -420,7 +420,8 @@ def timed_path(robot, path, dynamics, max_cable_speed, max_cable_accel, collisio
     done ("" for quasi-static); when no dynamically feasible timing exists the quasi-static
     one is kept and the note says so. The check's ``ok`` False: no executable trajectory
     within the bounds (its ``reason`` says why). ``collision``: the scene's CollisionModel
-    (or None), which the executed motion keeps clear of too."""
+    (or None), which the executed motion keeps clear of too. The path carries the robot's
+    cable stiffness: its commands (``PlannedPath.commanded``) are what was checked."""
     check_dynamics(robot, dynamics)
     note, motion, load = "", None, (None, None)
     if not (dynamics == "quasi_static" or (dynamics == "auto" and robot.mass is None)):

@@ -23,6 +23,14 @@ dt / PHASES s from dt after the start to dt before the end, each sample with its
 stencil t - dt, t, t + dt (one never straddles an end, where the JTC's hold makes the
 acceleration jump): a violation narrower than dt is seen whatever its phase.
 
+Elastic cables (``robot.cable_stiffness``): the JTC interpolates the commanded,
+unstretched lengths L0 (``PlannedPath.commanded``), and the platform's pose is the elastic
+equilibrium of those cables (``model.elastic.equilibrium_poses``: the cables' tensions
+max(0, EA (L - L0) / L0) balance the load wrench), first at rest, then, with the inertial
+wrench of the motion those static poses make (the same central differences), again; its
+tensions are the ones checked (with the same spread v). A slack cable (tension 0) fails
+as a tension below its minimum; an equilibrium not found is a lost pose.
+
 ``executable`` adds points to a timed PlannedPath until this check passes (module
 docstring of that function).
 """
@@ -40,6 +48,7 @@ from ..model.pose import tau_from_rotation
 from ..model.rotation import Rotation, Slerp
 from .path import with_commands
 from .splines import CubicSpline
+from .timing import limit_ratio
 
 CHECK_DT = 1e-3        # s: step of the check's central differences
 PHASES = 2             # samples per CHECK_DT: a violation narrower than the step is not
@@ -442,7 +451,9 @@ def executable(robot, path, motion=None, mass=None, inertia=None, max_cable_spee
         winch_only = not np.isfinite(check.least_tension_margin_n)  # tensions not reached
         winch_rounds += winch_only
         if (motion is not None and rounds < MAX_ROUNDS and len(path) + k.size <= max_points
-                and winch_rounds <= WINCH_ROUNDS):
+                and winch_rounds <= WINCH_ROUNDS
+                and not (winch_only and _points_exceed(robot, path, max_cable_speed,
+                                                       max_cable_accel))):
             t = 0.5 * (path.t[k] + path.t[k + 1])
             within = np.column_stack([path.t[k] - CHECK_DT, path.t[k + 1] + CHECK_DT])
             changed.append(within)
@@ -457,6 +468,16 @@ def executable(robot, path, motion=None, mass=None, inertia=None, max_cable_spee
             return path, replace(check, reason=f"{check.reason} after {rounds} rounds of "
                                                f"added points ({len(path)} points) and "
                                                f"{slowed} slow-downs (x {scale:.3g})")
+
+
+def _points_exceed(robot, path, max_cable_speed, max_cable_accel):
+    """Do the commanded rates at the points themselves exceed a winch limit? Points added
+    between them cannot lower those (with elastic cables the stretch's own rates add to the
+    motion's, which the timing kept just within the limits): only slowing down does."""
+    _, V, A = with_commands(robot, path).commanded()
+    m = V.shape[1]
+    return bool(np.max(limit_ratio(V, A, np.broadcast_to(max_cable_speed, (m,)),
+                                   np.broadcast_to(max_cable_accel, (m,)))) > 1 + TOL)
 
 
 def spline_rates(path):
