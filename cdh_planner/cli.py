@@ -34,7 +34,7 @@ PROG = 'cdh-planner'
 
 # Order here is the order in --help. A name whose module does not exist yet is skipped.
 COMMANDS = ['verify', 'slice', 'plan', 'workspace', 'sweep', 'node', 'call', 'replay', 'recover', 'urdf',
-            'demo']
+            'mjcf', 'simulate', 'demo']
 
 # The one-line summaries of `cdh-planner --help`, the same as each module's add_parser help
 # (test_startup_imports checks). Held here so that a run imports only the module of the command it runs:
@@ -50,6 +50,8 @@ SUMMARIES = {
     'replay': 'republish a recorded run, or re-send its plan requests',
     'recover': 'complete the run file of a killed node (summary, indexes, footer)',
     'urdf': 'print the robot description (URDF) of a robot file',
+    'mjcf': 'print the MuJoCo model (MJCF) of a robot file',
+    'simulate': "run a plan's trajectory on the simulated robot (MuJoCo physics)",
     'demo': "the whole story: the paper's robots, poses and motions checked, then the ROS "
             "node planning, streaming, recording and replaying Robot 2's sphere task",
 }

@@ -26,6 +26,9 @@ m = 6, P = J^-1 and there is no null space: the paper's envelope. The rule may l
 [t_min, t_max] at a pose Z holds (an affine rule is a stronger demand than Z containing the
 ellipsoid): ``tension_status`` then says "rule_exceeds_limits" (the band is still the
 rule's, but no controller should use it).
+With elastic cables (``robot.cable_stiffness``) under length control, the cables' stiffness,
+not the rule, shares a wrench change: the band is v_i = |row i of P_K L|,
+P_K = K J^T (J K J^T)^-1, K = diag(EA / L0) at the centred t0 (``stiffness_band``).
 Units: m, N, N m.
 """
 
@@ -36,7 +39,7 @@ from itertools import combinations
 import numpy as np
 from numba import njit, prange
 
-from .feasibility import CONSTRAINTS, SINGULAR_DET, Feasibility
+from .feasibility import CONSTRAINTS, SINGULAR_DET, Feasibility, inverse_ellipsoid_factor
 from .model.pose import rotation_tt
 
 MIN_CABLES = 6
@@ -836,6 +839,7 @@ def evaluate(robot, p, tau=None, R=None):
         J, c, robot.wrench_center_local, _inverse_factor(robot.ellipsoid_matrix.tobytes()),
         robot.ellipsoid_frame == "load", robot.tension_min, robot.tension_max, facet_subsets(m),
         SINGULAR_DET)
+    v = stiffness_band(robot, J, c, t0, lengths, v)
     singular = ~(scale > SINGULAR_DET) | (lengths.min(axis=1) <= 0)
     span_l = robot.length_max - robot.length_min
     span_t = robot.tension_max - robot.tension_min
@@ -872,9 +876,31 @@ def _band_names(m):
     return np.array([f"{CONSTRAINTS[j // m]}[{j % m + 1}]" for j in range(4 * m)])
 
 
+def stiffness_band(robot, J, c, t0, lengths, v):
+    """The band v (N, m) N of the rule under length control of elastic cables: a wrench
+    change dw moves the tensions of cables held at their lengths by P_K dw,
+    P_K = K J^T (J K J^T)^-1, K = diag(EA / L0) = diag((EA + t0) / L) at the nominal t0
+    (N, m) N and lengths (N, m) m, whatever rule chose t0; over the ellipsoid that is
+    +- |rows of P_K L| (L L^T = E^-1 at the load points c (N, 3) m). J (N, 6, m). Rigid
+    cables (no ``robot.cable_stiffness``), six cables (P_K = J^-1 = P) and poses where t0
+    is not finite: ``v`` unchanged."""
+    if robot.cable_stiffness is None or J.shape[-1] == 6:
+        return v
+    ok = np.all(np.isfinite(t0), axis=1)
+    if not ok.any():
+        return v
+    K = (robot.cable_stiffness + t0[ok]) / lengths[ok]
+    JK = J[ok] * K[:, None, :]
+    P = np.swapaxes(np.linalg.solve(JK @ np.swapaxes(J[ok], -1, -2), JK), -1, -2)
+    v = v.copy()
+    v[ok] = np.linalg.norm(P @ inverse_ellipsoid_factor(robot, c[ok]), axis=-1)
+    return v
+
+
 def _centred(robot, p, R):
     """lengths (N, m), unit vectors, sqrt(det J J^T), t0 and v of poses (p (N, 3) m,
-    R (N, 3, 3)): the kernel without the facet test."""
+    R (N, 3, 3)): the kernel without the facet test (v of elastic cables:
+    ``stiffness_band``)."""
     p = np.ascontiguousarray(np.atleast_2d(np.asarray(p, dtype=float)))
     R = np.ascontiguousarray(np.asarray(R, dtype=float).reshape(-1, 3, 3))
     lengths, u, J, c = pose_geometry(p, R, robot.base_anchors, robot.platform_anchors,
@@ -884,7 +910,7 @@ def _centred(robot, p, R):
         J, c, robot.wrench_center_local, _inverse_factor(robot.ellipsoid_matrix.tobytes()),
         robot.ellipsoid_frame == "load", robot.tension_min, robot.tension_max, NO_SUBSETS,
         SINGULAR_DET)
-    return lengths, u, scale, t0, v
+    return lengths, u, scale, t0, stiffness_band(robot, J, c, t0, lengths, v)
 
 
 def _band(robot, p, tau, R):

@@ -49,7 +49,7 @@ def test_a_completed_execution_prints_completed_and_exits_0(tmp_path):
     params = ["execution.mode:=follow_joint_trajectory", f"execution.controller_action:={ACTION}"]
     with claimed_domain() as domain, \
             ControllerDouble(domain, *ROBOT.winch_names, "--action", ACTION, "--time-scale", 4.0,
-                             "--initial", *map(repr, _lengths(Q1).tolist())) as double, \
+                             "--kinematic", "--initial", *map(repr, _lengths(Q1).tolist())) as double, \
             NodeProcess(domain, tmp_path / "runs", params=params, fake=True):
         assert double.ready.wait(30.0)
         rc, lines = _run(script, domain)

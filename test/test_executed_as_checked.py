@@ -32,8 +32,11 @@ FAST, DEFAULT = (1.0, 20.0), (0.05, 0.2)  # winch limits (m/s, m/s^2)
 
 @pytest.fixture(scope="module")
 def problem():
+    """Robot 2 with rigid cables (no cable_stiffness): the published positions are the
+    geometric lengths, which this module's rigid checker follows (elastic cables:
+    test_elastic_execution.py)."""
     pr = load_problem(PROBLEMS / "robot2_q2_q3.yaml")
-    return replace(pr, robot=replace(pr.robot, inertia=INERTIA))
+    return replace(pr, robot=replace(pr.robot, inertia=INERTIA, cable_stiffness=None))
 
 
 @pytest.fixture(scope="module")
@@ -229,8 +232,10 @@ def test_the_plan_and_its_json_carry_what_was_checked(problem):
     assert E.check_path(problem.robot, path, problem.robot.mass, problem.robot.inertia, *FAST).ok
     doc = result_dict(result)
     keys = {"p", "quaternion", "tau", "lengths", "tension_min", "tension_nominal",
-            "tension_max", "margin", "t", "velocities", "accelerations"}
+            "tension_max", "margin", "t", "commanded_lengths", "velocities", "accelerations"}
     assert all(set(w) == keys for w in doc["path"])
+    # rigid cables: the commanded lengths are the geometric ones
+    assert all(w["commanded_lengths"] == w["lengths"] for w in doc["path"])
     assert np.array_equal([w["velocities"] for w in doc["path"]], path.velocities)
     assert np.array_equal([w["accelerations"] for w in doc["path"]], path.accelerations)
     assert doc["executed"] == result.stats["executed"]

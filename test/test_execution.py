@@ -336,7 +336,7 @@ class DoubleProcess(ControllerDouble):
 
     def __init__(self, domain, *args):
         first, _ = ends()
-        super().__init__(domain, *WINCHES, "--time-scale", TIME_SCALE,
+        super().__init__(domain, *WINCHES, "--kinematic", "--time-scale", TIME_SCALE,
                          "--initial", *map(repr, first.tolist()), *args)
 
     def event(self, kind, index, timeout_s=2.0):

@@ -30,6 +30,15 @@ JOINT_STATES = "/winches/joint_states"
 TIME_SCALE = 4.0   # the double runs 4x faster than real time
 
 
+def _rest_lengths(coords):
+    """The winch (unstretched) lengths at which the simulated robot rests at ``coords``."""
+    from cdh_planner.sim.plant import rest_lengths
+    o = sphere_pose_msg(coords).pose
+    return rest_lengths(ROBOT, np.array([o.position.x, o.position.y, o.position.z]),
+                        rotation_from_quaternion(np.array([o.orientation.x, o.orientation.y,
+                                                           o.orientation.z, o.orientation.w])))
+
+
 def _lengths(coords):
     msg = sphere_pose_msg(coords)
     p, o = msg.pose.position, msg.pose.orientation
@@ -45,7 +54,8 @@ def ros(tmp_path_factory):
     with claimed_domain() as domain:
         double = ControllerDouble(domain, *ROBOT.winch_names, "--action", ACTION,
                                   "--joint-states", JOINT_STATES, "--time-scale", TIME_SCALE,
-                                  "--initial", *map(repr, _lengths(Q1).tolist()))
+                                  "--robot", ROBOT2,   # the simulated robot (MuJoCo)
+                                  "--initial", *map(repr, _rest_lengths(Q1).tolist()))
         node = NodeProcess(domain, tmp_path_factory.mktemp("execution"), params=params)
         try:
             assert double.ready.wait(30.0), "\n".join(double.lines)
@@ -105,7 +115,15 @@ def test_execute_refuses_when_the_winches_are_not_at_the_start(ros):
     accepted = len(ros.double.events("accepted"))
     ok, message = ros.execute()
     assert not ok and message.startswith("refused:"), message
-    gap = float(np.max(np.abs(_measured(ros) - _lengths(Q1))))
+    # against the trajectory's first point: the commanded (unstretched) lengths at q1, within
+    # the cables' stretch of the geometric ones (this plan's latched ~/planned_cable_trajectory)
+    def this_plan():
+        points = ros.trajectories[-1].points if ros.trajectories else []
+        return points and all(np.max(np.abs(np.array(points[k].positions) - _lengths(q))) < 5e-3
+                              for k, q in ((0, Q1), (-1, Q3)))
+    assert ros.spin_until(this_plan, 10.0)
+    first = np.array(ros.trajectories[-1].points[0].positions)
+    gap = float(np.max(np.abs(_measured(ros) - first)))
     assert f"{gap:.4g}" in message or f"{gap:.3g}" in message, (gap, message)
     assert any(name in message for name in ROBOT.winch_names), message
     # nothing was sent, shown by a later goal rather than by a quiet while: a plan that
@@ -122,11 +140,15 @@ def test_use_current_start_plans_from_where_the_winches_are_and_executes(ros):
     answer = ros.plan_path(plan_path_goal(None, sphere_pose_msg(Q3), use_current_start=True),
                            timeout_s=60)
     assert answer.success, answer.result.error_msg
+    # the commanded lengths carry each end's nominal tensions (with its acceleration): the
+    # start's differ from where the last plan's end left the winches by L dt / EA (3.4e-5 m)
     np.testing.assert_allclose(answer.result.cable_trajectory.points[0].positions,
-                               _measured(ros), atol=1e-6)
+                               _measured(ros), atol=1e-4)
     first = answer.result.path.poses[0].pose.position
     q2 = sphere_pose_msg(Q2).pose.position
-    np.testing.assert_allclose([first.x, first.y, first.z], [q2.x, q2.y, q2.z], atol=1e-6)
+    # where the simulated platform rests (its measured lengths stretched by the measured
+    # tensions): at q2 to the few um the end's commanded (unstretched) lengths make
+    np.testing.assert_allclose([first.x, first.y, first.z], [q2.x, q2.y, q2.z], atol=1e-5)
     _, status = _execute_to_the_end(ros, answer.result)
     assert M.status_values(status)["outcome"] == "completed"
 
@@ -155,5 +177,39 @@ def test_call_from_where_the_winches_stopped_to_the_goal_and_execute(ros):
     assert r.returncode == 0, r.stdout + r.stderr
     for line in ("outcome: planned", f"through {ACTION}", "execution completed"):
         assert line in r.stdout, r.stdout
-    assert ros.spin_until(lambda: np.allclose(_measured(ros), _lengths(Q3), rtol=0, atol=1e-6),
-                          10.0), (_measured(ros), _lengths(Q3))
+    # at q3: the lengths that carry the nominal tensions at rest there, to the difference
+    # the last point's nominal tensions (with its deceleration) make, L dt / EA
+    assert ros.spin_until(lambda: np.allclose(_measured(ros), _rest_lengths(Q3), rtol=0,
+                                              atol=1e-4), 10.0), (_measured(ros), _rest_lengths(Q3))
+
+
+def test_the_simulated_robot_measures_the_tensions_and_the_run_file_records_them(ros):
+    """The double is the simulated robot (MuJoCo): /joint_states carries each cable's
+    measured tension in effort; at rest at q2 they balance the platform's weight (the sum
+    of the tension vectors = the load, within the cables' stretch), and the node's run file
+    records them (~/cable_state with effort)."""
+    answer = ros.plan_path(plan_path_goal(None, sphere_pose_msg(Q2), use_current_start=True),
+                           timeout_s=60)
+    assert answer.success, answer.result.error_msg
+    _, status = _execute_to_the_end(ros, answer.result)
+    assert M.status_values(status)["outcome"] == "completed"
+    msg = ros.measured.messages[-1]
+    effort = np.array([msg.effort[list(msg.name).index(n)] for n in ROBOT.winch_names])
+    assert effort.shape == (6,) and np.all(effort > 0), msg
+    # statics at q2 from the measured lengths: J(x) t = w0 to the cables' compliance
+    from cdh_planner.feasibility import cable_vectors, load_point, nominal_wrench, screw_jacobian
+    q2 = sphere_pose_msg(Q2).pose
+    p = np.array([q2.position.x, q2.position.y, q2.position.z])
+    R = rotation_from_quaternion(np.array([q2.orientation.x, q2.orientation.y,
+                                           q2.orientation.z, q2.orientation.w]))
+    d = cable_vectors(ROBOT, p[None], R[None])
+    u = d / np.linalg.norm(d, axis=-1)[..., None]
+    expected = np.linalg.solve(screw_jacobian(ROBOT, u)[0],
+                               nominal_wrench(ROBOT, load_point(ROBOT, p[None], R[None]))[0])
+    assert np.allclose(effort, expected, rtol=0.05, atol=0.02), (effort, expected)
+    ros.process.stop(timeout=15.0)
+    from mcap_ros2.reader import read_ros2_messages
+    recorded = [m.ros_msg for f in ros.process.run_files()
+                for m in read_ros2_messages(str(f), topics=["/cdh_planner/cable_state"])]
+    assert recorded and all(len(m.effort) == 6 for m in recorded)
+    assert any(np.allclose(list(m.effort), effort, rtol=0.05) for m in recorded[-20:])

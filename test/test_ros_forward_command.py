@@ -39,7 +39,7 @@ def test_forward_command_drives_a_joint_group_position_controller(tmp_path):
               "execution.allow_unchecked_start:=false"]
     with claimed_domain() as domain, \
             ControllerDouble(domain, *ORDER, "--commands", TOPIC, "--joint-states", JOINT_STATES,
-                             "--initial", *[repr(start[n]) for n in ORDER]) as double, \
+                             "--kinematic", "--initial", *[repr(start[n]) for n in ORDER]) as double, \
             NodeProcess(domain, tmp_path, params=params, fake=True) as node, \
             PlannerClient(domain_id=domain) as client:
         assert double.ready.wait(30.0), "\n".join(double.lines)

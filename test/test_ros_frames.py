@@ -50,7 +50,7 @@ def test_tf_gives_the_platform_pose_during_an_execution(tmp_path):
             ControllerDouble(domain, *ROBOT.winch_names, "--action", ACTION, "--joint-states",
                              JOINT_STATES, "--time-scale", 1.0,   # real time: the node
                              # looks for joint states at 50 Hz, and > 10 poses must be seen
-                             "--initial", *map(repr, _lengths(Q1).tolist())) as double, \
+                             "--kinematic", "--initial", *map(repr, _lengths(Q1).tolist())) as double, \
             NodeProcess(domain, tmp_path, params=params, fake=True) as node, \
             PlannerClient(domain_id=domain) as client:
         tf = Collector(client.node, TFMessage, "/tf", TF_QOS)

@@ -105,7 +105,7 @@ def test_cable_trajectory_field_by_field():
         assert list(pt.positions) == PATH.lengths[k].tolist()  # m
         assert list(pt.velocities) == PATH.velocities[k].tolist()  # m/s
         assert list(pt.accelerations) == PATH.accelerations[k].tolist()  # m/s^2
-        assert len(pt.effort) == 0  # a JTC without an effort interface refuses effort
+        assert list(pt.effort) == PATH.tension_nominal[k].tolist()  # N, for tension control
         assert M.to_seconds(pt.time_from_start) == pytest.approx(PATH.t[k], abs=1e-9)
     times = [ns(Time(sec=p.time_from_start.sec, nanosec=p.time_from_start.nanosec)) for p in msg.points]
     assert times[0] == 0 and all(b > a for a, b in zip(times, times[1:]))
@@ -117,6 +117,31 @@ def test_cable_trajectory_field_by_field():
     # velocities within the winch limits, start and end at rest
     v = np.array([list(p.velocities) for p in msg.points])
     assert np.abs(v).max() <= VMAX * (1 + 1e-9) and not v[[0, -1]].any()
+
+
+def test_cable_trajectory_commands_unstretched_lengths():
+    """With elastic cables the positions are the unstretched lengths that carry the nominal
+    tensions at the planned pose (L0 (1 + t / EA) = L), their rates those of L0; a rigid
+    robot gets the geometric lengths and rates themselves; the FollowJointTrajectory goal
+    drops the effort (a JTC without an effort interface refuses it)."""
+    from dataclasses import replace
+    from cdh_planner.trajectory.path import with_commands
+    winches = pytest.importorskip("cdh_planner.ros.winches")
+    elastic = with_commands(ROBOT, PATH)
+    msg = M.cable_trajectory_msg(elastic, ROBOT.winch_names, FRAME)
+    L0 = np.array([list(p.positions) for p in msg.points])
+    np.testing.assert_allclose(L0 * (1 + PATH.tension_nominal / ROBOT.cable_stiffness),
+                               PATH.lengths, rtol=1e-3)  # the averaged tension: near t_nom
+    assert np.all(L0 < PATH.lengths)
+    np.testing.assert_array_equal(L0, elastic.commanded()[0])
+    np.testing.assert_array_equal([list(p.velocities) for p in msg.points],
+                                  elastic.commanded()[1])
+    goal = winches.fjt_goal(msg)
+    assert all(len(p.effort) == 0 for p in goal.trajectory.points)
+    rigid = replace(ROBOT, cable_stiffness=None)
+    msg = M.cable_trajectory_msg(with_commands(rigid, PATH), ROBOT.winch_names, FRAME)
+    assert [list(p.positions) for p in msg.points] == PATH.lengths.tolist()
+    assert [list(p.accelerations) for p in msg.points] == PATH.accelerations.tolist()
 
 
 def test_joint_names_are_checked():

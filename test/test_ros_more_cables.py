@@ -14,6 +14,8 @@ rclpy = pytest.importorskip("rclpy")
 from diagnostic_msgs.msg import DiagnosticArray  # noqa: E402
 from sensor_msgs.msg import JointState  # noqa: E402
 
+from cdh_planner.model.forward_kinematics import forward_kinematics_many  # noqa: E402
+from cdh_planner.sim.plant import rest_lengths  # noqa: E402
 from cdh_planner.model.kinematics import cable_lengths  # noqa: E402
 from cdh_planner.model.pose import rotation_from_quaternion  # noqa: E402
 from cdh_planner.ros import messages as M  # noqa: E402
@@ -39,11 +41,12 @@ def _params_file(tmp):
     return path
 
 
-def _lengths(robot, coords):
-    msg = sphere_pose_msg(coords)
-    p, o = msg.pose.position, msg.pose.orientation
-    R = rotation_from_quaternion(np.array([o.x, o.y, o.z, o.w]))
-    return cable_lengths(robot, np.array([p.x, p.y, p.z]), R)
+def _pose(coords):
+    """(p (3,) m, R (3, 3)) of the sphere task's pose at ``coords``."""
+    o = sphere_pose_msg(coords).pose
+    return (np.array([o.position.x, o.position.y, o.position.z]),
+            rotation_from_quaternion(np.array([o.orientation.x, o.orientation.y,
+                                               o.orientation.z, o.orientation.w])))
 
 
 @pytest.fixture(scope="module")
@@ -57,7 +60,9 @@ def ros(tmp_path_factory):
     with claimed_domain() as domain:
         double = ControllerDouble(domain, *robot.winch_names, "--action", ACTION,
                                   "--joint-states", JOINT_STATES, "--time-scale", TIME_SCALE,
-                                  "--initial", *map(repr, _lengths(robot, Q2).tolist()))
+                                  "--robot", params_file,   # the simulated robot (MuJoCo)
+                                  "--stream", "/cdh_planner/cable_command",   # its driver
+                                  "--initial", *map(repr, rest_lengths(robot, *_pose(Q2)).tolist()))
         node = NodeProcess(domain, tmp, params=params, params_file=params_file)
         try:
             assert double.ready.wait(30.0), "\n".join(double.lines)
@@ -148,6 +153,11 @@ def test_the_node_streams_an_eight_cable_plan(ros):
     assert bands.shape == (len(traj.points), 8, 3)
     assert np.all(bands[..., 0] >= ros.robot.tension_min - 1e-6)
     assert np.all(bands[..., 2] <= ros.robot.tension_max + 1e-6)
+    # the simulated robot, driven by the stream, ends at the last command, on taut cables
+    last = M.winch_command_values(run.commands[-1])[1]
+    assert ros.spin_until(lambda: np.allclose(_measured(ros), last, atol=1e-9), 10.0)
+    effort = np.array(ros.measured.messages[-1].effort)
+    assert effort.shape == (8,) and np.all(effort > 0), effort
 
 
 def test_the_node_executes_an_eight_cable_plan_through_the_controller(ros):
@@ -170,8 +180,20 @@ def test_the_node_executes_an_eight_cable_plan_through_the_controller(ros):
         assert event["joint_names"] == list(ros.robot.winch_names)
         last = answer.result.cable_trajectory.points[-1].positions
         assert ros.spin_until(lambda: np.allclose(_measured(ros), last, atol=1e-6), 10.0)
-        # at rest at q3 the 8 measured lengths are one pose's: the residual is rounding
-        assert ros.spin_until(lambda: _residual(ros) is not None and _residual(ros) < 1e-6, 10.0), \
-            _residual(ros)
+        # at rest at q3, on the simulated robot: the winches hold the unstretched lengths L0
+        # and the load cells the tensions t; the stretched lengths L0 (1 + t / EA) are one
+        # pose's (least squares on 8 lengths: residual at rounding); the node's rigid forward
+        # kinematics of L0 alone is off by no more than the largest stretch
+        msg = ros.measured.messages[-1]
+        names = list(msg.name)
+        effort = np.array([msg.effort[names.index(n)] for n in ros.robot.winch_names])
+        L0 = _measured(ros)
+        stretched = L0 * (1 + effort / ros.robot.cable_stiffness)
+        p, R = _pose(Q3)
+        fk = forward_kinematics_many(ros.robot, stretched[None], p[None], R[None])
+        assert np.max(np.abs(cable_lengths(ros.robot, fk.p[0], fk.R[0]) - stretched)) < 1e-9
+        stretch = float(np.max(stretched - L0))
+        assert ros.spin_until(lambda: _residual(ros) is not None and _residual(ros) <= stretch,
+                              10.0), (_residual(ros), stretch)
     finally:
         assert ros.set_parameters({"execution.mode": "stream"}) == [(True, "")]

@@ -154,6 +154,7 @@ def result_dict(result):
         out["clearance_binding"] = result.stats["clearance_binding"]
     path = result.path
     if path is not None:
+        commanded, velocities, accelerations = path.commanded()
         for k in range(len(path)):
             out["path"].append({
                 "p": path.p[k].tolist(), "quaternion": path.quaternion[k].tolist(),
@@ -161,8 +162,9 @@ def result_dict(result):
                 "tension_min": path.tension_min[k].tolist(),
                 "tension_nominal": path.tension_nominal[k].tolist(),
                 "tension_max": path.tension_max[k].tolist(), "margin": float(path.margin[k]),
-                "t": float(path.t[k]), "velocities": path.velocities[k].tolist(),
-                "accelerations": path.accelerations[k].tolist()})
+                "t": float(path.t[k]), "commanded_lengths": commanded[k].tolist(),
+                "velocities": velocities[k].tolist(),
+                "accelerations": accelerations[k].tolist()})
     return out
 
 

@@ -3,7 +3,11 @@ L0 (1 + t / EA) long, EA its axial stiffness (N, ``robot.cable_stiffness``). A r
 without a stiffness has rigid cables: every function here then gives the rigid answer.
 """
 
+from dataclasses import dataclass
+
 import numpy as np
+
+from .rotation import Rotation
 
 
 def is_elastic(robot):
@@ -20,6 +24,15 @@ def unstretched_lengths(robot, L, t):
     return L / (1.0 + np.asarray(t, dtype=float) / robot.cable_stiffness)
 
 
+def stretched_lengths(robot, L0, t):
+    """L (N, m) m: the lengths of cables of unstretched length L0 (N, m) m under tensions
+    t (N, m) N, L0 (1 + t / EA); L0 itself for rigid cables."""
+    L0 = np.asarray(L0, dtype=float)
+    if not is_elastic(robot):
+        return L0.copy()
+    return L0 * (1.0 + np.asarray(t, dtype=float) / robot.cable_stiffness)
+
+
 def stretched_tensions(robot, L, L0):
     """Tensions (N, m) N of cables of unstretched length L0 pulled to length L (both m):
     EA (L - L0) / L0, zero where slack (a cable cannot push)."""
@@ -29,3 +42,139 @@ def stretched_tensions(robot, L, L0):
 def axial_stiffness(robot, L0):
     """k_i = EA_i / L0_i (N/m) of cables of unstretched lengths L0 (N, m) m."""
     return robot.cable_stiffness / np.asarray(L0, dtype=float)
+
+
+EQUILIBRIUM_ITERATIONS = 25
+LINE_SEARCH_HALVINGS = 12
+EQUILIBRIUM_TOL = 1e-12  # N (and N m) per N of the load's force: converged
+
+
+@dataclass(frozen=True)
+class Equilibria:
+    """Poses p (M, 3) m, R (M, 3, 3) where elastic cables balance a load, their tensions
+    (M, m) N, the largest force or moment residual (M,) N and ``ok`` (M,) where Newton
+    converged."""
+
+    p: np.ndarray
+    R: np.ndarray
+    tensions: np.ndarray
+    residual: np.ndarray
+    ok: np.ndarray
+
+
+def wrench_balance(robot, L0, p, R, force, moment, arm, bilateral=False, jacobian=True):
+    """Residual (M, 6) and its Jacobian (M, 6, 6) of the balance of cables of unstretched
+    lengths L0 (M, m) m at poses (p (M, 3) m, R (M, 3, 3)) against the load wrench about
+    the origin [force; moment + c x arm] (each (M, 3), N and N m; c = p + R g the load
+    point): sum_i t_i [u_i; a_i x u_i] - w, t_i = max(0, EA_i (L_i - L0_i) / L0_i), u_i the
+    unit vector from base anchor a_i to platform anchor. Also the tensions (M, m) N. The
+    Jacobian is with respect to [dp; dtheta], p <- p + dp, R <- exp([dtheta]x) R (base
+    frame), the geometric stiffness of the tensions included. ``bilateral``: cables that
+    push as well (t_i = EA_i (L_i - L0_i) / L0_i of either sign), a smooth system whose
+    solution is the tension-only one where every tension comes out positive. ``jacobian``
+    False: the Jacobian is None (a line search needs the residual only)."""
+    r = np.einsum("nij,kj->nki", R, robot.platform_anchors)           # R b_i (M, m, 3)
+    d = p[:, None, :] + r - robot.base_anchors
+    L = np.linalg.norm(d, axis=-1)
+    u = d / L[..., None]
+    k = axial_stiffness(robot, L0)
+    t = k * (L - L0)
+    if not bilateral:
+        t = np.maximum(t, 0.0)
+        k = np.where(t > 0, k, 0.0)
+    a = np.broadcast_to(robot.base_anchors, u.shape)
+    c = p + np.einsum("nij,j->ni", R, robot.load_point)
+    w = np.concatenate([force, moment + np.cross(c, arm)], axis=1)
+    res = np.concatenate([np.einsum("nk,nki->ni", t, u),
+                          np.einsum("nk,nki->ni", t, np.cross(a, u))], axis=1) - w
+    if not jacobian:
+        return res, None, t
+    # dq_i / dx = [I, -[r_i]x]; dL_i = u_i . dq_i; du_i = (I - u_i u_i^T) / L_i dq_i
+    dq = np.concatenate([np.broadcast_to(np.eye(3), r.shape + (3,)), -_skew(r)], axis=-1)
+    dL = np.einsum("nki,nkij->nkj", u, dq)                              # (M, m, 6)
+    du = (dq - u[..., None] * dL[..., None, :]) / L[..., None, None]    # (M, m, 3, 6)
+    dt = k[..., None] * dL
+    top = np.einsum("nki,nkj->nij", u, dt) + np.einsum("nk,nkij->nij", t, du)
+    bottom = (np.einsum("nki,nkj->nij", np.cross(a, u), dt)
+              + np.einsum("nk,nkij->nij", t, _skew(a) @ du))
+    dc = np.concatenate([np.broadcast_to(np.eye(3), c.shape + (3,)),
+                         -_skew(c - p)], axis=-1)                       # (M, 3, 6)
+    jac = np.concatenate([top, bottom + _skew(arm) @ dc], axis=1)       # d(c x arm) = -arm x dc
+    return res, jac, t
+
+
+def equilibrium_poses(robot, L0, p0, R0, force, moment, arm,
+                      max_iterations=EQUILIBRIUM_ITERATIONS):
+    """Equilibria of the platform on elastic cables of unstretched lengths L0 (M, m) m under
+    the load wrench [force; moment + c x arm] (``wrench_balance``), by Newton with the exact
+    Jacobian from the poses (p0 (M, 3) m, R0 (M, 3, 3)): first with cables that could push
+    (smooth: no cable slackens on the way), then tension-only from there, which changes
+    nothing where every tension is positive. Converged when the residual is below
+    EQUILIBRIUM_TOL times the largest of the force's norm and 1 N; a slack cable is allowed
+    (its tension is zero), a singular Jacobian is not converged."""
+    p, R = np.array(p0, dtype=float), np.array(R0, dtype=float)
+    load = (force, moment, arm)
+    _newton(robot, L0, p, R, load, True, max_iterations)
+    ok = _newton(robot, L0, p, R, load, False, max_iterations)
+    res, _, t = wrench_balance(robot, L0, p, R, *load, jacobian=False)
+    return Equilibria(p=p, R=R, tensions=t, residual=np.max(np.abs(res), axis=1), ok=ok)
+
+
+def _newton(robot, L0, p, R, load, bilateral, max_iterations):
+    """Newton with line search on ``wrench_balance`` (in place on p, R); converged (M,)."""
+    scale = EQUILIBRIUM_TOL * np.maximum(1.0, np.linalg.norm(load[0], axis=1))
+    ok = np.zeros(len(p), dtype=bool)
+    todo = np.arange(len(p))
+    for _ in range(max_iterations):
+        res, _, _ = wrench_balance(robot, L0[todo], p[todo], R[todo],
+                                   *(x[todo] for x in load), bilateral, jacobian=False)
+        done = np.max(np.abs(res), axis=1) <= scale[todo]
+        ok[todo[done]] = True
+        todo, res = todo[~done], res[~done]
+        if todo.size == 0:
+            break
+        _, jac, _ = wrench_balance(robot, L0[todo], p[todo], R[todo],
+                                   *(x[todo] for x in load), bilateral)
+        keep = np.linalg.matrix_rank(jac) == 6
+        todo, res, jac = todo[keep], res[keep], jac[keep]
+        if todo.size == 0:
+            break
+        step = -np.linalg.solve(jac, res[..., None])[..., 0]
+        p[todo], R[todo], moved = _line_search(robot, L0[todo], p[todo], R[todo], step, res,
+                                               tuple(x[todo] for x in load), bilateral)
+        todo = todo[moved]  # no step lowers the residual: stuck, not converged
+    return ok
+
+
+def _line_search(robot, L0, p, R, step, res, load, bilateral, halvings=LINE_SEARCH_HALVINGS):
+    """The poses moved by the Newton ``step`` (K, 6), halved while the largest residual
+    does not fall below that at (p, R) (``res``): far from the equilibrium a stiff
+    cable's slack or the geometric stiffness can make the full step overshoot. Also which
+    poses moved (K,) (the others found no lower residual)."""
+    before = np.max(np.abs(res), axis=1)
+    p_new, R_new = p.copy(), R.copy()
+    scale = np.ones(len(p))
+    todo = np.arange(len(p))
+    for _ in range(halvings):
+        s = step[todo] * scale[todo, None]
+        p_try = p[todo] + s[:, :3]
+        R_try = Rotation.from_rotvec(s[:, 3:]).as_matrix() @ R[todo]
+        after, _, _ = wrench_balance(robot, L0[todo], p_try, R_try,
+                                     *(x[todo] for x in load), bilateral, jacobian=False)
+        better = np.max(np.abs(after), axis=1) < before[todo]
+        p_new[todo[better]], R_new[todo[better]] = p_try[better], R_try[better]
+        todo = todo[~better]
+        if todo.size == 0:
+            break
+        scale[todo] *= 0.5
+    moved = np.ones(len(p), dtype=bool)
+    moved[todo] = False
+    return p_new, R_new, moved
+
+
+def _skew(v):
+    """[v]x (..., 3, 3) of vectors v (..., 3)."""
+    z = np.zeros(v.shape[:-1])
+    return np.stack([np.stack([z, -v[..., 2], v[..., 1]], -1),
+                     np.stack([v[..., 2], z, -v[..., 0]], -1),
+                     np.stack([-v[..., 1], v[..., 0], z], -1)], -2)

@@ -18,6 +18,7 @@ import numpy as np
 from .rotation import Rotation  # numpy: no scipy.spatial import (start-up)
 
 from ..errors import InputError
+from .elastic import stretched_lengths
 from .kinematics import LSQ_RTOL, TOL_M, cable_lengths, forward_kinematics, rotation_vector_exp
 
 MAX_ITERATIONS = 20
@@ -92,6 +93,23 @@ def nearest_pose(robot, lengths, poses):
     L = np.asarray(lengths, dtype=float)
     return min(poses, key=lambda pose: float(np.max(np.abs(cable_lengths(robot, *pose) - L))),
                default=None)
+
+
+def measured_cable_lengths(robot, lengths, tensions):
+    """The cable lengths (m,) m of the winches' measured ``lengths`` (m,) m: with elastic
+    cables (``robot.cable_stiffness``) and measured ``tensions`` (m,) N, the winches pay
+    out unstretched cable, which is L0 (1 + t / EA) long (``elastic.stretched_lengths``;
+    a negative measured tension counts as slack); rigid cables or no tensions (None): the
+    lengths themselves. InputError (``joint_states.effort``) for tensions that are not
+    one finite number per winch."""
+    L = np.asarray(lengths, dtype=float)
+    if tensions is None:
+        return L
+    t = np.asarray(tensions, dtype=float)
+    if t.shape != L.shape or not np.all(np.isfinite(t)):
+        raise InputError("joint_states.effort", t.tolist(),
+                         "expected one finite tension (N) per winch")
+    return stretched_lengths(robot, L, np.maximum(t, 0.0))
 
 
 def current_pose(robot, lengths, guess=None, feasible=None):

@@ -392,7 +392,9 @@ class ExecutedMotion:
     """A motion as executed: its waypoints' times ``t`` (N,) s, cable ``lengths`` (N, 6) m
     and tension ``envelope`` (N, 6, 3) N (min, nominal, max); the executed cable lengths
     ``executed`` (M, 6) m (the streamed commands, or the winches' measured joint states) at
-    ``executed_t`` (M,) s from the first, and which of the two they are (``how``)."""
+    ``executed_t`` (M,) s from the first, and which of the two they are (``how``);
+    ``tensions`` (M, 6) N: the tensions measured with them (a simulated or real robot's load
+    cells, the joint states' effort), or None."""
 
     t: np.ndarray
     lengths: np.ndarray
@@ -400,6 +402,7 @@ class ExecutedMotion:
     executed_t: np.ndarray
     executed: np.ndarray
     how: str = "streamed"
+    tensions: np.ndarray = None
 
 
 def plot_execution(robot, motions, out, size=EXECUTION_SIZE):
@@ -418,6 +421,9 @@ def plot_execution(robot, motions, out, size=EXECUTION_SIZE):
                 top.plot(offset + m.t, m.lengths[:, i], ".", color=colors(i), ms=3)
                 _draw_envelope(bottom, offset + m.t, *m.envelope[:, i].T, color=colors(i),
                                nominal_color=colors(i))
+                if m.tensions is not None:
+                    bottom.plot(offset + m.executed_t, m.tensions[:, i], color="black", lw=0.7,
+                                ls=(0, (2, 1)), label="measured" if (k, i) == (0, 0) else None)
             top.axvline(offset, color="grey", lw=0.8, ls=":")
             top.annotate(f"{label} ({m.how})", (offset, 1), xycoords=("data", "axes fraction"),
                          xytext=(4, -14), textcoords="offset points")
@@ -432,8 +438,10 @@ def plot_execution(robot, motions, out, size=EXECUTION_SIZE):
         top.legend(ncol=6, fontsize="small", loc="lower right")
         bottom.set_ylabel("tension (N)")
         bottom.set_xlabel("time (s)")
+        measured = any(m.tensions is not None for m in motions.values())
         bottom.set_title("tension envelope over the wrench ellipsoid: nominal (line), "
-                         "min..max (band); dashed: limits")
+                         "min..max (band); dashed: limits"
+                         + ("\nblack dotted: measured tensions (load cells)" if measured else ""))
         fig.savefig(out, dpi=DPI, format="png")
     finally:
         plt.close(fig)

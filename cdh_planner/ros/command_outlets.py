@@ -26,6 +26,7 @@ from dataclasses import dataclass
 from typing import ClassVar
 
 from ..errors import InputError
+from ..model.elastic import is_elastic
 from .param_spec import STRING, STRINGS, Spec
 
 OUTLETS = {}  # execution.mode -> registered CommandOutlet class (``register``)
@@ -113,6 +114,7 @@ class CommandOutlet(abc.ABC):
     description: ClassVar[str] = ""   # in execution.mode's description
     specs: ClassVar[tuple] = ()       # its own node parameters (Spec)
     streamed: ClassVar[bool]          # sampled at stream_rate_hz (else the controller times it)
+    length_only: ClassVar[bool] = False  # commands lengths alone, no tensions
 
     def __init__(self, context, config):
         self.context = context
@@ -126,6 +128,19 @@ class CommandOutlet(abc.ABC):
 
     def configure(self, config):
         """New parameter values (NodeConfig; not the start-only ones, read once)."""
+
+    @classmethod
+    def refusal(cls, robot):
+        """Why this mode cannot execute a plan of ``robot`` (one line), or "": with more
+        than six rigid cables, lengths alone do not determine the tensions (any tensions in
+        the null space of the structure matrix hold the same pose), so a length-only mode
+        needs the cables' stiffness, which makes the commanded lengths carry the plan's."""
+        m = len(robot.base_anchors)
+        if cls.length_only and m > 6 and not is_elastic(robot):
+            return (f"robot.cable_stiffness is not set: execution.mode {cls.name} commands "
+                    f"lengths only, which do not determine the tensions of {m} rigid cables "
+                    f"(give the cables' axial stiffness EA, N)")
+        return ""
 
     @property
     @abc.abstractmethod
@@ -197,6 +212,7 @@ class JointStateStream(StreamedOutlet):
 @register
 class ForwardCommand(StreamedOutlet):
     name = "forward_command"
+    length_only = True
     description = ("std_msgs/Float64MultiArray cable lengths on execution.forward_command_topic "
                    "at stream_rate_hz, in execution.joint_order: a JointGroupPositionController")
     specs = (Spec("execution.forward_command_topic", STRING, "/cable_controller/commands",
@@ -227,6 +243,7 @@ class ForwardCommand(StreamedOutlet):
 @register
 class FollowJointTrajectory(TrajectoryOutlet):
     name = "follow_joint_trajectory"
+    length_only = True
     description = ("the cable trajectory, without effort, to a JointTrajectoryController's "
                    "action")
     specs = (Spec("execution.controller_action", STRING,

@@ -163,9 +163,11 @@ def path_msg(path, frame_id, stamp):
 
 def cable_trajectory_msg(path, joint_names, frame_id, stamp=None):
     """trajectory_msgs/JointTrajectory, one joint per winch (``joint_names`` = the robot's
-    winch_names): positions = cable lengths (m), velocities (m/s), accelerations (m/s^2),
-    time_from_start = t (s). No effort: a JointTrajectoryController without an effort
-    command interface refuses it; the tensions are on the tension envelope.
+    winch_names): positions = the commanded cable lengths (m; ``PlannedPath.commanded``:
+    unstretched with elastic cables), their velocities (m/s) and accelerations (m/s^2),
+    effort = the nominal tensions (N, for tension-aware controllers), time_from_start = t
+    (s). The FollowJointTrajectory goal drops the effort (``winches.fjt_goal``): a
+    JointTrajectoryController without an effort command interface refuses it.
 
     ``stamp`` None (zero) means "start on receipt" to a ros2_control
     JointTrajectoryController; a non-zero stamp is an absolute start time.
@@ -175,11 +177,13 @@ def cable_trajectory_msg(path, joint_names, frame_id, stamp=None):
     msg.header.frame_id = frame_id
     msg.header.stamp = stamp if stamp is not None else Time()
     msg.joint_names = check_joint_names(joint_names)
+    L, V, A = path.commanded()
     for k in range(len(path)):
         pt = JointTrajectoryPoint()
-        pt.positions = path.lengths[k].astype(float)
-        pt.velocities = path.velocities[k].astype(float)
-        pt.accelerations = path.accelerations[k].astype(float)
+        pt.positions = L[k].astype(float)
+        pt.velocities = V[k].astype(float)
+        pt.accelerations = A[k].astype(float)
+        pt.effort = path.tension_nominal[k].astype(float)
         pt.time_from_start = duration_msg(path.t[k])
         msg.points.append(pt)
     return msg

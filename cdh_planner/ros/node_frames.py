@@ -104,7 +104,8 @@ class NodeFrames:
         if lengths is None:
             return
         try:
-            p, R = node.execution.forward_kinematics(config.robot, lengths)
+            p, R = node.execution.forward_kinematics(config.robot, lengths,
+                                                     tensions=node.execution.joints.tensions)
         except InputError:
             return              # no pose for these lengths: nothing to show
         except Exception as exc:  # noqa: BLE001 - never take the node down
@@ -117,7 +118,10 @@ class NodeFrames:
                           config.values["platform_frame"])
         state, margin, markers = live_messages(config.robot, lengths, p, R, msg,
                                                config.base_frame, stamp)
-        self.pub_cables.publish(state)
+        if state.effort:    # measured tensions (load cells): the run file records them
+            node.record.publish(self.pub_cables, state)
+        else:
+            self.pub_cables.publish(state)
         self.pub_margin.publish(margin)
         self.pub_markers.publish(markers)
 

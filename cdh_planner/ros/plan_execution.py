@@ -32,6 +32,8 @@ import numpy as np
 
 from ..accuracy import has_accuracy, pose_accuracy
 from ..errors import InputError, exception_line
+from ..model.elastic import is_elastic
+from ..model.forward_kinematics import measured_cable_lengths
 from ..model.kinematics import cable_lengths
 from ..model.pose import rotation_from_quaternion
 from . import winches
@@ -64,11 +66,13 @@ class PlanExecution:
         self._timer_period = None
         self._last_pose = None         # (p, R) of the last forward kinematics, its next guess
         self.forward_kinematics_residual_m = None  # its largest cable length error, m
+        self._said_rigid = False       # logged that joint states without efforts are rigid
         values = config.values
         self.joints = winches.JointStateMonitor(
             node, values["execution.joint_states_topic"], config.robot.winch_names)
         context = OutletContext(node, command_publisher, callback_group)
         self.outlets = {mode: cls(context, config) for mode, cls in OUTLETS.items()}
+        self._warn_refusal(config)
 
     @property
     def running(self):
@@ -80,6 +84,15 @@ class PlanExecution:
         self.joints.winch_names = list(config.robot.winch_names)
         for outlet in self.outlets.values():
             outlet.configure(config)
+        self._warn_refusal(config)
+
+    def _warn_refusal(self, config):
+        """Say at configure when execution.mode cannot execute the robot's plans
+        (``CommandOutlet.refusal``); an execution then refuses with the same line."""
+        mode = config.values["execution.mode"]
+        refusal = self.outlets[mode].refusal(config.robot) if mode in self.outlets else ""
+        if refusal:
+            self._node.get_logger().warning(f"plans will not be executed: {refusal}")
 
     # ------------------------------------------------------------------ start, stop
 
@@ -94,6 +107,9 @@ class PlanExecution:
         if plan is None:
             return False, "refused: no plan to execute; call ~/plan first"
         path, robot, out = plan
+        refusal = self._outlet(values["execution.mode"]).refusal(robot)
+        if refusal:
+            return False, f"refused: {refusal}"
         refused, note = self._check_start(values, path, robot)
         if refused:
             return False, refused
@@ -128,11 +144,12 @@ class PlanExecution:
         return self.outlets[mode]
 
     def _check_start(self, values, path, robot):
-        """(refusal or "", note): the measured lengths against the path's first point; with
+        """(refusal or "", note): the measured lengths against the path's first commanded
+        point (the winches' lengths: unstretched with elastic cables); with
         none, refused unless ``execution.allow_unchecked_start`` (then noted)."""
         lengths, why = self.joints.lengths(values["execution.joint_states_max_age_s"])
         if lengths is not None:
-            mismatch = winches.start_mismatch(lengths, path.lengths[0],
+            mismatch = winches.start_mismatch(lengths, path.commanded()[0][0],
                                                 values["execution.start_tolerance"],
                                                 robot.winch_names)
             return (f"refused: {mismatch}" if mismatch else ""), ""
@@ -293,7 +310,7 @@ class PlanExecution:
         if lengths is None:
             return MeasuredStart(why=why)
         try:
-            p, R = self.forward_kinematics(config.robot, lengths, plan)
+            p, R = self.forward_kinematics(config.robot, lengths, plan, self.joints.tensions)
         except InputError as exc:
             return MeasuredStart(why=str(exc))
         except Exception as exc:  # noqa: BLE001 - the goal still gets a result, with why
@@ -301,10 +318,19 @@ class PlanExecution:
             return MeasuredStart(why=f"forward kinematics failed: {exception_line(exc)}")
         return MeasuredStart(pose=M.pose_stamped_msg(p, R, config.base_frame, self._stamp()))
 
-    def forward_kinematics(self, robot, lengths, plan=None):
-        """The pose (p (3,) m, R (3, 3)) of cable lengths ``lengths`` (m): Newton from the
-        nearest known pose (the last forward kinematics, the ends of ``plan``), kept as the
-        next one's guess. InputError when Newton finds none."""
+    def forward_kinematics(self, robot, lengths, plan=None, tensions=None):
+        """The pose (p (3,) m, R (3, 3)) of the winches' cable lengths ``lengths`` (m),
+        stretched by the measured ``tensions`` (N) when the cables are elastic (without
+        them: taken as rigid, said once in the log): Newton from the nearest known pose
+        (the last forward kinematics, the ends of ``plan``), kept as the next one's guess.
+        InputError when Newton finds none."""
+        if is_elastic(robot):
+            if tensions is None and not self._said_rigid:
+                self._said_rigid = True
+                self._node.get_logger().warning(
+                    "the joint states carry no efforts (measured tensions): forward kinematics "
+                    "takes the cables as rigid, not stretched by robot.cable_stiffness")
+            lengths = measured_cable_lengths(robot, lengths, tensions)
         guess = winches.nearest_pose(robot, lengths, self._known_poses(plan))
         p, R = winches.current_pose(robot, lengths, guess)
         self._last_pose = (p, R)

@@ -1,12 +1,21 @@
 """A simulated cable controller: a FollowJointTrajectory action server standing in for a
 ros2_control JointTrajectoryController (ros2_controllers, jazzy branch), with the winches'
-JointState, to try the node's ``follow_joint_trajectory`` execution without hardware (the
-demo) and to test it (test/doubles). It is NOT a controller: no hardware, no PID, no
-tolerances; the joints move exactly as commanded.
+JointState, to try the node's execution without hardware (the demo) and to test it
+(test/doubles). Two modes, one of them chosen:
 
-    python -m cdh_planner.ros.simulated_controller JOINT [JOINT ...] [--action NAME]
-        [--joint-states TOPIC] [--initial X [X ...]] [--time-scale K]
-        [--effort-interface] [--allow-nonzero-velocity-at-end] [--commands TOPIC]
+- ``--robot ROBOT.yaml``: the simulated robot (``cdh_planner/sim``): the goals, the
+  forwarded commands and the streamed setpoints drive MuJoCo's model of the robot file (a
+  free platform on elastic, tension-only cables, 1 kHz of simulated time following the wall
+  clock times ``--time-scale``); the JointState carries each winch's position (the
+  unstretched length it reached) and, in ``effort``, each cable's measured tension (N, a
+  load cell). The platform starts at rest at the pose of the ``--initial`` lengths.
+- ``--kinematic``: the pure-kinematic double for tests of the goal checks and the command
+  plumbing: the joints move exactly as commanded (no physics), ``effort`` empty.
+
+    python -m cdh_planner.ros.simulated_controller JOINT [JOINT ...] (--robot ROBOT.yaml |
+        --kinematic) [--action NAME] [--joint-states TOPIC] [--initial X [X ...]]
+        [--time-scale K] [--effort-interface] [--allow-nonzero-velocity-at-end]
+        [--commands TOPIC] [--stream TOPIC]
 
 With ``--commands TOPIC`` it is also a JointGroupPositionController (forward_command_controller,
 jazzy branch): std_msgs/Float64MultiArray on TOPIC (the controller's ``~/commands``) sets the
@@ -14,7 +23,10 @@ JOINTs' positions, data[i] to JOINT i. As the real controller's ``update`` does,
 whose data size is not the number of JOINTs is not applied and reported
 ({"event": "command_rejected", "reason": its log message}); beyond it, a non-finite value is
 rejected too (mock hardware would pass it to the winches). An applied command prints
-{"event": "command", "data": [...]}.
+{"event": "command", "data": [...]}. With ``--stream TOPIC`` it is the custom driver of the
+node's ``stream`` mode: sensor_msgs/JointState setpoints on TOPIC (by joint name) are
+applied the same way. On the simulated robot a command is reached in a straight line over
+the interval since the previous one (a winch does not jump).
 
 Before accepting a goal it checks what the real controller's goal callback checks
 (``validate_trajectory_msg``, with the controller's defaults: no partial joint goals, no
@@ -35,14 +47,16 @@ one JSON line {"event": "rejected", "reason": ...} with the controller's own log
 
 An accepted goal prints {"event": "accepted", "joint_names", "points", "has_effort",
 "duration_s"} and preempts a running one (aborted, INVALID_GOAL, as the controller does). It
-runs in real time divided by ``--time-scale``: positions interpolated linearly in time from
-where the joints are to the first point, then between points (a non-zero stamp in the future
+runs in real time divided by ``--time-scale``: on the simulated robot as a
+JointTrajectoryController interpolates (the quintic of positions, velocities and
+accelerations; positions alone: straight lines), kinematically with positions interpolated
+linearly in time; from where the joints are to the first point, then between points (a non-zero stamp in the future
 delays the start), with FollowJointTrajectory feedback at ~17 Hz, and succeeds with
 SUCCESSFUL exactly at the last point's positions ({"event": "succeeded"}). A cancel is
 accepted: the joints hold where they are and the result is canceled ({"event": "canceled"}).
 At SIGINT / SIGTERM a running goal is aborted (as when the controller is deactivated).
 
-sensor_msgs/JointState of the JOINTs' current positions is published at 50 Hz on
+sensor_msgs/JointState of the JOINTs' current positions (and measured tensions) is published at 50 Hz on
 ``--joint-states`` (default /joint_states; reliable, volatile, depth 10 like
 joint_state_broadcaster) all the time, from ``--initial`` (one number per joint, default 0),
 and once more as a goal ends, just before its result.
@@ -148,6 +162,16 @@ class SimulatedController:
         self.args = args
         self.lock = threading.Lock()
         self.positions = np.array(args.initial, dtype=float)
+        self.live = None             # the simulated robot (sim.live.LivePlant), or kinematic
+        if args.robot:
+            from ..model.robot import load_robot
+            from ..sim.live import LivePlant
+            robot = load_robot(args.robot)
+            if list(robot.winch_names) != self.joints:
+                raise SystemExit(f"--robot: the robot's winch names {list(robot.winch_names)} "
+                                 f"are not the JOINTs {self.joints}")
+            self.live = LivePlant(robot, self.positions, args.time_scale)
+            self.live.start()
         self.active = None           # the goal handle being executed
         self.stopping = threading.Event()   # set at SIGINT / SIGTERM: running goals abort
         group = ReentrantCallbackGroup()
@@ -161,6 +185,17 @@ class SimulatedController:
         if args.commands:   # the controller's subscription: rclcpp::SystemDefaultsQoS
             node.create_subscription(Float64MultiArray, args.commands, self.command, 10,
                                      callback_group=group)
+        if args.stream:     # a custom driver of the node's stream mode
+            node.create_subscription(JointState, args.stream, self.setpoint, 10,
+                                     callback_group=group)
+
+    def setpoint(self, msg):
+        """A streamed JointState setpoint: the JOINTs' positions by name."""
+        names = list(msg.name)
+        if sorted(names) != sorted(self.joints) or len(msg.position) != len(names):
+            say("command_rejected", reason=f"setpoint names {names} are not the joints")
+            return
+        self.apply([msg.position[names.index(j)] for j in self.joints])
 
     def command(self, msg):
         """A JointGroupPositionController's update with this command."""
@@ -172,9 +207,16 @@ class SimulatedController:
         if not np.all(np.isfinite(data)):
             say("command_rejected", reason=f"non-finite command {data}")
             return
+        self.apply(data)
+        say("command", data=data)
+
+    def apply(self, data):
+        """Move the joints to ``data`` (one position per JOINT)."""
+        if self.live is not None:
+            self.live.setpoint(np.array(data, dtype=float))
+            return
         with self.lock:
             self.positions = np.array(data, dtype=float)
-        say("command", data=data)
 
     def now_s(self):
         return self.node.get_clock().now().nanoseconds * 1e-9
@@ -182,8 +224,12 @@ class SimulatedController:
     def publish_state(self):
         msg = JointState(name=self.joints)
         msg.header.stamp = self.node.get_clock().now().to_msg()
-        with self.lock:
-            msg.position = self.positions.tolist()
+        if self.live is not None:
+            _, positions, tensions, _, _ = self.live.state()
+            msg.position, msg.effort = positions.tolist(), tensions.tolist()
+        else:
+            with self.lock:
+                msg.position = self.positions.tolist()
         self.publisher.publish(msg)
 
     def goal_received(self, goal):
@@ -206,6 +252,8 @@ class SimulatedController:
         handle.execute()
 
     def execute(self, handle):
+        if self.live is not None:
+            return self.execute_simulated(handle)
         trajectory = handle.request.trajectory
         order = [list(trajectory.joint_names).index(j) for j in self.joints]
         times = np.array([seconds(p.time_from_start) for p in trajectory.points])
@@ -220,25 +268,9 @@ class SimulatedController:
         scale = self.args.time_scale
         step = 0
         while True:
-            if getattr(handle, "preempted", False):
-                self.publish_state()
-                handle.abort()
-                say("aborted", reason="preempted")
-                return Result(error_code=Result.INVALID_GOAL,
-                              error_string="Current goal preempted by new incoming action.")
-            if self.stopping.is_set():
-                self.publish_state()
-                handle.abort()
-                self.release(handle)
-                say("aborted", reason="shutting down")
-                return Result(error_code=Result.INVALID_GOAL,
-                              error_string="Current goal cancelled during deactivate transition.")
-            if handle.is_cancel_requested:
-                self.publish_state()
-                handle.canceled()
-                self.release(handle)
-                say("canceled")
-                return Result()
+            ended = self._ended(handle)
+            if ended is not None:
+                return ended
             t = max(0.0, (time.monotonic() - t0) * scale)
             finished = t >= times[-1]
             desired = points[-1] if finished else np.array(
@@ -261,12 +293,68 @@ class SimulatedController:
                               error_string="Goal successfully reached!")
             time.sleep(PERIOD_S)
 
-    def feedback(self, handle, desired):
+    def execute_simulated(self, handle):
+        """A goal on the simulated robot: the trajectory handed to the plant, then watched
+        (preemption, shutdown, cancel) until the plant's clock passes its end."""
+        trajectory = handle.request.trajectory
+        order = [list(trajectory.joint_names).index(j) for j in self.joints]
+        times = np.array([seconds(p.time_from_start) for p in trajectory.points])
+        L, V, A = (None if any(len(getattr(p, f)) == 0 for p in trajectory.points) else
+                   np.array([[getattr(p, f)[k] for k in order] for p in trajectory.points])
+                   for f in ("positions", "velocities", "accelerations"))
+        stamp_s = seconds(trajectory.header.stamp)
+        delay = max(0.0, stamp_s - self.now_s()) * self.args.time_scale if stamp_s else 0.0
+        _, end = self.live.follow(times + delay, L, V, A if V is not None else None)
+        step = 0
+        while True:
+            ended = self._ended(handle)
+            if ended is not None:
+                self.live.hold()
+                return ended
+            now, positions, _, _, _ = self.live.state()
+            if step % FEEDBACK_EVERY == 0:
+                self.feedback(handle, self.live.desired(), positions)
+            step += 1
+            if now >= end:
+                self.publish_state()
+                handle.succeed()
+                self.release(handle)
+                say("succeeded", positions=positions.tolist())
+                return Result(error_code=Result.SUCCESSFUL,
+                              error_string="Goal successfully reached!")
+            time.sleep(PERIOD_S)
+
+    def _ended(self, handle):
+        """The Result of a goal that ends otherwise than by reaching its end (preempted,
+        shutting down, canceled), or None."""
+        if getattr(handle, "preempted", False):
+            self.publish_state()
+            handle.abort()
+            say("aborted", reason="preempted")
+            return Result(error_code=Result.INVALID_GOAL,
+                          error_string="Current goal preempted by new incoming action.")
+        if self.stopping.is_set():
+            self.publish_state()
+            handle.abort()
+            self.release(handle)
+            say("aborted", reason="shutting down")
+            return Result(error_code=Result.INVALID_GOAL,
+                          error_string="Current goal cancelled during deactivate transition.")
+        if handle.is_cancel_requested:
+            self.publish_state()
+            handle.canceled()
+            self.release(handle)
+            say("canceled")
+            return Result()
+        return None
+
+    def feedback(self, handle, desired, actual=None):
         msg = FollowJointTrajectory.Feedback(joint_names=self.joints)
         msg.header.stamp = self.node.get_clock().now().to_msg()
         msg.desired = JointTrajectoryPoint(positions=desired.tolist())
-        msg.actual = JointTrajectoryPoint(positions=desired.tolist())
-        msg.error = JointTrajectoryPoint(positions=[0.0] * len(self.joints))
+        actual = desired if actual is None else actual
+        msg.actual = JointTrajectoryPoint(positions=list(map(float, actual)))
+        msg.error = JointTrajectoryPoint(positions=list(map(float, np.subtract(desired, actual))))
         handle.publish_feedback(msg)
 
     def release(self, handle):
@@ -288,6 +376,13 @@ def parse(argv):
     parser.add_argument("--allow-nonzero-velocity-at-end", action="store_true")
     parser.add_argument("--commands", default="",
                         help="also a JointGroupPositionController: its ~/commands topic")
+    parser.add_argument("--stream", default="",
+                        help="also the stream mode's driver: its JointState setpoint topic")
+    mode = parser.add_mutually_exclusive_group(required=True)
+    mode.add_argument("--robot", default="", metavar="ROBOT.yaml",
+                      help="the simulated robot (MuJoCo) of this robot file")
+    mode.add_argument("--kinematic", action="store_true",
+                      help="pure-kinematic: the joints move exactly as commanded (tests)")
     args = parser.parse_args(argv)
     if args.initial is None:
         args.initial = [0.0] * len(args.joints)
@@ -316,6 +411,8 @@ def main(argv=None):
         pass
     double.stopping.set()
     time.sleep(2 * PERIOD_S)          # running goals see it and abort
+    if double.live is not None:
+        double.live.stop()
     executor.shutdown(timeout_sec=2.0)
     spinner.join(timeout=5.0)
     double.server.destroy()

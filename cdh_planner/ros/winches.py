@@ -35,6 +35,7 @@ from ..errors import InputError, check_finite, exception_line
 from ..cable_feasibility import feasibility_of as evaluate
 from ..model.forward_kinematics import current_pose as _current_pose, nearest_pose  # noqa: F401 (API)
 from .interface import ACTION_QOS
+from .live_state import measured_tensions
 from .messages import check_joint_names, duration_msg
 
 COMPLETED, STOPPED, FAILED = "completed", "stopped", "failed"
@@ -174,6 +175,7 @@ class JointStateMonitor:
         self.winch_names = check_joint_names(winch_names, "winch_names")
         self._arrived = threading.Condition()   # guards _latest; notified on each message
         self._latest = None          # (JointState, time.monotonic() of arrival)
+        self.tensions = None         # N: the efforts of the message ``lengths`` last read
         self.subscription = node.create_subscription(
             JointState, topic, self._received, JOINT_STATE_QOS,
             callback_group=callback_group)
@@ -220,7 +222,9 @@ class JointStateMonitor:
             return None, (f"the last joint state on {self.topic} is {age:.2f} s old "
                           f"(at most {max_age_s:g} s)")
         try:
-            return measured_lengths(msg, self.winch_names), ""
+            lengths = measured_lengths(msg, self.winch_names)
+            self.tensions = measured_tensions(msg, self.winch_names)
+            return lengths, ""
         except InputError as exc:
             return None, f"joint state on {self.topic}: {exc}"
 

@@ -48,7 +48,7 @@ from ..model.pose import tau_from_rotation
 from ..model.rotation import Rotation
 from ._toppra import toppra  # toppra without matplotlib and scipy.interpolate (start-up)
 from .executed import executable, spline_rates, unique_sorted
-from .path import PlannedPath
+from .path import PlannedPath, with_commands
 from .splines import CubicSpline, RotationSpline  # scipy's, in numpy (start-up time)
 
 GRID_POINTS = 400       # toppra gridpoints along the path (at least one per waypoint)
@@ -135,7 +135,8 @@ def _terms(robot, geo, s, mass, inertia):
         f0 = np.einsum("nij,nj->ni", J_inv, nominal_wrench(robot, c))
         v = np.linalg.norm(J_inv @ inverse_ellipsoid_factor(robot, c), axis=-1)
     else:  # m > 6: the published rule, t0 + P (w - w0) (cable_feasibility.tension_map), its
-        # t0 and band v = |rows of P L| from the compiled kernel
+        # t0 and band v = |rows of P L| from the compiled kernel (with elastic cables
+        # P_K's: zonotope.stiffness_band)
         from ..zonotope import rule_tensions  # six-cable commands load no numba
         J_inv = tension_map(robot, J)
         f0, v = rule_tensions(robot, p, R)
@@ -419,7 +420,8 @@ def timed_path(robot, path, dynamics, max_cable_speed, max_cable_accel, collisio
     done ("" for quasi-static); when no dynamically feasible timing exists the quasi-static
     one is kept and the note says so. The check's ``ok`` False: no executable trajectory
     within the bounds (its ``reason`` says why). ``collision``: the scene's CollisionModel
-    (or None), which the executed motion keeps clear of too."""
+    (or None), which the executed motion keeps clear of too. The path carries the robot's
+    cable stiffness: its commands (``PlannedPath.commanded``) are what was checked."""
     check_dynamics(robot, dynamics)
     note, motion, load = "", None, (None, None)
     if not (dynamics == "quasi_static" or (dynamics == "auto" and robot.mass is None)):
@@ -440,4 +442,4 @@ def timed_path(robot, path, dynamics, max_cable_speed, max_cable_accel, collisio
         path = spline_rates(path)
     path, check = executable(robot, path, motion, *load, max_cable_speed, max_cable_accel,
                              collision=collision)
-    return path, note, check
+    return with_commands(robot, path), note, check

@@ -23,6 +23,14 @@ dt / PHASES s from dt after the start to dt before the end, each sample with its
 stencil t - dt, t, t + dt (one never straddles an end, where the JTC's hold makes the
 acceleration jump): a violation narrower than dt is seen whatever its phase.
 
+Elastic cables (``robot.cable_stiffness``): the JTC interpolates the commanded,
+unstretched lengths L0 (``PlannedPath.commanded``), and the platform's pose is the elastic
+equilibrium of those cables (``model.elastic.equilibrium_poses``: the cables' tensions
+max(0, EA (L - L0) / L0) balance the load wrench), first at rest, then, with the inertial
+wrench of the motion those static poses make (the same central differences), again; its
+tensions are the ones checked (with the same spread v). A slack cable (tension 0) fails
+as a tension below its minimum; an equilibrium not found is a lost pose.
+
 ``executable`` adds points to a timed PlannedPath until this check passes (module
 docstring of that function).
 """
@@ -34,10 +42,13 @@ import numpy as np
 from ..cable_feasibility import nominal_tensions, tension_map
 from ..feasibility import (cable_vectors, inverse_ellipsoid_factor, load_point, nominal_wrench,
                            screw_jacobian)
+from ..model.elastic import equilibrium_poses, is_elastic
 from ..model.forward_kinematics import forward_kinematics_many
 from ..model.pose import tau_from_rotation
 from ..model.rotation import Rotation, Slerp
+from .path import with_commands
 from .splines import CubicSpline
+from .timing import limit_ratio
 
 CHECK_DT = 1e-3        # s: step of the check's central differences
 PHASES = 2             # samples per CHECK_DT: a violation narrower than the step is not
@@ -262,7 +273,11 @@ def _executed_margins(robot, t_wp, L, V, A, seed, ts, mid, q, mass, inertia, col
     need = unique_sorted(np.concatenate([mid - q, mid, mid + q]))
     pos, _, _ = quintic(t_wp, L, V, A, ts[need])
     p_seed, R_seed = seed(ts[need])
-    fk = forward_kinematics_many(robot, pos, p_seed, R_seed)
+    elastic = is_elastic(robot)
+    if elastic:  # the static equilibrium first: the motion's accelerations from it
+        fk = _equilibria(robot, pos, p_seed, R_seed)
+    else:
+        fk = forward_kinematics_many(robot, pos, p_seed, R_seed)
     lost = ~fk.ok | (np.linalg.norm(fk.p - p_seed, axis=1) > SEED_TOL_M)
     c_all = load_point(robot, fk.p, fk.R)
     at = [np.searchsorted(need, mid + o) for o in (-q, 0, q)]
@@ -273,19 +288,55 @@ def _executed_margins(robot, t_wp, L, V, A, seed, ts, mid, q, mass, inertia, col
     front = Rotation.from_matrix(np.swapaxes(R[0], 1, 2) @ R[1]).as_rotvec()
     omega = (back + front) / (2 * h)
     alpha = (back - front) / h ** 2
-    f, v = _tensions(robot, fk.p[at[1]], R[1], c[1], c_dd, omega, alpha, mass, inertia)
+    p_mid, lost_mid = fk.p[at[1]], lost[at[1]]
+    if elastic:  # the equilibrium with the inertial wrench, from the static one
+        eq = _equilibria(robot, pos[at[1]], p_mid, R[1],
+                         _inertial(R[1], c[1], c_dd, omega, alpha, mass, inertia))
+        p_mid, R[1] = eq.p, eq.R
+        lost_mid = lost_mid | ~eq.ok | (np.linalg.norm(eq.p - p_seed[at[1]], axis=1) > SEED_TOL_M)
+        f, v = eq.tensions, _band(robot, p_mid, R[1])
+    else:
+        f, v = _tensions(robot, p_mid, R[1], c[1], c_dd, omega, alpha, mass, inertia)
     margin = np.minimum(f - v - robot.tension_min, robot.tension_max - f - v)
     blocked = np.zeros(len(mid), dtype=bool)
     if collision is not None:
-        blocked = collision.margins(fk.p[at[1]], R[1])[0] < 0
-    return margin, lost[at[0]] | lost[at[1]] | lost[at[2]], blocked
+        blocked = collision.margins(p_mid, R[1])[0] < 0
+    return margin, lost[at[0]] | lost_mid | lost[at[2]], blocked
+
+
+def _equilibria(robot, L0, p, R, inertial=None):
+    """``model.elastic.equilibrium_poses`` of cables of unstretched lengths L0 (M, m) m
+    under the load wrench (``feasibility.nominal_wrench``'s force at the load point and
+    moment) minus ``inertial`` (M, 6), the motion's wrench about the origin (None: at rest),
+    from the poses (p (M, 3) m, R (M, 3, 3))."""
+    w = np.broadcast_to(robot.wrench_center_local, (len(p), 6))
+    force, moment = w[:, :3], w[:, 3:]
+    arm = force if robot.ellipsoid_frame == "load" else np.zeros_like(force)
+    if inertial is not None:  # [m c''; c x m c'' + R (I alpha + omega x I omega)]
+        c = load_point(robot, p, R)
+        moment = moment - (inertial[:, 3:] - np.cross(c, inertial[:, :3]))
+        force, arm = force - inertial[:, :3], arm - inertial[:, :3]
+    return equilibrium_poses(robot, L0, p, R, force, moment, arm)
+
+
+def _band(robot, p, R):
+    """The ellipsoid's spread v (M, m) N of the tensions at poses (p (M, 3) m,
+    R (M, 3, 3)): |rows of J^-1 L| for six cables, the rule's band for more."""
+    if len(robot.base_anchors) > 6:
+        from ..zonotope import rule_tensions  # m > 6 only: six-cable commands load no numba
+        return rule_tensions(robot, p, R)[1]
+    u = cable_vectors(robot, p, R)
+    u /= np.linalg.norm(u, axis=-1)[..., None]
+    J_inv = np.linalg.inv(screw_jacobian(robot, u))
+    return np.linalg.norm(J_inv @ inverse_ellipsoid_factor(robot, load_point(robot, p, R)), axis=-1)
 
 
 def _tensions(robot, p, R, c, c_dd, omega, alpha, mass, inertia):
     """Tensions f (M, m) balancing the load wrench minus the inertial wrench, and the
     ellipsoid's spread v (M, m), N. With m > 6, those of the published tension rule
     (``cable_feasibility.tension_map``): its centred nominal t0 moved by P times the
-    inertial wrench, and its band v = |rows of P L|."""
+    inertial wrench, and its band v = |rows of P L| (P_K's with elastic cables,
+    ``zonotope.stiffness_band``)."""
     u = cable_vectors(robot, p, R)
     u /= np.linalg.norm(u, axis=-1)[..., None]
     w = nominal_wrench(robot, c)
@@ -355,11 +406,12 @@ def path_seed(path):
 
 def check_path(robot, path, mass=None, inertia=None, max_cable_speed=np.inf,
                max_cable_accel=np.inf, dt=CHECK_DT, within=None, reuse=None, collision=None):
-    """check_executed of a timed PlannedPath's points (lengths, velocities, accelerations
-    at path.t), forward kinematics seeded from its waypoint poses."""
-    return check_executed(robot, path.t, path.lengths, path.velocities, path.accelerations,
-                          path_seed(path), mass, inertia, max_cable_speed, max_cable_accel, dt,
-                          within, reuse, collision)
+    """check_executed of a timed PlannedPath's points as a length controller receives them
+    (``path.with_commands``: lengths, velocities, accelerations at path.t), forward
+    kinematics seeded from its waypoint poses."""
+    L, V, A = with_commands(robot, path).commanded()  # the robot's stiffness
+    return check_executed(robot, path.t, L, V, A, path_seed(path), mass, inertia,
+                          max_cable_speed, max_cable_accel, dt, within, reuse, collision)
 
 
 # ----------------------------------------------------------------------------- making it pass
@@ -399,7 +451,9 @@ def executable(robot, path, motion=None, mass=None, inertia=None, max_cable_spee
         winch_only = not np.isfinite(check.least_tension_margin_n)  # tensions not reached
         winch_rounds += winch_only
         if (motion is not None and rounds < MAX_ROUNDS and len(path) + k.size <= max_points
-                and winch_rounds <= WINCH_ROUNDS):
+                and winch_rounds <= WINCH_ROUNDS
+                and not (winch_only and _points_exceed(robot, path, max_cable_speed,
+                                                       max_cable_accel))):
             t = 0.5 * (path.t[k] + path.t[k + 1])
             within = np.column_stack([path.t[k] - CHECK_DT, path.t[k + 1] + CHECK_DT])
             changed.append(within)
@@ -414,6 +468,16 @@ def executable(robot, path, motion=None, mass=None, inertia=None, max_cable_spee
             return path, replace(check, reason=f"{check.reason} after {rounds} rounds of "
                                                f"added points ({len(path)} points) and "
                                                f"{slowed} slow-downs (x {scale:.3g})")
+
+
+def _points_exceed(robot, path, max_cable_speed, max_cable_accel):
+    """Do the commanded rates at the points themselves exceed a winch limit? Points added
+    between them cannot lower those (with elastic cables the stretch's own rates add to the
+    motion's, which the timing kept just within the limits): only slowing down does."""
+    _, V, A = with_commands(robot, path).commanded()
+    m = V.shape[1]
+    return bool(np.max(limit_ratio(V, A, np.broadcast_to(max_cable_speed, (m,)),
+                                   np.broadcast_to(max_cable_accel, (m,)))) > 1 + TOL)
 
 
 def spline_rates(path):
@@ -433,6 +497,9 @@ def _merged(path, rows, at):
     each new row's tau continues its left neighbour's azimuth (phi at a pole)."""
     fields = {}
     for name in path.__dataclass_fields__:
+        if name == "cable_stiffness":  # per cable, not per waypoint
+            fields[name] = path.cable_stiffness
+            continue
         new = np.asarray(getattr(rows, name))
         if name == "tau":
             R = Rotation.from_quat(rows.quaternion).as_matrix()

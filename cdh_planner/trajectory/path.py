@@ -1,8 +1,14 @@
-"""A planned platform path with everything a winch controller needs, per waypoint."""
+"""A planned platform path with everything a winch controller needs, per waypoint.
 
-from dataclasses import dataclass
+    path = with_commands(robot, path)   # carries the robot's cable stiffness (None: rigid)
+    L0, V0, A0 = path.commanded()       # the lengths and rates a length controller receives
+"""
+
+from dataclasses import dataclass, replace
 
 import numpy as np
+
+COMMAND_WINDOW_S = 0.05  # s: the commanded tension is the nominal one averaged over +- this
 
 
 @dataclass
@@ -13,7 +19,9 @@ class PlannedPath:
     orientation slerp) is wrench-feasible; ``margin`` is the normalised feasibility margin
     of each waypoint (positive). ``t`` is time from start (s), from the cable-space time
     parameterisation; ``velocities`` / ``accelerations`` are the cable length rates
-    (m/s, m/s^2) at the waypoints.
+    (m/s, m/s^2) at the waypoints (of the geometric ``lengths``). ``cable_stiffness`` (m,)
+    N: the cables' axial stiffness EA (``robot.cable_stiffness``), None for rigid cables;
+    with it, ``commanded`` gives the unstretched lengths a length controller receives.
     """
 
     p: np.ndarray  # (N, 3)
@@ -27,6 +35,31 @@ class PlannedPath:
     t: np.ndarray  # (N,)
     velocities: np.ndarray  # (N, m): one column per cable
     accelerations: np.ndarray  # (N, m): one column per cable
+    cable_stiffness: np.ndarray = None  # (m,) N, or None: rigid cables (not per waypoint)
+
+    def commanded(self, window_s=COMMAND_WINDOW_S):
+        """(lengths m, velocities m/s, accelerations m/s^2), each (N, m): the points a
+        length controller receives. Elastic cables: the unstretched lengths L0 = L / (1 + t
+        / EA) that are the planned lengths L under the tensions t, so that the cables carry
+        them at the planned pose; t is the nominal tension averaged over ``window_s`` s
+        either side with a tent weight (``command_tensions``): a dynamic timing's tension
+        jumps where its acceleration switches, and a step in L0 there would make a
+        controller's quintic (and a damped cable) jerk and the winch exceed its limits;
+        the average spreads a jump J over the window, its second rate at most J / window^2. Rates:
+        those of L - stretch, exactly (the stretch L t / (EA + t) with the average's own
+        rates), zero where the path rests. Rigid cables: the geometric lengths and rates
+        themselves (the same arrays)."""
+        if self.cable_stiffness is None:
+            return self.lengths, self.velocities, self.accelerations
+        f, df, ddf = command_tensions(self.t, self.tension_nominal, window_s)
+        EA = self.cable_stiffness
+        q = f / (EA + f)                          # the stretch per length, t / (EA + t)
+        dq = EA * df / (EA + f) ** 2
+        ddq = EA * ddf / (EA + f) ** 2 - 2 * EA * df ** 2 / (EA + f) ** 3
+        L, V, A = self.lengths, self.velocities, self.accelerations
+        V0 = V - (V * q + L * dq)
+        V0[~np.any(V != 0.0, axis=1)] = 0.0       # at rest
+        return L * (1.0 - q), V0, A - (A * q + 2 * V * dq + L * ddq)
 
     def __len__(self):
         return self.p.shape[0]
@@ -34,3 +67,47 @@ class PlannedPath:
     def length_m(self):
         """Length of the platform's position path (m)."""
         return float(np.sum(np.linalg.norm(np.diff(self.p, axis=0), axis=1)))
+
+
+def with_commands(robot, path):
+    """``path`` (PlannedPath) carrying ``robot``'s cable stiffness, which ``commanded``
+    turns into the commands of elastic cables (None: rigid)."""
+    return replace(path, cable_stiffness=robot.cable_stiffness)
+
+
+def command_tensions(t, f, window_s, at=None):
+    """The tensions f (N, m) N at times t (N,) s, taken as linear between them and held
+    before the first and after the last, averaged with the tent weight (window_s - |s|) /
+    window_s^2 over s in [-window_s, window_s], at times ``at`` (M,) s (default t): the
+    averages (M, m) N, their rates (N/s) and second rates (N/s^2), exactly. With F and G
+    the first and second integrals of f, the average is the second difference
+    (G(t + w) - 2 G(t) + G(t - w)) / w^2, its rates those of F and of f: a jump J of the
+    tensions moves the average's second rate by at most J / w^2 (a box average's would be
+    a spike at its edges)."""
+    t, f = np.asarray(t, dtype=float), np.asarray(f, dtype=float)
+    at = t if at is None else np.asarray(at, dtype=float)
+    if len(t) < 2:
+        return (np.broadcast_to(f[0], (len(at), f.shape[1])).copy(),) + 2 * (np.zeros((len(at), f.shape[1])),)
+    h = np.diff(t)[:, None]
+    slope = np.diff(f, axis=0) / h
+    F = np.concatenate([np.zeros((1, f.shape[1])), np.cumsum(f[:-1] * h + slope * h ** 2 / 2, axis=0)])
+    G = np.concatenate([np.zeros((1, f.shape[1])),
+                        np.cumsum(F[:-1] * h + f[:-1] * h ** 2 / 2 + slope * h ** 3 / 6, axis=0)])
+
+    def integrals(x):  # f, F, G at x (held ends: f constant outside [t_0, t_N-1])
+        k = np.clip(np.searchsorted(t, x, side="right") - 1, 0, len(t) - 2)
+        d = (np.clip(x, t[0], t[-1]) - t[k])[:, None]
+        fx = f[k] + slope[k] * d
+        Fx = F[k] + f[k] * d + slope[k] * d ** 2 / 2
+        Gx = G[k] + F[k] * d + f[k] * d ** 2 / 2 + slope[k] * d ** 3 / 6
+        for edge, end in ((x < t[0], 0), (x > t[-1], -1)):  # linear / quadratic beyond
+            e = (x - t[end])[:, None]
+            fx = np.where(edge[:, None], f[end], fx)
+            Fx = np.where(edge[:, None], F[end] + f[end] * e, Fx)
+            Gx = np.where(edge[:, None], G[end] + F[end] * e + f[end] * e ** 2 / 2, Gx)
+        return fx, Fx, Gx
+
+    w = window_s
+    lo, mid, hi = integrals(at - w), integrals(at), integrals(at + w)
+    second = [(a - 2 * b + c) / w ** 2 for a, b, c in zip(lo, mid, hi)]
+    return second[2], second[1], second[0]

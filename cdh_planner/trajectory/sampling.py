@@ -43,7 +43,8 @@ class CableSample:
 
 
 def sample_cable_state(path, t, method="quintic"):
-    """Cable lengths, velocities and nominal tensions at time ``t`` (s from the start).
+    """Commanded cable lengths, velocities (``PlannedPath.commanded``: unstretched with
+    elastic cables) and nominal tensions at time ``t`` (s from the start).
 
     ``method``: ``quintic`` interpolates each segment with the quintic through position,
     velocity and acceleration at both ends, as ros2_control's JointTrajectoryController
@@ -60,11 +61,12 @@ def sample_cable_state(path, t, method="quintic"):
     if method not in ("quintic", "linear"):
         raise InputError("method", method, "expected 'quintic' or 'linear'")
     n, T = len(path), np.asarray(path.t, dtype=float)
+    lengths, velocities, accelerations = path.commanded()
     if n == 1 or t <= T[0] or t >= T[-1]:
         k = 0 if (n == 1 or t <= T[0]) else n - 1
         inside = n > 1 and t == T[k]
-        vel = path.velocities[k] if inside else np.zeros(np.shape(path.lengths)[1])
-        return CableSample(lengths=np.array(path.lengths[k], dtype=float),
+        vel = velocities[k] if inside else np.zeros(np.shape(lengths)[1])
+        return CableSample(lengths=np.array(lengths[k], dtype=float),
                            velocities=np.array(vel, dtype=float),
                            effort=np.array(path.tension_nominal[k], dtype=float))
     k = int(np.searchsorted(T, t, side="right") - 1)
@@ -72,8 +74,8 @@ def sample_cable_state(path, t, method="quintic"):
     s = (t - T[k]) / h
     effort = (1 - s) * path.tension_nominal[k] + s * path.tension_nominal[k + 1]
     if method == "linear":
-        rate = (path.lengths[k + 1] - path.lengths[k]) / h
-        return CableSample(lengths=path.lengths[k] + rate * (t - T[k]), velocities=rate,
+        rate = (lengths[k + 1] - lengths[k]) / h
+        return CableSample(lengths=lengths[k] + rate * (t - T[k]), velocities=rate,
                            effort=np.asarray(effort, dtype=float))
-    pos, vel, _ = quintic(T, path.lengths, path.velocities, path.accelerations, np.array([t]))
+    pos, vel, _ = quintic(T, lengths, velocities, accelerations, np.array([t]))
     return CableSample(lengths=pos[0], velocities=vel[0], effort=np.asarray(effort, dtype=float))

@@ -206,6 +206,18 @@ def _leg(demo, start, goal, current_start=False):
         err = float(np.max(np.abs(last - run.goal))) if run.goal is not None else math.nan
         print(f"  the controller moved the winches: {len(leg.measured)} joint states; the last "
               f"= the final waypoint's cable lengths within {err:.1e} m")
+        tensions = _measured_tensions(leg.measured, robot.winch_names)
+        if tensions is not None:
+            low = tensions.min(axis=0)
+            within = bool(np.all(low >= robot.tension_min) and
+                          np.all(tensions.max(axis=0) <= robot.tension_max))
+            print(f"  measured tensions (the simulated robot's load cells, joint states' effort): "
+                  f"{tensions.min():.3f} .. {tensions.max():.3f} N, least margin "
+                  f"{float(np.min(low - robot.tension_min)):+.3f} N to the least tension: "
+                  + ("within the limits" if within else "LIMIT LEFT"))
+            if not within:
+                demo.differs.append(f"robot2 {start} -> {goal}: a measured tension left its "
+                                    f"limits on the simulated robot")
     if run.accepted and not run.arrived:
         demo.differs.append(f"robot2 {start} -> {goal}: the execution did not reach the last "
                             f"waypoint ({run.outcome or 'no result'})")
@@ -230,6 +242,14 @@ def _measured_lengths(joint_state, names):
     return np.array([joint_state.position[list(joint_state.name).index(n)] for n in names])
 
 
+def _measured_tensions(states, names):
+    """The efforts (M, m) N of the (arrival time, JointState) list, or None when one lacks
+    them (a controller without load cells)."""
+    if any(len(m.effort) != len(m.name) for _, m in states):
+        return None
+    return np.array([[m.effort[list(m.name).index(n)] for n in names] for _, m in states])
+
+
 def leg_q1_q2(demo):
     """Plan q_1 -> q_2 over ROS and execute it."""
     _leg(demo, *LEGS[0])
@@ -247,6 +267,7 @@ def start_controller(demo):
     args = ["-m", "cdh_planner.ros.simulated_controller", *robot.winch_names,
             "--action", params["execution.controller_action"],
             "--joint-states", params["execution.joint_states_topic"],
+            "--robot", robot.source,     # the simulated robot: MuJoCo, elastic cables
             "--initial", *(repr(float(x)) for x in first.run.goal)]
     log = demo.out_dir / CONTROLLER_LOG
     out = story.stack.enter_context(open(log, "w"))
@@ -254,8 +275,10 @@ def start_controller(demo):
                                stdout=out, stderr=subprocess.STDOUT)
     story.stack.callback(stop_process, process)
     print(f"$ python {' '.join(args)}")
-    print(f"  (a simulated ros2_control JointTrajectoryController: it checks goals as the "
-          f"Jazzy controller does and publishes the winches' JointState; log {log})")
+    print(f"  (a simulated ros2_control JointTrajectoryController driving the simulated robot "
+          f"(MuJoCo: the platform on elastic cables, 1 kHz): it checks goals as the Jazzy "
+          f"controller does and publishes the winches' JointState with the measured tensions "
+          f"in effort; log {log})")
     client.node.create_subscription(JointState, params["execution.joint_states_topic"],
                                     lambda msg: story.joint_states.append(
                                         (time.monotonic(), msg)), 10)
@@ -393,6 +416,7 @@ def ros_pictures(demo):
     for leg in legs:
         if leg.run is not None and leg.run.envelope is not None:
             t, lengths = M.trajectory_arrays(leg.run.trajectory)
+            tensions = None
             if leg.run.commands:
                 stamps, done = leg.run.values()
                 how = "streamed commands"
@@ -401,11 +425,12 @@ def ros_pictures(demo):
                 done = np.array([_measured_lengths(m, robot.winch_names)
                                  for _, m in leg.measured])
                 how = "measured joint states, from the first motion"
+                tensions = _measured_tensions(leg.measured, robot.winch_names)
             else:
                 continue
             executed[f"{_plain(leg.start)} -> {_plain(leg.goal)}"] = ExecutedMotion(
                 t, lengths, M.envelope_from_msg(leg.run.envelope), stamps - stamps[:1], done,
-                how)
+                how, tensions)
     path = demo.out_dir / EXECUTION_PICTURE
     plot_execution(robot, executed, path)
     demo.files.append(path)
