@@ -25,7 +25,26 @@ import numpy as np
 from cdh_planner.ros.isolation import claimed_domain, isolated_env, stop_process  # noqa: F401 (re-exported)
 
 from conftest import REPO
-ROBOT2 = REPO / "config" / "robot2.yaml"
+
+
+def _rigid_copy(path):
+    """A copy of the robot parameters file ``path`` without ``cable_stiffness`` (rigid
+    cables), in a folder of this process: the FollowJointTrajectory controller double
+    reports positions only, no measured tensions, and the unstretched lengths of elastic
+    cables taken as rigid put the measured pose off the plan by the stretch (elastic
+    cables end to end: test_elastic_execution.py)."""
+    import atexit
+    import shutil
+    import tempfile
+    folder = Path(tempfile.mkdtemp(prefix="cdh_rigid_"))
+    atexit.register(shutil.rmtree, folder, True)
+    lines = path.read_text().splitlines(keepends=True)
+    out = folder / path.name
+    out.write_text("".join(x for x in lines if not x.lstrip().startswith("cable_stiffness:")))
+    return out
+
+
+ROBOT2 = _rigid_copy(REPO / "config" / "robot2.yaml")  # rigid cables (``_rigid_copy``)
 FAKE_NODE = REPO / "test" / "doubles" / "fake_planner.py"
 FRAME = "cdh_base"
 # No winches in most node tests: ~/execute would be refused without a measured start (the

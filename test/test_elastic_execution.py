@@ -156,14 +156,16 @@ def test_length_control_shares_a_wrench_change_by_stiffness():
                              (robot.ellipsoid_frame == "load"))
     J = screw_jacobian(robot, f.unit_vectors)
     K = (robot.cable_stiffness + f.tension_nominal) / f.lengths
-    P_K = np.swapaxes(np.linalg.solve((J * K[:, None]) @ np.swapaxes(J, 1, 2), J * K[:, None]), 1, 2)
+    JK = J * K[:, None]
+    P_K = np.swapaxes(np.linalg.solve(JK @ np.swapaxes(J, 1, 2), JK), 1, 2)
     c = load_point(robot, p, R)
-    dw_o = np.concatenate([dw[:3] + 0 * c, np.cross(c, dw[:3]) * (robot.ellipsoid_frame == "load")], axis=1)
+    moves = robot.ellipsoid_frame == "load"          # the load's moment moves with c
+    dw_o = np.concatenate([dw[:3] + 0 * c, np.cross(c, dw[:3]) * moves], axis=1)
     measured = (eq.tensions - f.tension_nominal) / 1e-4
     np.testing.assert_allclose(measured, np.einsum("nij,nj->ni", P_K, dw_o) / 1e-4, rtol=2e-2,
                                atol=2e-2 * np.abs(measured).max())
-    np.testing.assert_allclose(np.einsum("nij,njk->nik", J, P_K), np.broadcast_to(np.eye(6), (3, 6, 6)),
-                               atol=1e-9)
+    np.testing.assert_allclose(np.einsum("nij,njk->nik", J, P_K),
+                               np.broadcast_to(np.eye(6), (3, 6, 6)), atol=1e-9)
     v = np.linalg.norm(P_K @ inverse_ellipsoid_factor(robot, c), axis=-1)
     np.testing.assert_allclose(rule_tensions(robot, p, R)[1], v, rtol=1e-9)
     np.testing.assert_allclose(f.tension_spread, v, rtol=1e-9)

@@ -44,6 +44,7 @@ import numpy as np
 from ..errors import InputError, check_finite
 from ..cable_feasibility import planning_feasibility as evaluate, tension_map
 from ..feasibility import cable_vectors, inverse_ellipsoid_factor, nominal_wrench, screw_jacobian
+from ..model.elastic import is_elastic
 from ..model.pose import tau_from_rotation
 from ..model.rotation import Rotation
 from ._toppra import toppra  # toppra without matplotlib and scipy.interpolate (start-up)
@@ -373,6 +374,8 @@ def _retimed(robot, path, geo, s, sd, t_grid, mass, inertia):
     sddot = 0.5 * (u[np.maximum(g - 1, 0)] + u[np.minimum(g, len(u) - 1)])
     L, L_s, L_ss, f0, v, a_f, b_f = _terms(robot, geo, geo.s_wp, mass, inertia)
     f = f0 + a_f * sddot[:, None] + b_f * (sdot ** 2)[:, None]
+    if is_elastic(robot):  # elastic cables at rest carry the static tensions: the ends'
+        f[[0, -1]] = f0[[0, -1]]
     return replace(path, t=t_wp, velocities=L_s * sdot[:, None],
                    accelerations=L_s * sddot[:, None] + L_ss * (sdot ** 2)[:, None],
                    tension_nominal=f, tension_min=f - v, tension_max=f + v)

@@ -407,8 +407,8 @@ def path_seed(path):
 def check_path(robot, path, mass=None, inertia=None, max_cable_speed=np.inf,
                max_cable_accel=np.inf, dt=CHECK_DT, within=None, reuse=None, collision=None):
     """check_executed of a timed PlannedPath's points as a length controller receives them
-    (``path.with_commands``: lengths, velocities, accelerations at path.t), forward
-    kinematics seeded from its waypoint poses."""
+    (``PlannedPath.commanded`` with the robot's stiffness: lengths, velocities,
+    accelerations at path.t), forward kinematics seeded from its waypoint poses."""
     L, V, A = with_commands(robot, path).commanded()  # the robot's stiffness
     return check_executed(robot, path.t, L, V, A, path_seed(path), mass, inertia,
                           max_cable_speed, max_cable_accel, dt, within, reuse, collision)

@@ -45,10 +45,10 @@ class PlannedPath:
         either side with a tent weight (``command_tensions``): a dynamic timing's tension
         jumps where its acceleration switches, and a step in L0 there would make a
         controller's quintic (and a damped cable) jerk and the winch exceed its limits;
-        the average spreads a jump J over the window, its second rate at most J / window^2. Rates:
-        those of L - stretch, exactly (the stretch L t / (EA + t) with the average's own
-        rates), zero where the path rests. Rigid cables: the geometric lengths and rates
-        themselves (the same arrays)."""
+        the average spreads a jump J over the window, its second rate at most J /
+        window^2. Rates: those of L - stretch, exactly (the stretch L t / (EA + t) with the
+        average's own rates), zero where the path rests. Rigid cables: the geometric
+        lengths and rates themselves (the same arrays)."""
         if self.cable_stiffness is None:
             return self.lengths, self.velocities, self.accelerations
         f, df, ddf = command_tensions(self.t, self.tension_nominal, window_s)
@@ -87,10 +87,12 @@ def command_tensions(t, f, window_s, at=None):
     t, f = np.asarray(t, dtype=float), np.asarray(f, dtype=float)
     at = t if at is None else np.asarray(at, dtype=float)
     if len(t) < 2:
-        return (np.broadcast_to(f[0], (len(at), f.shape[1])).copy(),) + 2 * (np.zeros((len(at), f.shape[1])),)
+        zero = np.zeros((len(at), f.shape[1]))
+        return zero + f[0], zero, zero.copy()
     h = np.diff(t)[:, None]
     slope = np.diff(f, axis=0) / h
-    F = np.concatenate([np.zeros((1, f.shape[1])), np.cumsum(f[:-1] * h + slope * h ** 2 / 2, axis=0)])
+    F = np.concatenate([np.zeros((1, f.shape[1])),
+                        np.cumsum(f[:-1] * h + slope * h ** 2 / 2, axis=0)])
     G = np.concatenate([np.zeros((1, f.shape[1])),
                         np.cumsum(F[:-1] * h + f[:-1] * h ** 2 / 2 + slope * h ** 3 / 6, axis=0)])
 
