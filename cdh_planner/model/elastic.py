@@ -135,15 +135,27 @@ def _newton(robot, L0, p, R, load, bilateral, max_iterations):
             break
         _, jac, _ = wrench_balance(robot, L0[todo], p[todo], R[todo],
                                    *(x[todo] for x in load), bilateral)
-        keep = np.linalg.matrix_rank(jac) == 6
-        todo, res, jac = todo[keep], res[keep], jac[keep]
+        step = _newton_step(jac, res)
+        keep = np.all(np.isfinite(step), axis=1)  # a singular Jacobian: not converged
+        todo, res, step = todo[keep], res[keep], step[keep]
         if todo.size == 0:
             break
-        step = -np.linalg.solve(jac, res[..., None])[..., 0]
         p[todo], R[todo], moved = _line_search(robot, L0[todo], p[todo], R[todo], step, res,
                                                tuple(x[todo] for x in load), bilateral)
         todo = todo[moved]  # no step lowers the residual: stuck, not converged
     return ok
+
+
+def _newton_step(jac, res):
+    """-jac^-1 res (K, 6) for Jacobians (K, 6, 6); a row of nan where jac is singular (one
+    LU solve for all; the rank, an SVD per pose, only when LAPACK finds a singular one)."""
+    try:
+        return -np.linalg.solve(jac, res[..., None])[..., 0]
+    except np.linalg.LinAlgError:
+        step = np.full(res.shape, np.nan)
+        regular = np.linalg.matrix_rank(jac) == 6
+        step[regular] = -np.linalg.solve(jac[regular], res[regular][..., None])[..., 0]
+        return step
 
 
 def _line_search(robot, L0, p, R, step, res, load, bilateral, halvings=LINE_SEARCH_HALVINGS):
