@@ -5,6 +5,8 @@ The node runs in its own process around the TEST DOUBLE planner (test/doubles/fa
 these tests are about the node's states, not the planner's answers.
 """
 
+import signal
+
 import pytest
 from diagnostic_msgs.msg import DiagnosticArray, DiagnosticStatus
 from lifecycle_msgs.msg import Transition
@@ -142,3 +144,49 @@ def test_configure_warms_the_planners_kernel():
     assert warm_up(planner) is planner and [c[0] for c in calls] == ["lift", "F"]
     double = object()
     assert warm_up(double) is double
+
+
+def test_an_invalid_transition_by_id_is_refused_and_the_node_keeps_serving(tmp_path):
+    """ChangeState by id with a transition the current state does not have (configure or
+    activate to an active node, an unknown id): refused (success false, logged naming it);
+    the node stays active and keeps planning. Before: rclpy raised in its change_state
+    callback, the executor stopped and the process exited 0."""
+    with claimed_domain() as domain, \
+            NodeProcess(domain, tmp_path, fake=True) as node, \
+            PlannerClient(domain_id=domain) as client:
+        client.wait_for_node(timeout_s=30)
+        life = Lifecycle(client)
+        assert life.state() == "active"
+        for bad in (Transition.TRANSITION_CONFIGURE, Transition.TRANSITION_ACTIVATE, 99):
+            assert not life.transition(bad), bad
+            assert life.state() == "active", (bad, node.log())
+            assert plans(client), node.log()
+        assert node.proc.poll() is None, node.log()
+        assert "transition 99 refused" in node.log()
+        assert node.stop() == 0, node.log()
+
+
+def test_an_executor_that_stops_on_an_error_exits_non_zero(tmp_path, monkeypatch):
+    """node_main: an exception out of the executor (a callback that raised) is a crash:
+    logged naming it, exit 1 (before: exit 0, as a clean stop)."""
+    from rclpy.executors import MultiThreadedExecutor
+
+    from cdh_planner.ros import node_main
+    from ros_harness import ROBOT2, fake_planner_class
+
+    def crash(self, *args, **kwargs):
+        raise RuntimeError("a callback raised")
+
+    monkeypatch.setattr(MultiThreadedExecutor, "spin", crash)
+    lines = []
+    handlers = {s: signal.getsignal(s) for s in (signal.SIGINT, signal.SIGTERM)}
+    try:
+        with claimed_domain() as domain:
+            monkeypatch.setenv("ROS_DOMAIN_ID", str(domain))
+            rc = node_main.main(["--params-file", str(ROBOT2), "-p", f"log_dir:={tmp_path}",
+                                 "-p", "autostart:=false"], fake_planner_class(), lines.append)
+    finally:   # main() takes SIGINT / SIGTERM over: give them back to pytest
+        for s, handler in handlers.items():
+            signal.signal(s, handler)
+    assert rc == 1, lines
+    assert any("executor stopped: a callback raised" in line for line in lines), lines

@@ -62,6 +62,7 @@ class PlannerNode(LifecycleMixin, LifecycleNode):
 
     def __init__(self, planner_factory=default_planner_factory, **kwargs):
         super().__init__(NODE_NAME, **kwargs)
+        self.guard_change_state()
         self._factory = planner_factory
         self._values = declare_parameters(self, self._parameter_overrides)
         self.configured = self.active = False
