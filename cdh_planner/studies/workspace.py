@@ -315,15 +315,20 @@ class WorkspaceResult:
 
     def counts(self):
         """Samples, evaluated, feasible; with reach: planned, reachable, refused (goals the
-        planner refused), unreachable_feasible (planned, not refused, no path), unknown."""
+        planner refused: refused_under_floor, feasible but margin under the planner's margin
+        floor, and refused_band, the rest: for m > 6 the tension rule's band does not fit),
+        unreachable_feasible (planned, not refused, no path), unknown."""
         reach = self.reachable
         out = {"samples": int(self.spec.samples), "evaluated": int(self.evaluated.sum()),
                "feasible": int(self.feasible.sum())}
         if self.spec.reach:
             planned = [s for s in self.reach_status if s is not None]
             refused = self.reach_refused
+            floor = self.spec.settings.margin_floor
+            under = [x and bool(m < floor) for x, m in zip(refused, self.margin.tolist())]
             out.update(planned=len(planned), reachable=sum(r is True for r in reach),
-                       refused=sum(refused),
+                       refused=sum(refused), refused_under_floor=sum(under),
+                       refused_band=sum(refused) - sum(under),
                        unreachable_feasible=sum(r is False and not x for r, x, f in
                                                 zip(reach, refused, self.feasible.tolist()) if f),
                        unknown=sum(r is None for r in reach))
