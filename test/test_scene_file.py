@@ -278,3 +278,30 @@ def test_a_bad_platform_shape_is_refused_naming_the_field(shape, field):
     with pytest.raises(InputError) as info:
         _robot2_with(**shape)
     assert info.value.field == field, str(info.value)
+
+
+@pytest.mark.parametrize("text, held", [("", "the file is empty"), ("# nothing\n", "the file is empty"),
+                                        ("[1, 2]\n", "the file holds a list")])
+def test_an_empty_or_listed_scene_file_is_refused_naming_the_file(tmp_path, capsys, text, held):
+    """verify --scene, a problem's ``scene:``, and the loader the node's scene_file uses:
+    the error names the field and the file (before: ``= None: expected a mapping``)."""
+    from cdh_planner import cli
+    from cdh_planner.parsing.problem import load_problem
+    from conftest import CONFIG
+    path = tmp_path / "empty.yaml"
+    path.write_text(text)
+    with pytest.raises(InputError) as err:
+        load_scene(path)
+    assert str(err.value).startswith(f"scene = '{path}': {held}; expected a mapping with 'scene:'")
+    problem = tmp_path / "problem.yaml"
+    problem.write_text((CONFIG / "problems" / "robot2_q2_q3.yaml").read_text()
+                       .replace("robot: ../robot2.yaml", f"robot: {CONFIG / 'robot2.yaml'}")
+                       + f"scene: {path.name}\n")
+    with pytest.raises(InputError, match=f"scene = '{path}': {held}"):
+        load_problem(problem)
+    poses = tmp_path / "poses.json"
+    poses.write_text('[{"position": [0, 0, 0.2], "tau": [0, 0, 0]}]')
+    assert cli.main(["verify", str(CONFIG / "robot2.yaml"), str(poses), "--scene",
+                     str(path)]) == 2
+    err = capsys.readouterr().err
+    assert err.count("\n") == 1 and f"scene = '{path}': {held}" in err, err

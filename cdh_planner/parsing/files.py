@@ -132,6 +132,17 @@ def read_yaml(path, where, limits=YAML_LIMITS):
     return parse_yaml(text, where, str(path), limits)
 
 
+def read_yaml_mapping(path, where, expected, limits=YAML_LIMITS):
+    """The parsed YAML file at ``path`` if it is a mapping; else InputError naming ``where``
+    and the file: empty, or what it holds instead (``expected``: what the mapping holds,
+    e.g. "'scene:'")."""
+    doc = read_yaml(path, where, limits)
+    if not isinstance(doc, dict):
+        held = "the file is empty" if doc is None else f"the file holds a {type(doc).__name__}"
+        raise InputError(where, str(path), f"{held}; expected a mapping with {expected}")
+    return doc
+
+
 def parse_yaml(text, where, name="", limits=YAML_LIMITS):
     """Parse YAML ``text`` after checking its events against ``limits``; InputError
     naming ``where`` (and ``name``, the file) otherwise."""

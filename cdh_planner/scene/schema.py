@@ -146,7 +146,7 @@ def _same_array(a, b):
 def load_scene(path, robot=None):
     """The scene of the YAML file ``path`` (its top-level key ``scene:``); ``robot`` gives
     the default cable radius (robot.cable_radius). InputError naming the field."""
-    doc = files.read_yaml(path, "scene")
+    doc = files.read_yaml_mapping(path, "scene", "'scene:'")
     check_keys("", doc, ("scene",), required=("scene",))
     return scene_from_dict(doc["scene"], robot=robot, base_dir=Path(path).parent, source=str(path))
 

@@ -89,7 +89,7 @@ class Sweep:
 def load_sweep(path):
     """Read and check a SWEEP file and every design of it (InputError naming the field)."""
     path = Path(path)
-    doc = files.read_yaml(path, "sweep")
+    doc = files.read_yaml_mapping(path, "sweep", "'robot:' and 'vary:'")
     check_keys("", doc, TOP_KEYS, required=("robot", "vary"))
     base = path.parent
     robot_file = _file(base, doc["robot"], "robot")
