@@ -429,3 +429,23 @@ def test_an_undeclared_parameter_is_refused_naming_it(make_node):
     assert "planner.radius_typo" in result.reason and "0.25" in result.reason, result.reason
     assert node.set_parameters_atomically(
         [Parameter("planner.radius", value=0.25)]).successful
+
+
+@pytest.mark.parametrize("bad", ["/proc/nope", "FILE"])
+def test_a_log_dir_the_node_cannot_record_in_is_refused_as_a_parameter(make_node, tmp_path, bad):
+    """log_dir set at run time to a directory that cannot be made (/proc/nope) or is a
+    file: the parameter is refused naming it (before: accepted, only the log said recording
+    was off); the node keeps its directory and records there."""
+    node = make_node()
+    if bad == "FILE":
+        bad = str(tmp_path / "a_file")
+        Path(bad).write_text("x")
+    before = node.get_parameter("log_dir").value
+    result = node.set_parameters_atomically([Parameter("log_dir", value=bad)])
+    assert not result.successful
+    assert result.reason.startswith(f"log_dir = '{bad}': cannot record there"), result.reason
+    assert node.get_parameter("log_dir").value == before
+    plan(node)
+    assert list(Path(before).glob("*.mcap")), "still recording where it was"
+    good = tmp_path / "new" / "runs"
+    assert node.set_parameters_atomically([Parameter("log_dir", value=str(good))]).successful

@@ -147,7 +147,8 @@ _TAIL = tuple(
             "shape; cdh_planner/scene/schema.py): plans keep clear of it; empty: no scene. "
             "Read when set: edit the file, then set the parameter again"),
        Spec("log_dir", STRING, "~/.ros/cdh_planner",
-            "directory of the run MCAP files (one file per node run; created when needed)"),
+            "directory of the run MCAP files (one file per node run; created when needed); "
+            "while log_enabled, one the node cannot create or write is refused"),
        Spec("log_enabled", BOOL, True, "record plan calls, published messages and streamed "
             "commands to MCAP in log_dir"),
        Spec("log_max_file_mb", DOUBLE, 100.0, "rotation: a run file that has reached this "
@@ -301,12 +302,30 @@ def node_config(values, source="ROS parameters"):
     log_dir = checked["log_dir"]
     if not log_dir and checked["log_enabled"]:
         raise InputError("log_dir", log_dir, "must name a directory while log_enabled is true")
+    if checked["log_enabled"]:
+        _check_log_dir(log_dir)
     return NodeConfig(robot=robot, task=task, settings=settings,
                       base_frame=checked["base_frame"],
                       stream_rate_hz=checked["stream_rate_hz"],
                       stream_interpolation=checked["stream_interpolation"],
                       log_dir=os.path.expanduser(log_dir), log_enabled=checked["log_enabled"],
                       values=checked, scene=scene)
+
+
+def _check_log_dir(log_dir):
+    """InputError naming log_dir unless the directory exists or can be made and a file can
+    be written in it (a probe file, removed): a parameter that cannot work is refused, not
+    accepted and then only logged at the first recording."""
+    import tempfile
+    path = os.path.expanduser(log_dir)
+    try:
+        os.makedirs(path, exist_ok=True)
+        with tempfile.TemporaryFile(dir=path, prefix=".cdh_planner_probe_"):
+            pass
+    except OSError as exc:
+        raise InputError("log_dir", log_dir, f"cannot record there: {exc.strerror or exc}"
+                                             f"{f' ({exc.filename})' if exc.filename else ''}"
+                                             ) from None
 
 
 def _check_frames(checked):
