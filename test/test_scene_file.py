@@ -305,3 +305,19 @@ def test_an_empty_or_listed_scene_file_is_refused_naming_the_file(tmp_path, caps
                      str(path)]) == 2
     err = capsys.readouterr().err
     assert err.count("\n") == 1 and f"scene = '{path}': {held}" in err, err
+
+
+def test_ten_thousand_obstacles_are_refused_by_the_obstacle_bound(tmp_path):
+    """A scene file of 10,000 obstacles: the error says a scene has at most 1000 obstacles
+    (before: the generic 'more than 100000 values' of any YAML file)."""
+    from cdh_planner.scene.schema import MAX_OBSTACLES
+    path = tmp_path / "many.yaml"
+    items = [{"id": f"b{k}", "type": "sphere", "radius": 0.01, "position": [0.0, 0.0, 0.1]}
+             for k in range(10_000)]
+    path.write_text(yaml.safe_dump({"scene": {"obstacles": items}}))
+    with pytest.raises(InputError) as err:
+        load_scene(path)
+    assert f"at most {MAX_OBSTACLES} obstacles" in str(err.value), err.value
+    assert str(err.value).startswith(f"scene = '{path}'")
+    path.write_text(yaml.safe_dump({"scene": {"obstacles": items[:MAX_OBSTACLES]}}))
+    assert len(load_scene(path).obstacles) == MAX_OBSTACLES

@@ -77,6 +77,7 @@ class Limits:
     max_depth: int = 32
     max_items: int = 10_000
     max_nodes: int = 100_000
+    items_note: str = ""   # said after the entries bound (what it stands for, for this file)
 
 
 YAML_LIMITS = Limits()
@@ -183,7 +184,7 @@ def _check_yaml_events(text, where, label, limits):
             open_[-1][0] += 1
             if open_[-1][0] > open_[-1][1]:
                 _refuse(where, label, event, f"a list or mapping of more than "
-                                             f"{limits.max_items} entries")
+                                             f"{limits.max_items} entries{limits.items_note}")
         if isinstance(event, yaml.CollectionStartEvent):
             pairs = isinstance(event, yaml.MappingStartEvent)
             open_.append([0, (2 if pairs else 1) * limits.max_items])

@@ -51,6 +51,8 @@ FRAMES = ("base_frame", "fixed_frame", "platform_frame")
 # a ROS 2 topic or action name: tokens of letters, digits and _ (not starting with a digit)
 # between slashes, absolute or relative, or private (~/)
 ROS_NAME = re.compile(r"(~/|/)?[A-Za-z_][A-Za-z0-9_]*(/[A-Za-z_][A-Za-z0-9_]*)*")
+# a TF frame id: a ROS name without a leading slash (tf2 refuses "/world")
+FRAME_ID = re.compile(r"[A-Za-z_][A-Za-z0-9_]*(/[A-Za-z_][A-Za-z0-9_]*)*")
 
 
 _KINDS = {str: STRING, bool: BOOL, int: INT, float: DOUBLE}
@@ -236,6 +238,10 @@ def check_value(spec, value):
             raise InputError(name, value, f"expected one of {', '.join(spec.choices)}")
         if (name in FRAMES or spec.start_only) and not value:
             raise InputError(name, value, "must not be empty")
+        if name in FRAMES and not FRAME_ID.fullmatch(value):
+            raise InputError(name, value, "not a TF frame id: letters, digits and _ between "
+                                          "slashes, no leading slash, no token starting with "
+                                          "a digit")
         if spec.start_only and not ROS_NAME.fullmatch(value):
             raise InputError(name, value, "not a ROS name: letters, digits and _ between "
                                           "slashes, no token starting with a digit")
