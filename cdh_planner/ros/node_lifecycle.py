@@ -4,8 +4,8 @@ warm the planner, open the run file), ``close()`` (release all that) and ``execu
 
 - configure: parameters checked (``params.node_config``), then ``_configure``; a bad
   parameter fails the transition (the node stays unconfigured) and is logged naming it;
-- activate: plans, goals and ``~/execute`` served; deactivate: refused again, and an
-  execution stopped (holding);
+- activate: plans, goals and ``~/execute`` served; deactivate: refused again, a running
+  or waiting plan call cancelled, and an execution stopped (holding);
 - cleanup, shutdown: ``close()``;
 - a transition the current state does not have (by id: configure to an active node, an
   unknown id) is refused (``success`` false) and logged naming it; the node keeps serving.
@@ -77,6 +77,7 @@ class LifecycleMixin:
 
     def on_deactivate(self, state):
         self.active, self._lifecycle_state = False, "inactive"
+        self.plans.cancel_all()   # a running plan or goal ends (canceled), waiting ones too
         self.get_logger().info(f"inactive: {self.execution.stop()}")
         return super().on_deactivate(state)
 

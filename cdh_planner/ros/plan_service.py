@@ -56,13 +56,15 @@ class Answer:
 
 
 class Cancel:
-    """A plan's stop signal (``is_set``): shutting down, or the caller's own cancel."""
+    """A plan's stop signal (``is_set``): shutting down, every call cancelled since this
+    signal was made (``PlanService.cancel_all``: deactivate), or the caller's own cancel."""
 
     def __init__(self, plans, caller=None):
-        self.plans, self.caller = plans, caller
+        self.plans, self.caller, self.epoch = plans, caller, plans.epoch
 
     def is_set(self):
-        return self.plans.shutting_down or (self.caller is not None and self.caller.is_set())
+        return (self.plans.shutting_down or self.plans.epoch != self.epoch
+                or (self.caller is not None and self.caller.is_set()))
 
 
 class PlanService:
@@ -82,6 +84,7 @@ class PlanService:
         self.make_planner = make_planner
         self.shutting_down = False
         self.planning = False
+        self.epoch = 0   # cancel_all: the calls that arrived before it are cancelled
 
     @property
     def config(self):
@@ -132,6 +135,9 @@ class PlanService:
 
     def _serve(self, call, run_id, log_file, turn, refused):
         config = self._config
+        epoch = self.epoch
+        if call is not None:
+            call.cancel = Cancel(self, call.cancel)
         if refused:
             self._queue.drop(turn)
             result = refused
@@ -141,7 +147,8 @@ class PlanService:
                              f"wait (at most 1 + {self._queue.depth}); call again when one is "
                              f"answered", config.settings.strategy)
         elif not self._queue.wait(turn, call.cancel):
-            why = "the node is shutting down" if self.shutting_down else "cancelled while queued"
+            why = ("the node is shutting down" if self.shutting_down else
+                   "the node was deactivated" if self.epoch != epoch else "cancelled while queued")
             result = plan_requests.refusal(Status.CANCELED, f"canceled: {why}", config.settings.strategy)
         else:
             try:
@@ -282,6 +289,12 @@ class PlanService:
                 return False
             self._last = pending
             return True
+
+    def cancel_all(self):
+        """End the running plan at its next progress report and answer the waiting calls
+        (canceled); calls arriving later are served (lifecycle deactivate)."""
+        with self._lock:
+            self.epoch += 1
 
     def begin_shutdown(self):
         """A running plan ends at its next progress report; waiting calls are answered
