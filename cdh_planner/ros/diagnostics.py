@@ -9,7 +9,8 @@ Values (strings): state (lifecycle), activity (idle, planning, executing), queue
 calls waiting), last_plan (its message, or "none"), last_plan_ok ("none" before the
 first plan), last_plan_age_s (s) (the last plan stays through cleanup and shutdown),
 recording (the run file, "off" or "failed"), joint_states_age_s (s since the last
-JointState, or "none"). No rclpy: the node fills ``Health`` and publishes the message.
+JointState, or "none"), obstacle_updates_received / _applied / _refused / _dropped
+(ObstacleArrays so far). No rclpy: the node fills ``Health`` and publishes the message.
 """
 
 from dataclasses import dataclass
@@ -37,6 +38,8 @@ class Health:
     # the largest cable length error (m) of the last forward kinematics: rounding with six
     # cables; with more, how far the measured lengths are from any one pose (least squares)
     forward_kinematics_residual_m: float = None
+    # ObstacleArrays on ~/obstacles: {received, applied, refused, dropped} (node_scene.py)
+    obstacle_updates: dict = None
 
 
 def _level_and_message(h):
@@ -64,6 +67,8 @@ def health_status(h, name, hardware_id=""):
               "joint_states_age_s": _age(h.joint_states_age_s),
               "forward_kinematics_residual_m": "none" if h.forward_kinematics_residual_m is None
               else f"{h.forward_kinematics_residual_m:.3g}"}
+    for k, v in (h.obstacle_updates or {}).items():
+        values[f"obstacle_updates_{k}"] = str(v)
     return DiagnosticStatus(level=level, name=name, message=message, hardware_id=hardware_id,
                             values=[KeyValue(key=k, value=v) for k, v in values.items()])
 

@@ -122,6 +122,7 @@ class PlannerNode(LifecycleMixin, LifecycleNode):
         log_file = self.record(self.runlog.open) or ""
         self.outlet = Outlet(self)
         self.plans = PlanService(config, planner, self.outlet, make_planner=self._new_planner)
+        self.plans.between_steps = self.scene.drain   # obstacle updates while a plan runs
         self.scene.configure(config)
         self._execution = PlanExecution(self, config, self.pub_command, self.pub_execution,
                                         self.record.publish, self.plans.execution_ended,

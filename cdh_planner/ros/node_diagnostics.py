@@ -33,6 +33,7 @@ class NodeDiagnostics:
         plan = {} if not last else dict(     # kept through cleanup and shutdown
             last_plan=last[0].message, last_plan_ok=last[0].level == DiagnosticStatus.OK,
             last_plan_age_s=now - last[1])
+        plan["obstacle_updates"] = node.scene.counts()
         if not node.configured:
             return Health(state=state, **plan)
         plans, execution = node.plans, node.execution

@@ -67,6 +67,19 @@ class Cancel:
                 or (self.caller is not None and self.caller.is_set()))
 
 
+class StepCancel(Cancel):
+    """The running plan's Cancel: the search asks it between its steps, so it also does the
+    node's work that must not wait for the plan (``PlanService.between_steps``: the
+    obstacle updates), at most every STEP_WORK_PERIOD_S."""
+
+    def is_set(self):
+        self.plans.step_work()
+        return super().is_set()
+
+
+STEP_WORK_PERIOD_S = 0.005
+
+
 class PlanService:
 
     def __init__(self, config, planner, outlet, depth=plan_requests.PLAN_QUEUE_DEPTH,
@@ -85,6 +98,8 @@ class PlanService:
         self.shutting_down = False
         self.planning = False
         self.epoch = 0   # cancel_all: the calls that arrived before it are cancelled
+        self.between_steps = lambda: None   # the node's: work done between planning steps
+        self._last_step_work = 0.0
 
     @property
     def config(self):
@@ -200,10 +215,11 @@ class PlanService:
             start, goal = plan_requests.request_poses(call, config.base_frame)
         except InputError as exc:
             return plan_requests.input_refusal(exc, config.settings.strategy)
-        call.cancel = Cancel(self, call.cancel)
+        call.cancel = StepCancel(self, call.cancel)
         last = [0.0]
 
         def progress(info):
+            self.step_work()
             now = time.monotonic()
             if now - last[0] >= PROGRESS_PERIOD_S:
                 last[0] = now
@@ -217,6 +233,17 @@ class PlanService:
                                         logger=self._outlet.error)
         finally:
             self.planning = False
+
+    def step_work(self):
+        """``between_steps()``, at most every STEP_WORK_PERIOD_S (s); never raising."""
+        now = time.monotonic()
+        if now - self._last_step_work < STEP_WORK_PERIOD_S:
+            return
+        self._last_step_work = now
+        try:
+            self.between_steps()
+        except Exception:  # noqa: BLE001 - the plan goes on; the error is the node's
+            self._outlet.error(f"work between planning steps failed: {traceback.format_exc()}")
 
     # ------------------------------------------------------------------ commit
 
