@@ -59,6 +59,8 @@ class NodeScene:
         self._node = node
         self.state = SceneState()
         self._draining = threading.Lock()   # one drain at a time: arrival order kept
+        self._applying = threading.Lock()   # one array applied and published: ~/get_scene
+        # answers a version once its ~/scene and ~/scene_markers are out
         self._counts_lock = threading.Lock()
         self._counts = dict.fromkeys(("received", "applied", "refused", "dropped"), 0)
         self.pub_scene = node.create_publisher(Scene, f"~/{SCENE}", LATCHED)
@@ -129,23 +131,25 @@ class NodeScene:
             return
         config = node.config
         node.record(node.runlog.write, self.subscription.topic_name, msg, node.record.now())
-        try:
-            update = self.state.update(msg, config.base_frame, config.robot)
-        except Exception as exc:  # noqa: BLE001 - never take the node down
-            self._count(refused=1)
-            node.get_logger().error(f"~/{OBSTACLES} failed: {exception_line(exc)}")
-            return
+        with self._applying:
+            try:
+                update = self.state.update(msg, config.base_frame, config.robot)
+            except Exception as exc:  # noqa: BLE001 - never take the node down
+                self._count(refused=1)
+                node.get_logger().error(f"~/{OBSTACLES} failed: {exception_line(exc)}")
+                return
+            if update.taken:
+                self._publish(self.state.current())
         self._count(applied=int(bool(update.taken)), refused=int(bool(update.refused)))
         if update.refused:   # rclpy: one severity per call site
             node.get_logger().warning(f"~/{OBSTACLES}: {update.line()}")
         else:
             node.get_logger().info(f"~/{OBSTACLES}: {update.line()}")
-        if update.taken:
-            self._publish(self.state.current())
 
     def get_scene(self, request, response):
         config = self._node.config if self._node.configured else None
-        now = self.state.current()
+        with self._applying:
+            now = self.state.current()
         response.scene = scene_msg(now.version, now.scene, config.base_frame if config else "",
                                    self._node.get_clock().now().to_msg())
         return response
