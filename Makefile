@@ -17,7 +17,7 @@ export ROS_AUTOMATIC_DISCOVERY_RANGE := LOCALHOST
 export AMENT_PREFIX_PATH := $(abspath $(VENV))
 export PIP_DISABLE_PIP_VERSION_CHECK := 1
 
-.PHONY: venv demo test bench clean
+.PHONY: venv demo test bench pictures clean
 
 venv: $(STAMP) $(IFACE_STAMP)
 
@@ -60,6 +60,10 @@ bench: venv
 	@set -e; shopt -s nullglob; files=(benchmarks/*.py); \
 	if [ $${#files[@]} -eq 0 ]; then echo "no benchmarks/*.py"; fi; \
 	for f in "$${files[@]}"; do grep -q '^if __name__ == "__main__":' "$$f" || continue; echo "== $$f"; $(PY) "$$f"; done
+
+# Every picture of the README and the manual (docs/*.png), regenerated.
+pictures: venv
+	bash docs/pictures.sh
 
 clean:
 	rm -rf $(VENV) build install log .pytest_cache *.egg-info

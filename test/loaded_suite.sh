@@ -17,6 +17,7 @@ HOGS=${HOGS:-$(nproc)}
 HOG_S=${HOG_S:-3600}
 PYTHON=${PYTHON:-.venv/bin/python}
 LOGS=${LOGS:-$(mktemp -d /tmp/loaded_suite.XXXXXX)}   # each run's pytest output
+mkdir -p "$LOGS"
 hogs=()
 
 stop_hogs() {

@@ -9,7 +9,7 @@ LAYER = {"cdh_planner": 0, "errors": 0, "parsing.files": 0, "progress": 0, "stat
          "feasibility": 2, "scene": 2, "zonotope": 2, "cable_feasibility": 2,
          "manifold": 3, "atlas": 3, "search": 4, "trajectory": 4, "settings": 5,
          "planner": 6, "pipeline": 6, "parsing": 7, "pictures": 7, "recording": 7, "studies": 7,
-         "ros": 8, "commands": 9, "cli": 10}
+         "ros": 8, "commands": 9, "cli": 10, "cli_reference": 10}
 CABLE_FREE = {"atlas", "search"}  # they see F, F_x, bounds and costs only
 GENERIC = {"cdh_planner", "errors", "status", "atlas", "search"}
 

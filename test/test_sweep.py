@@ -123,6 +123,6 @@ def test_an_empty_sweep_file_is_refused_naming_the_file(tmp_path, capsys, text, 
 
 
 def test_the_example_sweep_file_in_config_reads():
-    """config/sweeps/robot2.yaml, the documented example (module docstring of studies.sweep)."""
-    sweep = sw.load_sweep(CONFIG / "sweeps" / "robot2.yaml")
+    """config/sweeps/robot2_tension_and_load.yaml, the documented example (module docstring of studies.sweep)."""
+    sweep = sw.load_sweep(CONFIG / "sweeps" / "robot2_tension_and_load.yaml")
     assert len(sweep.designs) == 4 and sweep.keys == ("robot.tension_max", "robot.load.mass")
