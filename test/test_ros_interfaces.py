@@ -236,6 +236,9 @@ def test_plan_path_action_goal_feedback_result_and_cancel_over_dds(plan_path_ser
         assert len(r.tension_envelope.points) == len(r.cable_trajectory.points) == 3
         assert r.tension_envelope.points[2].tension_max[5] == 26.0   # waypoint 2, cable 5
         assert r.tension_envelope.points[1].time_from_start.nanosec == 500_000_000
+        # feedback and result travel apart: the last feedback may come after the result
+        assert caller.spin_until(lambda: caller.feedback and
+                                 caller.feedback[-1][1].charts == r.charts, 30.0)
         assert len(caller.feedback) >= 3
         charts = [f.charts for _, f in caller.feedback]
         assert charts == sorted(charts) and r.charts == charts[-1]
