@@ -34,7 +34,7 @@ for run in $(seq 1 "$RUNS"); do
         hogs+=($!)
     done
     start=$(date +%s)
-    "$PYTHON" -m pytest -q -p no:cacheprovider "$@" > "$LOGS/run$run.log" 2>&1
+    "$PYTHON" -m pytest -p no:cacheprovider "$@" > "$LOGS/run$run.log" 2>&1
     rc=$?
     end=$(date +%s)
     stop_hogs

@@ -236,12 +236,12 @@ def test_plan_path_action_goal_feedback_result_and_cancel_over_dds(plan_path_ser
         assert len(r.tension_envelope.points) == len(r.cable_trajectory.points) == 3
         assert r.tension_envelope.points[2].tension_max[5] == 26.0   # waypoint 2, cable 5
         assert r.tension_envelope.points[1].time_from_start.nanosec == 500_000_000
-        # feedback and result travel apart: the last feedback may come after the result
-        assert caller.spin_until(lambda: caller.feedback and
-                                 caller.feedback[-1][1].charts == r.charts, 30.0)
+        # feedback and result travel apart, and rclpy's client drops a goal's feedback that
+        # arrives after its result: on a loaded machine the last ones may be missing, so
+        # the feedback seen is 1, 2, ... k (none lost between) with k <= the result's count
         assert len(caller.feedback) >= 3
         charts = [f.charts for _, f in caller.feedback]
-        assert charts == sorted(charts) and r.charts == charts[-1]
+        assert charts == list(range(1, len(charts) + 1)) and charts[-1] <= r.charts
 
         # a long goal (300 s: long enough to be caught on a loaded machine), cancelled once
         # its feedback flows: CANCELED, and the last feedback is the one the double counted
@@ -257,9 +257,10 @@ def test_plan_path_action_goal_feedback_result_and_cancel_over_dds(plan_path_ser
         answer = caller.result(handle)
         assert answer.status == GoalStatus.STATUS_CANCELED
         assert answer.result.error_code == PlanPath.Result.CANCELED
-        # the result's feedback count is the last feedback sent: none came after it
-        assert caller.spin_until(lambda: caller.feedback[-1][1].charts == answer.result.charts,
-                                 30.0)
+        # the result's feedback count is the last feedback sent: none came after it (those
+        # sent just before it may arrive after it, and rclpy's client drops them)
+        charts = [f.charts for _, f in caller.feedback]
+        assert charts == list(range(1, len(charts) + 1)) and charts[-1] <= answer.result.charts
 
         # after the cancel, the next goal runs to its result; a bad one is aborted with a code
         answer = caller.result(caller.send(_goal(0.05)))
