@@ -179,13 +179,15 @@ def connect(ray, address):
     token = token_source() if mode is None or mode.lower() == "token" else None
     if mode is None and token is not None:
         said = _try_init(ray, address, {GCS_WAIT: str(FIRST_TRY_S)})
+        if said is not None and "Unauthenticated" not in said:   # slow, or not tokens:
+            ray.shutdown()                                       # Ray's usual budget
+            said = _try_init(ray, address, {})
         if said is None:
             return None
         ray.shutdown()
-        if "Unauthenticated" in said:
-            _token_mode()
-        else:
-            token = None   # not a matter of tokens: the usual attempt below says what
+        if "Unauthenticated" not in said:
+            raise InputError("--ray-address", address, refusal(said, None))
+        _token_mode()
     said = _try_init(ray, address, {})
     if said is not None:
         raise InputError("--ray-address", address, refusal(said, token))
