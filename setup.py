@@ -28,6 +28,7 @@ setup(
                                                       + glob('config/*.json'))),
         ('share/' + package_name + '/config/problems', sorted(glob('config/problems/*.yaml'))),
         ('share/' + package_name + '/config/scenes', sorted(glob('config/scenes/*.yaml'))),
+        ('share/' + package_name + '/config/sweeps', sorted(glob('config/sweeps/*.yaml'))),
         ('share/' + package_name + '/launch', sorted(glob('launch/*.launch.py'))),
     ],
     install_requires=['setuptools', 'numpy', 'scipy', 'pyyaml', 'matplotlib', 'tqdm', 'threadpoolctl', 'numba', 'toppra',

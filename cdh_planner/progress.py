@@ -8,7 +8,9 @@ the bar's carriage-return frames would pile up as lines, so it writes one plain 
 most every ``LINE_INTERVAL_S`` seconds (none for a plan shorter than that).
 """
 
+import os
 import sys
+import tempfile
 import time
 from contextlib import contextmanager
 
@@ -71,3 +73,31 @@ def _lines(stream, interval_s, clock):
         print(f"atlas: {int(charts)} charts, best_h {best_h:.3g}, {now - start:.0f} s",
               file=stream, flush=True)
     return update
+
+
+class Held:
+    """What ``stderr_held`` kept: ``text`` (str), filled when the block ends."""
+
+    text = ""
+
+
+@contextmanager
+def stderr_held():
+    """What C code (rcl's, Ray's logging) writes to file descriptor 2 in the block: written
+    to stderr after it if the block returns, dropped if it raises (its exception says what
+    matters; the yielded ``Held.text`` keeps the words for the caller to read)."""
+    sys.stderr.flush()
+    held = Held()
+    saved = os.dup(2)
+    with tempfile.TemporaryFile() as f:
+        os.dup2(f.fileno(), 2)
+        try:
+            yield held
+        finally:
+            os.dup2(saved, 2)
+            os.close(saved)
+            f.seek(0)
+            held.text = f.read().decode(errors="replace")
+    if held.text:
+        sys.stderr.write(held.text)
+        sys.stderr.flush()

@@ -133,7 +133,7 @@ def test_demo_ros_story(full_run):
                             r"path ([\d.]+) m, duration ([\d.]+) s, lowest tension margin "
                             r"([\d.]+) N", part)
         assert planned, part[:400]
-        assert float(planned.group(1)) < 30 and float(planned.group(6)) > 0
+        assert float(planned.group(6)) > 0   # no bound on the planning time: a loaded machine is slow, not wrong
         assert "checked densely: safe, worst margin +" in part
         assert "execution completed" in part.split("\n== ")[0], part[:1500]
         parts[leg] = (part.split("\n== ")[0], planned)

@@ -17,7 +17,7 @@ from sensor_msgs.msg import JointState  # noqa: E402
 from cdh_planner.model.kinematics import cable_lengths  # noqa: E402
 from cdh_planner.model.pose import rotation_from_quaternion  # noqa: E402
 from cdh_planner.ros import messages as M  # noqa: E402
-from cdh_planner.ros.client import PlannerClient, plan_path_goal  # noqa: E402
+from cdh_planner.ros.client import PlannerClient, path_duration, plan_path_goal  # noqa: E402
 from cdh_planner.ros.params import node_config  # noqa: E402
 from ros_harness import (Q1, Q2, Q3, ROBOT2, Collector, ControllerDouble,  # noqa: E402
                          NodeProcess, claimed_domain, file_parameters, pose_text, run_cli,
@@ -153,19 +153,33 @@ def test_use_current_start_plans_from_where_the_winches_are_and_executes(ros):
     assert M.status_values(status)["outcome"] == "completed"
 
 
+SLOW_SPEED = 0.0005   # m/s: a motion of minutes, tens of seconds at the double's time scale
+
+
 def test_stop_cancels_the_controller_goal_and_ends_stopped(ros):
-    answer = ros.plan_path(plan_path_goal(None, sphere_pose_msg(Q2), use_current_start=True),
-                           timeout_s=60)
+    """Stop while the controller runs the goal: canceled there, the execution ends stopped.
+    The plan is made slow (trajectory.max_cable_speed) so that the goal is still running
+    when the stop arrives on a loaded machine: the cancel is caught, not raced."""
+    normal = CONFIG.values["trajectory.max_cable_speed"]
+    assert all(ok for ok, _ in ros.set_parameters({"trajectory.max_cable_speed": SLOW_SPEED}))
+    try:
+        answer = ros.plan_path(plan_path_goal(None, sphere_pose_msg(Q2), use_current_start=True),
+                               timeout_s=120)
+    finally:
+        assert all(ok for ok, _ in ros.set_parameters({"trajectory.max_cable_speed": normal}))
     assert answer.success, answer.result.error_msg
+    assert path_duration(answer.path) / TIME_SCALE > 20.0, path_duration(answer.path)
     seen = len(ros.execution_results)
+    accepted = len(ros.double.events("accepted"))
     ok, message = ros.execute()
     assert ok, message
+    assert ros.spin_until(lambda: len(ros.double.events("accepted")) > accepted, 60.0)
     ok, message = ros.stop()
     assert ok and "cancel" in message, message
-    status = ros.wait_execution_result(seen, timeout_s=15.0)
+    status = ros.wait_execution_result(seen, timeout_s=60.0)   # a limit for a hang
     assert status is not None and status.level == DiagnosticStatus.WARN, status
     assert M.status_values(status)["outcome"] == "stopped"
-    assert ros.spin_until(lambda: ros.double.events("canceled"), 5.0)
+    assert ros.spin_until(lambda: ros.double.events("canceled"), 30.0)
     ok, message = ros.stop()
     assert ok and message.startswith("not executing"), message
 

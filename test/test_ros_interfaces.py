@@ -193,14 +193,14 @@ class ActionCaller:
     def wait_for_server(self, timeout_s=20.0):
         return self.spin_until(self.client.server_is_ready, timeout_s)
 
-    def send(self, goal, timeout_s=10.0):
+    def send(self, goal, timeout_s=60.0):
         """The goal handle of an accepted or rejected ``goal``."""
         future = self.client.send_goal_async(
             goal, feedback_callback=lambda m: self.feedback.append((time.monotonic(), m.feedback)))
         assert self.spin_until(future.done, timeout_s), "no answer to the goal"
         return future.result()
 
-    def result(self, handle, timeout_s=10.0):
+    def result(self, handle, timeout_s=60.0):
         future = handle.get_result_async()
         assert self.spin_until(future.done, timeout_s), "no result"
         return future.result()
@@ -236,26 +236,31 @@ def test_plan_path_action_goal_feedback_result_and_cancel_over_dds(plan_path_ser
         assert len(r.tension_envelope.points) == len(r.cable_trajectory.points) == 3
         assert r.tension_envelope.points[2].tension_max[5] == 26.0   # waypoint 2, cable 5
         assert r.tension_envelope.points[1].time_from_start.nanosec == 500_000_000
+        # feedback and result travel apart, and rclpy's client drops a goal's feedback that
+        # arrives after its result: on a loaded machine the last ones may be missing, so
+        # the feedback seen is 1, 2, ... k (none lost between) with k <= the result's count
         assert len(caller.feedback) >= 3
         charts = [f.charts for _, f in caller.feedback]
-        assert charts == sorted(charts) and r.charts == charts[-1]
+        assert charts == list(range(1, len(charts) + 1)) and charts[-1] <= r.charts
 
-        # a long goal (30 s), cancelled once its feedback flows: CANCELED, and the last
-        # feedback is the one the double counted when it saw the cancel. The 10 s of
-        # caller.result only bound a hang; the answer's content says it was the cancel
+        # a long goal (300 s: long enough to be caught on a loaded machine), cancelled once
+        # its feedback flows: CANCELED, and the last feedback is the one the double counted
+        # when it saw the cancel. The waits' limits only bound a hang; the answer's content
+        # says it was the cancel
         caller.feedback.clear()
-        handle = caller.send(_goal(30.0))
+        handle = caller.send(_goal(300.0))
         assert handle.accepted
-        assert caller.spin_until(lambda: len(caller.feedback) >= 2, 10.0), "no feedback"
+        assert caller.spin_until(lambda: len(caller.feedback) >= 2, 60.0), "no feedback"
         cancel = handle.cancel_goal_async()
-        assert caller.spin_until(cancel.done, 5.0)
+        assert caller.spin_until(cancel.done, 60.0)
         assert len(cancel.result().goals_canceling) == 1
         answer = caller.result(handle)
         assert answer.status == GoalStatus.STATUS_CANCELED
         assert answer.result.error_code == PlanPath.Result.CANCELED
-        # the result's feedback count is the last feedback sent: none came after it
-        assert caller.spin_until(lambda: caller.feedback[-1][1].charts == answer.result.charts,
-                                 5.0)
+        # the result's feedback count is the last feedback sent: none came after it (those
+        # sent just before it may arrive after it, and rclpy's client drops them)
+        charts = [f.charts for _, f in caller.feedback]
+        assert charts == list(range(1, len(charts) + 1)) and charts[-1] <= answer.result.charts
 
         # after the cancel, the next goal runs to its result; a bad one is aborted with a code
         answer = caller.result(caller.send(_goal(0.05)))

@@ -5,6 +5,8 @@ The node runs in its own process around the TEST DOUBLE planner (test/doubles/fa
 these tests are about the node's states, not the planner's answers.
 """
 
+import signal
+
 import pytest
 from diagnostic_msgs.msg import DiagnosticArray, DiagnosticStatus
 from lifecycle_msgs.msg import Transition
@@ -27,26 +29,26 @@ class Lifecycle:
         make = client.node.create_client
         self.change = make(ChangeState, f"{NODE}/change_state", qos_profile=SERVICE_QOS)
         self.get = make(GetState, f"{NODE}/get_state", qos_profile=SERVICE_QOS)
-        assert self.change.wait_for_service(timeout_sec=15.0)
+        assert self.change.wait_for_service(timeout_sec=60.0)
 
     def state(self):
-        return self.client.call(self.get, GetState.Request(), 10.0).current_state.label
+        return self.client.call(self.get, GetState.Request(), 60.0).current_state.label
 
     def transition(self, transition_id):
         request = ChangeState.Request(transition=Transition(id=transition_id))
-        return self.client.call(self.change, request, 30.0).success
+        return self.client.call(self.change, request, 60.0).success
 
 
 def plans(client):
     """Whether ~/plan answers with a path (the test double's straight line)."""
-    return len(client.plan(sphere_pose_msg(Q1), sphere_pose_msg(Q2), timeout_s=30).path.poses) > 0
+    return len(client.plan(sphere_pose_msg(Q1), sphere_pose_msg(Q2), timeout_s=60).path.poses) > 0
 
 
 def test_the_lifecycle_transitions_work_by_service_calls(tmp_path):
     with claimed_domain() as domain, \
             NodeProcess(domain, tmp_path, params=["autostart:=false"], fake=True) as node, \
             PlannerClient(domain_id=domain) as client:
-        client.wait_for_node(timeout_s=30)
+        client.wait_for_node(timeout_s=60)
         life = Lifecycle(client)
         assert life.state() == "unconfigured"
         assert not plans(client), "an unconfigured node must not plan"
@@ -73,7 +75,7 @@ def test_a_bad_parameter_fails_configure_naming_it_and_the_node_stays_up(tmp_pat
             NodeProcess(domain, tmp_path, params=["autostart:=false", "log_dir:=''"],
                         fake=True) as node, \
             PlannerClient(domain_id=domain) as client:
-        client.wait_for_node(timeout_s=30)
+        client.wait_for_node(timeout_s=60)
         life = Lifecycle(client)
         assert not life.transition(Transition.TRANSITION_CONFIGURE)
         assert life.state() == "unconfigured"
@@ -88,9 +90,9 @@ def test_diagnostics_arrive_with_the_state(tmp_path):
             NodeProcess(domain, tmp_path, fake=True) as node, \
             PlannerClient(domain_id=domain) as client:
         got = Collector(client.node, DiagnosticArray, "/diagnostics", 10)
-        client.wait_for_node(timeout_s=30)
+        client.wait_for_node(timeout_s=60)
         assert plans(client)
-        assert client.spin_until(lambda: len(got.items) >= 3, 10.0), node.log()
+        assert client.spin_until(lambda: len(got.items) >= 3, 60.0), node.log()
         status = got.messages[-1].status[0]
         values = {kv.key: kv.value for kv in status.values}
         assert status.name == "/cdh_planner: planner" and status.hardware_id == "robot2"
@@ -142,3 +144,49 @@ def test_configure_warms_the_planners_kernel():
     assert warm_up(planner) is planner and [c[0] for c in calls] == ["lift", "F"]
     double = object()
     assert warm_up(double) is double
+
+
+def test_an_invalid_transition_by_id_is_refused_and_the_node_keeps_serving(tmp_path):
+    """ChangeState by id with a transition the current state does not have (configure or
+    activate to an active node, an unknown id): refused (success false, logged naming it);
+    the node stays active and keeps planning. Before: rclpy raised in its change_state
+    callback, the executor stopped and the process exited 0."""
+    with claimed_domain() as domain, \
+            NodeProcess(domain, tmp_path, fake=True) as node, \
+            PlannerClient(domain_id=domain) as client:
+        client.wait_for_node(timeout_s=60)
+        life = Lifecycle(client)
+        assert life.state() == "active"
+        for bad in (Transition.TRANSITION_CONFIGURE, Transition.TRANSITION_ACTIVATE, 99):
+            assert not life.transition(bad), bad
+            assert life.state() == "active", (bad, node.log())
+            assert plans(client), node.log()
+        assert node.proc.poll() is None, node.log()
+        assert "transition 99 refused" in node.log()
+        assert node.stop() == 0, node.log()
+
+
+def test_an_executor_that_stops_on_an_error_exits_non_zero(tmp_path, monkeypatch):
+    """node_main: an exception out of the executor (a callback that raised) is a crash:
+    logged naming it, exit 1 (before: exit 0, as a clean stop)."""
+    from rclpy.executors import MultiThreadedExecutor
+
+    from cdh_planner.ros import node_main
+    from ros_harness import ROBOT2, fake_planner_class
+
+    def crash(self, *args, **kwargs):
+        raise RuntimeError("a callback raised")
+
+    monkeypatch.setattr(MultiThreadedExecutor, "spin", crash)
+    lines = []
+    handlers = {s: signal.getsignal(s) for s in (signal.SIGINT, signal.SIGTERM)}
+    try:
+        with claimed_domain() as domain:
+            monkeypatch.setenv("ROS_DOMAIN_ID", str(domain))
+            rc = node_main.main(["--params-file", str(ROBOT2), "-p", f"log_dir:={tmp_path}",
+                                 "-p", "autostart:=false"], fake_planner_class(), lines.append)
+    finally:   # main() takes SIGINT / SIGTERM over: give them back to pytest
+        for s, handler in handlers.items():
+            signal.signal(s, handler)
+    assert rc == 1, lines
+    assert any("executor stopped: a callback raised" in line for line in lines), lines

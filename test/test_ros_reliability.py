@@ -429,3 +429,66 @@ def test_an_undeclared_parameter_is_refused_naming_it(make_node):
     assert "planner.radius_typo" in result.reason and "0.25" in result.reason, result.reason
     assert node.set_parameters_atomically(
         [Parameter("planner.radius", value=0.25)]).successful
+
+
+@pytest.mark.parametrize("bad", ["/proc/nope", "FILE"])
+def test_a_log_dir_the_node_cannot_record_in_is_refused_as_a_parameter(make_node, tmp_path, bad):
+    """log_dir set at run time to a directory that cannot be made (/proc/nope) or is a
+    file: the parameter is refused naming it (before: accepted, only the log said recording
+    was off); the node keeps its directory and records there."""
+    node = make_node()
+    if bad == "FILE":
+        bad = str(tmp_path / "a_file")
+        Path(bad).write_text("x")
+    before = node.get_parameter("log_dir").value
+    result = node.set_parameters_atomically([Parameter("log_dir", value=bad)])
+    assert not result.successful
+    assert result.reason.startswith(f"log_dir = '{bad}': cannot record there"), result.reason
+    assert node.get_parameter("log_dir").value == before
+    plan(node)
+    assert list(Path(before).glob("*.mcap")), "still recording where it was"
+    good = tmp_path / "new" / "runs"
+    assert node.set_parameters_atomically([Parameter("log_dir", value=str(good))]).successful
+
+
+def test_deactivate_cancels_the_running_plan(tmp_path, monkeypatch):
+    """A plan call running when the node is deactivated ends (canceled: an empty path)
+    within its next progress reports, not when the planner would have finished (60 s);
+    the node, activated again, plans. Before: only cleanup ended it."""
+    delay = tmp_path / "delay"
+    delay.write_text("60")
+    monkeypatch.setenv("FAKE_PLANNER_DELAY_FILE", str(delay))
+    with in_process_nodes(tmp_path / "runs") as make:
+        node = make()
+        answers = []
+        caller = threading.Thread(target=lambda: answers.append(node._plan(
+            GetPlan.Request(start=sphere_pose_msg(Q1), goal=sphere_pose_msg(Q2)),
+            GetPlan.Response())))
+        caller.start()
+        assert until(lambda: node.plans.planning, 30.0)
+        node.trigger_deactivate()
+        caller.join(30.0)
+        assert not caller.is_alive(), "deactivate did not end the running plan"
+        assert len(answers[0].plan.poses) == 0
+        assert node.lifecycle_state == "inactive"
+        delay.write_text("0")
+        node.trigger_activate()
+        plan_path, values = plan(node)
+        assert len(plan_path.poses) > 0, values
+
+
+def test_diagnostics_keep_the_last_plan_after_finalize(make_node):
+    """After shutdown (finalized) /diagnostics still names the last plan beside its
+    last_plan_ok (before: last_plan 'none' beside last_plan_ok 'true'); before any plan
+    both are 'none'."""
+    from cdh_planner.ros.diagnostics import health_status
+    node = make_node()
+    values = M.status_values(health_status(node.diagnostics.health(), "n"))
+    assert (values["last_plan"], values["last_plan_ok"]) == ("none", "none")
+    plan(node)
+    node.trigger_shutdown()
+    health = node.diagnostics.health()
+    values = M.status_values(health_status(health, "n"))
+    assert values["state"] == "finalized"
+    assert values["last_plan"] == "straight line (test double)" and values["last_plan_ok"] == "true"
+    assert float(values["last_plan_age_s"]) >= 0.0

@@ -278,3 +278,46 @@ def test_a_bad_platform_shape_is_refused_naming_the_field(shape, field):
     with pytest.raises(InputError) as info:
         _robot2_with(**shape)
     assert info.value.field == field, str(info.value)
+
+
+@pytest.mark.parametrize("text, held", [("", "the file is empty"), ("# nothing\n", "the file is empty"),
+                                        ("[1, 2]\n", "the file holds a list")])
+def test_an_empty_or_listed_scene_file_is_refused_naming_the_file(tmp_path, capsys, text, held):
+    """verify --scene, a problem's ``scene:``, and the loader the node's scene_file uses:
+    the error names the field and the file (before: ``= None: expected a mapping``)."""
+    from cdh_planner import cli
+    from cdh_planner.parsing.problem import load_problem
+    from conftest import CONFIG
+    path = tmp_path / "empty.yaml"
+    path.write_text(text)
+    with pytest.raises(InputError) as err:
+        load_scene(path)
+    assert str(err.value).startswith(f"scene = '{path}': {held}; expected a mapping with 'scene:'")
+    problem = tmp_path / "problem.yaml"
+    problem.write_text((CONFIG / "problems" / "robot2_q2_q3.yaml").read_text()
+                       .replace("robot: ../robot2.yaml", f"robot: {CONFIG / 'robot2.yaml'}")
+                       + f"scene: {path.name}\n")
+    with pytest.raises(InputError, match=f"scene = '{path}': {held}"):
+        load_problem(problem)
+    poses = tmp_path / "poses.json"
+    poses.write_text('[{"position": [0, 0, 0.2], "tau": [0, 0, 0]}]')
+    assert cli.main(["verify", str(CONFIG / "robot2.yaml"), str(poses), "--scene",
+                     str(path)]) == 2
+    err = capsys.readouterr().err
+    assert err.count("\n") == 1 and f"scene = '{path}': {held}" in err, err
+
+
+def test_ten_thousand_obstacles_are_refused_by_the_obstacle_bound(tmp_path):
+    """A scene file of 10,000 obstacles: the error says a scene has at most 1000 obstacles
+    (before: the generic 'more than 100000 values' of any YAML file)."""
+    from cdh_planner.scene.schema import MAX_OBSTACLES
+    path = tmp_path / "many.yaml"
+    items = [{"id": f"b{k}", "type": "sphere", "radius": 0.01, "position": [0.0, 0.0, 0.1]}
+             for k in range(10_000)]
+    path.write_text(yaml.safe_dump({"scene": {"obstacles": items}}))
+    with pytest.raises(InputError) as err:
+        load_scene(path)
+    assert f"at most {MAX_OBSTACLES} obstacles" in str(err.value), err.value
+    assert str(err.value).startswith(f"scene = '{path}'")
+    path.write_text(yaml.safe_dump({"scene": {"obstacles": items[:MAX_OBSTACLES]}}))
+    assert len(load_scene(path).obstacles) == MAX_OBSTACLES

@@ -111,3 +111,18 @@ def test_sigint_then_resume_runs_every_design_once(tmp_path):
     assert {n: (out / n).stat().st_mtime_ns for n in done} == done
     rows = list(csv.DictReader((out / "results.csv").open()))
     assert [r["design"] for r in rows] == [str(k) for k in range(6)]
+
+
+@pytest.mark.parametrize("text, held", [("", "the file is empty"), ("[1, 2]\n", "the file holds a list")])
+def test_an_empty_sweep_file_is_refused_naming_the_file(tmp_path, capsys, text, held):
+    path = tmp_path / "sweep.yaml"
+    path.write_text(text)
+    assert cli.main(["sweep", str(path), "--out", str(tmp_path / "out"), "--no-ray", "--quiet"]) == 2
+    err = capsys.readouterr().err
+    assert err.count("\n") == 1 and f"error: sweep = '{path}': {held}" in err, err
+
+
+def test_the_example_sweep_file_in_config_reads():
+    """config/sweeps/robot2_tension_and_load.yaml, the documented example (module docstring of studies.sweep)."""
+    sweep = sw.load_sweep(CONFIG / "sweeps" / "robot2_tension_and_load.yaml")
+    assert len(sweep.designs) == 4 and sweep.keys == ("robot.tension_max", "robot.load.mass")

@@ -181,3 +181,29 @@ def test_task_file_samples_lie_on_the_task_and_a_home_off_it_is_refused(tmp_path
                      "--home", "0", "0", "0.2", "0", "0", "0"]) == 2
     err = capsys.readouterr().err
     assert err.count("\n") == 1 and "--home" in err and "off the task" in err
+
+
+def _weak_robot(tmp_path):
+    """Robot 2 with tension_max 0.5 N: it holds its 0.6 kg load at no pose."""
+    path = tmp_path / "weak.yaml"
+    path.write_text(ROBOT2.read_text().replace("tension_max: [6.58, 6.58, 6.58, 6.58, 6.58, 6.58]",
+                                               "tension_max: [0.5, 0.5, 0.5, 0.5, 0.5, 0.5]"))
+    return path
+
+
+def test_a_robot_that_holds_its_load_nowhere_is_said_so_in_one_line(tmp_path, capsys):
+    """No --home given: the error names the robot file and why (no feasible pose among the
+    default home's draws), not --home, a flag the user did not give; the sweep of that robot
+    says the same (before: 0 % feasible, exit 0)."""
+    weak = _weak_robot(tmp_path)
+    assert cli.main(["workspace", str(weak), "--samples", "20", "--no-ray", "--quiet"]) == 2
+    err = capsys.readouterr().err
+    assert err.count("\n") == 1 and "--home" not in err, err
+    assert f"error: robot = '{weak}': holds its load nowhere: none of 100000 poses" in err, err
+    sweep = tmp_path / "sweep.yaml"
+    sweep.write_text(f"robot: {weak}\nvary:\n  robot.load.mass: [0.6]\n"
+                     "workspace: {samples: 20}\n")
+    assert cli.main(["sweep", str(sweep), "--out", str(tmp_path / "out"), "--no-ray",
+                     "--quiet"]) == 2
+    err = capsys.readouterr().err
+    assert err.count("\n") == 1 and "holds its load nowhere" in err, err

@@ -25,6 +25,18 @@ ROBOT2 = CONFIG / "robot2.yaml"
 SUMMARY_ONLY = ("seconds", "workers")  # how the run went, not what it answered
 
 
+@pytest.fixture(scope="module", autouse=True)
+def own_home(tmp_path_factory):
+    """A HOME of this module's own: a local Ray started here (ray.init) writes its token to
+    ~/.ray/auth_token, and the clusters the tests start read it there; the user's stays
+    untouched."""
+    home = tmp_path_factory.mktemp("home")
+    saved = os.environ.get("HOME")
+    os.environ["HOME"] = str(home)
+    yield home
+    os.environ["HOME"] = saved
+
+
 @pytest.fixture(scope="module")
 def robot():
     return load_robot(ROBOT2)

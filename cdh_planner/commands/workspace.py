@@ -187,6 +187,20 @@ def title_of(robot, res):
     return head
 
 
+def refusal_reasons(robot, res):
+    """Why the refused goals were refused, as counted (``counts``): "" when none."""
+    c = res.counts()
+    if not c["refused"]:
+        return ""
+    parts = [f"{c['refused_under_floor']} feasible but under the margin floor "
+             f"{res.spec.settings.margin_floor:g}"] if c["refused_under_floor"] else []
+    if c["refused_band"]:
+        parts.append(f"{c['refused_band']} " + ("where the tension rule's band does not fit"
+                                                if len(robot.base_anchors) > 6 else
+                                                "under the planner's margin"))
+    return f" ({', '.join(parts)})"
+
+
 def print_summary(robot, res):
     c, f, s = res.counts(), res.fractions(), res.seconds
     print(f"robot {robot.name} ({robot.source}): {c['evaluated']}/{c['samples']} samples evaluated, "
@@ -194,8 +208,8 @@ def print_summary(robot, res):
     if res.spec.reach:
         print(f"  reach from home: {c['reachable']} reachable ({100 * f['reachable']:.2f} % of the "
               f"samples, {100 * f['reachable_of_feasible']:.2f} % of the feasible), "
-              f"{c['unreachable_feasible']} without a path, {c['refused']} refused as goals "
-              f"(the tension rule's band does not fit), {c['unknown']} unknown (a bound)")
+              f"{c['unreachable_feasible']} without a path, {c['refused']} refused as goals"
+              f"{refusal_reasons(robot, res)}, {c['unknown']} unknown (a bound)")
     print(f"  {res.workers} worker(s); seconds: points {s['points']:.2f}, reach {s['reach']:.2f}, "
           f"total {s['total']:.2f} (Ray start {s.get('ray_start', 0.0):.2f})")
     if res.stopped:

@@ -77,6 +77,7 @@ class Limits:
     max_depth: int = 32
     max_items: int = 10_000
     max_nodes: int = 100_000
+    items_note: str = ""   # said after the entries bound (what it stands for, for this file)
 
 
 YAML_LIMITS = Limits()
@@ -132,6 +133,17 @@ def read_yaml(path, where, limits=YAML_LIMITS):
     return parse_yaml(text, where, str(path), limits)
 
 
+def read_yaml_mapping(path, where, expected, limits=YAML_LIMITS):
+    """The parsed YAML file at ``path`` if it is a mapping; else InputError naming ``where``
+    and the file: empty, or what it holds instead (``expected``: what the mapping holds,
+    e.g. "'scene:'")."""
+    doc = read_yaml(path, where, limits)
+    if not isinstance(doc, dict):
+        held = "the file is empty" if doc is None else f"the file holds a {type(doc).__name__}"
+        raise InputError(where, str(path), f"{held}; expected a mapping with {expected}")
+    return doc
+
+
 def parse_yaml(text, where, name="", limits=YAML_LIMITS):
     """Parse YAML ``text`` after checking its events against ``limits``; InputError
     naming ``where`` (and ``name``, the file) otherwise."""
@@ -172,7 +184,7 @@ def _check_yaml_events(text, where, label, limits):
             open_[-1][0] += 1
             if open_[-1][0] > open_[-1][1]:
                 _refuse(where, label, event, f"a list or mapping of more than "
-                                             f"{limits.max_items} entries")
+                                             f"{limits.max_items} entries{limits.items_note}")
         if isinstance(event, yaml.CollectionStartEvent):
             pairs = isinstance(event, yaml.MappingStartEvent)
             open_.append([0, (2 if pairs else 1) * limits.max_items])

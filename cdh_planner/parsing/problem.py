@@ -18,7 +18,8 @@ from pathlib import Path
 import numpy as np
 
 from ..errors import MAX_POSITION_M, InputError, check_keys
-from ..model.robot import load_robot, read_yaml
+from ..model.robot import load_robot
+from . import files
 from ..model.task import COORDINATES, task_from_dict
 from ..model.pose import Pose
 from ..scene.schema import default_scene, load_scene, scene_from_dict
@@ -47,7 +48,7 @@ class Problem:
 def load_problem(path):
     """Read and validate a problem file."""
     path = Path(path)
-    doc = read_yaml(path, "problem")
+    doc = files.read_yaml_mapping(path, "problem", "robot, task, start, goal")
     return problem_from_dict(doc, base_dir=path.parent, source=str(path))
 
 

@@ -41,7 +41,7 @@ from ..parsing.poses import pose_values
 from . import messages as M
 from .context import init_context
 from .interface import ACTION_QOS, CABLE_COMMAND, EXECUTE, EXECUTION_RESULT, GET_SCENE, \
-    LATCHED, NODE_NAME, OBSTACLES, OBSTACLES_DEPTH, PLAN, PLAN_PATH, PLAN_RESULT, \
+    LATCHED, NODE_NAME, OBSTACLES, OBSTACLES_QOS, PLAN, PLAN_PATH, PLAN_RESULT, \
     PLANNED_TRAJECTORY, SERVICE_QOS, STOP, TENSION_ENVELOPE
 
 DEFAULT_NODE = "/" + NODE_NAME
@@ -368,7 +368,7 @@ class PlannerClient:
         before = self.get_scene(timeout_s).version
         if self._obstacles is None:
             self._obstacles = self.node.create_publisher(ObstacleArray, self.topic(OBSTACLES),
-                                                         OBSTACLES_DEPTH)
+                                                         OBSTACLES_QOS)
         if not self.spin_until(lambda: self._obstacles.get_subscription_count() > 0, timeout_s):
             raise ClientError(f"no subscriber on {self.topic(OBSTACLES)}")
         self._obstacles.publish(array)

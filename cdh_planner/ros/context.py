@@ -4,13 +4,11 @@ line, exit 2), not an internal error, and rcl's own log line about it stays off 
 
 import os
 import re
-import sys
-import tempfile
-from contextlib import contextmanager
 
 import rclpy
 
 from ..errors import InputError, clip
+from ..progress import stderr_held
 
 
 def init_context(args=None, domain_id=None, **init_options):
@@ -21,7 +19,7 @@ def init_context(args=None, domain_id=None, **init_options):
     ``init_options``: more keywords of rclpy.init (the node's signal handler options)."""
     context = rclpy.Context()
     try:
-        with _stderr_held():
+        with stderr_held():
             rclpy.init(args=args, context=context, domain_id=domain_id, **init_options)
     except Exception as exc:  # noqa: BLE001 - rclpy's RCLError, not importable by name
         given = list(args or [])
@@ -38,23 +36,3 @@ def init_context(args=None, domain_id=None, **init_options):
 def _rcl_text(exc):
     """rcl's message without its source locations (``, at /project/src/rcl/x.c:12``)."""
     return clip(re.sub(r",? at \S+\.c(pp)?:\d+", "", str(exc)), 300)
-
-
-@contextmanager
-def _stderr_held():
-    """What C code (rcl's logging) writes to file descriptor 2 in the block: dropped if
-    the block raises (its exception says the same), written to stderr after it if not."""
-    sys.stderr.flush()
-    saved = os.dup(2)
-    with tempfile.TemporaryFile() as f:
-        os.dup2(f.fileno(), 2)
-        try:
-            yield
-        finally:
-            os.dup2(saved, 2)
-            os.close(saved)
-        f.seek(0)
-        text = f.read()
-    if text:
-        sys.stderr.write(text.decode(errors="replace"))
-        sys.stderr.flush()

@@ -6,11 +6,14 @@ Level: OK while active; WARN when not active (unconfigured or inactive: plans re
 when recording has failed, or while executing without fresh joint states. A failed plan is
 an answer (on ~/plan_result), not a fault of the node: it shows in the values only.
 Values (strings): state (lifecycle), activity (idle, planning, executing), queued (plan
-calls waiting), last_plan (its message, or "none"), last_plan_ok, last_plan_age_s (s),
+calls waiting), last_plan (its message, or "none"), last_plan_ok ("none" before the
+first plan), last_plan_age_s (s) (the last plan stays through cleanup and shutdown),
 recording (the run file, "off" or "failed"), joint_states_age_s (s since the last
 JointState, or "none"), position_error_m (m) and orientation_error_rad (rad): the accuracy
 of the last measured pose over the winches' length errors (``accuracy.pose_accuracy``;
-"none" before a pose, "not given" without robot.length_error). No rclpy: the node fills ``Health`` and publishes the message.
+"none" before a pose, "not given" without robot.length_error), obstacle_updates_received /
+_applied / _refused / _dropped (ObstacleArrays so far). No rclpy: the node fills ``Health``
+and publishes the message.
 """
 
 from dataclasses import dataclass
@@ -30,7 +33,7 @@ class Health:
     activity: str = "idle"           # idle, planning, executing
     queued: int = 0
     last_plan: str = ""              # the last plan's status message ("" none yet)
-    last_plan_ok: bool = True
+    last_plan_ok: bool = None        # None: no plan yet
     last_plan_age_s: float = None
     recording: str = "off"           # RunLog.state: the run file, "off", "failed", ...
     joint_states_age_s: float = None
@@ -42,6 +45,8 @@ class Health:
     # the robot has no length_error
     accuracy: tuple = None
     accuracy_given: bool = False
+    # ObstacleArrays on ~/obstacles: {received, applied, refused, dropped} (node_scene.py)
+    obstacle_updates: dict = None
 
 
 def _level_and_message(h):
@@ -72,12 +77,15 @@ def health_status(h, name, hardware_id=""):
     """diagnostic_msgs/DiagnosticStatus of Health ``h``."""
     level, message = _level_and_message(h)
     values = {"state": h.state, "activity": h.activity, "queued": str(h.queued),
-              "last_plan": h.last_plan or "none", "last_plan_ok": str(h.last_plan_ok).lower(),
+              "last_plan": h.last_plan or "none",
+              "last_plan_ok": "none" if h.last_plan_ok is None else str(h.last_plan_ok).lower(),
               "last_plan_age_s": _age(h.last_plan_age_s), "recording": h.recording,
               "joint_states_age_s": _age(h.joint_states_age_s),
               "forward_kinematics_residual_m": "none" if h.forward_kinematics_residual_m is None
               else f"{h.forward_kinematics_residual_m:.3g}",
               **_accuracy_values(h)}
+    for k, v in (h.obstacle_updates or {}).items():
+        values[f"obstacle_updates_{k}"] = str(v)
     return DiagnosticStatus(level=level, name=name, message=message, hardware_id=hardware_id,
                             values=[KeyValue(key=k, value=v) for k, v in values.items()])
 

@@ -8,7 +8,7 @@ answer. Every service, action server and client of ours is built with ``SERVICE_
 ``ACTION_QOS`` instead (test_ros_interfaces checks that none is left on the default).
 """
 
-from rclpy.qos import DurabilityPolicy, QoSProfile, ReliabilityPolicy
+from rclpy.qos import DurabilityPolicy, HistoryPolicy, QoSProfile, ReliabilityPolicy
 
 NODE_NAME = "cdh_planner"
 PLAN, PLAN_PATH, EXECUTE, STOP = "plan", "plan_path", "execute", "stop"
@@ -19,6 +19,10 @@ CABLE_COMMAND = "cable_command"
 # the scene: obstacles in (ADD / REMOVE), the current scene out (service; latched topics)
 OBSTACLES, GET_SCENE, SCENE, SCENE_MARKERS = "obstacles", "get_scene", "scene", "scene_markers"
 OBSTACLES_DEPTH = 100   # ObstacleArray updates not yet taken (each is applied at once)
+# ~/obstacles, both ends: reliable, every array kept until taken (KEEP_ALL: a reader that
+# keeps the last N drops arrays in a burst of retransmissions); OBSTACLES_DEPTH bounds it
+OBSTACLES_QOS = QoSProfile(depth=OBSTACLES_DEPTH, history=HistoryPolicy.KEEP_ALL,
+                           reliability=ReliabilityPolicy.RELIABLE)
 
 # latched outputs: for display and late joiners, never a command
 LATCHED = QoSProfile(depth=1, durability=DurabilityPolicy.TRANSIENT_LOCAL,

@@ -62,6 +62,7 @@ class PlannerNode(LifecycleMixin, LifecycleNode):
 
     def __init__(self, planner_factory=default_planner_factory, **kwargs):
         super().__init__(NODE_NAME, **kwargs)
+        self.guard_change_state()
         self._factory = planner_factory
         self._values = declare_parameters(self, self._parameter_overrides)
         self.configured = self.active = False
@@ -121,6 +122,7 @@ class PlannerNode(LifecycleMixin, LifecycleNode):
         log_file = self.record(self.runlog.open) or ""
         self.outlet = Outlet(self)
         self.plans = PlanService(config, planner, self.outlet, make_planner=self._new_planner)
+        self.plans.between_steps = self.scene.drain   # obstacle updates while a plan runs
         self.scene.configure(config)
         self._execution = PlanExecution(self, config, self.pub_command, self.pub_execution,
                                         self.record.publish, self.plans.execution_ended,

@@ -28,18 +28,20 @@ class NodeDiagnostics:
     def health(self):
         """diagnostics.Health of the node now."""
         node = self._node
-        state = node.lifecycle_state
+        state, now = node.lifecycle_state, time.monotonic()
+        outlet = getattr(node, "outlet", None)   # made by the first configure
+        last = outlet.last_result if outlet is not None else None
+        plan = {} if not last else dict(     # kept through cleanup and shutdown
+            last_plan=last[0].message, last_plan_ok=last[0].level == DiagnosticStatus.OK,
+            last_plan_age_s=now - last[1])
+        plan["obstacle_updates"] = node.scene.counts()
         if not node.configured:
-            return Health(state=state)
-        plans, execution, now = node.plans, node.execution, time.monotonic()
+            return Health(state=state, **plan)
+        plans, execution = node.plans, node.execution
         activity = ("executing" if execution.running else
                     "planning" if plans.planning else "idle")
-        last = node.outlet.last_result
         latest = execution.joints.latest
-        return Health(state=state, activity=activity, queued=plans.queued(),
-                      last_plan=last[0].message if last else "",
-                      last_plan_ok=last[0].level == DiagnosticStatus.OK if last else True,
-                      last_plan_age_s=now - last[1] if last else None,
+        return Health(state=state, activity=activity, queued=plans.queued(), **plan,
                       recording=node.runlog.state,
                       joint_states_age_s=now - latest[1] if latest else None,
                       joint_states_max_age_s=node.config.values["execution.joint_states_max_age_s"],

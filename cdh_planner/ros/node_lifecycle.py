@@ -4,9 +4,12 @@ warm the planner, open the run file), ``close()`` (release all that) and ``execu
 
 - configure: parameters checked (``params.node_config``), then ``_configure``; a bad
   parameter fails the transition (the node stays unconfigured) and is logged naming it;
-- activate: plans, goals and ``~/execute`` served; deactivate: refused again, and an
-  execution stopped (holding);
-- cleanup, shutdown: ``close()``.
+- activate: plans, goals and ``~/execute`` served; deactivate: refused again, a running
+  or waiting plan call cancelled, and an execution stopped (holding);
+- cleanup, shutdown: ``close()``;
+- a transition the current state does not have (by id: configure to an active node, an
+  unknown id) is refused (``success`` false) and logged naming it; the node keeps serving.
+  (rclpy 7.1 raises in its change_state callback, which stops the executor.)
 """
 
 from rclpy.lifecycle import TransitionCallbackReturn
@@ -16,6 +19,27 @@ from .params import node_config
 
 class LifecycleMixin:
     """Mixed into PlannerNode (before rclpy's LifecycleNode)."""
+
+    def guard_change_state(self):
+        """Wrap ~/change_state's callback: a transition id the current state does not have
+        is refused before rclpy's state machine sees it."""
+        service = self._service_change_state
+        handle = service.callback
+
+        def change_state(request, response):
+            transition = request.transition
+            if not transition.label:
+                state = self._state_machine.current_state[1]
+                allowed = {t[0] for t in self._state_machine.available_transitions}
+                if transition.id not in allowed:
+                    self.get_logger().warning(
+                        f"~/change_state: transition {transition.id} refused: not a transition "
+                        f"of state {state} (allowed: {sorted(allowed)})")
+                    response.success = False
+                    return response
+            return handle(request, response)
+
+        service.callback = change_state
 
     def start(self):
         """Configure and activate now (autostart); raises what stopped configure (InputError:
@@ -53,6 +77,7 @@ class LifecycleMixin:
 
     def on_deactivate(self, state):
         self.active, self._lifecycle_state = False, "inactive"
+        self.plans.cancel_all()   # a running plan or goal ends (canceled), waiting ones too
         self.get_logger().info(f"inactive: {self.execution.stop()}")
         return super().on_deactivate(state)
 

@@ -21,8 +21,9 @@ SHUTDOWN_JOIN_S = 5.0
 
 def main(ros_args=(), planner_factory=default_planner_factory, log=print):
     """Run the node until SIGINT / SIGTERM; return the exit code: 0 after a clean shutdown
-    (run file closed), 2 when it cannot start (bad parameters: one line naming the parameter
-    and value). ``ros_args``: what follows ``--ros-args``."""
+    (run file closed), 1 when the executor stopped on an error (a crash is never exit 0),
+    2 when it cannot start (bad parameters: one line naming the parameter and value).
+    ``ros_args``: what follows ``--ros-args``."""
     from rclpy.executors import MultiThreadedExecutor
 
     stop = threading.Event()
@@ -42,12 +43,14 @@ def main(ros_args=(), planner_factory=default_planner_factory, log=print):
         return 2
     executor = MultiThreadedExecutor(num_threads=EXECUTOR_THREADS, context=context)
     executor.add_node(node)
+    crashed = []
 
     def spin():
         try:
             executor.spin()
         except Exception as exc:  # noqa: BLE001 - e.g. the context shut down under it
             if not stop.is_set():
+                crashed.append(exc)
                 log(f"cdh-planner node: executor stopped: {clip(exc, 400)}")
         finally:
             stop.set()
@@ -73,5 +76,5 @@ def main(ros_args=(), planner_factory=default_planner_factory, log=print):
                                     if abandoned else "the executor did not stop; left"))
         sys.stdout.flush()
         sys.stderr.flush()
-        os._exit(0)
-    return 0
+        os._exit(1 if crashed else 0)
+    return 1 if crashed else 0

@@ -51,6 +51,8 @@ FRAMES = ("base_frame", "fixed_frame", "platform_frame")
 # a ROS 2 topic or action name: tokens of letters, digits and _ (not starting with a digit)
 # between slashes, absolute or relative, or private (~/)
 ROS_NAME = re.compile(r"(~/|/)?[A-Za-z_][A-Za-z0-9_]*(/[A-Za-z_][A-Za-z0-9_]*)*")
+# a TF frame id: a ROS name without a leading slash (tf2 refuses "/world")
+FRAME_ID = re.compile(r"[A-Za-z_][A-Za-z0-9_]*(/[A-Za-z_][A-Za-z0-9_]*)*")
 
 
 _KINDS = {str: STRING, bool: BOOL, int: INT, float: DOUBLE}
@@ -147,7 +149,8 @@ _TAIL = tuple(
             "shape; cdh_planner/scene/schema.py): plans keep clear of it; empty: no scene. "
             "Read when set: edit the file, then set the parameter again"),
        Spec("log_dir", STRING, "~/.ros/cdh_planner",
-            "directory of the run MCAP files (one file per node run; created when needed)"),
+            "directory of the run MCAP files (one file per node run; created when needed); "
+            "while log_enabled, one the node cannot create or write is refused"),
        Spec("log_enabled", BOOL, True, "record plan calls, published messages and streamed "
             "commands to MCAP in log_dir"),
        Spec("log_max_file_mb", DOUBLE, 100.0, "rotation: a run file that has reached this "
@@ -235,6 +238,10 @@ def check_value(spec, value):
             raise InputError(name, value, f"expected one of {', '.join(spec.choices)}")
         if (name in FRAMES or spec.start_only) and not value:
             raise InputError(name, value, "must not be empty")
+        if name in FRAMES and not FRAME_ID.fullmatch(value):
+            raise InputError(name, value, "not a TF frame id: letters, digits and _ between "
+                                          "slashes, no leading slash, no token starting with "
+                                          "a digit")
         if spec.start_only and not ROS_NAME.fullmatch(value):
             raise InputError(name, value, "not a ROS name: letters, digits and _ between "
                                           "slashes, no token starting with a digit")
@@ -301,12 +308,30 @@ def node_config(values, source="ROS parameters"):
     log_dir = checked["log_dir"]
     if not log_dir and checked["log_enabled"]:
         raise InputError("log_dir", log_dir, "must name a directory while log_enabled is true")
+    if checked["log_enabled"]:
+        _check_log_dir(log_dir)
     return NodeConfig(robot=robot, task=task, settings=settings,
                       base_frame=checked["base_frame"],
                       stream_rate_hz=checked["stream_rate_hz"],
                       stream_interpolation=checked["stream_interpolation"],
                       log_dir=os.path.expanduser(log_dir), log_enabled=checked["log_enabled"],
                       values=checked, scene=scene)
+
+
+def _check_log_dir(log_dir):
+    """InputError naming log_dir unless the directory exists or can be made and a file can
+    be written in it (a probe file, removed): a parameter that cannot work is refused, not
+    accepted and then only logged at the first recording."""
+    import tempfile
+    path = os.path.expanduser(log_dir)
+    try:
+        os.makedirs(path, exist_ok=True)
+        with tempfile.TemporaryFile(dir=path, prefix=".cdh_planner_probe_"):
+            pass
+    except OSError as exc:
+        raise InputError("log_dir", log_dir, f"cannot record there: {exc.strerror or exc}"
+                                             f"{f' ({exc.filename})' if exc.filename else ''}"
+                                             ) from None
 
 
 def _check_frames(checked):

@@ -56,13 +56,28 @@ class Answer:
 
 
 class Cancel:
-    """A plan's stop signal (``is_set``): shutting down, or the caller's own cancel."""
+    """A plan's stop signal (``is_set``): shutting down, every call cancelled since this
+    signal was made (``PlanService.cancel_all``: deactivate), or the caller's own cancel."""
 
     def __init__(self, plans, caller=None):
-        self.plans, self.caller = plans, caller
+        self.plans, self.caller, self.epoch = plans, caller, plans.epoch
 
     def is_set(self):
-        return self.plans.shutting_down or (self.caller is not None and self.caller.is_set())
+        return (self.plans.shutting_down or self.plans.epoch != self.epoch
+                or (self.caller is not None and self.caller.is_set()))
+
+
+class StepCancel(Cancel):
+    """The running plan's Cancel: the search asks it between its steps, so it also does the
+    node's work that must not wait for the plan (``PlanService.between_steps``: the
+    obstacle updates), at most every STEP_WORK_PERIOD_S."""
+
+    def is_set(self):
+        self.plans.step_work()
+        return super().is_set()
+
+
+STEP_WORK_PERIOD_S = 0.005
 
 
 class PlanService:
@@ -82,6 +97,9 @@ class PlanService:
         self.make_planner = make_planner
         self.shutting_down = False
         self.planning = False
+        self.epoch = 0   # cancel_all: the calls that arrived before it are cancelled
+        self.between_steps = lambda: None   # the node's: work done between planning steps
+        self._last_step_work = 0.0
 
     @property
     def config(self):
@@ -132,6 +150,9 @@ class PlanService:
 
     def _serve(self, call, run_id, log_file, turn, refused):
         config = self._config
+        epoch = self.epoch
+        if call is not None:
+            call.cancel = Cancel(self, call.cancel)
         if refused:
             self._queue.drop(turn)
             result = refused
@@ -141,7 +162,8 @@ class PlanService:
                              f"wait (at most 1 + {self._queue.depth}); call again when one is "
                              f"answered", config.settings.strategy)
         elif not self._queue.wait(turn, call.cancel):
-            why = "the node is shutting down" if self.shutting_down else "cancelled while queued"
+            why = ("the node is shutting down" if self.shutting_down else
+                   "the node was deactivated" if self.epoch != epoch else "cancelled while queued")
             result = plan_requests.refusal(Status.CANCELED, f"canceled: {why}", config.settings.strategy)
         else:
             try:
@@ -193,10 +215,11 @@ class PlanService:
             start, goal = plan_requests.request_poses(call, config.base_frame)
         except InputError as exc:
             return plan_requests.input_refusal(exc, config.settings.strategy)
-        call.cancel = Cancel(self, call.cancel)
+        call.cancel = StepCancel(self, call.cancel)
         last = [0.0]
 
         def progress(info):
+            self.step_work()
             now = time.monotonic()
             if now - last[0] >= PROGRESS_PERIOD_S:
                 last[0] = now
@@ -210,6 +233,17 @@ class PlanService:
                                         logger=self._outlet.error)
         finally:
             self.planning = False
+
+    def step_work(self):
+        """``between_steps()``, at most every STEP_WORK_PERIOD_S (s); never raising."""
+        now = time.monotonic()
+        if now - self._last_step_work < STEP_WORK_PERIOD_S:
+            return
+        self._last_step_work = now
+        try:
+            self.between_steps()
+        except Exception:  # noqa: BLE001 - the plan goes on; the error is the node's
+            self._outlet.error(f"work between planning steps failed: {traceback.format_exc()}")
 
     # ------------------------------------------------------------------ commit
 
@@ -282,6 +316,12 @@ class PlanService:
                 return False
             self._last = pending
             return True
+
+    def cancel_all(self):
+        """End the running plan at its next progress report and answer the waiting calls
+        (canceled); calls arriving later are served (lifecycle deactivate)."""
+        with self._lock:
+            self.epoch += 1
 
     def begin_shutdown(self):
         """A running plan ends at its next progress report; waiting calls are answered

@@ -32,7 +32,7 @@ Every field is checked here; an error names the field and value (errors.InputErr
 
 import math
 import os
-from dataclasses import dataclass, field
+from dataclasses import dataclass, field, replace
 from pathlib import Path
 
 import numpy as np
@@ -45,6 +45,10 @@ from ..model.robot import MAX_CABLE_RADIUS_M
 TYPES = ("sphere", "box", "cylinder", "mesh")
 PLATFORM_TYPES = TYPES  # a platform shape may be any of them, in the platform frame
 MAX_OBSTACLES = 1000  # per scene: every one is checked at every pose
+# a scene file's lists hold obstacles or a few numbers: more than MAX_OBSTACLES entries is
+# refused while parsing, before the file's values add up to the generic bound
+SCENE_FILE_LIMITS = replace(files.YAML_LIMITS, max_items=MAX_OBSTACLES,
+                            items_note=f" (a scene has at most {MAX_OBSTACLES} obstacles)")
 MAX_ID_CHARS = 64
 MAX_MESH_BYTES = 16 << 20  # a mesh file's size
 MAX_MESH_VERTICES = 100_000  # of a mesh, before its convex hull is taken
@@ -146,7 +150,7 @@ def _same_array(a, b):
 def load_scene(path, robot=None):
     """The scene of the YAML file ``path`` (its top-level key ``scene:``); ``robot`` gives
     the default cable radius (robot.cable_radius). InputError naming the field."""
-    doc = files.read_yaml(path, "scene")
+    doc = files.read_yaml_mapping(path, "scene", "'scene:'", SCENE_FILE_LIMITS)
     check_keys("", doc, ("scene",), required=("scene",))
     return scene_from_dict(doc["scene"], robot=robot, base_dir=Path(path).parent, source=str(path))
 

@@ -11,9 +11,11 @@ Ray is imported only by ``RayExecutor``: nothing else in the package needs it.
 """
 
 import os
+import socket
 import time
 
-from ..errors import InputError
+from ..errors import InputError, clip, exception_line
+from ..progress import stderr_held
 from . import workspace
 
 MAX_LOST = 100            # answers lost to dead workers before the map gives up (each retried)
@@ -69,7 +71,7 @@ class RayExecutor:
         self.ray, self.workers, self.module = ray, int(workers), module
         started = time.perf_counter()
         if address:
-            ray.init(address=address, **QUIET)
+            connect(ray, address)
         else:
             start_local_ray(self.workers)
         self.start_s = time.perf_counter() - started
@@ -152,6 +154,116 @@ class _Worker:
         if self.key != job_key:
             self.key, self.context = job_key, self.module.make_context(job)
         return self.module.run_call(self.context, call)
+
+
+AUTH_MODE = "RAY_AUTH_MODE"
+TOKEN_SOURCES = "RAY_AUTH_TOKEN, RAY_AUTH_TOKEN_PATH, ~/.ray/auth_token"
+TOKEN_FIX = "set RAY_AUTH_TOKEN to the head's `ray get-auth-token`"
+START_FIX = "start it with `ray start --head --port=PORT` or leave out --ray-address"
+CONNECT_TIMEOUT_S = 5.0   # s: a cluster's GCS port that does not accept in this is not there
+GCS_WAIT = "RAY_gcs_server_port_wait_time_s"   # Ray's connect budget (about 1 s a try)
+FIRST_TRY_S = 3           # s: the try without a token, when one is at hand
+
+
+def connect(ray, address):
+    """``ray.init`` on the cluster at ``address``, with a token if the cluster asks for one
+    and one is at hand where Ray's own CLI looks (RAY_AUTH_TOKEN, the file
+    RAY_AUTH_TOKEN_PATH, ~/.ray/auth_token; Ray's loader reads them): ray.init alone sends
+    none to an explicit address. A driver must match the cluster (a token-mode driver on a
+    cluster without tokens loses its workers), so with RAY_AUTH_MODE unset it first tries
+    without one, briefly, and turns token mode on only when the cluster answered
+    "Unauthenticated". A refused connection: InputError naming --ray-address, the cause
+    and the fix, in one line."""
+    reachable(address)
+    mode = os.environ.get(AUTH_MODE)
+    token = token_source() if mode is None or mode.lower() == "token" else None
+    if mode is None and token is not None:
+        said = _try_init(ray, address, {GCS_WAIT: str(FIRST_TRY_S)})
+        if said is not None and "Unauthenticated" not in said:   # slow, or not tokens:
+            ray.shutdown()                                       # Ray's usual budget
+            said = _try_init(ray, address, {})
+        if said is None:
+            return None
+        ray.shutdown()
+        if "Unauthenticated" not in said:
+            raise InputError("--ray-address", address, refusal(said, None))
+        _token_mode()
+    said = _try_init(ray, address, {})
+    if said is not None:
+        raise InputError("--ray-address", address, refusal(said, token))
+    return token
+
+
+def reachable(address, timeout_s=CONNECT_TIMEOUT_S):
+    """InputError naming --ray-address unless a HOST:PORT address accepts a TCP connection
+    within ``timeout_s`` (s): ray.init would retry a closed port for minutes. Other
+    addresses ("auto", "ray://...") are left to Ray."""
+    host, _, port = address.rpartition(":")
+    if not host or not port.isdigit() or "/" in host:
+        return
+    try:
+        socket.create_connection((host.strip("[]"), int(port)), timeout=timeout_s).close()
+    except OSError as exc:
+        raise InputError("--ray-address", address, f"nothing answers there "
+                         f"({exc.strerror or type(exc).__name__}): {START_FIX}") from None
+
+
+def _try_init(ray, address, env):
+    """None once ray.init connected, else what it said (its exception and Ray's lines on
+    stderr meanwhile). ``env``: variables set for this attempt only."""
+    saved = {k: os.environ.get(k) for k in env}
+    os.environ.update(env)
+    try:
+        with stderr_held() as held:   # Ray's C++ retries, a line a second
+            ray.init(address=address, **QUIET)
+        return None
+    except Exception as exc:  # noqa: BLE001 - ConnectionError, RuntimeError, AuthenticationError
+        return f"{held.text}\n{exception_line(exc, 120) if str(exc) else type(exc).__name__}"
+    finally:
+        for k, v in saved.items():
+            if v is None:
+                os.environ.pop(k, None)
+            else:
+                os.environ[k] = v
+
+
+def token_source():
+    """Where a Ray token is at hand for this process (the variable's name or the default
+    file), None without one."""
+    try:  # Ray's own loader (what ray.scripts.scripts start asks)
+        from ray._raylet import AuthenticationTokenLoader
+    except ImportError:  # another Ray: its ray.init decides alone
+        return None
+    loader = AuthenticationTokenLoader.instance()
+    found = loader.has_token(ignore_auth_mode=True)
+    loader.reset_cache()   # a cached token makes this driver ask its workers for it
+    if not found:
+        return None
+    for name in ("RAY_AUTH_TOKEN", "RAY_AUTH_TOKEN_PATH"):
+        if os.environ.get(name):
+            return name
+    return "~/.ray/auth_token"
+
+
+def _token_mode():
+    """Token authentication on for this process (what ``ray start --head`` does when a
+    token is at hand)."""
+    from ray._private.authentication import authentication_token_setup as setup
+    from ray._raylet import AuthenticationTokenLoader
+    setup._enable_token_auth()
+    AuthenticationTokenLoader.instance().reset_cache()
+
+
+def refusal(said, token):
+    """The one line of a refused connection: cause and fix. ``said``: what ray.init said
+    (``_try_init``); ``token``: ``token_source()`` if one was sent."""
+    unauthenticated = "Unauthenticated" in said or "no authentication token" in said
+    if unauthenticated and token is None:
+        return f"token required, none found ({TOKEN_SOURCES}): {TOKEN_FIX}"
+    if unauthenticated:
+        return f"the cluster refused the token of {token}: {TOKEN_FIX}"
+    cause = said.strip().splitlines()[-1] if said.strip() else "no answer"
+    return f"cannot connect ({clip(cause, 70)}): {START_FIX}"
 
 
 def start_local_ray(workers):

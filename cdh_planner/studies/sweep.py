@@ -89,7 +89,7 @@ class Sweep:
 def load_sweep(path):
     """Read and check a SWEEP file and every design of it (InputError naming the field)."""
     path = Path(path)
-    doc = files.read_yaml(path, "sweep")
+    doc = files.read_yaml_mapping(path, "sweep", "'robot:' and 'vary:'")
     check_keys("", doc, TOP_KEYS, required=("robot", "vary"))
     base = path.parent
     robot_file = _file(base, doc["robot"], "robot")
@@ -102,6 +102,7 @@ def load_sweep(path):
     designs = tuple(_design(k, dict(zip(keys, combo)), mapping, robot_file)
                     for k, combo in enumerate(itertools.product(*lists)))
     sweep = Sweep(str(path), str(robot_file), keys, designs, workspace, queries, base_robot)
+    _home(base_robot)  # the orientations tilt about it: refused here if it holds its load nowhere
     if workspace["reach"]:  # before any design runs: the planner accepts the settings
         ws.check_planner(base_robot, design_spec(sweep, designs[0]), design_scene(sweep, designs[0]))
     return sweep
@@ -226,7 +227,10 @@ def design_spec(sweep, design):
     and plans from its own default home (clear of the scene)."""
     w = sweep.workspace
     low, high = w["box"] or ws.default_box(sweep.base_robot)
-    home = _home(design.robot, w["scene"])
+    try:
+        home = _home(design.robot, w["scene"])
+    except InputError:  # a design that holds its load nowhere: 0 % feasible, nothing planned
+        home = _home(sweep.base_robot)
     return ws.WorkspaceSpec(samples=w["samples"], seed=w["seed"], box_low=low, box_high=high,
                             home_position=home[0], home_quaternion=home[1], tilt=w["tilt"],
                             reach=w["reach"], timeout_s=w["timeout"],

@@ -100,12 +100,25 @@ def default_home(robot, draws=HOME_DRAWS, seed=0, scene=None):
     """The documented default home: the pose of largest margin (``pose_margins``: with a
     scene, clear of it) among ``draws`` random poses in ``default_box`` (positions uniform,
     orientations uniform in SO(3), numpy seed 0), as (position (3,) m, quaternion (4,)
-    [x, y, z, w])."""
+    [x, y, z, w]); InputError naming the robot file if it holds its load at none of them."""
     rng = np.random.default_rng(seed)
     lo, hi = workspace_box(robot)
     p = rng.uniform(lo, hi, size=(draws, 3))
     q = Rotation.random(draws, rng).as_quat()
-    k = int(np.argmax(pose_margins(point_validity(robot, scene), p, q)[0]))
+    return _best_pose(robot, p, q, scene, "in its box")
+
+
+def _best_pose(robot, p, q, scene, where):
+    """(position, quaternion) of the largest-margin pose of p (N, 3), q (N, 4); InputError
+    naming the robot file when none holds the load: the robot holds it nowhere, a property
+    of the robot, not of an option."""
+    margin, binding = pose_margins(point_validity(robot, scene), p, q)
+    k = int(np.argmax(margin))
+    if not margin[k] > 0:
+        what = "wrench-feasible" + (" and clear of the scene" if scene is not None else "")
+        raise InputError("robot", robot.source or robot.name,
+                         f"holds its load nowhere: none of {len(p)} poses drawn {where} is "
+                         f"{what} (best margin {margin[k]:+.3g}, {binding[k]})")
     return tuple(map(float, p[k])), tuple(map(float, q[k]))
 
 
@@ -315,15 +328,20 @@ class WorkspaceResult:
 
     def counts(self):
         """Samples, evaluated, feasible; with reach: planned, reachable, refused (goals the
-        planner refused), unreachable_feasible (planned, not refused, no path), unknown."""
+        planner refused: refused_under_floor, feasible but margin under the planner's margin
+        floor, and refused_band, the rest: for m > 6 the tension rule's band does not fit),
+        unreachable_feasible (planned, not refused, no path), unknown."""
         reach = self.reachable
         out = {"samples": int(self.spec.samples), "evaluated": int(self.evaluated.sum()),
                "feasible": int(self.feasible.sum())}
         if self.spec.reach:
             planned = [s for s in self.reach_status if s is not None]
             refused = self.reach_refused
+            floor = self.spec.settings.margin_floor
+            under = [x and bool(m < floor) for x, m in zip(refused, self.margin.tolist())]
             out.update(planned=len(planned), reachable=sum(r is True for r in reach),
-                       refused=sum(refused),
+                       refused=sum(refused), refused_under_floor=sum(under),
+                       refused_band=sum(refused) - sum(under),
                        unreachable_feasible=sum(r is False and not x for r, x, f in
                                                 zip(reach, refused, self.feasible.tolist()) if f),
                        unknown=sum(r is None for r in reach))
@@ -423,8 +441,7 @@ def default_task_home(model, spec, draws=HOME_DRAWS // 5, scene=None):
     """The default home on ``spec.task``: the largest-margin of ``draws`` task samples of
     seed 0 (position (3,), quaternion (4,))."""
     p, q = sample_poses(replace(spec, seed=0), 0, draws)
-    k = int(np.argmax(pose_margins(point_validity(model, scene), p, q)[0]))
-    return tuple(map(float, p[k])), tuple(map(float, q[k]))
+    return _best_pose(model, p, q, scene, f"on the task ({spec.task.describe()})")
 
 
 def check_on_task(task, position, quaternion, tol=1e-6):

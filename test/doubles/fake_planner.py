@@ -5,7 +5,10 @@ planner use the real Planner.
 
 If the file named by ``FAKE_PLANNER_DELAY_FILE`` (environment) exists, every plan takes at
 least the number of seconds written in it, reporting progress every 10 ms and honouring
-``cancel``, so that "busy" and cancels can be provoked deterministically.
+``cancel``, so that "busy" and cancels can be provoked deterministically. Followed by the
+word ``busy`` ("2 busy"), the plan computes in Python meanwhile instead of sleeping: it
+holds the interpreter as the real planner's search does (the node's other callbacks must
+still be served).
 """
 
 import os
@@ -25,6 +28,14 @@ from cdh_planner.trajectory.dynamics import timed_path
 WAYPOINTS = 40
 
 
+def _compute(seconds):
+    """Pure-Python arithmetic for ``seconds`` (s): the interpreter held as a search holds it."""
+    end, x = time.perf_counter() + seconds, 0
+    while time.perf_counter() < end:
+        for k in range(200):
+            x += k * k
+
+
 class FakePlanner:
     def __init__(self, robot, task, settings, scene=None):
         self.robot, self.task, self.settings, self.scene = robot, task, settings, scene
@@ -40,15 +51,19 @@ class FakePlanner:
              timeout_s=None):
         t0 = time.perf_counter()
         try:
-            delay = float(open(self.delay_file).read()) if self.delay_file else 0.0
+            words = open(self.delay_file).read().split() if self.delay_file else ["0"]
         except OSError:
-            delay = 0.0
+            words = ["0"]
+        delay, busy = float(words[0]), words[1:] == ["busy"]
         while time.perf_counter() - t0 < delay:
             if cancel is not None and cancel.is_set():
                 return self._result(False, Status.CANCELED, "canceled (test double)", t0=t0)
             if progress is not None:
                 progress({"charts": 1, "time_s": time.perf_counter() - t0, "best_h": 1.0})
-            time.sleep(0.01)
+            if busy:
+                _compute(0.01)
+            else:
+                time.sleep(0.01)
         a = self.task.coords(start.p[None], start.tau[None])[0]
         b = self.task.coords(goal.p[None], goal.tau[None])[0]
         for label, pose in (("start", start), ("goal", goal)):
