@@ -74,7 +74,8 @@ def _quaternion(pose_stamped):
 
 def _check_result(result, start, goal):
     """A successful result: path from start to goal (within the 1 mm projection), cable
-    trajectory without effort whose lengths are the path's, envelope at the same times."""
+    trajectory whose lengths are the path's and whose efforts are the nominal tensions (N,
+    within the limits), envelope at the same times."""
     poses = result.path.poses
     assert len(poses) >= 2 and result.path.header.frame_id == "cdh_base"
     assert np.linalg.norm(_position(poses[0]) - _position(start)) < 1e-3
@@ -82,7 +83,9 @@ def _check_result(result, start, goal):
     traj = result.cable_trajectory
     assert list(traj.joint_names) == list(ROBOT.winch_names)
     assert len(traj.points) == len(poses)
-    assert all(len(pt.effort) == 0 for pt in traj.points)
+    E = np.array([pt.effort for pt in traj.points])
+    assert E.shape == (len(poses), len(ROBOT.winch_names))
+    assert np.all(E >= ROBOT.tension_min - 1e-9) and np.all(E <= ROBOT.tension_max + 1e-9)
     t = np.array([M.to_seconds(pt.time_from_start) for pt in traj.points])
     assert t[0] == 0.0 and np.all(np.diff(t) > 0)
     for k in (0, len(poses) - 1):

@@ -29,6 +29,7 @@ from cdh_planner.ros import messages as M  # noqa: E402
 from cdh_planner.ros import plan_requests  # noqa: E402
 from cdh_planner.ros.client import PlannerClient  # noqa: E402
 from cdh_planner.ros.params import node_config  # noqa: E402
+from conftest import REPO  # noqa: E402
 from ros_harness import (EQUATOR, EQUATOR_Q3, Q1, Q2, Q3, ROBOT2, Collector,  # noqa: E402
                          NodeProcess, claimed_domain, file_parameters, run_cli,
                          sphere_pose_msg, stamp_s)
@@ -133,7 +134,9 @@ def test_cable_trajectory_joint_names_units_and_limits(q1_q2):
     V = np.array([pt.velocities for pt in traj.points])
     A = np.array([pt.accelerations for pt in traj.points])
     assert L.shape == V.shape == A.shape == (len(t), 6)
-    assert all(len(pt.effort) == 0 for pt in traj.points)   # tensions: the envelope
+    E = np.array([pt.effort for pt in traj.points])   # the nominal tensions (N)
+    assert E.shape == L.shape
+    assert np.all(E >= ROBOT.tension_min - 1e-9) and np.all(E <= ROBOT.tension_max + 1e-9)
     # positions are cable lengths (m) of the path's poses: |a_i - (p + R b_i)|
     p, R = _positions(answer.path), rotation_from_quaternion(_quaternions(answer.path))
     attach = p[:, None, :] + np.einsum("kij,nj->kni", R, ROBOT.platform_anchors)
@@ -301,7 +304,7 @@ def test_no_path_between_components_over_ros(tmp_path):
         return pose_stamped([0.0, 0.0, 0.35] + list(q), "cdh_base")
 
     with claimed_domain() as domain:
-        node = NodeProcess(domain, tmp_path, params=params, params_file=ROBOT2.parent / "robot1.yaml")
+        node = NodeProcess(domain, tmp_path, params=params, params_file=REPO / "config" / "robot1.yaml")
         try:
             with PlannerClient(domain_id=domain) as client:
                 client.wait_for_node(30.0)
