@@ -24,7 +24,7 @@ def add_parser(subparsers):
 
 
 def run(args):
-    from .outputs import check_output, write_text
+    from .outputs import check_output, print_or_write
     from ..model.robot import load_robot
     from ..scene.schema import load_scene
     from ..sim.mjcf import mjcf
@@ -34,9 +34,5 @@ def run(args):
     robot = load_robot(args.robot)
     scene = load_scene(args.scene, robot) if args.scene else None
     text = mjcf(robot, scene)
-    if out is None:
-        print(text, end="")
-    else:
-        write_text("--output", out, text)
-        print(f"wrote {out}")
+    print_or_write("--output", out, text)
     return 0

@@ -72,3 +72,13 @@ def write_text(option, path, text):
     """Write ``text`` to ``path``; an OSError becomes an InputError naming ``option``."""
     with writing(option, path):
         Path(path).write_text(text)
+
+
+def print_or_write(option, path, text):
+    """``text`` on stdout when ``path`` is None, else written to ``path`` (``write_text``)
+    with one line saying so: how a command that prints a document (urdf, mjcf) outputs it."""
+    if path is None:
+        print(text, end="")
+    else:
+        write_text(option, path, text)
+        print(f"wrote {path}")

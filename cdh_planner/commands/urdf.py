@@ -27,7 +27,7 @@ def add_parser(subparsers):
 
 def run(args):
     from ..errors import InputError
-    from .outputs import check_output, write_text
+    from .outputs import check_output, print_or_write
     from ..model.robot import load_robot
     from ..ros.description import urdf
     frames = {"--fixed-frame": args.fixed_frame, "--base-frame": args.base_frame,
@@ -41,9 +41,5 @@ def run(args):
         "--output", args.output, suffixes=(".urdf", ".xml"),
         inputs=[("the robot file ROBOT", args.robot)])
     text = urdf(load_robot(args.robot), args.fixed_frame, args.base_frame, args.platform_frame)
-    if out is None:
-        print(text, end="")
-    else:
-        write_text("--output", out, text)
-        print(f"wrote {out}")
+    print_or_write("--output", out, text)
     return 0
