@@ -533,7 +533,7 @@ def _problem_copy(tmp_path):
 
 
 def test_plan_json_onto_its_problem_file_is_refused_as_a_process(tmp_path):
-    """Issue 19, item 3: ``plan P.yaml --json P.yaml`` replaced P.yaml with its JSON."""
+    """Found by the bad-input campaign: ``plan P.yaml --json P.yaml`` replaced P.yaml with its JSON."""
     problem, _ = _problem_copy(tmp_path)
     before = problem.read_bytes()
     rc, err = run_process(["plan", "--quiet", problem, "--json", problem])
@@ -619,7 +619,7 @@ def _write_recording(path, n=3):
 # ----------------------------------------------------------------------------- duplicate keys
 
 def test_a_duplicate_json_key_is_refused_as_a_process(tmp_path):
-    """Issue 19, item 7: json keeps the last of two equal keys; a pose file with two
+    """Found by the bad-input campaign: json keeps the last of two equal keys; a pose file with two
     positions was accepted silently."""
     path = tmp_path / "dup.json"
     path.write_text('[{"position": [1e308, 0, 0.35], "position": [0, 0, 0.35], '
@@ -659,7 +659,7 @@ def test_duplicate_yaml_keys_are_refused(tmp_path, capsys, poses):
 # ----------------------------------------------------------------------------- huge numbers in messages
 
 def test_huge_numbers_are_shown_short(capsys):
-    """Issue 19, item 7: a position of 1e308 was printed as a 309-digit number. An error
+    """Found by the bad-input campaign: a position of 1e308 was printed as a 309-digit number. An error
     shows a huge integer as a float is shown; the planner's pose text has 6 digits."""
     from cdh_planner.errors import short_repr
     from cdh_planner.pipeline.lift import describe
@@ -688,7 +688,7 @@ def ros_domain(monkeypatch):
 
 
 @pytest.mark.parametrize("argv, text", [
-    # issue 19, item 5: poses the node refused (292) are checked as a pose file's are
+    # found by the bad-input campaign: poses the node refused (292) are checked as a pose file's are
     (["--start", "nan 0 0.176 0 0 0 1"], "--start.position[0] = nan: expected a finite number"),
     (["--start", "0 inf 0.176 0 0 0 1"], "--start.position[1] = inf: expected a finite number"),
     (["--start", "0 0 0.176 0 0 0 0"], "--start.quaternion = [0.0, 0.0, 0.0, 0.0]: zero"),
@@ -697,7 +697,7 @@ def ros_domain(monkeypatch):
     (["--start", "1e308 0 0.176 0 0 0 1"], "--start.position[0] = 1e+308: must be within"),
     (["--start", "0 0 0.176 0 0 0"], "expected 7 numbers"),
     (["--start", START, "--goal", "0 0 0.2 0.7 0.7 0.7 0.7"], "--goal.quaternion"),
-    # issue 19, item 4: InvalidServiceNameException and RCLError were exit 3
+    # found by the bad-input campaign: InvalidServiceNameException and RCLError were exit 3
     (["--start", START, "--node", "bad name!!"], "--node = 'bad name!!': not a valid ROS"),
     (["--start", START, "--node", "/9lives"], "not a valid ROS node name"),
     (["--start", START, "--ros-args", "-r", "::::"],
@@ -720,7 +720,7 @@ def test_a_bad_ros_environment_is_bad_input(capsys, ros_domain, monkeypatch):
 
 
 def test_call_refusals_as_processes_are_one_line(ros_domain):
-    """Issue 19 items 4, 5: as the campaign ran them, rcl's own log line included."""
+    """Found by the bad-input campaign: as the campaign ran them, rcl's own log line included."""
     for argv, text in ((["--ros-args", "-r", "::::"], "--ros-args"),
                        (["--node", "bad name!!"], "--node")):
         rc, err = run_process(["call", "--start", START, "--goal", GOAL, *argv])
@@ -728,7 +728,7 @@ def test_call_refusals_as_processes_are_one_line(ros_domain):
 
 
 def test_call_without_a_node_says_so_in_one_line_exit_1(ros_domain):
-    """Issue 19, item 5: with no node it waited for --timeout and exited 3 (internal
+    """Found by the bad-input campaign: with no node it waited for --timeout and exited 3 (internal
     error); now it waits at most call.NODE_WAIT_S for the node's services."""
     from cdh_planner.commands.call import NODE_WAIT_S
     rc, err = run_process(["call", "--start", START, "--goal", GOAL])
@@ -743,7 +743,7 @@ def test_replay_refuses_bad_ros_input(tmp_path, capsys, ros_domain):
 
 
 def test_recover_and_replay_refuse_a_damaged_chunk(tmp_path, capsys):
-    """Issue 19, item 4: recover on a bad chunk CRC was exit 3; replay gave exit 2."""
+    """Found by the bad-input campaign: recover on a bad chunk CRC was exit 3; replay gave exit 2."""
     run = _write_recording(tmp_path / "run.mcap")
     data = bytearray(run.read_bytes())
     data[data.index(b"/cmd", 200) + 40] ^= 0xFF   # inside the chunk of a message
@@ -782,7 +782,7 @@ def test_command_line_text_that_is_not_utf8_is_refused(tmp_path, capsys, ros_dom
 
 
 def test_recover_tells_a_summary_cut_short_from_none(tmp_path, capsys):
-    """Issue 19, item 7: a disk that fills while the node closes its file leaves a summary
+    """Found by the bad-input campaign: a disk that fills while the node closes its file leaves a summary
     cut short, and recover said 'the node was killed'. A file cut after the writer's
     DataEnd record (its summary begun) is told apart from one that just stops."""
     import io

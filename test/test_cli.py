@@ -83,7 +83,7 @@ def test_usage_errors_are_one_line(capsys, argv, text):
 
 
 def test_usage_error_as_a_process_is_one_line():
-    """Issue 19, item 7: ``plan P --max-cable-speed fast`` printed 13 lines."""
+    """Found by the bad-input campaign: ``plan P --max-cable-speed fast`` printed 13 lines."""
     proc = subprocess.run([sys.executable, '-m', 'cdh_planner.cli', 'plan', 'p.yaml',
                            '--max-cable-speed', 'fast'], capture_output=True, text=True,
                           timeout=60)

@@ -1,6 +1,6 @@
 """The Python client of docs/ros-node.md ("Client side"), copied from the docs and run as a
 script against a node (TEST DOUBLE planner, test/doubles/fake_planner.py): it prints the
-outcome in every case and exits non-zero unless the execution completed (issue 23: the old
+outcome in every case and exits non-zero unless the execution completed (before, the old
 one printed nothing and exited 0 when the goal ended NO_CURRENT_STATE)."""
 
 import re

@@ -1,4 +1,4 @@
-"""Executed as checked (trajectory/executed.py, issue 18): the JointTrajectory the node
+"""Executed as checked (trajectory/executed.py): the JointTrajectory the node
 publishes, executed here as a ros2_control JointTrajectoryController does (one quintic per
 segment through positions, velocities and accelerations, solved here from its six end
 conditions), driven through forward kinematics (Newton, its steps between samples shown to
@@ -25,7 +25,7 @@ from cdh_planner.trajectory import dynamics as D
 from cdh_planner.trajectory import executed as E
 from cdh_planner.trajectory.timing import time_path
 
-INERTIA = np.diag([2e-3, 2e-3, 3.5e-3])  # kg m^2: issue 18's load on Robot 2 (0.6 kg)
+INERTIA = np.diag([2e-3, 2e-3, 3.5e-3])  # kg m^2: the dynamic-timing study's load on Robot 2 (0.6 kg)
 DT = 1e-3                                # s
 FAST, DEFAULT = (1.0, 20.0), (0.05, 0.2)  # winch limits (m/s, m/s^2)
 

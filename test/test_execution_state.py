@@ -148,7 +148,7 @@ def assert_ready(node, results):
     assert "stopped" in stop(node)
 
 
-# ---- the defects of issue 19, as they were met: a failed run next to a completed one
+# ---- the defects the bad-input campaign met, as they were met: a failed run next to a completed one
 
 def test_a_failed_controller_run_after_a_completed_stream_does_not_wedge(node, monkeypatch):
     """A stream completes; then follow_joint_trajectory with no controller: the run fails

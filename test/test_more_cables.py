@@ -1,4 +1,4 @@
-"""Robots with more than six cables (issue 21): the config robots, forward kinematics by
+"""Robots with more than six cables: the config robots, forward kinematics by
 least squares, and the callers still written for six cables refusing by name."""
 
 import numpy as np

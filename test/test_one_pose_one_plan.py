@@ -1,4 +1,4 @@
-"""One pose, one plan (issue 18, item 4): a start or goal written as task coordinates, as a
+"""One pose, one plan: a start or goal written as task coordinates, as a
 pose (a quaternion), or as that pose with the noise forward kinematics of measured cable
 lengths leaves (1e-7 rad, 2e-7 m) plans the same path, to 1 % in length, on every task,
 including at the singular set of tilt-and-torsion (theta = 0 or pi: the sphere task's

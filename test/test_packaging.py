@@ -178,7 +178,7 @@ def test_launch_file_declares_the_robot_argument_and_starts_the_node():
     assert {k: (v.func.id, ast.literal_eval(v.args[0])) for k, v in given.items()} == {
         "execution.mode": ("LaunchConfiguration", "execution_mode"),
         "use_sim_time": ("LaunchConfiguration", "use_sim_time")}
-    # issue 23: namespace, use_sim_time and log_level are launch arguments
+    # namespace, use_sim_time and log_level are launch arguments
     declared = {ast.literal_eval(c.args[0]): _kwargs(c)
                 for c in _calls(tree, "DeclareLaunchArgument")}
     assert {"namespace", "use_sim_time", "log_level"} <= set(declared)

@@ -216,7 +216,7 @@ def test_winch_names_give_the_cable_count_from_six_to_sixteen():
 
 
 def test_per_cable_sizes_follow_the_number_of_winches():
-    """Issue 21: an 8-winch robot block is read with 24 anchor coordinates and 8 limits per
+    """An 8-winch robot block is read with 24 anchor coordinates and 8 limits per
     side (a single number broadcast to 8), and 18 anchor coordinates are then refused naming
     the count."""
     doc = _robot_block()

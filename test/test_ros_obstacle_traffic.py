@@ -1,4 +1,4 @@
-"""Obstacle traffic while the node plans (issue 31): ObstacleArray updates at 50 Hz
+"""Obstacle traffic while the node plans: ObstacleArray updates at 50 Hz
 (reliable, keeping every array: ``interface.OBSTACLES_QOS``) while PlanPath goals are planned
 one after another. Every array is applied, in order (scene version k holds the k-th
 array's obstacle), and recorded (its arrival on ~/obstacles and the scene it made); the

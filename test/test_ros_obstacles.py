@@ -1,4 +1,4 @@
-"""Obstacles over ROS (issue 22, item 4), the real planner in `cdh-planner node` processes
+"""Obstacles over ROS, the real planner in `cdh-planner node` processes
 of their own ROS domain: an obstacle added on ``~/obstacles`` changes the next plan (which
 keeps clear of it, checked densely by the closed-form capsule-sphere distance), its
 removal brings the first plan back, every answer names its scene version (PlanPath's

@@ -1,4 +1,4 @@
-"""Old run files pruned by count and age (issue 23): only the node's own run files, oldest
+"""Old run files pruned by count and age: only the node's own run files, oldest
 first, never the one being written; the node's RunLog prunes when it opens a file."""
 
 import os

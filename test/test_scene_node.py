@@ -1,4 +1,4 @@
-"""The node's scene (issue 22, item 4 in part): the parameter scene_file gives the scene
+"""The node's scene: the parameter scene_file gives the scene
 its plans keep clear of; changing it makes a new planner; a bad file is refused naming
 the field. (The ~/obstacles topic and service are not there yet.)"""
 

@@ -1,4 +1,4 @@
-"""Plans with obstacles in the way (issue 22), each path dense-checked by computations that
+"""Plans with obstacles in the way, each path dense-checked by computations that
 do not use coal: closed-form distances of spheres (to a cable: point-segment; to the
 platform's sphere shape: point-point), point-box and point-cylinder distances of the
 platform's centre, and box / cylinder distances sampled along each cable; wrench

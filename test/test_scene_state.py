@@ -1,4 +1,4 @@
-"""The node's scene without ROS (issue 22, item 4): obstacle messages <-> scene shapes
+"""The node's scene without ROS: obstacle messages <-> scene shapes
 (the scene file's fields, a mesh as its convex hull), the version counter, refusals named
 item by item, and a planner made for each scene a plan is made under (PlanService)."""
 

@@ -1,4 +1,4 @@
-"""Start-up imports only what a command uses (issue 18, item 2): checked in fresh
+"""Start-up imports only what a command uses: checked in fresh
 interpreters through sys.modules, not by timing."""
 
 import json
@@ -41,7 +41,7 @@ def test_plan_command_parser_loads_no_plotting_and_no_ros():
 
 def test_a_direct_motion_plan_loads_no_plotting_ros_numba_or_scipy_module():
     """robot2_q1_q2: one direct motion, dynamically timed (toppra runs), no chart: numpy
-    alone does its rotations, splines and small banded solves (issue 18: scipy's
+    alone does its rotations, splines and small banded solves (for start-up: scipy's
     submodules were 0.2 s of its 0.55 s)."""
     problem = REPO / "config" / "problems" / "robot2_q1_q2.yaml"
     code = ("import contextlib, io\nfrom cdh_planner import cli\n"

@@ -154,7 +154,7 @@ def test_plot_is_written(tmp_path, capsys):
 
 
 def test_no_ray_run_and_other_commands_import_no_ray():
-    """Ray is a dependency of the studies' Ray executor only (issue 24, item 3)."""
+    """Ray is a dependency of the studies' Ray executor only."""
     import subprocess
     import sys
     code = ("import sys, contextlib, io\nfrom cdh_planner import cli\n"
