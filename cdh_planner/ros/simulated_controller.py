@@ -285,12 +285,7 @@ class SimulatedController:
                 # the state where the goal ended goes out before the result, as a real
                 # controller's state is at the goal when it reports success: a client
                 # that reads the joint states on the result then sees where it ended
-                self.publish_state()
-                handle.succeed()
-                self.release(handle)
-                say("succeeded", positions=desired.tolist())
-                return Result(error_code=Result.SUCCESSFUL,
-                              error_string="Goal successfully reached!")
+                return self._succeeded(handle, desired)
             time.sleep(PERIOD_S)
 
     def execute_simulated(self, handle):
@@ -316,13 +311,16 @@ class SimulatedController:
                 self.feedback(handle, self.live.desired(), positions)
             step += 1
             if now >= end:
-                self.publish_state()
-                handle.succeed()
-                self.release(handle)
-                say("succeeded", positions=positions.tolist())
-                return Result(error_code=Result.SUCCESSFUL,
-                              error_string="Goal successfully reached!")
+                return self._succeeded(handle, positions)
             time.sleep(PERIOD_S)
+
+    def _succeeded(self, handle, positions):
+        """The goal's success: the state where it ended goes out first, then the result."""
+        self.publish_state()
+        handle.succeed()
+        self.release(handle)
+        say("succeeded", positions=positions.tolist())
+        return Result(error_code=Result.SUCCESSFUL, error_string="Goal successfully reached!")
 
     def _ended(self, handle):
         """The Result of a goal that ends otherwise than by reaching its end (preempted,
