@@ -20,7 +20,7 @@ import argparse
 import time
 
 import numpy as np
-from cdh_planner.model.rotation import Rotation
+from cdh_planner.ports.rotation import Rotation
 
 from pathlib import Path
 

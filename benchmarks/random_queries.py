@@ -15,7 +15,7 @@ The same seed gives the same queries on every machine (numpy's PCG64).
 from dataclasses import dataclass
 
 import numpy as np
-from cdh_planner.model.rotation import Rotation
+from cdh_planner.ports.rotation import Rotation
 
 from cdh_planner.cable_feasibility import feasibility_of as evaluate  # m > 6: the facet test
 from cdh_planner.model.pose import Pose, quaternion_from_tau, tau_from_rotation

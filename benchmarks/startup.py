@@ -10,8 +10,8 @@ process used, user + system, which a loaded machine inflates less):
   answers, dynamically timed);
 - the floor under that plan: a bare interpreter importing only the library a dynamically
   timed plan cannot do without, numpy (rotations and splines are numpy code,
-  model/rotation.py and trajectory/splines.py; toppra comes without scipy.interpolate and
-  sparse, trajectory/_toppra.py), and for comparison the scipy modules the plan imported
+  ports/rotation.py and ports/splines.py; toppra comes without scipy.interpolate and
+  sparse, ports/lean_toppra.py), and for comparison the scipy modules the plan imported
   before (Rotation, which brings scipy.spatial and sparse; scipy.interpolate, which toppra
   imports at its top, with scipy.optimize and special);
 - with ``--before CHECKOUT``: the same plan with another checkout first on PYTHONPATH

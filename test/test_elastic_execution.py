@@ -18,7 +18,7 @@ from cdh_planner.model import elastic as E
 from cdh_planner.model.forward_kinematics import current_pose, measured_cable_lengths
 from cdh_planner.model.kinematics import cable_lengths
 from cdh_planner.model.robot import load_robot
-from cdh_planner.model.rotation import Rotation
+from cdh_planner.ports.rotation import Rotation
 from cdh_planner.parsing.problem import load_problem
 from cdh_planner.planner import Planner
 from cdh_planner.trajectory import executed as X

@@ -1,4 +1,4 @@
-"""The numpy rotations and splines (model/rotation.py, trajectory/splines.py) give scipy's
+"""The numpy rotations and splines (ports/rotation.py, ports/splines.py) give scipy's
 answers to rounding: the planner's outputs must not change with the import it saves."""
 
 import numpy as np
@@ -9,9 +9,9 @@ from scipy.spatial.transform import Rotation as ScipyRotation
 from scipy.spatial.transform import RotationSpline as ScipyRotationSpline
 from scipy.spatial.transform import Slerp as ScipySlerp
 
-from cdh_planner.model.rotation import Rotation, Slerp
-from cdh_planner.trajectory import splines
-from cdh_planner.trajectory.splines import CubicSpline, RotationSpline
+from cdh_planner.ports.rotation import Rotation, Slerp
+from cdh_planner.ports import splines
+from cdh_planner.ports.splines import CubicSpline, RotationSpline
 
 TOL = 1e-12
 

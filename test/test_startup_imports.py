@@ -107,7 +107,7 @@ def test_a_planning_algorithm_that_needs_scipy_still_gets_it():
     banded solve and other commands import scipy as usual."""
     code = ("import cdh_planner.trajectory.dynamics\n"
             "import numpy as np\n"
-            "from cdh_planner.trajectory import splines\n"
+            "from cdh_planner.ports import splines\n"
             "n = splines.DENSE_MAX + 1\n"
             "ab = np.vstack([np.ones(n), 4 * np.ones(n), np.ones(n)])\n"
             "x = splines.solve_banded((1, 1), ab, np.ones(n))\n"

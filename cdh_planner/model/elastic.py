@@ -7,7 +7,7 @@ from dataclasses import dataclass
 
 import numpy as np
 
-from .rotation import Rotation
+from ..ports import Rotation
 
 
 def is_elastic(robot):

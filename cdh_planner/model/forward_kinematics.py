@@ -15,7 +15,7 @@ decides), never raised.
 from dataclasses import dataclass
 
 import numpy as np
-from .rotation import Rotation  # numpy: no scipy.spatial import (start-up)
+from ..ports import Rotation
 
 from ..errors import InputError
 from .elastic import stretched_lengths

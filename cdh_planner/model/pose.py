@@ -2,7 +2,7 @@
 
 R(tau) = Rz(phi) Ry(theta) Rz(sigma - phi), tau = (phi, theta, sigma) in radians,
 theta in [0, pi]; phi and sigma are 2 pi periodic. Quaternions are (x, y, z, w), as in
-ROS (geometry_msgs/Quaternion) and scipy (whose formulas model/rotation.py follows).
+ROS (geometry_msgs/Quaternion) and scipy (whose formulas ports/rotation.py follows).
 
 Everything is vectorised over leading axes: tau has shape (..., 3), R (..., 3, 3).
 """
@@ -10,7 +10,7 @@ Everything is vectorised over leading axes: tau has shape (..., 3), R (..., 3, 3
 from dataclasses import dataclass
 
 import numpy as np
-from .rotation import Rotation  # numpy: no scipy.spatial import (start-up)
+from ..ports import Rotation
 
 from ..errors import InputError
 

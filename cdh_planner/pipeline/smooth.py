@@ -7,7 +7,7 @@ import numpy as np
 
 from ..model.task import COORDINATES
 from ..trajectory import clearance
-from ..trajectory.splines import solve_banded  # numpy when small: no scipy import (start-up)
+from ..ports import solve_banded
 from .validity import wrapped
 
 SMOOTHING_ROUNDS = 12

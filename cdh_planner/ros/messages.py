@@ -17,7 +17,7 @@ else builds one with ``winch_command`` and reads one with ``winch_command_values
 """
 
 import numpy as np
-from ..model.rotation import Rotation  # numpy: no scipy.spatial import (start-up)
+from ..ports import Rotation
 from builtin_interfaces.msg import Duration, Time
 from diagnostic_msgs.msg import DiagnosticStatus, KeyValue
 from geometry_msgs.msg import PoseStamped

@@ -33,7 +33,7 @@ class LivePlant:
     def __init__(self, robot, initial, time_scale=1.0, scene=None):
         from ..cable_feasibility import feasibility_of
         from ..model.forward_kinematics import current_pose
-        from ..model.rotation import Rotation
+        from ..ports import Rotation
         from .plant import SimulatedRobot
         self.plant = SimulatedRobot(robot, scene)
         L = np.asarray(initial, dtype=float)

@@ -38,7 +38,7 @@ from ..errors import InputError
 from ..model.pose import (Pose, quaternion_from_tau, rotation_from_quaternion, tau_from_quaternion,
                           tau_from_rotation)
 from ..model.robot import workspace_box
-from ..model.rotation import Rotation
+from ..ports import Rotation
 from ..model.task import COORDINATES, FreeTask
 from ..pipeline.validity import Validity
 from ..planner import Planner, PlannerSettings

@@ -8,7 +8,7 @@
 Model (SI units)
 ----------------
 The geometric path is C2 through the planned waypoints: p(s) a natural cubic spline, R(s)
-scipy's RotationSpline (C2 on SO(3); both in numpy, trajectory/splines.py), s the
+scipy's RotationSpline (C2 on SO(3); both in numpy, ports/splines.py), s the
 cumulative pose distance |dp| + L |d angle| (m).
 With u = s'' and x = s'^2, the centre of mass c = p + R g (g: the load point, platform
 frame) has c'' = c_s u + c_ss x; the body angular velocity is w s' and its derivative
@@ -46,11 +46,9 @@ from ..cable_feasibility import planning_feasibility as evaluate, tension_map
 from ..feasibility import cable_vectors, inverse_ellipsoid_factor, nominal_wrench, screw_jacobian
 from ..model.elastic import is_elastic
 from ..model.pose import tau_from_rotation
-from ..model.rotation import Rotation
-from ._toppra import toppra  # toppra without matplotlib and scipy.interpolate (start-up)
 from .executed import executable, spline_rates, unique_sorted
 from .path import PlannedPath, with_commands
-from .splines import CubicSpline, RotationSpline  # scipy's, in numpy (start-up time)
+from ..ports import CubicSpline, Rotation, RotationSpline, import_toppra
 
 GRID_POINTS = 400       # toppra gridpoints along the path (at least one per waypoint)
 CHECK_DT = 1e-3         # s: the dense check's time step
@@ -60,6 +58,7 @@ TOL = 1e-9              # N, m/s, m/s^2: rounding allowed in the dense check
 DERATE = 1e-3           # share of the winch limits and tension ranges kept in reserve
 SUSPECTS = 16           # failing runs of a dense check whose worst samples the next one
                         # looks at first
+toppra = import_toppra()  # without matplotlib and scipy.interpolate (start-up)
 toppra.setup_logging("ERROR")  # its warnings repeat what feasible=False says
 
 

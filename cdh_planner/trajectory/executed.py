@@ -45,9 +45,8 @@ from ..feasibility import (cable_vectors, inverse_ellipsoid_factor, load_point, 
 from ..model.elastic import equilibrium_poses, is_elastic
 from ..model.forward_kinematics import forward_kinematics_many
 from ..model.pose import tau_from_rotation
-from ..model.rotation import Rotation, Slerp
+from ..ports import CubicSpline, Rotation, Slerp
 from .path import with_commands
-from .splines import CubicSpline
 from .timing import limit_ratio
 
 CHECK_DT = 1e-3        # s: step of the check's central differences

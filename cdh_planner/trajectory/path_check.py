@@ -31,7 +31,7 @@ from dataclasses import dataclass
 from typing import Optional
 
 import numpy as np
-from ..model.rotation import Rotation  # numpy: no scipy.spatial import (start-up)
+from ..ports import Rotation
 
 from ..errors import InputError
 from ..cable_feasibility import feasibility_of as evaluate  # 6 cables: the closed form

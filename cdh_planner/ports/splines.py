@@ -15,7 +15,7 @@ LAPACK's banded solver), beyond it by ``scipy.linalg.solve_banded``, imported th
 
 import numpy as np
 
-from ..model.rotation import Rotation
+from .rotation import Rotation
 
 DENSE_MAX = 600  # unknowns: a dense solve is faster than importing scipy.linalg up to here
 
