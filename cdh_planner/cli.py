@@ -8,7 +8,7 @@ and holds the exit-code contract of every command:
     1  no path, or not feasible (the command's answer is "no"); for ``call`` and
        ``replay --requests`` also: no node answered (one line says so)
     2  bad input: arguments, input files (unreadable, not UTF-8, beyond the limits of
-       ``cdh_planner.parsing.files``, wrong types or magnitudes, damaged), output paths that cannot
+       ``cdh_planner.files``, wrong types or magnitudes, damaged), output paths that cannot
        be written or that name an input (checked before the work starts; a write that
        fails at the end, a full disk, is exit 2 too), ROS arguments and names that rcl
        refuses; the library exceptions only bad input raises (``INPUT_EXCEPTIONS``) too

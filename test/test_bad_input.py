@@ -19,7 +19,7 @@ import pytest
 import yaml
 
 from cdh_planner import cli
-from cdh_planner.parsing import files
+from cdh_planner import files
 from cdh_planner.commands import verify as verify_cmd
 from cdh_planner.errors import MAX_MESSAGE_CHARS, InputError
 from cdh_planner.feasibility import evaluate

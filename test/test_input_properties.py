@@ -25,7 +25,7 @@ from hypothesis import strategies as st
 
 from cdh_planner import cli
 from cdh_planner.errors import MAX_MESSAGE_CHARS, InputError
-from cdh_planner.parsing.files import parse_yaml
+from cdh_planner.files import parse_yaml
 from cdh_planner.parsing.poses import load_poses
 from cdh_planner.parsing.problem import load_problem
 from cdh_planner.model.robot import load_robot

@@ -5,7 +5,7 @@ import ast
 
 from conftest import PACKAGE
 # lower number = lower layer; a module may import its own layer and those below
-LAYER = {"cdh_planner": 0, "errors": 0, "parsing.files": 0, "ports": 0, "progress": 0, "status": 0, "model": 1,
+LAYER = {"cdh_planner": 0, "errors": 0, "files": 0, "ports": 0, "progress": 0, "status": 0, "model": 1,
          "feasibility": 2, "scene": 2, "zonotope": 2, "cable_feasibility": 2, "accuracy": 2,
          "manifold": 3, "atlas": 3, "search": 4, "trajectory": 4, "settings": 5,
          "planner": 6, "pipeline": 6, "parsing": 7, "pictures": 7, "recording": 7, "studies": 7, "sim": 7,
@@ -44,12 +44,9 @@ def _imports():
 
 
 def _layer(module):
-    """The LAYER key of a module: its own dotted name below cdh_planner if listed (a
-    module below its package's layer: parsing.files, the bounded file reading the model
-    uses), else its top-level package's or module's."""
+    """The LAYER key of a module: its top-level package's or module's name."""
     parts = module.split(".")
-    own = ".".join(parts[1:3])
-    return own if own in LAYER else parts[min(1, len(parts) - 1)]
+    return parts[min(1, len(parts) - 1)]
 
 
 def test_every_module_imports_only_its_layer_and_those_below():
@@ -80,3 +77,24 @@ def test_no_import_cycles():
     for m in graph:
         if m not in state:
             visit(m, [])
+
+
+def test_no_package_level_cycles():
+    """Packages as units: no two of them import each other, through any chain."""
+    graph = {}
+    for m, ts in _imports().items():
+        graph.setdefault(_layer(m), set()).update(_layer(t) for t in ts if _layer(t) != _layer(m))
+    state = {}
+
+    def visit(p, stack):
+        state[p] = "open"
+        for t in sorted(graph.get(p, ())):
+            if state.get(t) == "open":
+                raise AssertionError(f"package cycle: {' -> '.join(stack + [p, t])}")
+            if t not in state:
+                visit(t, stack + [p])
+        state[p] = "done"
+
+    for p in sorted(graph):
+        if p not in state:
+            visit(p, [])

@@ -225,7 +225,7 @@ def test_a_problem_files_scene_reads_or_is_refused_cleanly(scene, tmp_path_facto
 
 def _robot2_with(**platform_shape):
     from conftest import CONFIG
-    from cdh_planner.parsing import files
+    from cdh_planner import files
     from cdh_planner.model.robot import robot_from_dict
     doc = files.read_yaml(CONFIG / "robot2.yaml", "robot")
     (node,) = doc.values()

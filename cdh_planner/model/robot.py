@@ -20,7 +20,7 @@ from pathlib import Path
 import numpy as np
 
 from ..errors import MAX_FORCE_N, MAX_POSITION_M, InputError
-from ..parsing import files
+from .. import files
 from .robot_schema import CHOICE, MATRIX, N_CABLES, NAME, NAMES, NUMBER, NUMBERS, check_groups, \
     read_fields, robot_field, schema_of
 

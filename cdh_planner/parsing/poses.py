@@ -21,7 +21,7 @@ from dataclasses import dataclass
 import numpy as np
 
 from ..errors import MAX_POSITION_M, InputError, check_keys, check_numbers
-from .files import read_json
+from ..files import read_json
 from ..model.pose import check_quaternion, quaternion_from_tau, rotation_from_quaternion, \
     tau_from_quaternion
 

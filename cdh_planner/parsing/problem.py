@@ -19,7 +19,7 @@ import numpy as np
 
 from ..errors import MAX_POSITION_M, InputError, check_keys
 from ..model.robot import load_robot
-from . import files
+from .. import files
 from ..model.task import COORDINATES, task_from_dict
 from ..model.pose import Pose
 from ..scene.schema import default_scene, load_scene, scene_from_dict

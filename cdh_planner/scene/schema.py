@@ -37,7 +37,7 @@ from pathlib import Path
 
 import numpy as np
 
-from ..parsing import files
+from .. import files
 from ..errors import MAX_POSITION_M, InputError, check_finite, check_keys, check_numbers
 from ..model.pose import check_quaternion, rotation_from_quaternion
 from ..model.robot import MAX_CABLE_RADIUS_M

@@ -59,7 +59,7 @@ class Plan:
 def read_plan(path, robot):
     """The Plan of a plan JSON file (``cdh-planner plan --json``) for ``robot``; InputError
     naming the file or the field when it is not a successful plan of this robot's cables."""
-    from ..parsing.files import read_json
+    from ..files import read_json
     doc = read_json(path, "PLAN")
     if not isinstance(doc, dict) or not isinstance(doc.get("path"), list) or not doc["path"]:
         raise InputError("PLAN", str(path), "not a plan JSON with a path (cdh-planner plan --json)")

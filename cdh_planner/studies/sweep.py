@@ -42,7 +42,7 @@ from pathlib import Path
 
 import numpy as np
 
-from ..parsing import files
+from .. import files
 from ..errors import InputError, check_finite, check_keys, short_repr
 from ..parsing.problem import load_problem
 from ..model.robot import FIELDS, GRAVITY, ros_parameters, robot_from_dict

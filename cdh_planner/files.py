@@ -28,7 +28,7 @@ from pathlib import Path
 
 import yaml
 
-from ..errors import InputError
+from .errors import InputError
 
 
 class _Loader(getattr(yaml, "CSafeLoader", yaml.SafeLoader)):
