@@ -39,7 +39,6 @@ from .live_state import measured_tensions
 from .messages import check_joint_names, duration_msg
 
 COMPLETED, STOPPED, FAILED = "completed", "stopped", "failed"
-OUTCOMES = (COMPLETED, STOPPED, FAILED)
 
 # s: how late the controller may reach the last point before it aborts the goal
 # (GOAL_TOLERANCE_VIOLATED; only checked for joints with a goal tolerance). 0 leaves it to
