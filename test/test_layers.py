@@ -61,22 +61,26 @@ def test_atlas_and_search_know_nothing_of_cables():
     assert not bad, bad
 
 
-def test_no_import_cycles():
-    graph = _imports()
+def _assert_acyclic(graph, what):
+    """Depth-first search over ``graph`` ({node: targets}); the first cycle found fails."""
     state = {}
 
-    def visit(m, stack):
-        state[m] = "open"
-        for t in graph.get(m, ()):
+    def visit(node, stack):
+        state[node] = "open"
+        for t in sorted(graph.get(node, ())):
             if state.get(t) == "open":
-                raise AssertionError(f"import cycle: {' -> '.join(stack + [m, t])}")
+                raise AssertionError(f"{what} cycle: {' -> '.join(stack + [node, t])}")
             if t not in state:
-                visit(t, stack + [m])
-        state[m] = "done"
+                visit(t, stack + [node])
+        state[node] = "done"
 
-    for m in graph:
-        if m not in state:
-            visit(m, [])
+    for node in sorted(graph):
+        if node not in state:
+            visit(node, [])
+
+
+def test_no_import_cycles():
+    _assert_acyclic(_imports(), "import")
 
 
 def test_no_package_level_cycles():
@@ -84,17 +88,4 @@ def test_no_package_level_cycles():
     graph = {}
     for m, ts in _imports().items():
         graph.setdefault(_layer(m), set()).update(_layer(t) for t in ts if _layer(t) != _layer(m))
-    state = {}
-
-    def visit(p, stack):
-        state[p] = "open"
-        for t in sorted(graph.get(p, ())):
-            if state.get(t) == "open":
-                raise AssertionError(f"package cycle: {' -> '.join(stack + [p, t])}")
-            if t not in state:
-                visit(t, stack + [p])
-        state[p] = "done"
-
-    for p in sorted(graph):
-        if p not in state:
-            visit(p, [])
+    _assert_acyclic(graph, "package")
