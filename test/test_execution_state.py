@@ -1,4 +1,4 @@
-"""The execution's state machine (ros/execution_runs.py) and the node's executions under
+"""The execution's state machine (ros/core/execution_runs.py) and the node's executions under
 injected failures: every run that starts ends exactly once, with one ``~/execution_result``,
 and leaves the node ready to execute again, whatever fails inside.
 
@@ -13,7 +13,7 @@ import time
 
 import pytest
 
-from cdh_planner.ros.execution_runs import ExecutionRuns, Phase
+from cdh_planner.ros.core.execution_runs import ExecutionRuns, Phase
 
 # --------------------------------------------------------------------------- no ROS
 
@@ -75,9 +75,9 @@ from rclpy.executors import SingleThreadedExecutor  # noqa: E402
 from rclpy.parameter import Parameter  # noqa: E402
 from std_srvs.srv import Trigger  # noqa: E402
 
-from cdh_planner.ros import winches  # noqa: E402
-from cdh_planner.ros import messages as M  # noqa: E402
-from cdh_planner.ros import plan_execution  # noqa: E402
+from cdh_planner.ros.execution import winches  # noqa: E402
+from cdh_planner.ros.msgs import messages as M  # noqa: E402
+from cdh_planner.ros.execution import plan_execution  # noqa: E402
 from ros_harness import Q1, Q2, in_process_nodes, sphere_pose_msg  # noqa: E402
 
 FOLLOW = [Parameter("execution.mode", value="follow_joint_trajectory")]
