@@ -141,7 +141,7 @@ def start_node(demo):
 def _leg(demo, start, goal, current_start=False):
     """Plan start -> goal through ~/plan_path, check the motion densely, execute it."""
     from ...model.pose import quaternion_from_tau, tau_from_quaternion
-    from ...ros import messages as M
+    from ...ros.msgs import messages as M
     from ...ros.client import path_duration, path_length, plan_path_goal, pose_stamped
     from ...trajectory.path_check import check_motion
 
@@ -304,7 +304,7 @@ def leg_q2_q3(demo):
 
 def replay(demo):
     """Republish the recorded cable commands; re-send the recorded requests to a fresh node."""
-    from ...ros import messages as M
+    from ...ros.msgs import messages as M
     from ...ros.interface import CABLE_COMMAND
     from ...ros.replay import read_records
     story, client = demo.ros, demo.ros.client
@@ -393,7 +393,7 @@ def shutdown(demo):
 
 def ros_pictures(demo):
     """The plans on the C-space; cable lengths and tension envelopes over time."""
-    from ...ros import messages as M
+    from ...ros.msgs import messages as M
     legs = [leg for leg in demo.ros.legs if leg.coords is not None]
     if not legs:
         print("no plans to draw")
