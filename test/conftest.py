@@ -1,6 +1,9 @@
 """Shared by the test modules: the repository's folders (as constants, since parametrize
 lists are built at import) and fixtures for them."""
 
+import os
+import shutil
+import tempfile
 from pathlib import Path
 
 import pytest
@@ -9,6 +12,23 @@ REPO = Path(__file__).resolve().parents[1]
 CONFIG = REPO / "config"
 PROBLEMS = CONFIG / "problems"
 PACKAGE = REPO / "cdh_planner"
+
+
+@pytest.fixture(scope="session", autouse=True)
+def ray_temp_dir():
+    """Ray's session folders (and ``ray start``'s address file) in a folder of the run's own,
+    removed at its end, instead of /tmp/ray: RAY_TMPDIR, read by ``ray.init``, ``ray start``
+    and every process they start. Short (/tmp/cdh-ray-XXXX): Ray's socket paths inside it
+    must stay under the 107 bytes of a Unix socket name."""
+    folder = tempfile.mkdtemp(prefix="cdh-ray-", dir="/tmp")
+    saved = os.environ.get("RAY_TMPDIR")
+    os.environ["RAY_TMPDIR"] = folder
+    yield Path(folder)
+    if saved is None:
+        os.environ.pop("RAY_TMPDIR", None)
+    else:
+        os.environ["RAY_TMPDIR"] = saved
+    shutil.rmtree(folder, ignore_errors=True)
 
 
 @pytest.fixture

@@ -124,7 +124,7 @@ def test_a_cluster_started_outside_answers_as_a_local_ray(tmp_path, capsys):
     """``ray start --head --block`` on localhost (this test starts and stops it), then the
     command with --ray-address: the same poses and answers as --workers 2."""
     port = _free_port()
-    address_file = Path("/tmp/ray/ray_current_cluster")  # `ray start` leaves it: ours goes
+    address_file = Path(os.environ["RAY_TMPDIR"], "ray", "ray_current_cluster")  # ours goes
     had_file = address_file.exists()
     head = subprocess.Popen(
         [sys.executable, "-m", "ray.scripts.scripts", "start", "--head", "--block",
