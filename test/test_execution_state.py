@@ -336,10 +336,16 @@ def test_shutdown_while_following_ends_stopped(node):
     assert not node._execution.running
 
 
-def test_the_platform_pose_updates_one_at_a_time(node):
-    """The 50 Hz pose update runs forward kinematics, which a loaded machine can make
-    slower than its period: in a reentrant group each tick started another update on
-    another executor thread until none was left for goals and results (CI: accepted
-    use_current_start goals whose result never came)."""
-    from rclpy.callback_groups import MutuallyExclusiveCallbackGroup
-    assert isinstance(node.frames.timer.callback_group, MutuallyExclusiveCallbackGroup)
+def test_the_live_state_runs_on_one_thread_of_its_own(node):
+    """The live state (forward kinematics, feasibility, markers) is computed on a thread of
+    its own, one look at a time, and joint states are never executor callbacks: a slow
+    forward kinematics (loaded machine) once took every executor thread from goals and
+    results (CI: accepted use_current_start goals whose result never came), and joint
+    states at 500 Hz as callbacks took most of a core. Closing ends the thread."""
+    from sensor_msgs.msg import JointState
+    worker = node.frames.worker
+    assert worker.is_alive() and worker is not threading.current_thread()
+    assert not [s for s in node.subscriptions if s.msg_type is JointState]
+    assert not [t for t in node.timers if getattr(t.callback, "__self__", None) is node.frames]
+    node.close()
+    assert not worker.is_alive() and node.frames.worker is None

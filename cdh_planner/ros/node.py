@@ -296,5 +296,6 @@ class PlannerNode(LifecycleMixin, LifecycleNode):
             return
         self.configured = self.active = False
         self.begin_shutdown()
+        self.frames.close()        # the live state's thread reads the joint states: first
         self._execution.release()
         self.record(self.runlog.close)
