@@ -11,6 +11,7 @@ executor of this test.
 import threading
 import time
 
+import numpy as np
 import pytest
 
 from cdh_planner.ros.execution_runs import ExecutionRuns, Phase
@@ -78,7 +79,7 @@ from std_srvs.srv import Trigger  # noqa: E402
 from cdh_planner.ros import winches  # noqa: E402
 from cdh_planner.ros import messages as M  # noqa: E402
 from cdh_planner.ros import plan_execution  # noqa: E402
-from ros_harness import Q1, Q2, in_process_nodes, sphere_pose_msg  # noqa: E402
+from ros_harness import Q1, Q2, in_process_nodes, sphere_pose_msg, until  # noqa: E402
 
 FOLLOW = [Parameter("execution.mode", value="follow_joint_trajectory")]
 STREAM = [Parameter("execution.mode", value="stream")]
@@ -349,3 +350,32 @@ def test_the_live_state_runs_on_one_thread_of_its_own(node):
     assert not [t for t in node.timers if getattr(t.callback, "__self__", None) is node.frames]
     node.close()
     assert not worker.is_alive() and node.frames.worker is None
+
+
+def test_the_live_state_is_computed_once_per_new_joint_state(node, monkeypatch):
+    """Many looks of the live state's thread, one joint state: one ~/cable_state, and the
+    pose (with its forward kinematics residual, what /diagnostics reports) of that state;
+    a second joint state: one more. Counted by looks, not by time."""
+    from sensor_msgs.msg import JointState
+    from test_ros_execution import _lengths
+    looks, published = [], []
+    real_update, real_publish = node.frames.update, node.frames.pub_cables.publish
+    monkeypatch.setattr(node.frames, "update", lambda: (real_update(), looks.append(1)))
+    monkeypatch.setattr(node.frames.pub_cables, "publish",
+                        lambda msg: (published.append(msg), real_publish(msg)))
+    winch_state = node.create_publisher(JointState, "/joint_states", 10)
+    lengths = _lengths(Q1)
+    for k in (1, 2):
+        msg = JointState(name=list(node.config.robot.winch_names), position=list(lengths))
+        msg.header.stamp.sec = k
+        assert until(lambda: winch_state.get_subscription_count() == 1, 10.0)
+        winch_state.publish(msg)
+        assert until(lambda: len(published) == k, 10.0), "the joint state was not turned " \
+                                                         "into a live state"
+        seen = len(looks)
+        assert until(lambda: len(looks) >= seen + 5, 10.0)    # five more looks: nothing new
+        assert len(published) == k and published[-1].header.stamp.sec == k
+    assert node.execution.forward_kinematics_residual_m < 1e-9
+    p, _ = node.execution._last_pose
+    expected = sphere_pose_msg(Q1).pose.position
+    np.testing.assert_allclose(p, [expected.x, expected.y, expected.z], rtol=0, atol=1e-9)
