@@ -32,6 +32,7 @@ import time
 from pathlib import Path
 
 import numpy as np
+import yaml
 
 ROOT = Path(__file__).resolve().parents[1]
 ROBOT_FILE = ROOT / "config" / "robot2.yaml"
@@ -54,7 +55,8 @@ def node_configuration():
     from cdh_planner.model.robot import read_yaml, ros_parameters
     from cdh_planner.ros.params import node_config
     values = _flat(ros_parameters(read_yaml(ROBOT_FILE, "robot"), str(ROBOT_FILE)))
-    values.update(p.split(":=") for p in NODE_PARAMS)
+    values.update((name, yaml.safe_load(value))      # as rcl reads -p name:=value
+                  for name, value in (p.split(":=") for p in NODE_PARAMS))
     return node_config(values)
 
 
@@ -112,11 +114,11 @@ def publisher(rate_hz, domain):
 # ----------------------------------------------------------------------------- node
 
 @contextlib.contextmanager
-def node_and_client(domain, python):
+def node_and_client(domain, python, params=()):
     from cdh_planner.ros.client import PlannerClient
     from cdh_planner.ros.isolation import isolated_env, stop_process
     ros_args = ["--ros-args", "--params-file", str(ROBOT_FILE)]
-    for p in NODE_PARAMS:
+    for p in NODE_PARAMS + tuple(params):
         ros_args += ["-p", p]
     proc = subprocess.Popen([python, "-m", "cdh_planner.cli", "node", *ros_args],
                             env=isolated_env(domain), cwd=Path(python).parents[2],  # its checkout
@@ -135,10 +137,10 @@ def cpu_s(pid):
     return (int(fields[11]) + int(fields[12])) / os.sysconf("SC_CLK_TCK")
 
 
-def idle_cpu(rate_hz, idle_s, python):
+def idle_cpu(rate_hz, idle_s, python, params=()):
     """% of one core the idle node takes over ``idle_s`` s with joint states at ``rate_hz``."""
     from cdh_planner.ros.isolation import claimed_domain
-    with claimed_domain() as domain, node_and_client(domain, python) as (proc, client), \
+    with claimed_domain() as domain, node_and_client(domain, python, params) as (proc, client), \
             publisher(rate_hz, domain):
         client.spin(SETTLE_S)
         c0, t0 = cpu_s(proc.pid), time.monotonic()
@@ -189,6 +191,8 @@ def main():
     ap.add_argument("--rates", type=float, nargs="*", default=[0.0, 50.0, 500.0])
     ap.add_argument("--plan-rates", type=float, nargs="*", default=[0.0, 50.0])
     ap.add_argument("--python", default=sys.executable, help="the node's interpreter")
+    ap.add_argument("--param", action="append", default=[],
+                    help="name:=value, another node parameter for the idle runs (repeatable)")
     ap.add_argument("--publish", type=float, help=argparse.SUPPRESS)
     ap.add_argument("--domain", type=int, help=argparse.SUPPRESS)
     args = ap.parse_args()
@@ -198,7 +202,8 @@ def main():
     print(f"load average {os.getloadavg()[0]:.1f} on {os.cpu_count()} cores; node: {args.python}")
     for rate in args.rates:
         print(f"idle node, joint states at {rate:g} Hz: "
-              f"{idle_cpu(rate, args.idle_s, args.python):.1f} % of a core over {args.idle_s:g} s",
+              f"{idle_cpu(rate, args.idle_s, args.python, args.param):.1f} % of a core over "
+              f"{args.idle_s:g} s",
               flush=True)
     if not args.plan_rates:
         return

@@ -11,7 +11,8 @@ The live state is a thread of its own, not an executor callback: every 1 /
 ``live_state_rate_hz`` s it takes the newest joint state (``winches.LatestMessage``: none
 are handled in between) and, only when there is a new one, computes and publishes it
 (markers at ``live_markers_rate_hz``). So joint states at 50 - 1000 Hz cost the executor
-nothing, and the planner's thread the GIL for a few ms per look.
+nothing, and the planner's thread the GIL for a few ms per look. /tf is read the same way
+(``polled.py``), when a request needs a frame and at each look.
 
 /tf and /tf_static carry tf2_msgs/TFMessage: the real package where ROS is installed, a
 partial copy with the same type hash in the venv (interfaces/tf2_msgs).
@@ -36,6 +37,7 @@ from .frames import Z_DOWN, TransformBook, pose_in_frame, transform_msg
 from .interface import LATCHED
 from .live_state import CABLE_STATE, LEAST_MARGIN, LIVE_MARKERS, LiveRates, live_markers, \
     live_messages
+from .polled import PolledSubscription
 
 TF_QOS = QoSProfile(depth=100, reliability=ReliabilityPolicy.RELIABLE,
                     durability=DurabilityPolicy.VOLATILE)         # tf2_ros's
@@ -59,9 +61,12 @@ class NodeFrames:
         self.pub_markers = pub(MarkerArray, f"~/{LIVE_MARKERS}", 10)
         # robot_state_publisher's name and QoS (relative: it follows the namespace)
         self.pub_description = pub(String, ROBOT_DESCRIPTION, LATCHED)
-        for topic, qos in (("/tf", TF_QOS), ("/tf_static", TF_STATIC_QOS)):
-            node.create_subscription(TFMessage, topic, self._received, qos,
-                                     callback_group=callback_group)
+        # /tf taken when a request needs it and at each look of the live state, not a
+        # callback per message: the node's own platform pose at live_state_rate_hz comes
+        # back on it (the rare /tf_static ones are callbacks)
+        self.tf = PolledSubscription(node, TFMessage, "/tf", TF_QOS)
+        node.create_subscription(TFMessage, "/tf_static", self._received, TF_STATIC_QOS,
+                                 callback_group=callback_group)
         self._seen = None        # the JointState last turned into a pose
         self.rates = None        # LiveRates of the configured parameters
         # one update at a time, never on an executor thread: a slow forward kinematics
@@ -72,6 +77,11 @@ class NodeFrames:
     def _received(self, msg):
         for transform in msg.transforms:
             self.book.add(transform)
+
+    def read_tf(self):
+        """Every /tf message that came since the last read into the book."""
+        for msg, _ in self.tf.take():
+            self._received(msg)
 
     def configure(self, config):
         """Publish (latched) the static frames of ``config`` (fixed -> base, z-down) and the
@@ -98,6 +108,11 @@ class NodeFrames:
             self._stop.set()
             worker.join(JOIN_S)
 
+    def destroy(self):
+        """``close``, and the /tf subscription (the node is being destroyed)."""
+        self.close()
+        self.tf.destroy()
+
     def _live(self):
         while not self._stop.wait(self.rates.period_s):
             try:
@@ -112,6 +127,7 @@ class NodeFrames:
         """Replace each PoseStamped ``request.<field>`` by the same pose in ``base_frame``;
         None, or the refusal (BAD_FRAME, naming the field and frame) of the first one TF
         cannot resolve."""
+        self.read_tf()
         try:
             for field in fields:
                 setattr(request, field,
@@ -126,6 +142,7 @@ class NodeFrames:
         node = self._node
         if not node.configured:
             return
+        self.read_tf()     # kept short: the middleware keeps the last 100 messages
         latest = node.execution.joints.latest
         if latest is None or latest[0] is self._seen:
             return

@@ -27,9 +27,7 @@ from action_msgs.msg import GoalStatus
 from action_msgs.srv import CancelGoal
 from control_msgs.action import FollowJointTrajectory
 from rclpy.action import ActionClient
-from rclpy.impl.implementation_singleton import rclpy_implementation as _rclpy
 from rclpy.qos import DurabilityPolicy, QoSProfile, ReliabilityPolicy
-from rclpy.type_support import check_is_valid_msg_type
 from sensor_msgs.msg import JointState
 from trajectory_msgs.msg import JointTrajectory, JointTrajectoryPoint
 
@@ -39,6 +37,7 @@ from ..model.forward_kinematics import current_pose as _current_pose, nearest_po
 from .interface import ACTION_QOS
 from .live_state import measured_tensions
 from .messages import check_joint_names, duration_msg
+from .polled import PolledSubscription
 
 COMPLETED, STOPPED, FAILED = "completed", "stopped", "failed"
 
@@ -162,44 +161,9 @@ def current_pose(robot, lengths, guess=None):
 
 # ----------------------------------------------------------------------------- joint states
 
-class LatestMessage:
-    """A subscription that no executor serves: the middleware keeps the newest message
-    (QoS depth 1) and ``take()`` reads it when asked. A controller publishing at 50 -
-    1000 Hz then costs no Python per message (a callback per message through rclpy's
-    executor took 68 % of a core at 500 Hz, and the GIL from planning); whoever reads
-    decides the rate. rclpy has no public call for this: the C subscription its
-    ``Node.create_subscription`` makes, without registering it with the node."""
-
-    def __init__(self, node, msg_type, topic, qos):
-        check_is_valid_msg_type(msg_type)       # imports the type support
-        self.msg_type = msg_type
-        with node.handle:
-            self._handle = _rclpy.Subscription(node.handle, msg_type, topic,
-                                               qos.get_c_qos_profile())
-        self.topic_name = self._handle.get_topic_name()
-
-    def take(self):
-        """(the newest message not taken yet, when it was received: time.monotonic() s),
-        or None when none came since the last take."""
-        newest = None
-        with self._handle:
-            while (taken := self._handle.take_message(self.msg_type, False)) is not None:
-                newest = taken
-        if newest is None:
-            return None
-        msg, info = newest
-        now = time.monotonic()
-        received_ns = info.get("received_timestamp", 0)   # system clock; 0: not given
-        age_s = (time.time_ns() - received_ns) * 1e-9 if received_ns else 0.0
-        return msg, now - max(age_s, 0.0)
-
-    def destroy(self):
-        self._handle.destroy_when_not_in_use()
-
-
 class JointStateMonitor:
     """The latest sensor_msgs/JointState on ``topic`` and when it arrived (monotonic),
-    read when asked (``LatestMessage``: no executor work per message).
+    read when asked (``polled.PolledSubscription``: no executor work per message).
 
     ``lengths(max_age_s)`` gives the winches' cable lengths (6,) m in the order of
     ``winch_names``, or None and why not: nothing received yet, the last message older than
@@ -213,7 +177,7 @@ class JointStateMonitor:
         self._lock = threading.Lock()
         self._latest = None          # (JointState, time.monotonic() of arrival)
         self.tensions = None         # N: the efforts of the message ``lengths`` last read
-        self.subscription = LatestMessage(node, JointState, topic, JOINT_STATE_QOS)
+        self.subscription = PolledSubscription(node, JointState, topic, JOINT_STATE_QOS)
         self.topic = self.subscription.topic_name
 
     @property
@@ -221,8 +185,8 @@ class JointStateMonitor:
         """(the last JointState, its arrival time.monotonic() s), or None."""
         with self._lock:
             taken = self.subscription.take()
-            if taken is not None:
-                self._latest = taken
+            if taken:
+                self._latest = taken[-1]
             return self._latest
 
     def wait_lengths(self, max_age_s, wait_s, cancelled=lambda: False):
