@@ -10,8 +10,10 @@ that forward kinematics has work); the node's process CPU time (utime + stime fr
 /proc/PID/stat) over ``--idle-s`` s of wall clock, in % of one core.
 
 (b) Planning over ROS: Robot 2 q2 -> q3 (sphere task, A*) on ``~/plan``, round trip at the
-client, on a fresh node (cold: its first plan) then ``--runs`` more (warm: the node keeps
-its atlas), for each of ``--plan-rates`` (0: no publisher); and the library's own time for
+client: on a fresh node per rate of ``--plan-rates`` (0: no publisher), its first plan
+(cold); then on one more node, ``--runs`` rounds of one plan per rate, the publisher
+started and stopped around each (warm: the node keeps its atlas; the rates in turn, so
+that the machine's changing load falls on each alike); and the library's own time for
 the same query (``Planner.plan`` in this process on the node's configuration, cold then
 warm).
 
@@ -148,21 +150,36 @@ def idle_cpu(rate_hz, idle_s, python, params=()):
         return 100.0 * (cpu_s(proc.pid) - c0) / (time.monotonic() - t0)
 
 
-def node_plans(rate_hz, runs, python):
-    """(cold s, [warm s]) of q2 -> q3 on ~/plan, round trips, joint states at ``rate_hz``."""
+def node_plans(rates, runs, python):
+    """({rate: cold s}, {rate: [warm s]}) of q2 -> q3 on ~/plan, round trips at the client,
+    joint states at each of ``rates`` Hz (0: none). Cold: the first plan of a fresh node
+    per rate. Warm: one more node, the rates taken in turn ``runs`` times (the publisher
+    started and stopped around each plan), so that a change of the machine's load falls
+    on every rate alike."""
     from cdh_planner.ros.isolation import claimed_domain
     config = node_configuration()
     start, goal = sphere_pose(config.task, Q2), sphere_pose(config.task, Q3)
-    with claimed_domain() as domain, node_and_client(domain, python) as (_, client), \
-            publisher(rate_hz, domain):
-        client.spin(SETTLE_S)
-        times = []
-        for _ in range(1 + runs):
-            answer = client.plan(start, goal, timeout_s=300)
-            if not answer.success:
-                raise SystemExit(f"the node did not plan q2 -> q3: {answer.values}")
-            times.append(answer.seconds)
-    return times[0], times[1:]
+
+    def plan(client):
+        answer = client.plan(start, goal, timeout_s=300)
+        if not answer.success:
+            raise SystemExit(f"the node did not plan q2 -> q3: {answer.values}")
+        return answer.seconds
+
+    cold, warm = {}, {rate: [] for rate in rates}
+    for rate in rates:
+        with claimed_domain() as domain, node_and_client(domain, python) as (_, client), \
+                publisher(rate, domain):
+            client.spin(SETTLE_S)
+            cold[rate] = plan(client)
+    with claimed_domain() as domain, node_and_client(domain, python) as (_, client):
+        plan(client)
+        for _ in range(runs):
+            for rate in rates:
+                with publisher(rate, domain):
+                    client.spin(SETTLE_S)
+                    warm[rate].append(plan(client))
+    return cold, warm
 
 
 def library_plans(runs):
@@ -210,14 +227,14 @@ def main():
     cold, warm = library_plans(args.runs)
     library = statistics.median(warm) if warm else cold
     print(f"library q2 -> q3: cold {cold:.2f} s, warm median {library:.2f} s", flush=True)
+    cold, warm = node_plans(args.plan_rates, args.runs, args.python)
     base = None
     for rate in args.plan_rates:
-        cold, warm = node_plans(rate, args.runs, args.python)
-        median = statistics.median(warm) if warm else cold
+        median = statistics.median(warm[rate]) if warm[rate] else cold[rate]
         base = median if base is None else base
-        print(f"node q2 -> q3 over ~/plan, joint states at {rate:g} Hz: cold {cold:.2f} s, "
-              f"warm median {median:.2f} s ({median / base:.2f}x the first rate, "
-              f"{median / library:.2f}x the library)", flush=True)
+        print(f"node q2 -> q3 over ~/plan, joint states at {rate:g} Hz: cold {cold[rate]:.2f} s, "
+              f"warm median {median:.2f} s of {len(warm[rate])} ({median / base:.2f}x the first "
+              f"rate, {median / library:.2f}x the library)", flush=True)
 
 
 if __name__ == "__main__":
