@@ -66,6 +66,22 @@ def test_racing_ends_end_a_run_once():
         assert wins.count(True) == 1 and runs.phase == Phase.IDLE
 
 
+def test_live_markers_come_at_their_rate_of_the_looks():
+    """Looks at 20 Hz, markers at 10 Hz: every other look, with the looks late or early by
+    up to a fifth of their period; markers at 20 Hz or more: every look; at 1 Hz: every
+    20th."""
+    from cdh_planner.ros.live_state import LiveRates
+    looks = np.arange(200) / 20.0 + 0.01 * np.sin(np.arange(200))   # s
+
+    def drawn(markers_hz):
+        rates = LiveRates(20.0, markers_hz)
+        return [k for k, t in enumerate(looks) if rates.markers_due(t)]
+
+    assert drawn(10.0) == list(range(0, 200, 2))
+    assert drawn(20.0) == drawn(40.0) == list(range(200))
+    assert drawn(1.0) == list(range(0, 200, 20))
+
+
 # --------------------------------------------------------------------------- the node
 
 rclpy = pytest.importorskip("rclpy")
