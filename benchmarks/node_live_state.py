@@ -55,7 +55,7 @@ def _flat(d, prefix=""):
 def node_configuration():
     """The node's NodeConfig for ROBOT_FILE and NODE_PARAMS."""
     from cdh_planner.model.robot import read_yaml, ros_parameters
-    from cdh_planner.ros.params import node_config
+    from cdh_planner.ros.core.params import node_config
     values = _flat(ros_parameters(read_yaml(ROBOT_FILE, "robot"), str(ROBOT_FILE)))
     values.update((name, yaml.safe_load(value))      # as rcl reads -p name:=value
                   for name, value in (p.split(":=") for p in NODE_PARAMS))
@@ -186,7 +186,7 @@ def library_plans(runs):
     """(cold s, [warm s]) of q2 -> q3 by Planner.plan in this process, as the node plans."""
     from nav_msgs.srv import GetPlan
     from cdh_planner.planner import Planner
-    from cdh_planner.ros import plan_requests
+    from cdh_planner.ros.core import plan_requests
     config = node_configuration()
     request = GetPlan.Request(start=sphere_pose(config.task, Q2), goal=sphere_pose(config.task, Q3))
     poses = plan_requests.request_poses(request, config.base_frame)

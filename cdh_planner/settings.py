@@ -2,7 +2,7 @@
 
 Each ``PlannerSettings`` field carries its metadata (``Setting``: node parameter name, CLI
 flag, unit, range or choices, description) and ``check_setting`` validates a value
-against it. The node's parameter descriptors (``ros/params.py``), the problem file's keys
+against it. The node's parameter descriptors (``ros/core/params.py``), the problem file's keys
 (``parsing/problem.py``) and the ``plan`` command's flags (``commands/plan.py``) are built from
 ``SETTINGS``, so a new setting is one field here. The strategy's choices are the search's
 registry (``search.strategies.STRATEGIES``) read when used, so a strategy registered later is a

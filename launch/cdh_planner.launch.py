@@ -8,7 +8,7 @@
 hold the robot, its task and the planner settings (default: the installed
 ``config/robot2.yaml``, the paper's Robot 2). ``execution_mode``: the node's
 ``execution.mode``, one of the registered command outlets (its choices and description
-come from ``cdh_planner/ros/command_outlets.py``, so a new one needs no change here).
+come from ``cdh_planner/ros/execution/command_outlets.py``, so a new one needs no change here).
 ``namespace``: the node's namespace (its topics,
 services and action follow it; /tf, /tf_static and /diagnostics stay absolute).
 ``use_sim_time``: the node's clock from /clock. ``log_level``: rcl's (debug, info, warn,
@@ -22,7 +22,7 @@ from launch.substitutions import LaunchConfiguration, PathJoinSubstitution
 from launch_ros.actions import Node
 from launch_ros.substitutions import FindPackageShare
 
-from cdh_planner.ros.command_outlets import OUTLETS, modes_description
+from cdh_planner.ros.execution.command_outlets import OUTLETS, modes_description
 
 
 def generate_launch_description():

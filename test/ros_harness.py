@@ -71,7 +71,7 @@ def in_process_nodes(log_dir):
     domain of its own (Robot 2's file, recording to ``log_dir``); each is closed and
     destroyed at the end. Nothing spins it: tests call its callbacks or spin it."""
     import rclpy
-    from cdh_planner.ros.node import PlannerNode
+    from cdh_planner.ros.node.planner_node import PlannerNode
     made = []
     with claimed_domain() as domain:
         def make(factory=None, params=()):
@@ -195,7 +195,7 @@ class Collector:
 
 
 def stamp_s(stamp):
-    from cdh_planner.ros.messages import to_seconds
+    from cdh_planner.ros.msgs.messages import to_seconds
     return to_seconds(stamp)
 
 

@@ -27,7 +27,7 @@ from cdh_planner.model.robot import load_robot
 from cdh_planner.model.task import SphereTask
 from cdh_planner.pictures.slices import FEASIBLE, INACCURATE, SliceView, compute_slice
 from cdh_planner.planner import Planner
-from cdh_planner.ros.diagnostics import Health, health_status
+from cdh_planner.ros.core.diagnostics import Health, health_status
 from cdh_planner.settings import PlannerSettings
 from cdh_planner.status import Status
 from cdh_planner.trajectory.path_check import check_path

@@ -34,7 +34,7 @@ from cdh_planner.recording.mcap_log import (  # noqa: E402
 from cdh_planner.recording.ros_schemas import full_definition  # noqa: E402
 from cdh_planner.ros import replay as R  # noqa: E402
 from cdh_planner.ros.client import plan_path_goal  # noqa: E402
-from cdh_planner.ros.run_log import RunLog  # noqa: E402
+from cdh_planner.ros.core.run_log import RunLog  # noqa: E402
 from ros_harness import (Q1, Q2, Q3, NodeProcess, run_cli,  # noqa: E402
                          sphere_pose_msg)
 
@@ -190,7 +190,7 @@ def test_a_use_current_start_goal_is_replayed_from_the_recorded_path_start(domai
     from sensor_msgs.msg import JointState
     from cdh_planner.model.kinematics import cable_lengths
     from cdh_planner.model.pose import rotation_from_quaternion
-    from cdh_planner.ros.params import node_config
+    from cdh_planner.ros.core.params import node_config
     from ros_harness import ROBOT2, file_parameters
     robot = node_config(file_parameters(ROBOT2)).robot
     q2 = sphere_pose_msg(Q2)

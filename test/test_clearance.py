@@ -133,7 +133,7 @@ def test_plan_command_reports_the_least_margins(tmp_path, capsys):
 def test_node_plan_result_carries_the_least_margins():
     pytest.importorskip("diagnostic_msgs")
     from builtin_interfaces.msg import Time
-    from cdh_planner.ros import plan_requests
+    from cdh_planner.ros.core import plan_requests
     _, pr, res = plan("robot2_q1_q2", clearance_weight=WEIGHT)
     status = plan_requests.result_status(res, pr.robot, "r#1", "", Time(sec=1))
     values = {kv.key: kv.value for kv in status.values}

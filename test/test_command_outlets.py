@@ -1,4 +1,4 @@
-"""Command outlets are plug-ins: one registered class (ros/command_outlets.py) is an
+"""Command outlets are plug-ins: one registered class (ros/execution/command_outlets.py) is an
 ``execution.mode`` everywhere (the mode parameter's choices and description, its own
 parameters, the docs' table) and the node executes a plan through it over DDS."""
 
@@ -8,11 +8,11 @@ import numpy as np
 import pytest
 
 from cdh_planner.errors import InputError
-from cdh_planner.ros import params
-from cdh_planner.ros.command_outlets import (OUTLETS, FollowJointTrajectory, ForwardCommand,
+from cdh_planner.ros.core import params
+from cdh_planner.ros.execution.command_outlets import (OUTLETS, FollowJointTrajectory, ForwardCommand,
                                              JointStateStream, StreamedOutlet,
                                              check_joint_order, register)
-from cdh_planner.ros.param_spec import STRING, Spec
+from cdh_planner.ros.core.param_spec import STRING, Spec
 
 TOPIC = "/winches/lengths_velocities"
 JOINT_ORDER = ForwardCommand.specs[1]      # execution.joint_order, shared as declared
@@ -130,7 +130,7 @@ def test_the_node_executes_a_plan_through_it(tmp_path, registered):
     from rclpy.executors import SingleThreadedExecutor
     from std_msgs.msg import Float64MultiArray
     from std_srvs.srv import Trigger
-    from cdh_planner.ros import messages as M
+    from cdh_planner.ros.msgs import messages as M
     from ros_harness import Q1, Q2, in_process_nodes, sphere_pose_msg, until
     with in_process_nodes(tmp_path / "runs") as make:
         node = make()

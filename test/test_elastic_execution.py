@@ -254,7 +254,7 @@ def test_forward_kinematics_with_measured_tensions_recovers_the_pose(name):
 # ----------------------------------------------------------------------------- refusal
 
 def test_length_only_modes_refuse_more_than_six_rigid_cables():
-    outlets = pytest.importorskip("cdh_planner.ros.command_outlets")
+    outlets = pytest.importorskip("cdh_planner.ros.execution.command_outlets")
     eight = load_robot(REPO / "config" / "robot2_8.yaml")
     six = load_robot(REPO / "config" / "robot2.yaml")
     for mode, cls in outlets.OUTLETS.items():

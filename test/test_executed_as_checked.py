@@ -121,7 +121,7 @@ def executed_margins(robot, msg, p0, R0):
 def published(path, robot):
     """The JointTrajectory the node publishes (FollowJointTrajectory goal and
     ~/planned_cable_trajectory) for ``path``."""
-    M = pytest.importorskip("cdh_planner.ros.messages")
+    M = pytest.importorskip("cdh_planner.ros.msgs.messages")
     return M.cable_trajectory_msg(path, robot.winch_names, "cdh_base")
 
 
@@ -242,7 +242,7 @@ def test_the_plan_and_its_json_carry_what_was_checked(problem):
 
 
 def test_the_stream_sends_the_checked_quintic(problem, outputs):
-    streaming = pytest.importorskip("cdh_planner.ros.streaming")
+    streaming = pytest.importorskip("cdh_planner.ros.core.streaming")
     robot, (path, _, _) = problem.robot, outputs[FAST]
     stream = streaming.Stream(path, robot.winch_names, start=0.0)
     stamp = published(path, robot).header.stamp

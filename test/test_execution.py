@@ -1,4 +1,4 @@
-"""Executing a plan on a trajectory controller (cdh_planner/ros/winches.py).
+"""Executing a plan on a trajectory controller (cdh_planner/ros/execution/winches.py).
 
 In process: the FollowJointTrajectory goal of a cable trajectory (no effort, stamp zero),
 measured cable lengths of a JointState, the start check, and the pose of measured lengths
@@ -30,8 +30,8 @@ from cdh_planner.model.kinematics import (cable_lengths, forward_kinematics,  # 
                                           rotation_vector_exp)
 from cdh_planner.model.pose import rotation_angle_between, rotation_tt  # noqa: E402
 from cdh_planner.model.robot import load_robot  # noqa: E402
-from cdh_planner.ros import winches as X  # noqa: E402
-from cdh_planner.ros.messages import cable_trajectory_msg, to_seconds  # noqa: E402
+from cdh_planner.ros.execution import winches as X  # noqa: E402
+from cdh_planner.ros.msgs.messages import cable_trajectory_msg, to_seconds  # noqa: E402
 
 from conftest import CONFIG, PROBLEMS  # noqa: E402
 from ros_harness import ControllerDouble, claimed_domain, until  # noqa: E402
@@ -269,7 +269,7 @@ def test_current_pose_of_unreachable_lengths_says_why(guess):
 
 @functools.lru_cache(maxsize=None)
 def double_module():
-    from cdh_planner.ros import simulated_controller
+    from cdh_planner.ros.execution import simulated_controller
     return simulated_controller
 
 

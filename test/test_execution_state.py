@@ -1,4 +1,4 @@
-"""The execution's state machine (ros/execution_runs.py) and the node's executions under
+"""The execution's state machine (ros/core/execution_runs.py) and the node's executions under
 injected failures: every run that starts ends exactly once, with one ``~/execution_result``,
 and leaves the node ready to execute again, whatever fails inside.
 
@@ -14,7 +14,7 @@ import time
 import numpy as np
 import pytest
 
-from cdh_planner.ros.execution_runs import ExecutionRuns, Phase
+from cdh_planner.ros.core.execution_runs import ExecutionRuns, Phase
 
 # --------------------------------------------------------------------------- no ROS
 
@@ -70,7 +70,7 @@ def test_live_markers_come_at_their_rate_of_the_looks():
     """Looks at 20 Hz, markers at 10 Hz: every other look, with the looks late or early by
     up to a fifth of their period; markers at 20 Hz or more: every look; at 1 Hz: every
     20th."""
-    from cdh_planner.ros.live_state import LiveRates
+    from cdh_planner.ros.core.live_state import LiveRates
     looks = np.arange(200) / 20.0 + 0.01 * np.sin(np.arange(200))   # s
 
     def drawn(markers_hz):
@@ -92,9 +92,9 @@ from rclpy.executors import SingleThreadedExecutor  # noqa: E402
 from rclpy.parameter import Parameter  # noqa: E402
 from std_srvs.srv import Trigger  # noqa: E402
 
-from cdh_planner.ros import winches  # noqa: E402
-from cdh_planner.ros import messages as M  # noqa: E402
-from cdh_planner.ros import plan_execution  # noqa: E402
+from cdh_planner.ros.execution import winches  # noqa: E402
+from cdh_planner.ros.msgs import messages as M  # noqa: E402
+from cdh_planner.ros.execution import plan_execution  # noqa: E402
 from ros_harness import Q1, Q2, in_process_nodes, sphere_pose_msg, until  # noqa: E402
 
 FOLLOW = [Parameter("execution.mode", value="follow_joint_trajectory")]

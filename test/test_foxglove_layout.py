@@ -16,7 +16,7 @@ from conftest import CONFIG, REPO
 pytest.importorskip("rclpy")   # cdh_planner.ros.interface imports it
 
 from cdh_planner.ros import interface  # noqa: E402
-from cdh_planner.ros.params import SPEC  # noqa: E402
+from cdh_planner.ros.core.params import SPEC  # noqa: E402
 
 LAYOUT_FILE = CONFIG / "cdh_planner.foxglove.json"
 MSG_DIR = REPO / "interfaces" / "cdh_planner_interfaces" / "msg"
@@ -115,7 +115,7 @@ def test_every_panel_in_the_layout_has_a_config_and_vice_versa(layout):
 
 def test_every_topic_is_one_the_node_publishes_or_joint_states(layout):
     published = {f"/{interface.NODE_NAME}/{getattr(interface, c)}" for c in TOPIC_CONSTANTS}
-    from cdh_planner.ros.live_state import LIVE_MARKERS     # measured, beside the planned
+    from cdh_planner.ros.core.live_state import LIVE_MARKERS     # measured, beside the planned
     allowed = published | {"/joint_states", f"/{interface.NODE_NAME}/{LIVE_MARKERS}"}
     topics = {topic_of(s) for s in strings(layout) if s.startswith("/")}
     assert topics <= allowed, sorted(topics - allowed)

@@ -6,9 +6,9 @@ import pytest
 from scipy.spatial.transform import Rotation
 
 from cdh_planner.errors import InputError
-from cdh_planner.ros.frames import (IDENTITY, Z_DOWN, TransformBook, compose, inverse,
+from cdh_planner.ros.core.frames import (IDENTITY, Z_DOWN, TransformBook, compose, inverse,
                                     pose_in_frame, quat_multiply, quat_rotate, transform_msg)
-from cdh_planner.ros.messages import pose_stamped_msg
+from cdh_planner.ros.msgs.messages import pose_stamped_msg
 
 RNG = np.random.default_rng(23)
 

@@ -2,6 +2,8 @@
 atlas and the search know nothing of cables, and no modules import each other in a cycle."""
 
 import ast
+import subprocess
+import sys
 
 from conftest import PACKAGE
 # lower number = lower layer; a module may import its own layer and those below
@@ -89,3 +91,31 @@ def test_no_package_level_cycles():
     for m, ts in _imports().items():
         graph.setdefault(_layer(m), set()).update(_layer(t) for t in ts if _layer(t) != _layer(m))
     _assert_acyclic(graph, "package")
+
+
+RCLPY_FREE = ("cdh_planner.ros.core", "cdh_planner.ros.msgs")   # the node's logic, conversions
+
+
+def _rclpy_free_modules():
+    return sorted(m for m in _imports() if m.startswith(RCLPY_FREE))
+
+
+def test_the_node_logic_and_the_conversions_import_no_rclpy():
+    """Nothing under ros/core/ or ros/msgs/ imports rclpy, lazily neither; importing all of
+    them in a fresh interpreter loads no rclpy module (nor does anything they import)."""
+    bad = []
+    for module in _rclpy_free_modules():
+        path = PACKAGE.parent.joinpath(*module.split(".")).with_suffix(".py")
+        if not path.exists():
+            path = path.with_suffix("") / "__init__.py"
+        for node in ast.walk(ast.parse(path.read_text())):
+            names = ([a.name for a in node.names] if isinstance(node, ast.Import) else
+                     [node.module or ""] if isinstance(node, ast.ImportFrom) and not node.level else [])
+            bad += [(module, n) for n in names if n == "rclpy" or n.startswith("rclpy.")]
+    assert not bad, bad
+    code = ("import importlib, sys\n"
+            f"for m in {_rclpy_free_modules()!r}: importlib.import_module(m)\n"
+            "print(sorted(k for k in sys.modules if k == 'rclpy' or k.startswith('rclpy.')))")
+    out = subprocess.run([sys.executable, "-c", code], capture_output=True, text=True, timeout=120)
+    assert out.returncode == 0, out.stderr
+    assert out.stdout.strip() == "[]", out.stdout

@@ -273,8 +273,8 @@ def test_a_measured_start_through_the_nodes_messages_plans_the_pole_path():
     one from q1's task coordinates (before: 13 % longer over the node)."""
     pytest.importorskip("rclpy")
     from nav_msgs.srv import GetPlan
-    from cdh_planner.ros import messages as M
-    from cdh_planner.ros.plan_requests import request_poses
+    from cdh_planner.ros.msgs import messages as M
+    from cdh_planner.ros.core.plan_requests import request_poses
     pr = load_problem(PROBLEMS / "robot2_q1_q2.yaml")
     goal = M.pose_stamped_msg(pr.goal.p, rotation_tt(pr.goal.tau), "base")
     results = [("lambda", Planner(pr.robot, pr.task, pr.settings).plan(pr.start, pr.goal))]

@@ -157,9 +157,9 @@ def test_launch_file_declares_the_robot_argument_and_starts_the_node():
     declare, mode = _calls(tree, "DeclareLaunchArgument")[:2]
     assert ast.literal_eval(declare.args[0]) == "robot"
     assert ast.literal_eval(mode.args[0]) == "execution_mode"
-    from cdh_planner.ros.params import SPEC
+    from cdh_planner.ros.core.params import SPEC
     # the mode's choices are the registry's (a new command outlet needs no change there)
-    assert ("cdh_planner.ros.command_outlets", "OUTLETS") in imported
+    assert ("cdh_planner.ros.execution.command_outlets", "OUTLETS") in imported
     assert ast.unparse(_kwargs(mode)["choices"]) == "list(OUTLETS)"
     assert ast.literal_eval(_kwargs(mode)["default_value"]) == SPEC["execution.mode"].default
     default = _kwargs(declare)["default_value"]
@@ -218,7 +218,7 @@ def test_rviz_config_shows_the_nodes_latched_outputs(setup_kwargs):
     node's default fixed_frame (z up), and its displays subscribe to the node's ~/markers and
     ~/path with the latched QoS they are published with."""
     import yaml
-    from cdh_planner.ros.params import SPEC
+    from cdh_planner.ros.core.params import SPEC
     cfg = yaml.safe_load((REPO / "config" / "cdh_planner.rviz").read_text())
     manager = cfg["Visualization Manager"]
     assert manager["Global Options"]["Fixed Frame"] == SPEC["fixed_frame"].default

@@ -1,4 +1,4 @@
-"""The node's plan service without a ROS graph (ros/plan_service.py): no rclpy node, no
+"""The node's plan service without a ROS graph (ros/core/plan_service.py): no rclpy node, no
 context; an outlet that keeps what it is handed, the TEST DOUBLE planner. Commit, rollback,
 the plan made while executing, the queue's refusals and an internal error's answer."""
 
@@ -10,9 +10,9 @@ pytest.importorskip("nav_msgs")
 
 from nav_msgs.srv import GetPlan  # noqa: E402
 
-from cdh_planner.ros import plan_requests  # noqa: E402
-from cdh_planner.ros.params import node_config  # noqa: E402
-from cdh_planner.ros.plan_service import PlanService  # noqa: E402
+from cdh_planner.ros.core import plan_requests  # noqa: E402
+from cdh_planner.ros.core.params import node_config  # noqa: E402
+from cdh_planner.ros.core.plan_service import PlanService  # noqa: E402
 from ros_harness import (Q1, Q2, ROBOT2, fake_planner_class, file_parameters,  # noqa: E402
                          sphere_pose_msg)
 from builtin_interfaces.msg import Time  # noqa: E402

@@ -21,7 +21,7 @@ from conftest import PROBLEMS  # noqa: E402
 from cdh_planner.errors import MAX_MESSAGE_CHARS, InputError  # noqa: E402
 from cdh_planner.parsing.problem import load_problem  # noqa: E402
 from cdh_planner.planner import Planner  # noqa: E402
-from cdh_planner.ros.plan_requests import PlanCall, request_poses, run_planner  # noqa: E402
+from cdh_planner.ros.core.plan_requests import PlanCall, request_poses, run_planner  # noqa: E402
 from cdh_planner.settings import STRATEGY_CHOICES  # noqa: E402
 from cdh_planner.status import Status  # noqa: E402
 

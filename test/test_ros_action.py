@@ -22,10 +22,10 @@ from cdh_planner_interfaces.action import PlanPath  # noqa: E402
 
 from cdh_planner.model.kinematics import cable_lengths  # noqa: E402
 from cdh_planner.model.pose import rotation_from_quaternion  # noqa: E402
-from cdh_planner.ros import messages as M  # noqa: E402
+from cdh_planner.ros.msgs import messages as M  # noqa: E402
 from cdh_planner.ros.client import PlannerClient, plan_path_goal  # noqa: E402
-from cdh_planner.ros.params import node_config  # noqa: E402
-from cdh_planner.ros.plan_requests import PLAN_QUEUE_DEPTH  # noqa: E402
+from cdh_planner.ros.core.params import node_config  # noqa: E402
+from cdh_planner.ros.core.plan_requests import PLAN_QUEUE_DEPTH  # noqa: E402
 from ros_harness import (Q1, Q2, Q3, ROBOT2, NodeProcess, claimed_domain,  # noqa: E402
                          file_parameters, sphere_pose_msg)
 

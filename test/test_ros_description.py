@@ -10,9 +10,9 @@ import yourdfpy
 from std_msgs.msg import String
 
 from cdh_planner.ros.client import PlannerClient
-from cdh_planner.ros.description import urdf
+from cdh_planner.ros.core.description import urdf
 from cdh_planner.ros.interface import LATCHED
-from cdh_planner.ros.params import node_config
+from cdh_planner.ros.core.params import node_config
 from ros_harness import ROBOT2, NodeProcess, claimed_domain, cli, file_parameters
 
 ROBOT = node_config(file_parameters(ROBOT2)).robot

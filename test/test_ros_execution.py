@@ -16,9 +16,9 @@ from sensor_msgs.msg import JointState  # noqa: E402
 
 from cdh_planner.model.kinematics import cable_lengths  # noqa: E402
 from cdh_planner.model.pose import rotation_from_quaternion  # noqa: E402
-from cdh_planner.ros import messages as M  # noqa: E402
+from cdh_planner.ros.msgs import messages as M  # noqa: E402
 from cdh_planner.ros.client import PlannerClient, path_duration, plan_path_goal  # noqa: E402
-from cdh_planner.ros.params import node_config  # noqa: E402
+from cdh_planner.ros.core.params import node_config  # noqa: E402
 from ros_harness import (Q1, Q2, Q3, ROBOT2, Collector, ControllerDouble,  # noqa: E402
                          NodeProcess, claimed_domain, file_parameters, pose_text, run_cli,
                          sphere_pose_msg, wait_node_measures)

@@ -1,7 +1,7 @@
 """``execution.mode: forward_command``: the node streams std_msgs/Float64MultiArray to a
 ros2_control JointGroupPositionController's ``~/commands``, in the controller's joint order
 (``execution.joint_order``, checked against the robot's winch names). Over DDS against the
-simulated controller with ``--commands`` (cdh_planner/ros/simulated_controller.py, through
+simulated controller with ``--commands`` (cdh_planner/ros/execution/simulated_controller.py, through
 test/doubles/follow_joint_trajectory_server.py), which applies a command only when the
 real controller would (data size = number of joints; finite) and publishes the joints'
 JointState. The node around the TEST DOUBLE planner: these tests are about execution.
@@ -14,10 +14,10 @@ import pytest
 from std_srvs.srv import Trigger
 
 from cdh_planner.errors import InputError
-from cdh_planner.ros import messages as M
+from cdh_planner.ros.msgs import messages as M
 from cdh_planner.ros.client import PlannerClient
-from cdh_planner.ros.params import node_config
-from cdh_planner.ros.command_outlets import forward_command
+from cdh_planner.ros.core.params import node_config
+from cdh_planner.ros.execution.command_outlets import forward_command
 from ros_harness import (Q1, Q2, ROBOT2, ControllerDouble, NodeProcess, claimed_domain,
                          file_parameters, in_process_nodes, sphere_pose_msg, wait_node_measures)
 from test_ros_execution import _lengths

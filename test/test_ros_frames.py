@@ -18,12 +18,12 @@ from tf2_msgs.msg import TFMessage
 
 from cdh_planner.feasibility import evaluate
 from cdh_planner.model.pose import rotation_from_quaternion
-from cdh_planner.ros import messages as M
-from cdh_planner.ros import plan_requests
+from cdh_planner.ros.msgs import messages as M
+from cdh_planner.ros.core import plan_requests
 from cdh_planner.ros.client import PlannerClient
-from cdh_planner.ros.winches import current_pose
-from cdh_planner.ros.node_frames import TF_QOS, TF_STATIC_QOS
-from cdh_planner.ros.params import node_config
+from cdh_planner.ros.execution.winches import current_pose
+from cdh_planner.ros.node.frames import TF_QOS, TF_STATIC_QOS
+from cdh_planner.ros.core.params import node_config
 from ros_harness import (Q1, Q2, ROBOT2, Collector, ControllerDouble, NodeProcess,
                          claimed_domain, file_parameters, sphere_pose_msg, wait_node_measures)
 from test_ros_execution import _lengths

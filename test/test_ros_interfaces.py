@@ -52,7 +52,7 @@ def test_error_codes_are_nav2s_where_they_fit_and_the_planners_own_beyond():
     own = {k: getattr(R, k) for k in ("CANCELED", "BUSY", "INVALID_REQUEST", "NO_CURRENT_STATE",
                                       "OUTPUT_LIMIT")}
     assert all(v >= 290 for v in own.values()) and len(set(own.values())) == len(own)
-    from cdh_planner.ros import messages as M
+    from cdh_planner.ros.msgs import messages as M
     assert (M.NONE, M.UNKNOWN, M.TF_ERROR, M.TIMEOUT, M.NO_VALID_PATH) == (
         R.NONE, R.UNKNOWN, R.TF_ERROR, R.TIMEOUT, R.NO_VALID_PATH)
 

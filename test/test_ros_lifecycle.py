@@ -13,7 +13,7 @@ from lifecycle_msgs.msg import Transition
 from lifecycle_msgs.srv import ChangeState, GetState
 
 from cdh_planner.ros.client import PlannerClient
-from cdh_planner.ros.diagnostics import Health, health_status
+from cdh_planner.ros.core.diagnostics import Health, health_status
 from cdh_planner.ros.interface import SERVICE_QOS
 
 from ros_harness import Q1, Q2, Collector, NodeProcess, claimed_domain, sphere_pose_msg
@@ -126,7 +126,7 @@ def test_diagnostic_levels(health, level, words):
 def test_configure_warms_the_planners_kernel():
     """plan_requests.warm_up (called on every planner the node makes: configure, new parameters)
     evaluates the constraint's compiled kernel once; a planner without one is left as is."""
-    from cdh_planner.ros.plan_requests import warm_up
+    from cdh_planner.ros.core.plan_requests import warm_up
     calls = []
 
     class Constraint:
@@ -171,7 +171,7 @@ def test_an_executor_that_stops_on_an_error_exits_non_zero(tmp_path, monkeypatch
     logged naming it, exit 1 (before: exit 0, as a clean stop)."""
     from rclpy.executors import MultiThreadedExecutor
 
-    from cdh_planner.ros import node_main
+    from cdh_planner.ros.node import main as node_main
     from ros_harness import ROBOT2, fake_planner_class
 
     def crash(self, *args, **kwargs):

@@ -1,4 +1,4 @@
-"""Message conversions (ros/messages.py): field by field against the planner's data, layouts
+"""Message conversions (ros/msgs/messages.py): field by field against the planner's data, layouts
 and strides by the std_msgs/MultiArrayLayout rule, frames, joint names, SI units, nav2 error
 codes, interpolation mathematics and pose round trips. No ROS graph: messages only."""
 
@@ -20,10 +20,10 @@ from cdh_planner.feasibility import evaluate  # noqa: E402
 from cdh_planner.model.pose import quaternion_from_tau, rotation_from_quaternion, rotation_tt  # noqa: E402
 from cdh_planner.model.robot import load_robot  # noqa: E402
 from cdh_planner.planner import PlanResult, Pose  # noqa: E402
-from cdh_planner.ros import markers as MK  # noqa: E402
+from cdh_planner.ros.msgs import markers as MK  # noqa: E402
 from cdh_planner.trajectory import sampling as S  # noqa: E402
 from cdh_planner.status import Status  # noqa: E402
-from cdh_planner.ros import messages as M  # noqa: E402
+from cdh_planner.ros.msgs import messages as M  # noqa: E402
 from cdh_planner.trajectory.path import PlannedPath  # noqa: E402
 from cdh_planner.trajectory.timing import time_path  # noqa: E402
 
@@ -126,7 +126,7 @@ def test_cable_trajectory_commands_unstretched_lengths():
     drops the effort (a JTC without an effort interface refuses it)."""
     from dataclasses import replace
     from cdh_planner.trajectory.path import with_commands
-    winches = pytest.importorskip("cdh_planner.ros.winches")
+    winches = pytest.importorskip("cdh_planner.ros.execution.winches")
     elastic = with_commands(ROBOT, PATH)
     msg = M.cable_trajectory_msg(elastic, ROBOT.winch_names, FRAME)
     L0 = np.array([list(p.positions) for p in msg.points])

@@ -18,9 +18,9 @@ from cdh_planner.model.forward_kinematics import forward_kinematics_many  # noqa
 from cdh_planner.sim.plant import rest_lengths  # noqa: E402
 from cdh_planner.model.kinematics import cable_lengths  # noqa: E402
 from cdh_planner.model.pose import rotation_from_quaternion  # noqa: E402
-from cdh_planner.ros import messages as M  # noqa: E402
+from cdh_planner.ros.msgs import messages as M  # noqa: E402
 from cdh_planner.ros.client import PlannerClient, plan_path_goal  # noqa: E402
-from cdh_planner.ros.params import node_config  # noqa: E402
+from cdh_planner.ros.core.params import node_config  # noqa: E402
 from ros_harness import (Q2, Q3, ROBOT2, Collector, ControllerDouble, NodeProcess,  # noqa: E402
                          claimed_domain, file_parameters, sphere_pose_msg, wait_node_measures)
 

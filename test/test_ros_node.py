@@ -25,10 +25,10 @@ from trajectory_msgs.msg import JointTrajectory  # noqa: E402
 from visualization_msgs.msg import Marker, MarkerArray  # noqa: E402
 
 from cdh_planner.model.pose import rotation_from_quaternion  # noqa: E402
-from cdh_planner.ros import messages as M  # noqa: E402
-from cdh_planner.ros import plan_requests  # noqa: E402
+from cdh_planner.ros.msgs import messages as M  # noqa: E402
+from cdh_planner.ros.core import plan_requests  # noqa: E402
 from cdh_planner.ros.client import PlannerClient  # noqa: E402
-from cdh_planner.ros.params import node_config  # noqa: E402
+from cdh_planner.ros.core.params import node_config  # noqa: E402
 from conftest import REPO  # noqa: E402
 from ros_harness import (EQUATOR, EQUATOR_Q3, Q1, Q2, Q3, ROBOT2, Collector,  # noqa: E402
                          NodeProcess, claimed_domain, file_parameters, run_cli,

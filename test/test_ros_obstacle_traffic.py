@@ -110,12 +110,15 @@ def _values(msg):
 
 def assert_answers_during_plans(latencies, plan_s):
     """~/get_scene answers while a plan runs: typically within GET_SCENE_BOUND_S (the
-    median), and never after the plan (each well under the plan's ``plan_s``; a loaded
-    machine may stall a process for some 100 ms, which says nothing of the node)."""
+    median), and not behind the plan: nine calls in ten well under the plan's ``plan_s``
+    (a service that waited for the plan would wait in most calls; a loaded machine may
+    stall one process for a second or two, which says nothing of the node: a fresh-clone
+    CI run saw one call in 86 take 2.0 s with a median of 0.016 s)."""
     assert latencies
     shown = (len(latencies), statistics.median(latencies), max(latencies))
     assert statistics.median(latencies) < GET_SCENE_BOUND_S, shown
-    assert max(latencies) < plan_s / 2, shown
+    late = [t for t in latencies if t >= plan_s / 2]
+    assert len(late) <= len(latencies) // 10, (shown, late)
 
 
 def check_every_array(files, arrays):

@@ -14,7 +14,7 @@ pytest.importorskip("rclpy")
 from cdh_planner.model.pose import rotation_from_quaternion  # noqa: E402
 from cdh_planner.model.robot import load_robot  # noqa: E402
 from cdh_planner.ros.client import ClientError, plan_path_goal  # noqa: E402
-from cdh_planner.ros.messages import path_arrays  # noqa: E402
+from cdh_planner.ros.msgs.messages import path_arrays  # noqa: E402
 from cdh_planner.ros.replay import SCENE_TYPE, read_records  # noqa: E402
 from cdh_planner_interfaces.msg import Obstacle  # noqa: E402
 
@@ -106,8 +106,8 @@ def test_obstacles_over_dds_change_the_next_plan_and_replay_reproduces_them(
 def test_every_rotated_run_file_begins_with_the_current_scene(tmp_path):
     """RunLog: a message written as a snapshot (the node's ~/scene) opens every later file
     (after the parameters), so a replay of any one file knows the obstacles."""
-    from cdh_planner.ros.run_log import RunLog
-    from cdh_planner.ros.scene_msgs import scene_msg
+    from cdh_planner.ros.core.run_log import RunLog
+    from cdh_planner.ros.msgs.scene_msgs import scene_msg
     from cdh_planner.scene.schema import scene_from_dict
     from std_msgs.msg import String
 

@@ -18,12 +18,12 @@ from cdh_planner.feasibility import evaluate  # noqa: E402
 from cdh_planner.model.pose import quaternion_from_tau  # noqa: E402
 from cdh_planner.model.robot import load_robot  # noqa: E402
 from cdh_planner.model.task import PivotTask, SliceTask  # noqa: E402
-from cdh_planner.ros import plan_requests  # noqa: E402
+from cdh_planner.ros.core import plan_requests  # noqa: E402
 from cdh_planner.model import robot_schema  # noqa: E402
 from cdh_planner.model.robot import FIELDS as ROBOT_FIELDS, OPTIONAL_GROUPS  # noqa: E402
-from cdh_planner.ros import params  # noqa: E402
-from cdh_planner.ros.params import SPEC, SPECS, node_config  # noqa: E402
-from cdh_planner.ros.streaming import Stream  # noqa: E402
+from cdh_planner.ros.core import params  # noqa: E402
+from cdh_planner.ros.core.params import SPEC, SPECS, node_config  # noqa: E402
+from cdh_planner.ros.core.streaming import Stream  # noqa: E402
 from cdh_planner.status import Status  # noqa: E402
 from cdh_planner.trajectory.path import PlannedPath  # noqa: E402
 from cdh_planner.trajectory.timing import time_path  # noqa: E402
@@ -141,14 +141,14 @@ def test_parameters_map_onto_the_planner_settings():
 
 
 def test_settings_errors_name_the_node_parameter():
-    from cdh_planner.ros.params import parameter_error
+    from cdh_planner.ros.core.params import parameter_error
     err = parameter_error(InputError("max_cable_speed", 0.0, "must be positive"))
     assert str(err) == "trajectory.max_cable_speed = 0.0: must be positive"
     assert str(parameter_error(InputError("radius", -1.0, "x"))).startswith("planner.radius")
 
 
 def test_a_parameter_set_to_its_value_keeps_the_planner():
-    from cdh_planner.ros.params import needs_new_planner
+    from cdh_planner.ros.core.params import needs_new_planner
     old = node_config(ROBOT2_PARAMS).values
     same = node_config(dict(ROBOT2_PARAMS, **{"planner.timeout_s": 60})).values
     assert not needs_new_planner(["planner.timeout_s"], old, same)
@@ -190,7 +190,7 @@ def test_refusal_reasons_and_codes():
     ("timeout", Status.INVALID, 292), ("nan", Status.INVALID, 292)])
 def test_a_goals_own_faults_are_refused_with_their_member(fault, reason, code):
     from cdh_planner.ros.client import plan_path_goal
-    from cdh_planner.ros import messages as M
+    from cdh_planner.ros.msgs import messages as M
     goal = plan_path_goal(None, sphere_pose_msg(Q2, frame="map" if fault == "frame"
                                                 else "cdh_base"), use_current_start=True)
     goal.strategy = "dijkstra" if fault == "strategy" else ""
@@ -262,7 +262,7 @@ def test_stream_refuses_wrong_joint_names():
 def test_the_parameter_table_in_the_docs_is_generated_from_the_specs():
     text = (REPO / "docs" / "parameters.md").read_text()
     assert text == params.parameters_markdown(), \
-        "docs/parameters.md is stale: python -m cdh_planner.ros.params > docs/parameters.md"
+        "docs/parameters.md is stale: python -m cdh_planner.ros.core.params > docs/parameters.md"
     assert all(f"| `{s.name}` |" in text for s in SPECS)
 
 

@@ -23,9 +23,9 @@ from sensor_msgs.msg import JointState  # noqa: E402
 from trajectory_msgs.msg import JointTrajectory  # noqa: E402
 
 from cdh_planner.model.robot import load_robot  # noqa: E402
-from cdh_planner.ros import messages as M  # noqa: E402
+from cdh_planner.ros.msgs import messages as M  # noqa: E402
 from cdh_planner.ros.client import PlannerClient  # noqa: E402
-from cdh_planner.ros.plan_requests import PLAN_QUEUE_DEPTH  # noqa: E402
+from cdh_planner.ros.core.plan_requests import PLAN_QUEUE_DEPTH  # noqa: E402
 from ros_harness import (Q1, Q2, ROBOT2, Collector, NodeProcess,  # noqa: E402
                          claimed_domain, sphere_pose_msg, stamp_s)
 

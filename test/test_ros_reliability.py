@@ -25,8 +25,8 @@ from rclpy.parameter import Parameter  # noqa: E402
 from std_srvs.srv import Trigger  # noqa: E402
 
 from cdh_planner.recording.mcap_log import REQUEST_RECEIVED, RESPONSE_SENT, read_run  # noqa: E402
-from cdh_planner.ros import messages as M  # noqa: E402
-from cdh_planner.ros import plan_requests  # noqa: E402
+from cdh_planner.ros.msgs import messages as M  # noqa: E402
+from cdh_planner.ros.core import plan_requests  # noqa: E402
 from cdh_planner.ros.client import PlannerClient, path_duration  # noqa: E402
 from ros_harness import (Q1, Q2, ROBOT2, NodeProcess, claimed_domain, fake_planner_class,  # noqa: E402
                          in_process_nodes, sphere_pose_msg, until)
@@ -183,14 +183,14 @@ def test_output_refusal(change, why):
 
 
 def _robot_task_settings():
-    from cdh_planner.ros.params import node_config
+    from cdh_planner.ros.core.params import node_config
     from ros_harness import file_parameters
     config = node_config(file_parameters(ROBOT2))
     return config.robot, config.task, config.settings
 
 
 def _poses():
-    from cdh_planner.ros.params import node_config
+    from cdh_planner.ros.core.params import node_config
     from ros_harness import file_parameters
     base = node_config(file_parameters(ROBOT2)).base_frame
     return plan_requests.request_poses(GetPlan.Request(start=sphere_pose_msg(Q1),
@@ -481,7 +481,7 @@ def test_diagnostics_keep_the_last_plan_after_finalize(make_node):
     """After shutdown (finalized) /diagnostics still names the last plan beside its
     last_plan_ok (before: last_plan 'none' beside last_plan_ok 'true'); before any plan
     both are 'none'."""
-    from cdh_planner.ros.diagnostics import health_status
+    from cdh_planner.ros.core.diagnostics import health_status
     node = make_node()
     values = M.status_values(health_status(node.diagnostics.health(), "n"))
     assert (values["last_plan"], values["last_plan_ok"]) == ("none", "none")

@@ -30,7 +30,7 @@ from cdh_planner.errors import InputError  # noqa: E402
 from cdh_planner.recording.mcap_log import (  # noqa: E402
     MAGIC, REQUEST_RECEIVED, RESPONSE_SENT, NotARecording, check_recording, read_run, recover)
 from cdh_planner.ros import replay as R  # noqa: E402
-from cdh_planner.ros.run_log import PARAMETER_EVENTS, RunLog  # noqa: E402
+from cdh_planner.ros.core.run_log import PARAMETER_EVENTS, RunLog  # noqa: E402
 
 NODE = "/cdh_planner"
 SERVICE = "/cdh_planner/plan"

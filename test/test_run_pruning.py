@@ -4,8 +4,8 @@ first, never the one being written; the node's RunLog prunes when it opens a fil
 import os
 import time
 
-from cdh_planner.ros.run_log import RunLog, log_limits
-from cdh_planner.ros.run_pruning import DAY_S, prune, run_files
+from cdh_planner.ros.core.run_log import RunLog, log_limits
+from cdh_planner.ros.core.run_pruning import DAY_S, prune, run_files
 
 NOW = 1_800_000_000.0
 

@@ -254,7 +254,7 @@ def test_the_robots_platform_shape_is_the_scenes_default_platform():
 
 def test_a_platform_shape_parameter_gives_the_nodes_scene_without_a_scene_file():
     from conftest import CONFIG
-    from cdh_planner.ros import params
+    from cdh_planner.ros.core import params
     from ros_harness import file_parameters
     values = dict(file_parameters(CONFIG / "robot2.yaml"),
                   **{"robot.platform_shape.type": "box",

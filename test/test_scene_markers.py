@@ -3,7 +3,7 @@
 import numpy as np
 from visualization_msgs.msg import Marker
 
-from cdh_planner.ros.markers import obstacle_markers
+from cdh_planner.ros.msgs.markers import obstacle_markers
 from cdh_planner.scene.schema import scene_from_dict
 
 Q = [0.0, 0.0, 0.7071067811865476, 0.7071067811865476]

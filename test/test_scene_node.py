@@ -7,8 +7,8 @@ import pytest
 import yaml
 
 from cdh_planner.errors import InputError
-from cdh_planner.ros import params
-from cdh_planner.ros.node import default_planner_factory
+from cdh_planner.ros.core import params
+from cdh_planner.ros.node.planner_node import default_planner_factory
 
 from ros_harness import file_parameters  # noqa: E402
 from conftest import CONFIG
@@ -52,7 +52,7 @@ def test_a_scene_set_over_the_parameter_service_changes_the_next_plan(tmp_path):
     from rclpy.parameter import Parameter
     from test_ros_reliability import plan
     from cdh_planner.model.pose import rotation_from_quaternion
-    from cdh_planner.ros.messages import path_arrays
+    from cdh_planner.ros.msgs.messages import path_arrays
     from test_ros_obstacles import least_distance
     from cdh_planner.model.robot import load_robot
     from ros_harness import Q2, Q3, in_process_nodes

@@ -10,10 +10,10 @@ from geometry_msgs.msg import Point
 from shape_msgs.msg import MeshTriangle, SolidPrimitive
 
 from cdh_planner.errors import InputError
-from cdh_planner.ros import params
-from cdh_planner.ros.scene_msgs import obstacle_msg, same, scene_change, scene_msg, \
+from cdh_planner.ros.core import params
+from cdh_planner.ros.msgs.scene_msgs import obstacle_msg, same, scene_change, scene_msg, \
     shape_of_obstacle
-from cdh_planner.ros.scene_state import SceneState
+from cdh_planner.ros.core.scene_state import SceneState
 from cdh_planner.scene.schema import scene_from_dict
 from cdh_planner_interfaces.msg import Obstacle, ObstacleArray
 
@@ -152,8 +152,8 @@ def test_the_scene_message_and_the_change_that_reaches_another():
 def test_a_planner_is_made_for_each_scene_a_plan_is_made_under():
     """PlanService: a call carries the scene of its arrival; the planner in force serves it
     if it was made for that scene, else make_planner makes one (and it stays)."""
-    from cdh_planner.ros.plan_service import PlanService
-    from cdh_planner.ros.scene_state import SceneVersion
+    from cdh_planner.ros.core.plan_service import PlanService
+    from cdh_planner.ros.core.scene_state import SceneVersion
 
     class Planner:
         def __init__(self, scene):

@@ -9,7 +9,7 @@ import pytest
 from cdh_planner.cli import build_parser
 from cdh_planner.errors import InputError
 from cdh_planner.parsing.problem import SETTING_KEYS, TOP_KEYS, TOP_SETTINGS, settings_from_dict
-from cdh_planner.ros.params import SETTING_PARAMETERS, SPEC, check_value
+from cdh_planner.ros.core.params import SETTING_PARAMETERS, SPEC, check_value
 from cdh_planner.settings import SETTINGS, PlannerSettings, check_setting
 
 

@@ -56,7 +56,8 @@ def _choices(parser, dest):
 
 
 def test_a_new_strategy_is_one_class_and_a_choice_everywhere(registered):
-    from cdh_planner.ros import params, plan_requests
+    from cdh_planner.ros.core import params
+    from cdh_planner.ros.core import plan_requests
     from cdh_planner.ros.client import plan_path_goal
     pytest.importorskip("nav_msgs")
     from ros_harness import Q2, sphere_pose_msg

@@ -138,7 +138,7 @@ def test_pivot_slice_draws(tmp_path, capsys):
 
 
 def test_every_task_field_is_a_node_parameter_with_its_default():
-    from cdh_planner.ros.params import SPEC
+    from cdh_planner.ros.core.params import SPEC
     assert SPEC["task.type"].choices == tuple(T.TASKS)
     for cls in T.TASKS.values():
         for name, meta, default in cls.parameters():
@@ -183,7 +183,7 @@ def plane_registered():
 
 
 def test_a_new_task_is_one_class(plane_registered):
-    from cdh_planner.ros import params
+    from cdh_planner.ros.core import params
     task = T.task_from_dict({"type": "plane", "height": 0.25})
     assert task == PlaneTask(height=0.25)
     specs = {s.name: s for s in params._task_specs()}

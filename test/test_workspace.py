@@ -160,7 +160,7 @@ def test_no_ray_run_and_other_commands_import_no_ray():
     code = ("import sys, contextlib, io\nfrom cdh_planner import cli\n"
             "with contextlib.redirect_stdout(io.StringIO()):\n"
             f"    assert cli.main(['workspace', {str(ROBOT2)!r}, '--samples', '50', '--no-ray', '--quiet']) == 0\n"
-            "import cdh_planner.ros.node, cdh_planner.commands.plan, cdh_planner.commands.sweep\n"
+            "import cdh_planner.ros.node.planner_node, cdh_planner.commands.plan, cdh_planner.commands.sweep\n"
             "print('ray' in sys.modules)")
     out = subprocess.run([sys.executable, "-c", code], capture_output=True, text=True, check=True)
     assert out.stdout.strip().splitlines()[-1] == "False"

@@ -1,4 +1,4 @@
-"""``cdh-planner node``: run the ROS 2 planner node (``cdh_planner.ros.node``).
+"""``cdh-planner node``: run the ROS 2 planner node (``cdh_planner.ros.node.planner_node``).
 
     cdh-planner node --ros-args --params-file config/robot2.yaml [-p name:=value ...]
 
@@ -19,7 +19,7 @@ def add_parser(subparsers):
                     "~/planned_cable_trajectory, ~/tension_envelope, ~/markers, "
                     "~/plan_result, ~/execution_result, ~/plan_progress, ~/cable_command; "
                     "subscribes to /joint_states. Parameters: the robot file and the names in "
-                    "cdh_planner/ros/params.py (docs/ros-node.md).",
+                    "cdh_planner/ros/core/params.py (docs/ros-node.md).",
         epilog="example:\n  cdh-planner node --ros-args --params-file config/robot2.yaml "
                "-p log_dir:=/tmp/runs -p planner.strategy:=gbf",
         formatter_class=argparse.RawDescriptionHelpFormatter)
@@ -30,5 +30,5 @@ def add_parser(subparsers):
 
 
 def run(args):
-    from ..ros.node_main import main
+    from ..ros.node.main import main
     return main(args.ros_args, log=lambda line: print(line, file=sys.stderr))

@@ -250,7 +250,7 @@ def _apply_scene(client, plan):
     """Bring the node's obstacles to those recorded before ``plan`` (the node's ~/scene);
     print what changed; the problems."""
     from ..ros.client import ClientError
-    from ..ros.scene_msgs import scene_change
+    from ..ros.msgs.scene_msgs import scene_change
     if plan.scene is None:
         return []
     try:

@@ -3,7 +3,7 @@
     cdh-planner urdf ROBOT.yaml [-o OUT.urdf] [--fixed-frame world] [--base-frame cdh_base]
         [--platform-frame cdh_platform]
 
-The same URDF the node publishes on ``robot_description`` (``ros/description.py``): the
+The same URDF the node publishes on ``robot_description`` (``ros/core/description.py``): the
 z-up fixed frame, the paper's z-down base frame under it, the anchors as frames, the
 platform on a floating joint. Printed on stdout, or written to OUT. Exit 0, or 2 for bad
 input (the robot file, an output that cannot be written or is the robot file).
@@ -29,7 +29,7 @@ def run(args):
     from ..errors import InputError
     from .outputs import check_output, print_or_write
     from ..model.robot import load_robot
-    from ..ros.description import urdf
+    from ..ros.core.description import urdf
     frames = {"--fixed-frame": args.fixed_frame, "--base-frame": args.base_frame,
               "--platform-frame": args.platform_frame}
     for option, name in frames.items():

@@ -161,6 +161,8 @@ def dump_rows(doc):
 
 
 _ENCODER = json.JSONEncoder(allow_nan=False)
+MARGIN_RESOLUTION = 12   # decimals: a bisected boundary point's margin is 0 to rounding
+# (-1e-16 on one machine, -1e-15 on another); the JSON keeps the computed value
 
 
 def _encode(value):
@@ -260,7 +262,8 @@ def _print_segment(s):
 
 
 def _point_text(pt):
-    return (f"s = {pt.s:.4f}  margin {_num(pt.margin, '+.4g')}  {pt.binding}  "
+    margin = round(pt.margin, MARGIN_RESOLUTION) if math.isfinite(pt.margin) else pt.margin
+    return (f"s = {pt.s:.4f}  margin {_num(margin, '+.4g')}  {pt.binding}  "
             f"p {_vec(pt.position, '.4f')}  q {_vec(pt.quaternion, '.4f')}")
 
 

@@ -73,8 +73,9 @@ def wrench_balance(robot, L0, p, R, force, moment, arm, bilateral=False, jacobia
     push as well (t_i = EA_i (L_i - L0_i) / L0_i of either sign), a smooth system whose
     solution is the tension-only one where every tension comes out positive. ``jacobian``
     False: the Jacobian is None (a line search needs the residual only)."""
-    r = np.einsum("nij,kj->nki", R, robot.platform_anchors)           # R b_i (M, m, 3)
-    d = p[:, None, :] + r - robot.base_anchors
+    a, b = robot.base_anchors, robot.platform_anchors
+    r = b @ R.transpose(0, 2, 1)                                        # R b_i (M, m, 3)
+    d = p[:, None, :] + r - a
     L = np.linalg.norm(d, axis=-1)
     u = d / L[..., None]
     k = axial_stiffness(robot, L0)
@@ -82,24 +83,31 @@ def wrench_balance(robot, L0, p, R, force, moment, arm, bilateral=False, jacobia
     if not bilateral:
         t = np.maximum(t, 0.0)
         k = np.where(t > 0, k, 0.0)
-    a = np.broadcast_to(robot.base_anchors, u.shape)
-    c = p + np.einsum("nij,j->ni", R, robot.load_point)
+    c = p + R @ robot.load_point
     w = np.concatenate([force, moment + np.cross(c, arm)], axis=1)
-    res = np.concatenate([np.einsum("nk,nki->ni", t, u),
-                          np.einsum("nk,nki->ni", t, np.cross(a, u))], axis=1) - w
+    au = np.cross(a, u)                                                 # a_i x u_i (M, m, 3)
+    res = np.concatenate([(t[:, None, :] @ u)[:, 0], (t[:, None, :] @ au)[:, 0]], axis=1) - w
     if not jacobian:
         return res, None, t
-    # dq_i / dx = [I, -[r_i]x]; dL_i = u_i . dq_i; du_i = (I - u_i u_i^T) / L_i dq_i
-    dq = np.concatenate([np.broadcast_to(np.eye(3), r.shape + (3,)), -_skew(r)], axis=-1)
-    dL = np.einsum("nki,nkij->nkj", u, dq)                              # (M, m, 6)
-    du = (dq - u[..., None] * dL[..., None, :]) / L[..., None, None]    # (M, m, 3, 6)
-    dt = k[..., None] * dL
-    top = np.einsum("nki,nkj->nij", u, dt) + np.einsum("nk,nkij->nij", t, du)
-    bottom = (np.einsum("nki,nkj->nij", np.cross(a, u), dt)
-              + np.einsum("nk,nkij->nij", t, _skew(a) @ du))
-    dc = np.concatenate([np.broadcast_to(np.eye(3), c.shape + (3,)),
-                         -_skew(c - p)], axis=-1)                       # (M, 3, 6)
-    jac = np.concatenate([top, bottom + _skew(arm) @ dc], axis=1)       # d(c x arm) = -arm x dc
+    # dq_i = dp + dtheta x r_i; dL_i = [u_i; r_i x u_i] . [dp; dtheta];
+    # d(t_i u_i) = k_i u_i dL_i + (t_i / L_i) (dq_i - u_i dL_i), summed over the cables with
+    # matrix products (M, 3, m) @ (M, m, 6), the [a]x [r]x terms as r a^T - (a . r) I
+    dL = np.concatenate([u, np.cross(r, u)], axis=-1)                   # (M, m, 6)
+    tl = t / L                                                          # (M, m) N/m
+    cu = (k - tl)[..., None] * dL                                        # (M, m, 6)
+    wr = tl[..., None] * r                                               # (t_i / L_i) r_i (M, m, 3)
+    eye = np.eye(3)
+    top = u.transpose(0, 2, 1) @ cu
+    top[:, :, :3] += tl.sum(axis=1)[:, None, None] * eye
+    top[:, :, 3:] -= _skew(wr.sum(axis=1))
+    bottom = au.transpose(0, 2, 1) @ cu
+    bottom[:, :, :3] += _skew(tl @ a)
+    bottom[:, :, 3:] -= (wr.transpose(0, 2, 1) @ a                     # sum (t_i / L_i) r_i a_i^T
+                         - (wr * a).sum(axis=(1, 2))[:, None, None] * eye)
+    arm_x = _skew(arm)
+    bottom[:, :, :3] += arm_x                                          # d(c x arm) = -arm x dc
+    bottom[:, :, 3:] -= arm_x @ _skew(c - p)
+    jac = np.concatenate([top, bottom], axis=1)
     return res, jac, t
 
 

@@ -4,7 +4,7 @@
 ``Robot`` dataclass, as ``settings.py`` does for the planner settings: its key in the file
 (dotted inside a group: ``load.force``), kind, unit, size, bounds and description.
 ``read_fields`` reads and checks a ``robot:`` mapping by that declaration; the node's
-parameters (``ros/params.py``: ``robot.<key>``) and their table (docs/parameters.md) are
+parameters (``ros/core/params.py``: ``robot.<key>``) and their table (docs/parameters.md) are
 built from it too, so a new robot field is one ``Robot`` field.
 
 Sizes per cable follow the number of winches, m = len(winch_names): a per-cable field

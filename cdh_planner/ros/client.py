@@ -38,7 +38,7 @@ from cdh_planner_interfaces.msg import TensionEnvelope
 
 from ..errors import InputError
 from ..parsing.poses import pose_values
-from . import messages as M
+from .msgs import messages as M
 from .context import init_context
 from .interface import ACTION_QOS, CABLE_COMMAND, EXECUTE, EXECUTION_RESULT, GET_SCENE, \
     LATCHED, NODE_NAME, OBSTACLES, OBSTACLES_QOS, PLAN, PLAN_PATH, PLAN_RESULT, \

@@ -39,10 +39,10 @@ from ..recording.mcap_log import ACTION_INFIX, GET_RESULT, REQUEST_RECEIVED, RES
     SEND_GOAL, SERVICE_EVENT_SUFFIX, NotARecording, check_recording
 from ..recording.mcap_log import scan_records as scan_run  # raw records of a (possibly killed) run file
 from ..recording.ros_schemas import rosidl_type
-from .command_outlets import command_topic_parameters
-from .messages import path_arrays
+from .execution.command_outlets import command_topic_parameters
+from .msgs.messages import path_arrays
 from .interface import CABLE_COMMAND, OBSTACLES, SERVICE_QOS
-from .run_log import PARAMETER_EVENTS
+from .core.run_log import PARAMETER_EVENTS
 
 
 MATCH_SETTLE_S = 0.3   # s after the publisher sees its subscribers, before the first message
@@ -50,7 +50,7 @@ MAX_GAP_S = 5.0        # default longest wait between two republished messages (
 # the parameters that decide a plan's answer (the others: streaming, recording)
 ANSWER_PREFIXES = ("robot.", "task.", "planner.", "trajectory.")
 ANSWER_PARAMETERS = ("base_frame", "scene_file")
-SCENE_TYPE = "cdh_planner_interfaces/msg/Scene"   # the node's ~/scene (node_scene.py)
+SCENE_TYPE = "cdh_planner_interfaces/msg/Scene"   # the node's ~/scene (node/scene.py)
 
 
 # the recorded PlanPath goals and results (recording.mcap_log.RunRecorder.write_action_event)
@@ -409,7 +409,7 @@ def parameter_differences(recorded, live, limit=3):
     """Text naming the parameters whose ``live`` value (name -> Python value) differs from
     the ``recorded`` one (name -> rcl_interfaces/msg/Parameter); "" if none."""
     from ..errors import short_repr
-    from .params import _same
+    from .core.params import _same
     diffs = [f"{name} is {short_repr(live.get(name), 40)} here, "
              f"{short_repr(parameter_value(msg), 40)} in the recording"
              for name, msg in sorted(recorded.items())

@@ -92,7 +92,7 @@ class FakePlanner:
 def main():
     """Run the real node with this test double: python -m test.ros_doubles.fake_planner
     --ros-args ..."""
-    from cdh_planner.ros.node_main import main as node_main
+    from cdh_planner.ros.node.main import main as node_main
     args = sys.argv[1:]
     if args[:1] == ["--ros-args"]:
         args = args[1:]

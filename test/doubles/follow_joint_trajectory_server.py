@@ -1,4 +1,4 @@
-"""TEST DOUBLE: the simulated cable controller (cdh_planner/ros/simulated_controller.py), a
+"""TEST DOUBLE: the simulated cable controller (cdh_planner/ros/execution/simulated_controller.py), a
 FollowJointTrajectory server that checks what the Jazzy JointTrajectoryController checks
 before accepting a goal and publishes the joints' JointState. It is NOT a controller; the
 tests use it in place of one (test/test_execution.py, test/test_ros_execution.py).
@@ -8,7 +8,7 @@ tests use it in place of one (test/test_execution.py, test/test_ros_execution.py
 
 import sys
 
-from cdh_planner.ros.simulated_controller import main
+from cdh_planner.ros.execution.simulated_controller import main
 
 if __name__ == "__main__":
     sys.exit(main())

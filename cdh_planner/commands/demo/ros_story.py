@@ -2,7 +2,7 @@
 in a ROS domain of its own, recording to ``<out>/runs``; 6. a task sequencer plans
 q_1 -> q_2 through the ``~/plan_path`` action, checks the motion densely and streams it
 (``PlannerClient.execute_and_follow``); 7. ros2_control takes over: the simulated cable
-controller (``ros/simulated_controller.py``, a FollowJointTrajectory server with the winches'
+controller (``ros/execution/simulated_controller.py``, a FollowJointTrajectory server with the winches'
 JointState) starts where the winches are and the node switches to
 ``execution.mode: follow_joint_trajectory``; 8. q_2 -> q_3 planned from the pose of the
 measured cable lengths (``use_current_start``) and executed through the controller;
@@ -264,7 +264,7 @@ def start_controller(demo):
     if first is None or first.run is None or first.run.goal is None:
         raise NodeFailed("no executed first leg: the winches' lengths are unknown")
     params = story.parameters
-    args = ["-m", "cdh_planner.ros.simulated_controller", *robot.winch_names,
+    args = ["-m", "cdh_planner.ros.execution.simulated_controller", *robot.winch_names,
             "--action", params["execution.controller_action"],
             "--joint-states", params["execution.joint_states_topic"],
             "--robot", robot.source,     # the simulated robot: MuJoCo, elastic cables

@@ -19,8 +19,8 @@ from sensor_msgs.msg import JointState
 from std_msgs.msg import Float64
 from visualization_msgs.msg import MarkerArray
 
-from ..cable_feasibility import feasibility_of as evaluate
-from .markers import pose_markers
+from ...cable_feasibility import feasibility_of as evaluate
+from ..msgs.markers import pose_markers
 
 CABLE_STATE, LEAST_MARGIN, LIVE_MARKERS = "cable_state", "least_margin", "live_markers"
 

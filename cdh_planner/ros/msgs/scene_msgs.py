@@ -18,9 +18,9 @@ from shape_msgs.msg import MeshTriangle, SolidPrimitive
 
 from cdh_planner_interfaces.msg import Obstacle, ObstacleArray, Scene
 
-from ..errors import MAX_POSITION_M, InputError, check_numbers
-from ..model.pose import check_quaternion
-from ..scene.schema import MAX_ID_CHARS, Shape, hull_of_points, shape_from_dict
+from ...errors import MAX_POSITION_M, InputError, check_numbers
+from ...model.pose import check_quaternion
+from ...scene.schema import MAX_ID_CHARS, Shape, hull_of_points, shape_from_dict
 
 PRIMITIVES = {SolidPrimitive.SPHERE: "sphere", SolidPrimitive.BOX: "box",
               SolidPrimitive.CYLINDER: "cylinder"}

@@ -14,7 +14,7 @@ warm the planner, open the run file), ``close()`` (release all that) and ``execu
 
 from rclpy.lifecycle import TransitionCallbackReturn
 
-from .params import node_config
+from ..core.params import node_config
 
 
 class LifecycleMixin:

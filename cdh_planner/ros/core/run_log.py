@@ -43,8 +43,8 @@ from pathlib import Path
 
 from rcl_interfaces.msg import ParameterEvent
 
-from ..errors import exception_line
-from ..recording.mcap_log import REQUEST_RECEIVED, REQUEST_SENT, RESPONSE_RECEIVED, RESPONSE_SENT, \
+from ...errors import exception_line
+from ...recording.mcap_log import REQUEST_RECEIVED, REQUEST_SENT, RESPONSE_RECEIVED, RESPONSE_SENT, \
     RunRecorder
 from .run_pruning import prune
 

@@ -1,14 +1,14 @@
-"""The node's frames on TF (``frames.py`` for the conventions) and the robot's live state:
+"""The node's frames on TF (``core/frames.py`` for the conventions) and the robot's live state:
 the static transform fixed frame (z-up) -> base frame (the paper's, z-down) on /tf_static
 and the URDF on ``robot_description`` (``description.py``), both latched; from the newest
 measured JointState (stamped with it), the platform's pose from forward kinematics,
-base frame -> platform frame, on /tf and ``~/platform_pose``, and ``live_state.py``'s
+base frame -> platform frame, on /tf and ``~/platform_pose``, and ``core/live_state.py``'s
 ``~/cable_state``, ``~/least_margin`` and ``~/live_markers``; and a
 ``frames.TransformBook`` of /tf and /tf_static through which goals in other frames are
 expressed in the base frame.
 
 The live state is a thread of its own, not an executor callback: every 1 /
-``live_state_rate_hz`` s it takes the newest joint state (``winches.LatestMessage``: none
+``live_state_rate_hz`` s it takes the newest joint state (``polled.PolledSubscription``: none
 are handled in between) and, only when there is a new one, computes and publishes it
 (markers at ``live_markers_rate_hz``). So joint states at 50 - 1000 Hz cost the executor
 nothing, and the planner's thread the GIL for a few ms per look. /tf is read the same way
@@ -29,15 +29,15 @@ from visualization_msgs.msg import MarkerArray
 from rclpy.qos import DurabilityPolicy, QoSProfile, ReliabilityPolicy
 from tf2_msgs.msg import TFMessage
 
-from ..errors import InputError, exception_line
-from . import messages as M
-from . import plan_requests
-from .description import urdf
-from .frames import Z_DOWN, TransformBook, pose_in_frame, transform_msg
-from .interface import LATCHED
-from .live_state import CABLE_STATE, LEAST_MARGIN, LIVE_MARKERS, LiveRates, live_markers, \
+from ...errors import InputError, exception_line
+from ..msgs import messages as M
+from ..core import plan_requests
+from ..core.description import urdf
+from ..core.frames import Z_DOWN, TransformBook, pose_in_frame, transform_msg
+from ..interface import LATCHED
+from ..core.live_state import CABLE_STATE, LEAST_MARGIN, LIVE_MARKERS, LiveRates, live_markers, \
     live_messages
-from .polled import PolledSubscription
+from ..polled import PolledSubscription
 
 TF_QOS = QoSProfile(depth=100, reliability=ReliabilityPolicy.RELIABLE,
                     durability=DurabilityPolicy.VOLATILE)         # tf2_ros's

@@ -25,9 +25,9 @@ import abc
 from dataclasses import dataclass
 from typing import ClassVar
 
-from ..errors import InputError
-from ..model.elastic import is_elastic
-from .param_spec import STRING, STRINGS, Spec
+from ...errors import InputError
+from ...model.elastic import is_elastic
+from ..core.param_spec import STRING, STRINGS, Spec
 
 OUTLETS = {}  # execution.mode -> registered CommandOutlet class (``register``)
 NODE_PARAMETERS = set()  # the node's own parameter names, no outlet's (``reserve``)

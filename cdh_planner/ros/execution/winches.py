@@ -31,13 +31,13 @@ from rclpy.qos import DurabilityPolicy, QoSProfile, ReliabilityPolicy
 from sensor_msgs.msg import JointState
 from trajectory_msgs.msg import JointTrajectory, JointTrajectoryPoint
 
-from ..errors import InputError, check_finite, exception_line
-from ..cable_feasibility import feasibility_of as evaluate
-from ..model.forward_kinematics import current_pose as _current_pose, nearest_pose  # noqa: F401 (API)
-from .interface import ACTION_QOS
-from .live_state import measured_tensions
-from .messages import check_joint_names, duration_msg
-from .polled import PolledSubscription
+from ...errors import InputError, check_finite, exception_line
+from ...cable_feasibility import feasibility_of as evaluate
+from ...model.forward_kinematics import current_pose as _current_pose, nearest_pose  # noqa: F401 (API)
+from ..interface import ACTION_QOS
+from ..core.live_state import measured_tensions
+from ..msgs.messages import check_joint_names, duration_msg
+from ..polled import PolledSubscription
 
 COMPLETED, STOPPED, FAILED = "completed", "stopped", "failed"
 

@@ -1,11 +1,11 @@
 """One node parameter's declaration (``Spec``) and its kinds: small and rclpy-free, so the
 parameter table (``params.py``) and the modules that bring their own parameters (the
-command outlets, ``command_outlets.py``) share it without importing each other."""
+command outlets, ``execution/command_outlets.py``) share it without importing each other."""
 
 from dataclasses import dataclass
 
-from ..model import robot_schema as rs
-from ..settings import Bounds
+from ...model import robot_schema as rs
+from ...settings import Bounds
 
 STRING, BOOL, INT, DOUBLE, DOUBLES, STRINGS = "string", "bool", "int", "double", "doubles", \
     "strings"

@@ -17,7 +17,7 @@ else builds one with ``winch_command`` and reads one with ``winch_command_values
 """
 
 import numpy as np
-from ..ports import Rotation
+from ...ports import Rotation
 from builtin_interfaces.msg import Duration, Time
 from diagnostic_msgs.msg import DiagnosticStatus, KeyValue
 from geometry_msgs.msg import PoseStamped
@@ -28,11 +28,11 @@ from trajectory_msgs.msg import JointTrajectory, JointTrajectoryPoint
 from cdh_planner_interfaces.action import PlanPath
 from cdh_planner_interfaces.msg import TensionEnvelope, TensionEnvelopePoint
 
-from ..errors import InputError
-from ..model.pose import Pose, check_quaternion, quaternion_from_tau, tau_from_quaternion
-from ..model.robot_schema import MAX_CABLES, MIN_CABLES
-from ..status import Status
-from ..trajectory.sampling import check_timed_path, sample_cable_state
+from ...errors import InputError
+from ...model.pose import Pose, check_quaternion, quaternion_from_tau, tau_from_quaternion
+from ...model.robot_schema import MAX_CABLES, MIN_CABLES
+from ...status import Status
+from ...trajectory.sampling import check_timed_path, sample_cable_state
 
 NS_PER_S = 1_000_000_000
 

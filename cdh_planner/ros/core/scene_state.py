@@ -1,6 +1,6 @@
 """The node's scene without the graph: the scene of ``scene_file`` changed by the obstacles
 received on ``~/obstacles``, and its version. It owns its lock and imports no rclpy: the
-node (``node_scene.py``) maps the topic and the service onto it, the tests drive it directly.
+node (``node/scene.py``) maps the topic and the service onto it, the tests drive it directly.
 
     state = SceneState()
     state.configure(config)                  # at configure, and after each parameter change
@@ -23,9 +23,9 @@ from dataclasses import dataclass
 
 from cdh_planner_interfaces.msg import Obstacle
 
-from ..errors import InputError
-from ..scene.schema import MAX_OBSTACLES, Scene, scene_from_dict
-from .scene_msgs import check_id, shape_of_obstacle
+from ...errors import InputError
+from ...scene.schema import MAX_OBSTACLES, Scene, scene_from_dict
+from ..msgs.scene_msgs import check_id, shape_of_obstacle
 
 MAX_ITEMS = MAX_OBSTACLES   # obstacles in one ObstacleArray (more: refused whole)
 

@@ -10,7 +10,7 @@ how it ended (the node's part behind ``~/execute``, ``~/stop`` and ``use_current
     run.close()                               # shutting down: hold, end as stopped
     run.release()                             # lifecycle cleanup: close, then destroy
 
-The modes are the registered command outlets (``command_outlets.py``), one of each made at
+The modes are the registered command outlets (``execution/command_outlets.py``), one of each made at
 configure: a streamed one (``stream``, ``forward_command``) gets the plan's cable state
 sampled in real time (``streaming.Stream``) at ``stream_rate_hz`` from a node timer, one
 command per sample; a trajectory one (``follow_joint_trajectory``) gets the cable
@@ -30,17 +30,17 @@ from dataclasses import dataclass
 
 import numpy as np
 
-from ..accuracy import has_accuracy, pose_accuracy
-from ..errors import InputError, exception_line
-from ..model.elastic import is_elastic
-from ..model.forward_kinematics import measured_cable_lengths
-from ..model.kinematics import cable_lengths
-from ..model.pose import rotation_from_quaternion
+from ...accuracy import has_accuracy, pose_accuracy
+from ...errors import InputError, exception_line
+from ...model.elastic import is_elastic
+from ...model.forward_kinematics import measured_cable_lengths
+from ...model.kinematics import cable_lengths
+from ...model.pose import rotation_from_quaternion
 from . import winches
-from . import messages as M
+from ..msgs import messages as M
 from .command_outlets import OUTLETS, OutletContext
-from .execution_runs import ExecutionRuns, Phase
-from .streaming import Stream
+from ..core.execution_runs import ExecutionRuns, Phase
+from ..core.streaming import Stream
 
 
 @dataclass

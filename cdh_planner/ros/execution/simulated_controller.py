@@ -12,7 +12,7 @@ JointState, to try the node's execution without hardware (the demo) and to test 
 - ``--kinematic``: the pure-kinematic double for tests of the goal checks and the command
   plumbing: the joints move exactly as commanded (no physics), ``effort`` empty.
 
-    python -m cdh_planner.ros.simulated_controller JOINT [JOINT ...] (--robot ROBOT.yaml |
+    python -m cdh_planner.ros.execution.simulated_controller JOINT [JOINT ...] (--robot ROBOT.yaml |
         --kinematic) [--action NAME] [--joint-states TOPIC] [--initial X [X ...]]
         [--time-scale K] [--effort-interface] [--allow-nonzero-velocity-at-end]
         [--commands TOPIC] [--stream TOPIC]
@@ -83,7 +83,7 @@ from sensor_msgs.msg import JointState
 from std_msgs.msg import Float64MultiArray
 from trajectory_msgs.msg import JointTrajectoryPoint
 
-from .interface import ACTION_QOS
+from ..interface import ACTION_QOS
 
 NODE = "simulated_cable_controller"
 PERIOD_S = 0.02          # 50 Hz: joint states and the interpolation step
@@ -164,8 +164,8 @@ class SimulatedController:
         self.positions = np.array(args.initial, dtype=float)
         self.live = None             # the simulated robot (sim.live.LivePlant), or kinematic
         if args.robot:
-            from ..model.robot import load_robot
-            from ..sim.live import LivePlant
+            from ...model.robot import load_robot
+            from ...sim.live import LivePlant
             robot = load_robot(args.robot)
             if list(robot.winch_names) != self.joints:
                 raise SystemExit(f"--robot: the robot's winch names {list(robot.winch_names)} "

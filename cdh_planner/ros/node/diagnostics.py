@@ -6,8 +6,8 @@ import time
 
 from diagnostic_msgs.msg import DiagnosticArray, DiagnosticStatus
 
-from ..accuracy import has_accuracy
-from .diagnostics import PERIOD_S, TOPIC, Health, diagnostic_array
+from ...accuracy import has_accuracy
+from ..core.diagnostics import PERIOD_S, TOPIC, Health, diagnostic_array
 
 
 class NodeDiagnostics:

@@ -1,6 +1,7 @@
-"""Adapters between the node and the plan service: ``Outlet``, the plan service's way out to
-ROS (record, then publish; log; the last plan's status kept for ``/diagnostics``), and
-``GoalCancel``, a PlanPath goal's cancel as the planner's ``is_set``."""
+"""Adapters between the node and the plan service: ``NodePlanOutlet``, the plan service's
+``PlanOutlet`` (core/plan_service.py) on ROS (record, then publish; log; the last plan's
+status kept for ``/diagnostics``), and ``GoalCancel``, a PlanPath goal's cancel as the
+planner's ``is_set``."""
 
 import time
 
@@ -15,7 +16,7 @@ class GoalCancel:
         return self.goal_handle.is_cancel_requested
 
 
-class Outlet:
+class NodePlanOutlet:
     """``node``: the PlannerNode (its publishers, its recording, its logger)."""
 
     def __init__(self, node):

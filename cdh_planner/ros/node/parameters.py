@@ -8,8 +8,8 @@ from rcl_interfaces.msg import FloatingPointRange, IntegerRange, ParameterDescri
     SetParametersResult
 from rclpy.parameter import Parameter
 
-from ..errors import InputError
-from .params import BOOL, DOUBLE, DOUBLES, INT, PLANNER_PREFIXES, READ_ONLY, REQUIRED, SPECS, \
+from ...errors import InputError
+from ..core.params import BOOL, DOUBLE, DOUBLES, INT, PLANNER_PREFIXES, READ_ONLY, REQUIRED, SPECS, \
     STRING, STRINGS
 
 STATIC_TYPES = {STRING: Parameter.Type.STRING, BOOL: Parameter.Type.BOOL,
@@ -23,7 +23,7 @@ def declare_parameters(node, overrides):
     unknown = sorted(n for n in overrides if n.startswith(PLANNER_PREFIXES) and n not in names)
     if unknown:
         raise InputError(unknown[0], overrides[unknown[0]].value,
-                         "unknown parameter (see cdh_planner/ros/params.py)")
+                         "unknown parameter (see cdh_planner/ros/core/params.py)")
     return {spec.name: node.declare_parameter(spec.name, *_default_and_descriptor(spec)).value
             for spec in SPECS}
 

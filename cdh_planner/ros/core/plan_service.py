@@ -1,7 +1,7 @@
 """The node's plan service without the graph: the queue of calls, the configuration and
 planner in force, the last good plan and a plan made while executing, and the commit of a
 plan's outputs (all of them or none). It owns its lock and imports no rclpy: the node
-(``node.py``) maps ROS callbacks onto it, and the tests drive it directly.
+(``node/planner_node.py``) maps ROS callbacks onto it, and the tests drive it directly.
 
     plans = PlanService(config, planner, outlet)
     turn = plans.enter()                          # first: the queue's order is arrival order
@@ -9,7 +9,7 @@ plan's outputs (all of them or none). It owns its lock and imports no rclpy: the
     plans.with_last(lambda plan: execution.start(plan, config))
     plans.execution_ended(publish_pending=True)   # a plan made meanwhile goes out now
 
-``outlet`` is the node's side (an ``Outlet``): it records and publishes what it is given.
+``outlet`` is the node's side (a ``PlanOutlet``): it records and publishes what it is given.
 """
 
 import threading
@@ -18,15 +18,15 @@ import traceback
 from dataclasses import dataclass
 from typing import Optional, Protocol
 
-from ..errors import InputError, exception_line
-from ..planner import PlanResult
-from ..status import Status
+from ...errors import InputError, exception_line
+from ...planner import PlanResult
+from ...status import Status
 from . import plan_requests
 
 PROGRESS_PERIOD_S = 0.1   # ~/plan_progress at most this often
 
 
-class Outlet(Protocol):
+class PlanOutlet(Protocol):
     """What the plan service hands to ROS (the node records, then publishes)."""
 
     def publish_outputs(self, out):

@@ -17,8 +17,8 @@ Commands are built by ``messages.winch_command``.
 
 import numpy as np
 
-from ..trajectory.sampling import sample_cable_state
-from . import messages as M
+from ...trajectory.sampling import sample_cable_state
+from ..msgs import messages as M
 
 
 class Stream:

@@ -5,9 +5,9 @@
 It maps ROS callbacks onto the parts that hold the logic: ``plan_service.PlanService``
 (plan calls' queue, the last good plan, the commit of outputs; no rclpy),
 ``plan_execution.PlanExecution`` (``~/execute``, ``~/stop``, ``use_current_start``),
-``node_scene.NodeScene`` (``~/obstacles``, ``~/get_scene``: a plan uses the scene of its
+``scene.NodeScene`` (``~/obstacles``, ``~/get_scene``: a plan uses the scene of its
 arrival), ``run_log.NodeRecording`` (the run file). Names, QoS: ``interface.py``;
-parameters: ``params.py``; the interface: docs/ros-node.md; the process: ``node_main.py``.
+parameters: ``core/params.py``; the interface: docs/ros-node.md; the process: ``main.py``.
 
 A lifecycle node (``rclpy.lifecycle``): configure checks the parameters, loads the robot,
 warms the planner, opens the run file; activate serves (inactive: plan calls, goals and
@@ -29,24 +29,24 @@ from visualization_msgs.msg import MarkerArray
 from cdh_planner_interfaces.action import PlanPath
 from cdh_planner_interfaces.msg import TensionEnvelope
 
-from ..errors import InputError, exception_line
-from ..recording.mcap_log import REQUEST_RECEIVED, RESPONSE_SENT
-from ..status import Status
-from . import plan_requests
-from .interface import ACTION_QOS, CABLE_COMMAND, EXECUTE, EXECUTION_RESULT, LATCHED, MARKERS, \
+from ...errors import InputError, exception_line
+from ...recording.mcap_log import REQUEST_RECEIVED, RESPONSE_SENT
+from ...status import Status
+from ..core import plan_requests
+from ..interface import ACTION_QOS, CABLE_COMMAND, EXECUTE, EXECUTION_RESULT, LATCHED, MARKERS, \
     NODE_NAME, PATH, PLAN, PLAN_PATH, PLAN_PROGRESS, PLAN_RESULT, PLANNED_TRAJECTORY, \
     SERVICE_QOS, STOP, TENSION_ENVELOPE
-from .messages import WINCH_COMMAND_TYPE
-from .node_diagnostics import NodeDiagnostics
-from .node_frames import NodeFrames
-from .node_lifecycle import LifecycleMixin
-from .node_outlet import GoalCancel, Outlet, run_stem
-from .node_parameters import declare_parameters, refuse_unknown
-from .node_scene import NodeScene
-from .params import needs_new_planner, node_config, parameter_error
-from .plan_execution import PlanExecution
-from .plan_service import PlanService
-from .run_log import NodeRecording, RunLog, log_limits
+from ..msgs.messages import WINCH_COMMAND_TYPE
+from .diagnostics import NodeDiagnostics
+from .frames import NodeFrames
+from .lifecycle import LifecycleMixin
+from .plan_outlet import GoalCancel, NodePlanOutlet, run_stem
+from .parameters import declare_parameters, refuse_unknown
+from .scene import NodeScene
+from ..core.params import needs_new_planner, node_config, parameter_error
+from ..execution.plan_execution import PlanExecution
+from ..core.plan_service import PlanService
+from ..core.run_log import NodeRecording, RunLog, log_limits
 
 # executor threads: the plan being computed, the requests waiting their turn, and spare ones
 # (busy answers, execute / stop, the stream timer, parameters) that are never all blocked
@@ -54,7 +54,7 @@ EXECUTOR_THREADS = 1 + plan_requests.PLAN_QUEUE_DEPTH + 3
 
 
 def default_planner_factory(robot, task, settings, scene=None):
-    from ..planner import Planner
+    from ...planner import Planner
     return Planner(robot, task, settings, scene=scene)
 
 
@@ -120,7 +120,7 @@ class PlannerNode(LifecycleMixin, LifecycleNode):
         self.record = NodeRecording(self, self.runlog)
         self.record.parameters(self.get_parameters_by_prefix("").values(), initial=True)
         log_file = self.record(self.runlog.open) or ""
-        self.outlet = Outlet(self)
+        self.outlet = NodePlanOutlet(self)
         self.plans = PlanService(config, planner, self.outlet, make_planner=self._new_planner)
         self.plans.between_steps = self.scene.drain   # obstacle updates while a plan runs
         self.scene.configure(config)

@@ -12,9 +12,9 @@ import threading
 import rclpy
 import rclpy.signals
 
-from ..errors import InputError, clip
-from .context import init_context
-from .node import EXECUTOR_THREADS, PlannerNode, default_planner_factory
+from ...errors import InputError, clip
+from ..context import init_context
+from .planner_node import EXECUTOR_THREADS, PlannerNode, default_planner_factory
 
 SHUTDOWN_JOIN_S = 5.0
 

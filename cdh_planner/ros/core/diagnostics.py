@@ -45,7 +45,7 @@ class Health:
     # the robot has no length_error
     accuracy: tuple = None
     accuracy_given: bool = False
-    # ObstacleArrays on ~/obstacles: {received, applied, refused, dropped} (node_scene.py)
+    # ObstacleArrays on ~/obstacles: {received, applied, refused, dropped} (node/scene.py)
     obstacle_updates: dict = None
 
 

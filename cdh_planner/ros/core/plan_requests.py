@@ -1,6 +1,6 @@
 """One plan call, without the graph: request -> poses -> PlanResult -> messages.
 
-The node (``ros/node.py``) only moves these values between ROS and this module:
+The node (``ros/node/planner_node.py``) only moves these values between ROS and this module:
 
     turn = queue.enter()                                      # None: full, answer busy
     call = PlanCall.of_get_plan(request)                      # or of_plan_path(goal, ...)
@@ -33,13 +33,13 @@ from nav_msgs.msg import Path
 
 from cdh_planner_interfaces.action import PlanPath
 
-from ..errors import InputError, exception_line
-from ..model.pose import on_singular_set
-from ..planner import PlanResult
-from ..settings import check_setting
-from ..status import Status
-from . import messages as M
-from .markers import markers_msg
+from ...errors import InputError, exception_line
+from ...model.pose import on_singular_set
+from ...planner import PlanResult
+from ...settings import check_setting
+from ...status import Status
+from ..msgs import messages as M
+from ..msgs.markers import markers_msg
 
 # keys that ``result_status`` adds to messages.plan_status's (strings; numbers by repr)
 EXTRA_KEYS = ("path_stamp", "waypoints", "path_length_m", "duration_s", "min_margin",

@@ -8,16 +8,16 @@ CLI uses (``model.robot.robot_from_dict``, ``model.task.task_from_dict``), so th
 the CLI accept and refuse exactly the same files, with the same messages (``InputError``
 naming the parameter and the value).
 
-No rclpy here: ``declare`` in ``ros/node.py`` turns ``SPECS`` into declarations. Numeric
+No rclpy here: ``declare`` in ``ros/node/planner_node.py`` turns ``SPECS`` into declarations. Numeric
 parameters are dynamically typed in ROS so that ``-p planner.timeout_s:=5`` (an integer) and
 YAML integer lists work; ``node_config`` checks their types and ranges itself.
 
 The parameters are ``SPECS``: the robot file's fields (``robot.*``, declared on
 ``model.robot.Robot``), the registered tasks' fields (``task.*``, ``model/task.py``), the
 planner settings (``settings.py``), the node's own (below) and the registered command
-outlets' (``execution.mode`` and its modes' parameters, ``command_outlets.py``). Their
+outlets' (``execution.mode`` and its modes' parameters, ``execution/command_outlets.py``). Their
 table, with units, defaults and ranges, is docs/parameters.md, generated from ``SPECS`` by
-``python -m cdh_planner.ros.params > docs/parameters.md`` (test_ros_params checks it is
+``python -m cdh_planner.ros.core.params > docs/parameters.md`` (test_ros_params checks it is
 current).
 """
 
@@ -29,14 +29,14 @@ from dataclasses import dataclass, field
 
 import numpy as np
 
-from ..errors import InputError
-from ..model import robot_schema as rs
-from ..model.robot import FIELDS as ROBOT_FIELDS, OPTIONAL_GROUPS, robot_from_dict
-from ..model.task import TASKS, task_from_dict, task_parameters
-from ..pipeline.metrics import task_cost
-from ..scene.schema import default_scene, load_scene
-from ..settings import SETTINGS, LiveChoices, PlannerSettings, check_range
-from .command_outlets import OUTLETS, modes_description, outlet_specs, reserve
+from ...errors import InputError
+from ...model import robot_schema as rs
+from ...model.robot import FIELDS as ROBOT_FIELDS, OPTIONAL_GROUPS, robot_from_dict
+from ...model.task import TASKS, task_from_dict, task_parameters
+from ...pipeline.metrics import task_cost
+from ...scene.schema import default_scene, load_scene
+from ...settings import SETTINGS, LiveChoices, PlannerSettings, check_range
+from ..execution.command_outlets import OUTLETS, modes_description, outlet_specs, reserve
 from .param_spec import BOOL, DOUBLE, DOUBLES, INT, REQUIRED, STRING, STRINGS, Spec  # noqa: F401
 
 # the groups whose change means a new Planner (the others only affect the node)
@@ -407,8 +407,8 @@ def parameter_error(exc):
 
 DOCS_HEADER = """# The node's parameters
 
-Generated from `cdh_planner/ros/params.py` (`SPECS`) by
-`python -m cdh_planner.ros.params > docs/parameters.md`; `test/test_ros_params.py` checks
+Generated from `cdh_planner/ros/core/params.py` (`SPECS`) by
+`python -m cdh_planner.ros.core.params > docs/parameters.md`; `test/test_ros_params.py` checks
 that it is current. The `robot.*` parameters are the robot file's `robot:` block (keys
 nested in the file: `load: {force: ...}` is `robot.load.force`), declared on
 `cdh_planner/model/robot.py`'s `Robot`; `task.*` are the registered tasks' fields (the

@@ -9,8 +9,8 @@ from geometry_msgs.msg import Point
 from std_msgs.msg import ColorRGBA
 from visualization_msgs.msg import Marker, MarkerArray
 
-from ..model.pose import rotation_from_quaternion
-from ..trajectory.sampling import check_timed_path
+from ...model.pose import rotation_from_quaternion
+from ...trajectory.sampling import check_timed_path
 
 
 LINE_WIDTH_M = 0.002

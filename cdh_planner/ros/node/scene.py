@@ -28,12 +28,12 @@ from visualization_msgs.msg import Marker, MarkerArray
 from cdh_planner_interfaces.msg import ObstacleArray, Scene
 from cdh_planner_interfaces.srv import GetScene
 
-from ..errors import exception_line
-from .interface import GET_SCENE, LATCHED, OBSTACLES, OBSTACLES_QOS, SCENE, SCENE_MARKERS, \
+from ...errors import exception_line
+from ..interface import GET_SCENE, LATCHED, OBSTACLES, OBSTACLES_QOS, SCENE, SCENE_MARKERS, \
     SERVICE_QOS
-from .markers import obstacle_markers
-from .scene_msgs import scene_msg
-from .scene_state import SceneState
+from ..msgs.markers import obstacle_markers
+from ..msgs.scene_msgs import scene_msg
+from ..core.scene_state import SceneState
 
 
 DRAIN_PERIOD_S = 0.02   # s: the timer that drains the arrays while no plan does

@@ -20,7 +20,7 @@ import threading
 import numpy as np
 from geometry_msgs.msg import PoseStamped, TransformStamped
 
-from ..errors import InputError
+from ...errors import InputError
 
 # fixed (z-up) -> paper frame (z-down): pi about x
 Z_DOWN = (np.array([1.0, 0.0, 0.0, 0.0]), np.zeros(3))

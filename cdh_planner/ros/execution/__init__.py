@@ -1,0 +1,2 @@
+"""Executing a plan: the command outlets, the controller clients (FollowJointTrajectory) and
+the simulated controller."""

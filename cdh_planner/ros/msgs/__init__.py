@@ -1,0 +1,1 @@
+"""Conversions between the library's objects (paths, envelopes, scenes) and ROS messages."""

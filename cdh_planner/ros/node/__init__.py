@@ -1,0 +1,1 @@
+"""The PlannerNode (``planner_node.py``) and its rclpy adapters; ``main.py`` runs it."""
