@@ -361,7 +361,7 @@ class Side:
         self.node = rclpy.create_node("execution_test", context=self.context)
         self.group = ReentrantCallbackGroup()
         self.executor = X.TrajectoryExecutor(self.node, ACTION, self.group)
-        self.monitor = X.JointStateMonitor(self.node, "/joint_states", WINCHES, self.group)
+        self.monitor = X.JointStateMonitor(self.node, "/joint_states", WINCHES)
         self.raw = ActionClient(self.node, FollowJointTrajectory, ACTION,
                                 callback_group=self.group)
         self._retired = []
@@ -639,10 +639,9 @@ def test_joint_state_monitor_reports_lengths_or_why_not(ros):
     assert side.monitor.lengths(1e-9)[0] is None
     assert "s old (at most 1e-09 s)" in side.monitor.lengths(1e-9)[1]
     shuffled = WINCHES[::-1]
-    other = X.JointStateMonitor(side.node, "/joint_states", shuffled, side.group)
-    nothing = X.JointStateMonitor(side.node, "/nobody/joint_states", WINCHES, side.group)
-    missing = X.JointStateMonitor(side.node, "/joint_states", WINCHES[:5] + ["winch_7"],
-                                  side.group)
+    other = X.JointStateMonitor(side.node, "/joint_states", shuffled)
+    nothing = X.JointStateMonitor(side.node, "/nobody/joint_states", WINCHES)
+    missing = X.JointStateMonitor(side.node, "/joint_states", WINCHES[:5] + ["winch_7"])
     assert until(lambda: other.latest is not None and missing.latest is not None, 5.0)
     mine, _ = side.monitor.lengths(1.0)
     theirs, _ = other.lengths(1.0)
@@ -686,14 +685,13 @@ def test_joint_state_monitor_waits_a_bounded_time_for_a_message(ros):
     wait (then why not) when none comes; and no longer once cancelled. Each shown by what
     was answered and by the polls of ``cancelled``, not by how long it took."""
     side, double = ros
-    missing = X.JointStateMonitor(side.node, "/joint_states", WINCHES[:5] + ["winch_7"],
-                                  side.group)
+    missing = X.JointStateMonitor(side.node, "/joint_states", WINCHES[:5] + ["winch_7"])
     assert until(lambda: missing.latest is not None, 5.0)
     polls = Polls()
     lengths, why = missing.wait_lengths(30.0, 60.0, cancelled=polls)
     assert lengths is None and "winch_7" in why and polls.calls == 0   # never waited
 
-    late = X.JointStateMonitor(side.node, "/late/joint_states", WINCHES, side.group)
+    late = X.JointStateMonitor(side.node, "/late/joint_states", WINCHES)
     publisher = side.node.create_publisher(X.JointState, "/late/joint_states", 10)
     msg = X.JointState(name=WINCHES, position=[0.3] * 6)
     assert until(lambda: publisher.get_subscription_count() == 1, 5.0)

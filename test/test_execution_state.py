@@ -11,6 +11,7 @@ executor of this test.
 import threading
 import time
 
+import numpy as np
 import pytest
 
 from cdh_planner.ros.core.execution_runs import ExecutionRuns, Phase
@@ -65,6 +66,22 @@ def test_racing_ends_end_a_run_once():
         assert wins.count(True) == 1 and runs.phase == Phase.IDLE
 
 
+def test_live_markers_come_at_their_rate_of_the_looks():
+    """Looks at 20 Hz, markers at 10 Hz: every other look, with the looks late or early by
+    up to a fifth of their period; markers at 20 Hz or more: every look; at 1 Hz: every
+    20th."""
+    from cdh_planner.ros.core.live_state import LiveRates
+    looks = np.arange(200) / 20.0 + 0.01 * np.sin(np.arange(200))   # s
+
+    def drawn(markers_hz):
+        rates = LiveRates(20.0, markers_hz)
+        return [k for k, t in enumerate(looks) if rates.markers_due(t)]
+
+    assert drawn(10.0) == list(range(0, 200, 2))
+    assert drawn(20.0) == drawn(40.0) == list(range(200))
+    assert drawn(1.0) == list(range(0, 200, 20))
+
+
 # --------------------------------------------------------------------------- the node
 
 rclpy = pytest.importorskip("rclpy")
@@ -78,7 +95,7 @@ from std_srvs.srv import Trigger  # noqa: E402
 from cdh_planner.ros.execution import winches  # noqa: E402
 from cdh_planner.ros.msgs import messages as M  # noqa: E402
 from cdh_planner.ros.execution import plan_execution  # noqa: E402
-from ros_harness import Q1, Q2, in_process_nodes, sphere_pose_msg  # noqa: E402
+from ros_harness import Q1, Q2, in_process_nodes, sphere_pose_msg, until  # noqa: E402
 
 FOLLOW = [Parameter("execution.mode", value="follow_joint_trajectory")]
 STREAM = [Parameter("execution.mode", value="stream")]
@@ -336,10 +353,45 @@ def test_shutdown_while_following_ends_stopped(node):
     assert not node._execution.running
 
 
-def test_the_platform_pose_updates_one_at_a_time(node):
-    """The 50 Hz pose update runs forward kinematics, which a loaded machine can make
-    slower than its period: in a reentrant group each tick started another update on
-    another executor thread until none was left for goals and results (CI: accepted
-    use_current_start goals whose result never came)."""
-    from rclpy.callback_groups import MutuallyExclusiveCallbackGroup
-    assert isinstance(node.frames.timer.callback_group, MutuallyExclusiveCallbackGroup)
+def test_the_live_state_runs_on_one_thread_of_its_own(node):
+    """The live state (forward kinematics, feasibility, markers) is computed on a thread of
+    its own, one look at a time, and joint states are never executor callbacks: a slow
+    forward kinematics (loaded machine) once took every executor thread from goals and
+    results (CI: accepted use_current_start goals whose result never came), and joint
+    states at 500 Hz as callbacks took most of a core. Closing ends the thread."""
+    from sensor_msgs.msg import JointState
+    worker = node.frames.worker
+    assert worker.is_alive() and worker is not threading.current_thread()
+    assert not [s for s in node.subscriptions if s.msg_type is JointState]
+    assert not [t for t in node.timers if getattr(t.callback, "__self__", None) is node.frames]
+    node.close()
+    assert not worker.is_alive() and node.frames.worker is None
+
+
+def test_the_live_state_is_computed_once_per_new_joint_state(node, monkeypatch):
+    """Many looks of the live state's thread, one joint state: one ~/cable_state, and the
+    pose (with its forward kinematics residual, what /diagnostics reports) of that state;
+    a second joint state: one more. Counted by looks, not by time."""
+    from sensor_msgs.msg import JointState
+    from test_ros_execution import _lengths
+    looks, published = [], []
+    real_update, real_publish = node.frames.update, node.frames.pub_cables.publish
+    monkeypatch.setattr(node.frames, "update", lambda: (real_update(), looks.append(1)))
+    monkeypatch.setattr(node.frames.pub_cables, "publish",
+                        lambda msg: (published.append(msg), real_publish(msg)))
+    winch_state = node.create_publisher(JointState, "/joint_states", 10)
+    lengths = _lengths(Q1)
+    for k in (1, 2):
+        msg = JointState(name=list(node.config.robot.winch_names), position=list(lengths))
+        msg.header.stamp.sec = k
+        assert until(lambda: winch_state.get_subscription_count() == 1, 10.0)
+        winch_state.publish(msg)
+        assert until(lambda: len(published) == k, 10.0), "the joint state was not turned " \
+                                                         "into a live state"
+        seen = len(looks)
+        assert until(lambda: len(looks) >= seen + 5, 10.0)    # five more looks: nothing new
+        assert len(published) == k and published[-1].header.stamp.sec == k
+    assert node.execution.forward_kinematics_residual_m < 1e-9
+    p, _ = node.execution._last_pose
+    expected = sphere_pose_msg(Q1).pose.position
+    np.testing.assert_allclose(p, [expected.x, expected.y, expected.z], rtol=0, atol=1e-9)

@@ -74,6 +74,10 @@ def ros(tmp_path_factory):
             assert rc == 0 and "Traceback" not in log, log
 
 
+def _key(stamp):
+    return (stamp.sec, stamp.nanosec)
+
+
 def _measured(ros):
     msg = ros.measured.messages[-1]
     return np.array([msg.position[list(msg.name).index(n)] for n in ROBOT.winch_names])
@@ -221,9 +225,20 @@ def test_the_simulated_robot_measures_the_tensions_and_the_run_file_records_them
     expected = np.linalg.solve(screw_jacobian(ROBOT, u)[0],
                                nominal_wrench(ROBOT, load_point(ROBOT, p[None], R[None]))[0])
     assert np.allclose(effort, expected, rtol=0.05, atol=0.02), (effort, expected)
+    # the node computes its live state from the newest joint state at live_state_rate_hz:
+    # wait until it has published that of this one or a later one, then stop it
+    cables = Collector(ros.node, JointState, "/cdh_planner/cable_state", 10)
+    assert ros.spin_until(lambda: any(_key(m.header.stamp) >= _key(msg.header.stamp)
+                                      for m in cables.messages), 30.0)
     ros.process.stop(timeout=15.0)
     from mcap_ros2.reader import read_ros2_messages
     recorded = [m.ros_msg for f in ros.process.run_files()
                 for m in read_ros2_messages(str(f), topics=["/cdh_planner/cable_state"])]
     assert recorded and all(len(m.effort) == 6 for m in recorded)
-    assert any(np.allclose(list(m.effort), effort, rtol=0.05) for m in recorded[-20:])
+    assert _key(recorded[-1].header.stamp) >= _key(msg.header.stamp)
+    # each recorded effort is the measured tensions of its joint state (by stamp), in
+    # winch order
+    measured = {_key(m.header.stamp): [m.effort[list(m.name).index(n)] for n in ROBOT.winch_names]
+                for m in ros.measured.messages}
+    same = [m for m in recorded if _key(m.header.stamp) in measured]
+    assert same and all(list(m.effort) == measured[_key(m.header.stamp)] for m in same)

@@ -169,8 +169,67 @@ def test_a_goal_in_the_z_up_frame_plans_the_same_path_as_in_the_paper_frame(tmp_
         ends = M.path_arrays(again.path)[0][[0, -1]]
         np.testing.assert_allclose(ends, offline.path.p[[0, -1]], rtol=0, atol=1e-9)
 
+        # a moving frame on /tf (read by the node when a request needs it, not a callback)
+        cart = TransformStamped()
+        cart.header.frame_id, cart.child_frame_id = "world", "cart"
+        cart.transform.translation.y, cart.transform.rotation.w = -0.2, 1.0
+        moving_tf = client.node.create_publisher(TFMessage, "/tf", TF_QOS)
+        assert client.spin_until(lambda: moving_tf.get_subscription_count() > 0, 30.0)
+        moving_tf.publish(TFMessage(transforms=[cart]))
+        moving = client.plan(_shifted(_z_up(start), "cart", (0, -0.2, 0)),
+                             _shifted(_z_up(goal), "cart", (0, -0.2, 0)), timeout_s=120)
+        assert moving.success, moving.values
+        np.testing.assert_allclose(M.path_arrays(moving.path)[0][[0, -1]], offline.path.p[[0, -1]],
+                                   rtol=0, atol=1e-9)
+
         unknown = client.plan(_shifted(start, "map", (0, 0, 0)), goal, timeout_s=30)
         assert not unknown.success
         assert unknown.values["error_code"] == str(M.TF_ERROR)
         assert "start.header.frame_id = 'map': no transform from 'map' to 'cdh_base'" in \
             unknown.values["error_msg"]
+
+
+def test_a_burst_of_joint_states_is_taken_latest_only_while_a_plan_runs(tmp_path):
+    """Joint states published as fast as a loop can while a plan runs over ROS: the plan
+    succeeds, the node publishes far fewer cable states than it was sent (it computes the
+    newest one at live_state_rate_hz, never a backlog), in the order sent, and the last
+    one is the last one sent. Counted in messages, not timed."""
+    import threading
+    lengths = _lengths(Q1)
+    with claimed_domain() as domain, \
+            NodeProcess(domain, tmp_path, params=["live_state_rate_hz:=5.0"]) as node, \
+            PlannerClient(domain_id=domain) as client:
+        cables = Collector(client.node, JointState, "/cdh_planner/cable_state", 1000)
+        winch_state = client.node.create_publisher(JointState, "/joint_states", 10)
+        client.wait_for_node(60.0)
+        sent, done = [0], threading.Event()
+
+        def state(k):
+            msg = JointState(name=list(ROBOT.winch_names), position=list(lengths))
+            msg.header.stamp.sec = k
+            return msg
+
+        def burst():    # at least 2000 states, and on until the plan has its answer
+            while not done.is_set() or sent[0] < 2000:
+                sent[0] += 1
+                winch_state.publish(state(sent[0]))
+                if sent[0] % 100 == 0:
+                    threading.Event().wait(0.001)     # let the others have the core too
+        burster = threading.Thread(target=burst, daemon=True)
+        burster.start()
+        assert client.spin_until(lambda: cables.messages, 60.0), node.log()
+        during = sent[0]
+        answer = client.plan(sphere_pose_msg(Q1), sphere_pose_msg(Q2), timeout_s=120)
+        assert answer.success, (answer.values, node.log())
+        assert sent[0] > during          # the states kept coming through the plan
+        done.set()
+        burster.join(60.0)
+        last = sent[0]
+        # the last state sent, again until it is seen (best effort may lose one)
+        assert client.spin_until(lambda: cables.messages[-1].header.stamp.sec == last or
+                                 winch_state.publish(state(last)), 60.0), node.log()
+        stamps = [m.header.stamp.sec for m in cables.messages]
+        assert stamps == sorted(stamps) and stamps[-1] == last
+        assert len(set(stamps)) * 4 < last, (len(set(stamps)), last)   # latest only
+        for m in cables.messages:
+            np.testing.assert_array_equal(m.position, lengths)

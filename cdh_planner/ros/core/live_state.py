@@ -1,6 +1,7 @@
 """Live state of the robot from the measured cable lengths (no rclpy, no graph): what the
-node publishes beside the platform's TF for each new joint state, during an execution and
-at rest.
+node publishes beside the platform's TF, during an execution and at rest, from the newest
+joint state only, at the rates ``LiveRates`` says (``live_state_rate_hz``,
+``live_markers_rate_hz``): a controller publishing at 1 kHz costs no more than one at 50 Hz.
 
 - ``~/cable_state`` (sensor_msgs/JointState): the winches' names, the measured lengths (m)
   as positions, and the measured tensions (N) as efforts when the joint state carries one
@@ -35,8 +36,9 @@ def measured_tensions(joint_state, winch_names):
 
 
 def live_messages(robot, lengths, p, R, joint_state, frame_id, stamp):
-    """(cable_state JointState, least_margin Float64, MarkerArray) of the measured lengths
-    ``lengths`` (m, winch order) at the pose (p m, R) of their forward kinematics."""
+    """(cable_state JointState, least_margin Float64, the margin of each cable (m,)) of the
+    measured lengths ``lengths`` (m, winch order) at the pose (p m, R) of their forward
+    kinematics; ``live_markers`` draws them."""
     feasibility = evaluate(robot, np.asarray(p)[None], R=np.asarray(R)[None])
     state = JointState(name=list(robot.winch_names), position=[float(x) for x in lengths])
     state.header.stamp, state.header.frame_id = stamp, frame_id
@@ -44,7 +46,32 @@ def live_messages(robot, lengths, p, R, joint_state, frame_id, stamp):
     if tensions is not None:
         state.effort = tensions
     margin = Float64(data=float(feasibility.margin[0]))
-    per_cable = feasibility.margins[0].min(axis=0)
-    markers = MarkerArray(markers=pose_markers(robot, p, R, per_cable, frame_id, stamp,
-                                               ns_suffix="_measured"))
-    return state, margin, markers
+    return state, margin, feasibility.margins[0].min(axis=0)
+
+
+def live_markers(robot, p, R, per_cable, frame_id, stamp):
+    """The MarkerArray of the platform and cables at the measured pose (p m, R), each cable
+    coloured by its margin ``per_cable`` (m,)."""
+    return MarkerArray(markers=pose_markers(robot, p, R, per_cable, frame_id, stamp,
+                                            ns_suffix="_measured"))
+
+
+class LiveRates:
+    """When the live state is computed: a worker looks every ``period_s`` (1 /
+    ``live_state_rate_hz``) for a joint state newer than the last it computed, and draws
+    the markers of one at most every 1 / ``live_markers_rate_hz`` s. Times in s."""
+
+    def __init__(self, state_hz, markers_hz):
+        self.period_s = 1.0 / float(state_hz)
+        self._markers_s = 1.0 / float(markers_hz)
+        self._last_markers = None
+
+    def markers_due(self, now_s):
+        """True (and remembered) when markers were last drawn ``1 / markers_hz`` s or more
+        before ``now_s``, or never."""
+        # half a look's period early: markers at 10 Hz of states at 20 Hz come every other one
+        if self._last_markers is not None and \
+                now_s - self._last_markers < self._markers_s - 0.5 * self.period_s:
+            return False
+        self._last_markers = now_s
+        return True

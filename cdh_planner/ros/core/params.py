@@ -114,7 +114,14 @@ _HEAD = tuple(
           "about x (a static transform on /tf_static)"),
      Spec("platform_frame", STRING, "cdh_platform",
           "the platform's frame: base_frame -> platform_frame on /tf, from the forward "
-          "kinematics of the measured cable lengths")]
+          "kinematics of the measured cable lengths"),
+     Spec("live_state_rate_hz", DOUBLE, 20.0,
+          "the live state (platform pose on /tf and ~/platform_pose, ~/cable_state, "
+          "~/least_margin) is computed at most this often (Hz), from the newest joint state "
+          "only, and not at all while none arrives", low=0.1, high=1000.0),
+     Spec("live_markers_rate_hz", DOUBLE, 10.0,
+          "~/live_markers is drawn at most this often (Hz; at most live_state_rate_hz)",
+          low=0.1, high=1000.0)]
     + [_robot_spec(f) for f in ROBOT_FIELDS]
     + _task_specs()
     + [_setting_spec(name) for name in SETTINGS]

@@ -37,6 +37,7 @@ from ...model.forward_kinematics import current_pose as _current_pose, nearest_p
 from ..interface import ACTION_QOS
 from ..core.live_state import measured_tensions
 from ..msgs.messages import check_joint_names, duration_msg
+from ..polled import PolledSubscription
 
 COMPLETED, STOPPED, FAILED = "completed", "stopped", "failed"
 
@@ -57,8 +58,8 @@ RESULT_MARGIN_S = 5.0
 # The joint state subscription: best effort matches both a reliable publisher
 # (ros2_control's joint_state_broadcaster: reliable, volatile, depth 10) and a best-effort
 # one (many drivers use the sensor data profile); a reliable subscription would not hear
-# the latter at all. Only the latest message is used, so a lost one does not matter.
-JOINT_STATE_QOS = QoSProfile(depth=10, reliability=ReliabilityPolicy.BEST_EFFORT,
+# the latter at all. Only the latest message is used: depth 1, and a lost one does not matter.
+JOINT_STATE_QOS = QoSProfile(depth=1, reliability=ReliabilityPolicy.BEST_EFFORT,
                              durability=DurabilityPolicy.VOLATILE)
 
 ERROR_NAMES = {getattr(FollowJointTrajectory.Result, name): name for name in (
@@ -161,7 +162,8 @@ def current_pose(robot, lengths, guess=None):
 # ----------------------------------------------------------------------------- joint states
 
 class JointStateMonitor:
-    """The latest sensor_msgs/JointState on ``topic`` and when it arrived (monotonic).
+    """The latest sensor_msgs/JointState on ``topic`` and when it arrived (monotonic),
+    read when asked (``polled.PolledSubscription``: no executor work per message).
 
     ``lengths(max_age_s)`` gives the winches' cable lengths (6,) m in the order of
     ``winch_names``, or None and why not: nothing received yet, the last message older than
@@ -169,33 +171,29 @@ class JointStateMonitor:
     waits, a bounded time, for a message when there is none recent enough.
     """
 
-    def __init__(self, node, topic, winch_names, callback_group=None):
+    def __init__(self, node, topic, winch_names):
         self._node = node
         self.winch_names = check_joint_names(winch_names, "winch_names")
-        self._arrived = threading.Condition()   # guards _latest; notified on each message
+        self._lock = threading.Lock()
         self._latest = None          # (JointState, time.monotonic() of arrival)
         self.tensions = None         # N: the efforts of the message ``lengths`` last read
-        self.subscription = node.create_subscription(
-            JointState, topic, self._received, JOINT_STATE_QOS,
-            callback_group=callback_group)
+        self.subscription = PolledSubscription(node, JointState, topic, JOINT_STATE_QOS)
         self.topic = self.subscription.topic_name
-
-    def _received(self, msg):
-        with self._arrived:
-            self._latest = (msg, time.monotonic())
-            self._arrived.notify_all()
 
     @property
     def latest(self):
         """(the last JointState, its arrival time.monotonic() s), or None."""
-        with self._arrived:
+        with self._lock:
+            taken = self.subscription.take()
+            if taken:
+                self._latest = taken[-1]
             return self._latest
 
     def wait_lengths(self, max_age_s, wait_s, cancelled=lambda: False):
         """``lengths(max_age_s)``, waiting up to ``wait_s`` (s) for a message while none is
         recent enough (processes started together can take a DDS announcement period,
-        about 3 s, to find each other), and no longer once ``cancelled()`` is true.
-        A message that names the winches wrongly is answered at once."""
+        about 3 s, to find each other), looking every CANCEL_POLL_S, and no longer once
+        ``cancelled()`` is true. A message that names the winches wrongly is answered at once."""
         end = time.monotonic() + wait_s
         while True:
             latest = self.latest
@@ -203,9 +201,7 @@ class JointStateMonitor:
             left = end - time.monotonic()
             if recent or left <= 0 or cancelled():
                 return self.lengths(max_age_s)
-            with self._arrived:
-                if self._latest is latest:
-                    self._arrived.wait(min(left, CANCEL_POLL_S))
+            time.sleep(min(left, CANCEL_POLL_S))
 
     def lengths(self, max_age_s):
         """(cable lengths (6,) m, "") or (None, the reason)."""
@@ -228,7 +224,7 @@ class JointStateMonitor:
             return None, f"joint state on {self.topic}: {exc}"
 
     def destroy(self):
-        self._node.destroy_subscription(self.subscription)
+        self.subscription.destroy()
 
 
 # ----------------------------------------------------------------------------- execution

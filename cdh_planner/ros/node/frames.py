@@ -1,23 +1,31 @@
 """The node's frames on TF (``core/frames.py`` for the conventions) and the robot's live state:
 the static transform fixed frame (z-up) -> base frame (the paper's, z-down) on /tf_static
-and the URDF on ``robot_description`` (``description.py``), both latched; for each new
+and the URDF on ``robot_description`` (``description.py``), both latched; from the newest
 measured JointState (stamped with it), the platform's pose from forward kinematics,
 base frame -> platform frame, on /tf and ``~/platform_pose``, and ``core/live_state.py``'s
 ``~/cable_state``, ``~/least_margin`` and ``~/live_markers``; and a
 ``frames.TransformBook`` of /tf and /tf_static through which goals in other frames are
 expressed in the base frame.
 
+The live state is a thread of its own, not an executor callback: every 1 /
+``live_state_rate_hz`` s it takes the newest joint state (``polled.PolledSubscription``: none
+are handled in between) and, only when there is a new one, computes and publishes it
+(markers at ``live_markers_rate_hz``). So joint states at 50 - 1000 Hz cost the executor
+nothing, and the planner's thread the GIL for a few ms per look. /tf is read the same way
+(``polled.py``), when a request needs a frame and at each look.
+
 /tf and /tf_static carry tf2_msgs/TFMessage: the real package where ROS is installed, a
 partial copy with the same type hash in the venv (interfaces/tf2_msgs).
 """
 
+import threading
+import time
 import traceback
 
 from geometry_msgs.msg import PoseStamped
 from sensor_msgs.msg import JointState
 from std_msgs.msg import Float64, String
 from visualization_msgs.msg import MarkerArray
-from rclpy.callback_groups import MutuallyExclusiveCallbackGroup
 from rclpy.qos import DurabilityPolicy, QoSProfile, ReliabilityPolicy
 from tf2_msgs.msg import TFMessage
 
@@ -27,14 +35,16 @@ from ..core import plan_requests
 from ..core.description import urdf
 from ..core.frames import Z_DOWN, TransformBook, pose_in_frame, transform_msg
 from ..interface import LATCHED
-from ..core.live_state import CABLE_STATE, LEAST_MARGIN, LIVE_MARKERS, live_messages
+from ..core.live_state import CABLE_STATE, LEAST_MARGIN, LIVE_MARKERS, LiveRates, live_markers, \
+    live_messages
+from ..polled import PolledSubscription
 
 TF_QOS = QoSProfile(depth=100, reliability=ReliabilityPolicy.RELIABLE,
                     durability=DurabilityPolicy.VOLATILE)         # tf2_ros's
 TF_STATIC_QOS = QoSProfile(depth=1, reliability=ReliabilityPolicy.RELIABLE,
                            durability=DurabilityPolicy.TRANSIENT_LOCAL)   # tf2_ros's
 PLATFORM_POSE, ROBOT_DESCRIPTION = "platform_pose", "robot_description"
-PERIOD_S = 0.02          # looks for a new joint state at 50 Hz (joint_state_broadcaster's)
+JOIN_S = 5.0     # s: how long closing waits for the live state's thread to end its look
 
 
 class NodeFrames:
@@ -51,19 +61,27 @@ class NodeFrames:
         self.pub_markers = pub(MarkerArray, f"~/{LIVE_MARKERS}", 10)
         # robot_state_publisher's name and QoS (relative: it follows the namespace)
         self.pub_description = pub(String, ROBOT_DESCRIPTION, LATCHED)
-        for topic, qos in (("/tf", TF_QOS), ("/tf_static", TF_STATIC_QOS)):
-            node.create_subscription(TFMessage, topic, self._received, qos,
-                                     callback_group=callback_group)
+        # /tf taken when a request needs it and at each look of the live state, not a
+        # callback per message: the node's own platform pose at live_state_rate_hz comes
+        # back on it (the rare /tf_static ones are callbacks)
+        self.tf = PolledSubscription(node, TFMessage, "/tf", TF_QOS)
+        node.create_subscription(TFMessage, "/tf_static", self._received, TF_STATIC_QOS,
+                                 callback_group=callback_group)
         self._seen = None        # the JointState last turned into a pose
-        # one update at a time: in a reentrant group a slow forward kinematics (loaded
-        # machine, Newton from seeds) started a new update every period on another executor
-        # thread until none was left for plan goals, joint states and results
-        self.timer = node.create_timer(PERIOD_S, self.update,
-                                       callback_group=MutuallyExclusiveCallbackGroup())
+        self.rates = None        # LiveRates of the configured parameters
+        # one update at a time, never on an executor thread: a slow forward kinematics
+        # (loaded machine, Newton from seeds) cannot take the threads of plan goals and results
+        self.worker = None
+        self._stop = threading.Event()
 
     def _received(self, msg):
         for transform in msg.transforms:
             self.book.add(transform)
+
+    def read_tf(self):
+        """Every /tf message that came since the last read into the book."""
+        for msg, _ in self.tf.take():
+            self._received(msg)
 
     def configure(self, config):
         """Publish (latched) the static frames of ``config`` (fixed -> base, z-down) and the
@@ -76,11 +94,40 @@ class NodeFrames:
         for transform in static:
             self.book.add(transform)
         self.pub_static.publish(TFMessage(transforms=static))
+        self.rates = LiveRates(values["live_state_rate_hz"], values["live_markers_rate_hz"])
+        if self.worker is None:
+            self._stop.clear()
+            self.worker = threading.Thread(target=self._live, name="cdh_planner live state",
+                                           daemon=True)
+            self.worker.start()
+
+    def close(self):
+        """End the live state's thread (after its current look); configure starts it again."""
+        worker, self.worker = self.worker, None
+        if worker is not None:
+            self._stop.set()
+            worker.join(JOIN_S)
+
+    def destroy(self):
+        """``close``, and the /tf subscription (the node is being destroyed)."""
+        self.close()
+        self.tf.destroy()
+
+    def _live(self):
+        while not self._stop.wait(self.rates.period_s):
+            try:
+                self.update()
+            except Exception as exc:  # noqa: BLE001 - never take the node down
+                if not self._node.context.ok():
+                    return              # shut down under the look
+                self._node.get_logger().error(f"live state failed: {exception_line(exc)}\n"
+                                              f"{traceback.format_exc()}")
 
     def to_base(self, request, fields, base_frame):
         """Replace each PoseStamped ``request.<field>`` by the same pose in ``base_frame``;
         None, or the refusal (BAD_FRAME, naming the field and frame) of the first one TF
         cannot resolve."""
+        self.read_tf()
         try:
             for field in fields:
                 setattr(request, field,
@@ -90,10 +137,12 @@ class NodeFrames:
         return None
 
     def update(self):
-        """Each new measured JointState: the platform's pose on /tf and ~/platform_pose."""
+        """The newest measured JointState, when new: the platform's pose on /tf and
+        ~/platform_pose, the live state, the markers when due. Nothing when none is new."""
         node = self._node
         if not node.configured:
             return
+        self.read_tf()     # kept short: the middleware keeps the last 100 messages
         latest = node.execution.joints.latest
         if latest is None or latest[0] is self._seen:
             return
@@ -108,22 +157,20 @@ class NodeFrames:
                                                      tensions=node.execution.joints.tensions)
         except InputError:
             return              # no pose for these lengths: nothing to show
-        except Exception as exc:  # noqa: BLE001 - never take the node down
-            node.get_logger().error(f"platform pose failed: {exception_line(exc)}\n"
-                                    f"{traceback.format_exc()}")
-            return
         stamp = msg.header.stamp if (msg.header.stamp.sec or msg.header.stamp.nanosec) \
             else node.get_clock().now().to_msg()
         self.publish_pose(M.pose_stamped_msg(p, R, config.base_frame, stamp),
                           config.values["platform_frame"])
-        state, margin, markers = live_messages(config.robot, lengths, p, R, msg,
-                                               config.base_frame, stamp)
+        state, margin, per_cable = live_messages(config.robot, lengths, p, R, msg,
+                                                 config.base_frame, stamp)
         if state.effort:    # measured tensions (load cells): the run file records them
             node.record.publish(self.pub_cables, state)
         else:
             self.pub_cables.publish(state)
         self.pub_margin.publish(margin)
-        self.pub_markers.publish(markers)
+        if self.rates.markers_due(time.monotonic()):
+            self.pub_markers.publish(live_markers(config.robot, p, R, per_cable,
+                                                  config.base_frame, stamp))
 
     def publish_pose(self, pose, platform_frame):
         o, q = pose.pose.position, pose.pose.orientation

@@ -288,6 +288,12 @@ class PlannerNode(LifecycleMixin, LifecycleNode):
         if self.plans is not None:
             self.plans.begin_shutdown()
 
+    def destroy_node(self):
+        """rclpy's, after the subscriptions no executor serves (``polled.py``)."""
+        self.close()
+        self.frames.destroy()
+        super().destroy_node()
+
     def close(self):
         """Stop executing (holding), end a running plan at its next progress report, close
         the run file, release the subscriptions (lifecycle cleanup). Safe to call twice, and
@@ -296,5 +302,6 @@ class PlannerNode(LifecycleMixin, LifecycleNode):
             return
         self.configured = self.active = False
         self.begin_shutdown()
+        self.frames.close()        # the live state's thread reads the joint states: first
         self._execution.release()
         self.record(self.runlog.close)
