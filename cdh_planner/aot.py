@@ -1,8 +1,9 @@
 """Ahead-of-time compilation of the package's numba kernels, one way for all of them
 (manifold/kernels.py, scene/kernels.py).
 
-A kernel module holds plain Python functions (no numba import) and names its entry
-points and their signatures. Two compilations of the same source, the first one found
+A kernel module holds plain Python functions (no numba import), its one entry's name
+and signature (AOT_EXPORT, AOT_SIGNATURE), the prefix of its builds (AOT_PREFIX),
+``source_digest()`` and ``jit_kernel()``. Two compilations of the same source, the first one found
 is used:
 
 - ahead of time (numba.pycc, ``python -m cdh_planner.manifold.aot`` / ``.scene.aot``, run
@@ -33,14 +34,20 @@ def source_digest(directory, names):
     return h.hexdigest()[:12]
 
 
-def load(package, module_name, exports):
-    """The exported functions (a tuple, in the order of ``exports``) of the ahead-of-time
-    module ``package.module_name``, or None if it was not built for this source."""
+def module_name(kernels):
+    """The ahead-of-time module of the kernel module ``kernels`` built from its current
+    source: its AOT_PREFIX and its ``source_digest()``."""
+    return kernels.AOT_PREFIX + kernels.source_digest()
+
+
+def load(kernels):
+    """The ahead-of-time compiled entry (AOT_EXPORT) of the kernel module ``kernels``, or
+    None if it was not built for this source."""
     try:
-        module = importlib.import_module(f"{package}.{module_name}")
+        module = importlib.import_module(f"{kernels.__package__}.{module_name(kernels)}")
     except (ImportError, OSError):  # not built, or the source not readable as files
         return None
-    return tuple(getattr(module, name) for name in exports)
+    return getattr(module, kernels.AOT_EXPORT)
 
 
 def jit(namespace, helpers, inline=()):
@@ -56,34 +63,37 @@ def jit(namespace, helpers, inline=()):
     return njit(cache=True)
 
 
-def build(module_name, exports, output_dir, prefix):
-    """Compile ``exports`` ({exported name: (signature, numba function)}) ahead of time
-    into the extension ``module_name`` in ``output_dir``; older builds (``prefix``*) are
-    removed. The extension's path."""
+def build(kernels, output_dir=None):
+    """Compile the entry of the kernel module ``kernels`` (AOT_EXPORT, AOT_SIGNATURE, its
+    ``jit_kernel()``) ahead of time into ``output_dir`` (default: beside its source); older
+    builds (AOT_PREFIX*) are removed. The extension's path."""
     with warnings.catch_warnings():
         warnings.simplefilter("ignore")  # pycc's pending-deprecation notice
         from numba.pycc import CC
-    cc = CC(module_name)
+    name = module_name(kernels)
+    output_dir = Path(kernels.__file__).resolve().parent if output_dir is None else Path(output_dir)
+    cc = CC(name)
     cc.output_dir = str(output_dir)
     cc.verbose = False
-    for name, (signature, function) in exports.items():
-        cc.export(name, signature)(function.py_func)
+    jit = kernels.jit_kernel()  # the helpers as numba functions, which the export calls
+    cc.export(kernels.AOT_EXPORT, kernels.AOT_SIGNATURE)(jit.py_func)
     cc.compile()  # object files go to a temporary directory of pycc's own
-    built = [p for p in Path(output_dir).glob(f"{module_name}.*") if p.suffix in (".so", ".pyd")]
+    built = [p for p in output_dir.glob(f"{name}.*") if p.suffix in (".so", ".pyd")]
     if not built:
-        raise RuntimeError(f"numba.pycc wrote no {module_name}.* in {output_dir}")
-    for old in Path(output_dir).glob(prefix + "*"):
-        if not old.name.startswith(module_name + "."):
+        raise RuntimeError(f"numba.pycc wrote no {name}.* in {output_dir}")
+    for old in output_dir.glob(kernels.AOT_PREFIX + "*"):
+        if not old.name.startswith(name + "."):
             old.unlink()
     return built[0]
 
 
-def main(label, build_kernel, warm_jit):
-    """Run ``build_kernel()`` (the extension's path); if it fails, ``warm_jit()``. Exit code
-    0 either way: the kernel works, only its first call in a process costs more."""
+def main(label, kernels, warm_jit):
+    """Build the kernel module ``kernels`` ahead of time (``build``); if that fails,
+    ``warm_jit()``. Exit code 0 either way: the kernel works, only its first call in a
+    process costs more."""
     t = time.perf_counter()
     try:
-        path = build_kernel()
+        path = build(kernels)
     except Exception as exc:  # noqa: BLE001 - any failure leaves the JIT, which works
         print(f"{label}: ahead-of-time build failed ({type(exc).__name__}: {exc}); "
               f"warming numba's JIT cache instead", file=sys.stderr)

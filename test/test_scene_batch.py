@@ -1,7 +1,7 @@
 """The collision kernel over batches of poses: ``CollisionModel.margins`` (one compiled
 call for the batch, coal only near obstacles) equals ``clearance`` pose by pose; the
 ahead-of-time kernel (scene/aot.py) is the JIT kernel's twin and a fresh process with it
-compiles nothing (numba is never imported)."""
+compiles nothing (numba is never imported; its naming: test_kernel_aot.py)."""
 
 import importlib.util
 import subprocess
@@ -77,18 +77,6 @@ def test_an_empty_scene_batch_names_cable_pairs():
         c = cm.clearance(p[n], R[n])
         assert c.kind == "cable-cable" and margin[n] == pytest.approx(c.margin, abs=1e-12)
         assert binding[n] == f"collision {c.binding}"
-
-
-def test_the_aot_module_is_named_after_the_digest_of_the_kernel_source():
-    import hashlib
-    from pathlib import Path
-    h = hashlib.sha256(Path(kernels.__file__).read_bytes())
-    assert kernels.aot_module_name() == kernels.AOT_PREFIX + h.hexdigest()[:12]
-
-
-def test_a_build_of_other_source_is_never_loaded(monkeypatch):
-    monkeypatch.setattr(kernels, "source_digest", lambda: "000000000000")
-    assert kernels.aot_kernel() is None
 
 
 @pytest.mark.skipif(not AOT_BUILT, reason="no ahead-of-time collision kernel built (make, or "

@@ -7,28 +7,21 @@ The build, its naming and the JIT fallback without a C compiler: ``cdh_planner.a
 """
 
 import sys
-from pathlib import Path
 
 import numpy as np
 
 from .. import aot
 from . import kernels
 
-HERE = Path(kernels.__file__).resolve().parent
-
-
-def build(output_dir=HERE):
-    """Compile the kernel ahead of time into ``output_dir``; the extension's path."""
-    jit = kernels.jit_kernel()  # the helpers as numba functions, which the export calls
-    return aot.build(kernels.aot_module_name(), {kernels.AOT_EXPORT: (kernels.AOT_SIGNATURE, jit)},
-                     output_dir, kernels.AOT_PREFIX)
-
 
 def warm_jit():
     """Compile the JIT kernel once so that its cache (in __pycache__) is there."""
-    X = np.ones(kernels.N_VARS)
-    kernels.jit_kernel()(X, np.ones(kernels.N_PARAMS), True)
+    X, prm = np.ones(kernels.N_VARS), np.ones(kernels.N_PARAMS)
+    prm[kernels.K_KAPPA] = 0.1
+    prm[kernels.K_LMAX:kernels.K_FMIN] = 3.0  # length and tension ranges of non-zero width
+    prm[kernels.K_FMAX:kernels.K_KAPPA] = 4.0
+    kernels.jit_kernel()(X, prm, True)
 
 
 if __name__ == "__main__":
-    sys.exit(aot.main("kernel", build, warm_jit))
+    sys.exit(aot.main("kernel", kernels, warm_jit))

@@ -18,6 +18,7 @@ Two compilations of the same source, the first one found is used:
 """
 
 import math
+import sys
 from pathlib import Path
 
 import numpy as np
@@ -345,14 +346,13 @@ def source_digest():
 
 
 def aot_module_name():
-    """The ahead-of-time module built from this very source (see the module doc)."""
-    return AOT_PREFIX + source_digest()
+    """The ahead-of-time module built from this very source."""
+    return aot.module_name(sys.modules[__name__])
 
 
 def aot_kernel():
     """The ahead-of-time compiled kernel, or None if it was not built for this source."""
-    found = aot.load(__package__, aot_module_name(), (AOT_EXPORT,))
-    return found and found[0]
+    return aot.load(sys.modules[__name__])
 
 
 def jit_kernel():

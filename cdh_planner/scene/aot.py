@@ -7,21 +7,11 @@ The build, its naming and the JIT fallback without a C compiler: ``cdh_planner.a
 """
 
 import sys
-from pathlib import Path
 
 import numpy as np
 
 from .. import aot
 from . import kernels
-
-HERE = Path(kernels.__file__).resolve().parent
-
-
-def build(output_dir=HERE):
-    """Compile the kernel ahead of time into ``output_dir``; the extension's path."""
-    jit = kernels.jit_kernel()  # the helpers as numba functions, which the export calls
-    return aot.build(kernels.aot_module_name(), {kernels.AOT_EXPORT: (kernels.AOT_SIGNATURE, jit)},
-                     output_dir, kernels.AOT_PREFIX)
 
 
 def warm_jit():
@@ -39,4 +29,4 @@ def warm_jit():
 
 
 if __name__ == "__main__":
-    sys.exit(aot.main("collision kernel", build, warm_jit))
+    sys.exit(aot.main("collision kernel", kernels, warm_jit))

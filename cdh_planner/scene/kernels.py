@@ -7,6 +7,7 @@ ahead of time by ``python -m cdh_planner.scene.aot`` (``make``), else by the JIT
 """
 
 import math
+import sys
 from pathlib import Path
 
 import numpy as np
@@ -271,13 +272,12 @@ def source_digest():
 
 def aot_module_name():
     """The ahead-of-time module built from this very source."""
-    return AOT_PREFIX + source_digest()
+    return aot.module_name(sys.modules[__name__])
 
 
 def aot_kernel():
-    """The ahead-of-time compiled batch kernel, or None if it was not built for this source."""
-    found = aot.load(__package__, aot_module_name(), (AOT_EXPORT,))
-    return found and found[0]
+    """The ahead-of-time compiled kernel, or None if it was not built for this source."""
+    return aot.load(sys.modules[__name__])
 
 
 def jit_kernel():
