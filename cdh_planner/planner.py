@@ -30,7 +30,7 @@ from .pipeline.metrics import task_cost, task_costs  # noqa: F401  (task_cost: A
 from .pipeline.route import Route, failure_message
 from .pipeline.smooth import Smooth
 from .pipeline.timing import time_stage
-from .pipeline.validity import Validity
+from .pipeline.validity import CollisionFreeDomain, Validity
 from .search.strategies import AUTO, MB, Stop
 from .settings import PlannerSettings, check_setting  # noqa: F401  (PlannerSettings: API)
 from .status import Status
@@ -99,7 +99,6 @@ class Planner:
         self.constraint = planning_manifold(robot, task, s.margin_floor)
         self.radius = s.radius or default_radius(self.constraint.dim)
         self.clearance_weight = s.clearance_weight
-        self.atlas = Atlas(self.constraint, radius=self.radius)
         check_dynamics(robot, s.dynamics)
         self.pose_cost = task_cost(robot, task, s.cost)
         self.pose_costs = task_costs(robot, task, s.cost)
@@ -109,6 +108,9 @@ class Planner:
         self.validity = Validity(robot, task, s.margin_floor, scene,
                                  accuracy=(s.accuracy_position_m, s.accuracy_orientation_rad))
         self.collision = self.validity.collision
+        # with a scene, collisions are out of the atlas's domain (no chart centred in one)
+        self.atlas = Atlas(self.constraint if self.collision is None
+                           else CollisionFreeDomain(self.constraint, self.validity), radius=self.radius)
         self.lift = Lift(self.validity, self.constraint, self.atlas.in_domain)
         self.densify = Densify(self.validity, s.max_cable_speed, s.max_cable_accel)
         self.route = Route(self.constraint, self.atlas, self.validity, self.length,

@@ -1,5 +1,6 @@
-"""The ahead-of-time kernel (manifold/aot.py) is the JIT kernel's twin, and only ever the
-build of the current source."""
+"""The ahead-of-time kernels (manifold/aot.py, scene/aot.py through cdh_planner/aot.py) are
+their JIT kernels' twins, and only ever the build of the current source (the collision
+kernel's twin test: test_scene_batch.py)."""
 
 import hashlib
 import importlib.util
@@ -11,19 +12,25 @@ import numpy as np
 import pytest
 
 from cdh_planner.manifold import kernels
+from cdh_planner.scene import kernels as scene_kernels
 
 AOT_BUILT = importlib.util.find_spec(f"cdh_planner.manifold.{kernels.aot_module_name()}") is not None
 
 
-def test_the_aot_module_is_named_after_the_digest_of_the_kernel_source():
-    d = Path(kernels.__file__).resolve().parent
-    h = hashlib.sha256((d / "kernels.py").read_bytes() + (d / "layout.py").read_bytes())
-    assert kernels.aot_module_name() == kernels.AOT_PREFIX + h.hexdigest()[:12]
+SOURCES = [(kernels, ("kernels.py", "layout.py")), (scene_kernels, ("kernels.py",))]
 
 
-def test_a_build_of_other_source_is_never_loaded(monkeypatch):
-    monkeypatch.setattr(kernels, "source_digest", lambda: "000000000000")
-    assert kernels.aot_kernel() is None
+@pytest.mark.parametrize("module, sources", SOURCES, ids=["manifold", "scene"])
+def test_the_aot_module_is_named_after_the_digest_of_the_kernel_source(module, sources):
+    d = Path(module.__file__).resolve().parent
+    h = hashlib.sha256(b"".join((d / name).read_bytes() for name in sources))
+    assert module.aot_module_name() == module.AOT_PREFIX + h.hexdigest()[:12]
+
+
+@pytest.mark.parametrize("module", [kernels, scene_kernels], ids=["manifold", "scene"])
+def test_a_build_of_other_source_is_never_loaded(module, monkeypatch):
+    monkeypatch.setattr(module, "source_digest", lambda: "000000000000")
+    assert module.aot_kernel() is None
 
 
 @pytest.mark.skipif(not AOT_BUILT, reason="no ahead-of-time kernel built (make, or python -m "
@@ -52,3 +59,22 @@ def test_with_the_aot_kernel_a_process_never_imports_numba():
             "print('numba' in sys.modules)")
     out = subprocess.run([sys.executable, "-c", code], capture_output=True, text=True, check=True)
     assert out.stdout.strip() == "False"
+
+
+def test_without_a_compiler_the_build_falls_back_to_warming_the_jit(monkeypatch, capsys):
+    from cdh_planner import aot
+
+    def fail(module):
+        raise OSError("no C compiler")
+
+    warmed = []
+    monkeypatch.setattr(aot, "build", fail)
+    assert aot.main("collision kernel", scene_kernels, lambda: warmed.append(1)) == 0
+    assert warmed == [1] and "no C compiler" in capsys.readouterr().err
+
+
+@pytest.mark.parametrize("name", ["manifold", "scene"])
+def test_the_jit_warm_up_runs_on_its_own_inputs(name):
+    """The fallback's warm-up call compiles and runs (no division by zero in its inputs)."""
+    module = importlib.import_module(f"cdh_planner.{name}.aot")
+    module.warm_jit()

@@ -11,21 +11,19 @@ kernel this small.
 
 Two compilations of the same source, the first one found is used:
 
-- ahead of time (numba.pycc, ``python -m cdh_planner.manifold.aot``, run by ``make``): an
-  extension module next to this file whose name carries a digest of this file and
-  layout.py, so an edited kernel never runs stale machine code. Importing it and the first
-  call take about 10 ms, and numba is not imported at all;
-- numba's JIT with ``cache=True``: importing numba and loading the machine code from
-  __pycache__ cost 0.4 - 0.5 s in a fresh process (a first compilation, a few seconds).
+- ahead of time (``python -m cdh_planner.manifold.aot``, run by ``make``; ``cdh_planner.aot``):
+  an extension module next to this file whose name carries a digest of this file and
+  layout.py. Importing it and the first call take about 10 ms, numba is not imported;
+- numba's JIT with ``cache=True``: 0.4 - 0.5 s in a fresh process.
 """
 
-import hashlib
-import importlib
 import math
+import sys
 from pathlib import Path
 
 import numpy as np
 
+from .. import aot
 from .layout import I_D, I_F, I_G, I_L, I_P, I_S, I_T, I_TAU, I_V, N_EQS, N_VARS
 
 # Layout of the packed parameter vector.
@@ -344,36 +342,22 @@ AOT_PREFIX = "_kernels_aot_"
 
 def source_digest():
     """12 hex digits of sha256 over this file and layout.py: what the machine code is of."""
-    h = hashlib.sha256()
-    here = Path(__file__).resolve().parent
-    for name in ("kernels.py", "layout.py"):
-        h.update((here / name).read_bytes())
-    return h.hexdigest()[:12]
+    return aot.source_digest(Path(__file__).resolve().parent, ("kernels.py", "layout.py"))
 
 
 def aot_module_name():
-    """The ahead-of-time module built from this very source (see the module doc)."""
-    return AOT_PREFIX + source_digest()
+    """The ahead-of-time module built from this very source."""
+    return aot.module_name(sys.modules[__name__])
 
 
 def aot_kernel():
     """The ahead-of-time compiled kernel, or None if it was not built for this source."""
-    try:
-        module = importlib.import_module(f"{__package__}.{aot_module_name()}")
-    except (ImportError, OSError):  # not built, or the source not readable as files
-        return None
-    return getattr(module, AOT_EXPORT)
+    return aot.load(sys.modules[__name__])
 
 
 def jit_kernel():
     """numba's JIT kernel (cache=True); the helpers become numba functions in this module."""
-    from numba import njit
-
-    g = globals()
-    for name in HELPERS:
-        if not hasattr(g[name], "py_func"):
-            g[name] = njit(cache=True)(g[name])
-    return njit(cache=True)(_residual_and_jacobian)
+    return aot.jit(globals(), HELPERS)(_residual_and_jacobian)
 
 
 navigation_residual_and_jacobian = aot_kernel() or jit_kernel()

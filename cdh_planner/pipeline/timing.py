@@ -7,6 +7,8 @@ clearance.
 
 from dataclasses import dataclass
 
+import numpy as np
+
 from ..model.pose import rotation_tt
 from ..trajectory import clearance
 from ..trajectory.dynamics import timed_path
@@ -42,6 +44,7 @@ def least_clearance(collision, path):
     """{least_clearance_m, clearance_binding} over the path's waypoints (with a scene)."""
     if collision is None:
         return {}
-    cs = [collision.clearance(p, R) for p, R in zip(path.p, rotation_tt(path.tau))]
-    c = min(cs, key=lambda c: c.distance)
+    R = rotation_tt(path.tau)
+    k = int(np.argmin(collision.margins(path.p, R)[0]))  # one batch; what binds at the least
+    c = collision.clearance(path.p[k], R[k])
     return {"least_clearance_m": c.distance, "clearance_binding": c.binding}

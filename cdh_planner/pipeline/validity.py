@@ -70,10 +70,12 @@ class Validity:
         if self.accuracy is not None:
             if self.accuracy.margins(self.robot, p[None], R[None])[0][0] < self.margin_floor:
                 return False
-        if self.collision is None:
-            return True
-        c = self.collision.clearance(p, R)
-        return c.margin / COLLISION_UNIT_M >= self.margin_floor
+        return self.collision is None or bool(self.clear_of_collision(p[None], R[None])[0])
+
+    def clear_of_collision(self, p, R):
+        """Which poses (p (N, 3) m, R (N, 3, 3)) are clear of collision by the margin floor
+        (the collision margin in units of COLLISION_UNIT_M): (N,) bool, one batch."""
+        return self.collision.margins(p, R)[0] / COLLISION_UNIT_M >= self.margin_floor
 
     def accuracy_violation(self, p, tau):
         """None, or one line saying which accuracy limit the pose (p (3,) m, tau (3,) rad)
@@ -128,6 +130,36 @@ class Validity:
         ``trajectory.path_check`` segment report per pair."""
         return check_motion(self.robot, p, q, collision=self.collision,
                             feasibility=self.feasibility)
+
+
+class CollisionFreeDomain:
+    """The planning manifold's constraint with collisions out of its domain, as wrench
+    feasibility is for m > 6 (``configuration.inside``): the atlas centres no chart in
+    collision and cuts a chart where it reaches an obstacle (``Atlas.expand``). Everything
+    else is the wrapped constraint's."""
+
+    def __init__(self, constraint, validity):
+        self.constraint, self.validity = constraint, validity
+
+    def __getattr__(self, name):
+        if name in ("constraint", "validity") or name.startswith("__"):
+            raise AttributeError(name)  # not set yet (copy, pickle): no recursion
+        return getattr(self.constraint, name)
+
+    def inside(self, x):
+        """Is the point x of M in the domain: the constraint's own and clear of collision?"""
+        return bool(self.inside_many(np.asarray(x)[None])[0])
+
+    def inside_many(self, xs):
+        """``inside`` of the rows of xs (N, n_vars): (N,) bool, one collision batch."""
+        c = self.constraint
+        many = getattr(c, "inside_many", None) or (
+            lambda xs: [c.inside(x) for x in xs] if hasattr(c, "inside") else True)
+        ok = np.asarray(many(xs), dtype=bool)
+        poses = [self.constraint.pose(x) for x in xs]
+        p = np.array([a for a, _ in poses]).reshape(-1, 3)
+        tau = np.array([b for _, b in poses]).reshape(-1, 3)
+        return ok & self.validity.clear_of_collision(p, rotation_tt(tau))
 
 
 def wrapped(d, periodic):

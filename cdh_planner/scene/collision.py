@@ -27,8 +27,8 @@ from dataclasses import dataclass
 
 import coal
 import numpy as np
-from numba import njit
 
+from .kernels import MESH_CODE, collision_batch
 from .margin import COLLISION_UNIT_M, combine  # noqa: F401  (their home; re-exported)
 from .schema import SHARED_ANCHOR_M
 
@@ -36,9 +36,6 @@ from .schema import SHARED_ANCHOR_M
 # of room counts as a wrench margin of 0.1 (Robot 2's poses have 0.03 to 0.15), and the
 # planner's margin floor (1e-3) keeps planned waypoints 0.1 mm beyond the scene's clearance.
 GJK_TOLERANCE = 1e-9  # m: coal's convergence tolerance (its default, 1e-6, is too coarse)
-EPS = 1e-300
-MESH_CODE = 3.0   # a platform the kernel leaves to coal (a mesh)
-GOLDEN_STEPS = 40   # golden-section steps on a cable: 0.618^40 = 4e-9 of its length (~1 nm)
 
 
 @dataclass(frozen=True)
@@ -88,23 +85,38 @@ class CollisionModel:
         centres = np.array([o.position for o in self.obstacles], dtype=float).reshape(-1, 3)
         radii = np.array([o.bounding_radius() for o in self.obstacles], dtype=float)
         plat = self.platform
-        self.static = np.concatenate([  # the kernel's constants, one array (offsets: _kernel)
+        self.static = np.concatenate([  # the kernel's constants (offsets: kernels._kernel)
             A.ravel(), B.ravel(), centres.ravel(), radii, trims.ravel(),
             [scene.cable_radius, scene.shared_anchor_exemption],
             plat.position if plat else np.zeros(3),
             [plat.bounding_radius() if plat else -1.0],  # < 0: no platform
             _platform_form(plat)])  # its kind code, 3 dimensions, rotation (platform frame)
-        # work buffers: lower bounds (rows: cables, then the platform; columns: obstacles,
-        # then the platform's own shape) and each cable's capsule frame (rotation 9, centre
-        # 3, half length 1; its platform anchor 3) and that of its part kept clear of the
-        # platform (13), cable pair distances
-        self.lb = np.empty((m + 1, K + 1))
-        self.frames = np.empty((m, 16))
-        self.frames_p = np.empty((m, 13))
-        self.cc = np.empty(len(self.pairs))
-        self.cp = np.empty(m)   # cable-platform distances of a primitive platform (kernel)
-        self.least = np.empty(3)   # the least of cc and cp: value, 0 (cc) / 1 (cp) / -1, index
+        self.m, self.K = m, K
+        self.buffers = self._buffers(1)  # one pose's (clearance, distances, lower_bounds)
+        self.lb, self.frames, self.frames_p, self.cc, self.cp, self.least = \
+            (b[0] for b in self.buffers)
+        # bindings of what the kernel resolves alone: cable pairs, cables on the platform
+        self.pair_binding = np.array([f"collision {self.names[i]} / {self.names[j]}"
+                                      for i, j in self.pairs] + ["collision "], dtype=object)
+        self.own_binding = np.array([f"collision {n} / platform" for n in self.names],
+                                    dtype=object)
         self._coal(m)
+
+    def _buffers(self, n):
+        """The kernel's work buffers for n poses: lower bounds (rows: cables, then the
+        platform; columns: obstacles, then the platform's own shape), each cable's capsule
+        frame (rotation 9, centre 3, half length 1; its platform anchor 3) and that of its
+        part kept clear of the platform (13), cable pair distances, cable-platform distances
+        of a primitive platform, the least of those two (value, 0 pair / 1 platform / -1,
+        index)."""
+        m, K = self.m, self.K
+        return (np.empty((n, m + 1, K + 1)), np.empty((n, m, 16)), np.empty((n, m, 13)),
+                np.empty((n, len(self.pairs))), np.empty((n, m)), np.empty((n, 3)))
+
+    def _run(self, p, R, buffers):
+        """The compiled kernel on poses p (N, 3) m, R (N, 3, 3) into ``buffers``."""
+        collision_batch(np.ascontiguousarray(p, dtype=float), np.ascontiguousarray(R, dtype=float),
+                        self.static, self.pairs, *buffers)
 
     def _coal(self, m):
         """coal's shapes, placements and distance functors (cables, platform, obstacles)."""
@@ -131,13 +143,20 @@ class CollisionModel:
     def clearance(self, p, R):
         """The least signed distance (m) at pose (p (3,) m, R (3, 3)) and what binds."""
         p, R = self._pose(p, R)
-        best, kind, n = self.least   # the kernel's least cable-cable / cable-platform distance
+        return self._answer(*self._resolve(p, R, self.lb, self.least, self.frames,
+                                           self.frames_p))
+
+    def _resolve(self, p, R, lb, least, frames, frames_p):
+        """(least distance m, what binds: (kind, obstacle index, cables) or None) of pose
+        (p, R) from its kernel buffers, calling coal in the order of the lower bounds ``lb``
+        while one is below the least distance found (``lb`` is consumed)."""
+        best, kind, n = least   # the kernel's least cable-cable / cable-platform distance
         what = None if kind < 0 else \
             ("cable-cable", None, tuple(map(int, self.pairs[int(n)]))) if kind == 0 else \
-            ("cable-platform", len(self.obstacles), (int(n),))
+            ("cable-platform", self.K, (int(n),))
         best = float(best)
-        flat = self.lb.ravel()  # consumed: each pair tried is set to inf
-        m, K = len(self.names), len(self.obstacles)
+        flat = lb.ravel()  # consumed: each pair tried is set to inf
+        m, K = self.m, self.K
         while True:  # in increasing order of the bounds, while one is below the best
             idx = int(np.argmin(flat))
             if flat[idx] >= best:
@@ -145,22 +164,20 @@ class CollisionModel:
             flat[idx] = math.inf
             i, k = divmod(idx, K + 1)
             if k == K:
-                d, w = self._cable_platform(i, p, R), ("cable-platform", k, (i,))
+                d, w = self._cable_platform(i, p, R, frames_p), ("cable-platform", k, (i,))
             elif i < m:
-                d, w = self._cable_obstacle(i, k), ("cable-obstacle", k, (i,))
+                d, w = self._cable_obstacle(i, k, frames), ("cable-obstacle", k, (i,))
             else:
                 d, w = self._platform_obstacle(k, p, R), ("platform-obstacle", k, ())
             if d < best:
                 best, what = d, w
-        return self._answer(best, what)
+        return best, what
 
     def _pose(self, p, R):
-        """Fill the work buffers for pose (p, R): lower bounds, pair distances, frames."""
+        """Fill the one-pose buffers for pose (p, R): lower bounds, pair distances, frames."""
         p = np.ascontiguousarray(p, dtype=float)
         R = np.ascontiguousarray(R, dtype=float)
-        _kernel(p, R, self.static, self.pairs, self.lb, self.frames, self.frames_p, self.cc,
-                self.cp)
-        _least(self.cc, self.cp, self.least)
+        self._run(p[None], R[None], self.buffers)
         return p, R
 
     def _answer(self, best, what):
@@ -174,10 +191,10 @@ class CollisionModel:
 
     # ------------------------------------------------------------------ one pair (coal)
 
-    def _cable_obstacle(self, i, k):
-        """Signed distance (m) of cable i's capsule (frame from the last ``_pose``) to
-        obstacle k, by coal."""
-        f = self.frames[i]
+    def _cable_obstacle(self, i, k, frames):
+        """Signed distance (m) of cable i's capsule (its frame ``frames[i]``, from the
+        kernel) to obstacle k, by coal."""
+        f = frames[i]
         self.capsules[i].halfLength = f[12]
         T = self.cable_T[i]
         T.setTransform(f[:9].reshape(3, 3), f[9:12])
@@ -191,10 +208,11 @@ class CollisionModel:
         return float(self.platform_fn[k](self.platform_T, self.placement[k], self.request,
                                          self.result))
 
-    def _cable_platform(self, i, p, R):
+    def _cable_platform(self, i, p, R, frames_p):
         """Signed distance (m) of cable i's capsule, short of its platform anchor by the
-        exemption (frame from the last ``_pose``), to the platform's own shape at (p, R)."""
-        f = self.frames_p[i]
+        exemption (its frame ``frames_p[i]``, from the kernel), to the platform's own shape
+        at (p, R)."""
+        f = frames_p[i]
         self.capsules_p[i].halfLength = f[12]
         T = self.cable_T[i]
         T.setTransform(f[:9].reshape(3, 3), f[9:12])
@@ -215,26 +233,34 @@ class CollisionModel:
         out = [("cable-cable", None, tuple(map(int, pair)), float(d))
                for pair, d in zip(self.pairs, self.cc)]
         for k, o in enumerate(self.obstacles):
-            out += [("cable-obstacle", o.id, (i,), self._cable_obstacle(i, k))
+            out += [("cable-obstacle", o.id, (i,), self._cable_obstacle(i, k, self.frames))
                     for i in range(len(self.names))]
             if self.platform is not None:
                 out.append(("platform-obstacle", o.id, (), self._platform_obstacle(k, p, R)))
         K = len(self.obstacles)
         out += [("cable-platform", "platform", (i,),
-                 self._cable_platform(i, p, R) if self.lb[i, K] < math.inf else float(self.cp[i]))
+                 self._cable_platform(i, p, R, self.frames_p) if self.lb[i, K] < math.inf else float(self.cp[i]))
                 for i in range(len(self.names)) if self.lb[i, K] < math.inf or self.cp[i] < math.inf]
         return out
 
     def margins(self, p, R):
         """Collision margins (m, distance - clearance) and bindings ("collision winch_2 /
-        ball") of N poses: p (N, 3) m, R (N, 3, 3)."""
-        p = np.asarray(p, dtype=float).reshape(-1, 3)
-        R = np.asarray(R, dtype=float).reshape(-1, 3, 3)
-        margin, binding = np.empty(len(p)), np.empty(len(p), dtype=object)
-        for n in range(len(p)):
-            c = self.clearance(p[n], R[n])
-            margin[n], binding[n] = c.margin, f"collision {c.binding}"
-        return margin, binding
+        ball") of N poses: p (N, 3) m, R (N, 3, 3); equal to ``clearance`` pose by pose.
+        One compiled call for the batch; coal only for the poses where a lower bound is
+        below the kernel's least distance (near an obstacle or the platform's mesh)."""
+        p = np.ascontiguousarray(p, dtype=float).reshape(-1, 3)
+        R = np.ascontiguousarray(R, dtype=float).reshape(-1, 3, 3)
+        buffers = lb, frames, frames_p, _, _, least = self._buffers(len(p))
+        self._run(p, R, buffers)
+        best = least[:, 0].copy()
+        kind, index = least[:, 1].astype(int), least[:, 2].astype(int)
+        binding = np.where(kind == 1, self.own_binding[np.where(kind == 1, index, 0)],
+                           self.pair_binding[np.where(kind == 0, index, -1)])
+        near = np.flatnonzero(lb.reshape(len(p), -1).min(axis=1) < best) if len(p) else ()
+        for n in near:
+            best[n], what = self._resolve(p[n], R[n], lb[n], least[n], frames[n], frames_p[n])
+            binding[n] = f"collision {self._answer(best[n], what).binding}"
+        return best - self.scene.clearance, binding
 
     def lower_bounds(self, p, R):
         """Lower bounds (m + 1, K + 1), m, of the cable-obstacle (rows 0..m-1, columns
@@ -281,230 +307,3 @@ def _cable_pairs(A, B):
     return np.array(pairs, dtype=np.int64).reshape(-1, 2), np.array(trims).reshape(-1, 2)
 
 
-# ----------------------------------------------------------------------------- kernel
-
-@njit(cache=True)
-def _kernel(p, R, static, pairs, lb, frames, frames_p, cc, cp):
-    """For pose (p, R): lb[i, k] = dist(segment a_i b_i, c_k) - rho_k - r, a lower bound
-    of cable i's distance to obstacle k (c_k, rho_k its bounding sphere), and lb[m, k]
-    the platform's (|centre - c_k| - rho_k - rho_platform; inf without a platform);
-    lb[i, K] cable i's (cut by rho at its platform anchor) to the platform's own shape
-    (inf without one, or if nothing is left; lb[m, K] inf); frames[i]: cable i's capsule
-    frame (rotation taking z to the cable, row-major; centre; half length), frames_p[i]
-    that of its cut part; cc[n]: the distance of the capsules of cable pair n (shared ends
-    cut by rho; inf if nothing is left); cp[i]: cable i's (cut) distance to a sphere, box or
-    cylinder platform, exact here (lb[i, K] is then inf: no coal call), inf otherwise.
-    Scalar code on 3-tuples: no allocation in the loops."""
-    m, K, P = lb.shape[0] - 1, lb.shape[1] - 1, pairs.shape[0]
-    oB, oC = 3 * m, 6 * m
-    oR = oC + 3 * K
-    oT = oR + K
-    o = oT + 2 * P
-    r, rho = static[o], static[o + 1]
-    pc = _add(_rot(R, _v(static, o + 2)), _v(p, 0))
-    prad = static[o + 5]
-    form = static[o + 6:o + 19]     # kind code, dimensions, rotation (platform frame)
-    M = R @ form[4:13].reshape(3, 3)   # the platform shape's axes in the base frame
-    for i in range(m):
-        a = _v(static, 3 * i)
-        b = _add(_rot(R, _v(static, oB + 3 * i)), _v(p, 0))
-        frames[i, 13], frames[i, 14], frames[i, 15] = b  # the platform anchor, for the pairs
-        _frame(a, b, frames[i])
-        for k in range(K):
-            lb[i, k] = _point_segment(_v(static, oC + 3 * k), a, b) - static[oR + k] - r
-        lb[i, K], cp[i] = _own(a, b, pc, prad, M, form, r, rho, frames_p[i])
-    lb[m, K] = np.inf
-    for k in range(K):
-        lb[m, k] = _norm(_sub(_v(static, oC + 3 * k), pc)) - static[oR + k] - prad \
-            if prad >= 0.0 else np.inf
-    for n in range(P):
-        i, j = pairs[n, 0], pairs[n, 1]
-        cut_a, cut_b = static[oT + 2 * n], static[oT + 2 * n + 1]
-        ok1, p0, p1 = _cut(_v(static, 3 * i), _v(frames[i], 13), cut_a, cut_b, rho)
-        ok2, q0, q1 = _cut(_v(static, 3 * j), _v(frames[j], 13), cut_a, cut_b, rho)
-        cc[n] = _segment_segment(p0, p1, q0, q1) - 2.0 * r if ok1 and ok2 else np.inf
-
-
-@njit(cache=True)
-def _least(cc, cp, out):
-    """out = (least of cc and cp, 0 if it is cc's / 1 if cp's / -1 if both are empty or
-    inf, its index)."""
-    out[0], out[1], out[2] = np.inf, -1.0, -1.0
-    for n in range(cc.shape[0]):
-        if cc[n] < out[0]:
-            out[0], out[1], out[2] = cc[n], 0.0, n
-    for i in range(cp.shape[0]):
-        if cp[i] < out[0]:
-            out[0], out[1], out[2] = cp[i], 1.0, i
-
-
-@njit(cache=True)
-def _own(a, b, pc, prad, M, form, r, rho, frame):
-    """(lower bound, exact distance) of the cable a..b, cut by rho at its platform anchor
-    b, to the platform's own shape: exact for a primitive (the bound inf), else the bound
-    from its bounding sphere and the cut capsule's ``frame`` for coal; (inf, inf) without a
-    platform or a cut cable."""
-    if prad < 0.0:
-        return np.inf, np.inf
-    ok, q0, q1 = _cut(a, b, 0.0, 1.0, rho)
-    if not ok:
-        return np.inf, np.inf
-    if form[0] < MESH_CODE:
-        return np.inf, _segment_sdf(_local(M, pc, q0), _local(M, pc, q1), form) - r
-    _frame(q0, q1, frame)
-    return _point_segment(pc, q0, q1) - prad - r, np.inf
-
-
-@njit(cache=True)
-def _local(M, c, x):
-    """x (base frame) in the frame of axes M (columns) and origin c."""
-    d = _sub(x, c)
-    return (M[0, 0] * d[0] + M[1, 0] * d[1] + M[2, 0] * d[2],
-            M[0, 1] * d[0] + M[1, 1] * d[1] + M[2, 1] * d[2],
-            M[0, 2] * d[0] + M[1, 2] * d[1] + M[2, 2] * d[2])
-
-
-@njit(cache=True)
-def _sdf(x, form):
-    """Signed distance (m) of the point x (shape frame) to a sphere (code 0: radius), box
-    (1: half edges) or cylinder (2: radius, half height; axis z)."""
-    if form[0] == 0.0:
-        return _norm(x) - form[1]
-    if form[0] == 1.0:
-        q = (abs(x[0]) - form[1], abs(x[1]) - form[2], abs(x[2]) - form[3])
-    else:
-        q = (math.hypot(x[0], x[1]) - form[1], abs(x[2]) - form[2], -np.inf)
-    out = (max(q[0], 0.0), max(q[1], 0.0), max(q[2], 0.0))
-    return _norm(out) + min(max(q[0], max(q[1], q[2])), 0.0)
-
-
-@njit(cache=True)
-def _segment_sdf(x0, x1, form):
-    """Least signed distance of the segment x0..x1 (shape frame) to the shape: the signed
-    distance to a convex set is convex, so golden-section search on the segment finds its
-    minimum (GOLDEN_STEPS steps: within 4e-9 of the segment's length); a sphere's in
-    closed form."""
-    if form[0] == 0.0:
-        return _point_segment((0.0, 0.0, 0.0), x0, x1) - form[1]
-    d = _sub(x1, x0)
-    lo, hi, g = 0.0, 1.0, 0.6180339887498949
-    c, e = hi - g, g
-    fc = _sdf(_add(x0, _scale(c, d)), form)
-    fe = _sdf(_add(x0, _scale(e, d)), form)
-    for _ in range(GOLDEN_STEPS):
-        if fc < fe:
-            hi, e, fe = e, c, fc
-            c = hi - g * (hi - lo)
-            fc = _sdf(_add(x0, _scale(c, d)), form)
-        else:
-            lo, c, fc = c, e, fe
-            e = lo + g * (hi - lo)
-            fe = _sdf(_add(x0, _scale(e, d)), form)
-    return min(fc, fe, _sdf(x0, form), _sdf(x1, form))
-
-
-@njit(cache=True, inline="always")
-def _v(x, o):
-    return (x[o], x[o + 1], x[o + 2])
-
-
-@njit(cache=True, inline="always")
-def _add(a, b):
-    return (a[0] + b[0], a[1] + b[1], a[2] + b[2])
-
-
-@njit(cache=True, inline="always")
-def _sub(a, b):
-    return (a[0] - b[0], a[1] - b[1], a[2] - b[2])
-
-
-@njit(cache=True, inline="always")
-def _scale(s, a):
-    return (s * a[0], s * a[1], s * a[2])
-
-
-@njit(cache=True, inline="always")
-def _dot(a, b):
-    return a[0] * b[0] + a[1] * b[1] + a[2] * b[2]
-
-
-@njit(cache=True, inline="always")
-def _norm(a):
-    return math.sqrt(_dot(a, a))
-
-
-@njit(cache=True, inline="always")
-def _rot(R, x):
-    return (R[0, 0] * x[0] + R[0, 1] * x[1] + R[0, 2] * x[2],
-            R[1, 0] * x[0] + R[1, 1] * x[1] + R[1, 2] * x[2],
-            R[2, 0] * x[0] + R[2, 1] * x[1] + R[2, 2] * x[2])
-
-
-@njit(cache=True)
-def _frame(a, b, out):
-    """out[:13] = rotation taking z to the unit vector u along a -> b (row-major:
-    Rodrigues about z x u, R = I + K + K^2 / (1 + u_z)), the midpoint, half the length."""
-    d = _sub(b, a)
-    length = _norm(d)
-    x, y, z = (d[0] / length, d[1] / length, d[2] / length) if length > 0.0 else (0.0, 0.0, 1.0)
-    if z < -1.0 + 1e-12:
-        rows = (1.0, 0.0, 0.0, 0.0, -1.0, 0.0, 0.0, 0.0, -1.0)
-    else:
-        h = 1.0 / (1.0 + z)
-        rows = (1.0 - h * x * x, -h * x * y, x,
-                -h * x * y, 1.0 - h * y * y, y,
-                -x, -y, 1.0 - h * (x * x + y * y))
-    for c in range(9):
-        out[c] = rows[c]
-    for c in range(3):
-        out[9 + c] = 0.5 * (a[c] + b[c])
-    out[12] = 0.5 * length
-
-
-@njit(cache=True)
-def _cut(a, b, cut_a, cut_b, rho):
-    """(ok, a', b'): the segment a..b with rho removed at the ends flagged; ok False if
-    nothing is left."""
-    d = _sub(b, a)
-    length = _norm(d)
-    if (cut_a > 0.0 or cut_b > 0.0) and length == 0.0:
-        return False, a, b
-    s0 = rho / length if cut_a > 0.0 else 0.0
-    s1 = 1.0 - (rho / length if cut_b > 0.0 else 0.0)
-    if (cut_a > 0.0 or cut_b > 0.0) and s1 <= s0:
-        return False, a, b
-    return True, _add(a, _scale(s0, d)), _add(a, _scale(s1, d))
-
-
-@njit(cache=True)
-def _point_segment(c, a, b):
-    d, w = _sub(b, a), _sub(c, a)
-    dd = _dot(d, d)
-    t = 0.0 if dd <= 0.0 else min(1.0, max(0.0, _dot(w, d) / dd))
-    return _norm(_sub(w, _scale(t, d)))
-
-
-@njit(cache=True)
-def _segment_segment(p0, p1, q0, q1):
-    """Least distance between segments p0..p1 and q0..q1 (Ericson, Real-Time Collision
-    Detection, 5.1.9)."""
-    d1, d2, r = _sub(p1, p0), _sub(q1, q0), _sub(p0, q0)
-    a, e, f = _dot(d1, d1), _dot(d2, d2), _dot(d2, r)
-    if a <= EPS and e <= EPS:
-        return _norm(r)
-    if a <= EPS:
-        s, t = 0.0, min(1.0, max(0.0, f / e))
-    else:
-        c = _dot(d1, r)
-        if e <= EPS:
-            s, t = min(1.0, max(0.0, -c / a)), 0.0
-        else:
-            b = _dot(d1, d2)
-            denom = a * e - b * b
-            s = min(1.0, max(0.0, (b * f - c * e) / denom)) if denom > 1e-14 * a * e else 0.0
-            t = (b * s + f) / e
-            if t < 0.0:
-                s, t = min(1.0, max(0.0, -c / a)), 0.0
-            elif t > 1.0:
-                s, t = min(1.0, max(0.0, (b - c) / a)), 1.0
-    return _norm(_sub(_add(r, _scale(s, d1)), _scale(t, d2)))

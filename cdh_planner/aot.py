@@ -1,0 +1,103 @@
+"""Ahead-of-time compilation of the package's numba kernels, one way for all of them
+(manifold/kernels.py, scene/kernels.py).
+
+A kernel module holds plain Python functions (no numba import), its one entry's name
+and signature (AOT_EXPORT, AOT_SIGNATURE), the prefix of its builds (AOT_PREFIX),
+``source_digest()`` and ``jit_kernel()``. Two compilations of the same source, the first one found
+is used:
+
+- ahead of time (numba.pycc, ``python -m cdh_planner.manifold.aot`` / ``.scene.aot``, run
+  by ``make``): an extension module next to the source, named after a digest of it, so an
+  edited kernel never runs stale machine code; importing it and a first call take about
+  10 ms and numba is not imported at all. Built for the generic CPU of the architecture.
+- numba's JIT with ``cache=True`` (``jit``): importing numba and loading the machine code
+  from __pycache__ cost 0.4 - 1 s in a fresh process (a first compilation, seconds).
+
+numba marks pycc "pending deprecation" (0.57 - 0.68 still ship it): if it is missing or
+the build fails (no C compiler), ``main`` warms numba's JIT cache instead and exits 0.
+"""
+
+import hashlib
+import importlib
+import sys
+import time
+import warnings
+from pathlib import Path
+
+
+def source_digest(directory, names):
+    """12 hex digits of sha256 over the files ``names`` in ``directory``: what the
+    machine code is of."""
+    h = hashlib.sha256()
+    for name in names:
+        h.update((Path(directory) / name).read_bytes())
+    return h.hexdigest()[:12]
+
+
+def module_name(kernels):
+    """The ahead-of-time module of the kernel module ``kernels`` built from its current
+    source: its AOT_PREFIX and its ``source_digest()``."""
+    return kernels.AOT_PREFIX + kernels.source_digest()
+
+
+def load(kernels):
+    """The ahead-of-time compiled entry (AOT_EXPORT) of the kernel module ``kernels``, or
+    None if it was not built for this source."""
+    try:
+        module = importlib.import_module(f"{kernels.__package__}.{module_name(kernels)}")
+    except (ImportError, OSError):  # not built, or the source not readable as files
+        return None
+    return getattr(module, kernels.AOT_EXPORT)
+
+
+def jit(namespace, helpers, inline=()):
+    """Turn the functions ``helpers`` of a kernel module's globals ``namespace`` into numba
+    functions (cache=True; those in ``inline`` inlined), once; entries then compile with
+    ``njit(cache=True)`` and call them."""
+    from numba import njit
+
+    for name in helpers:
+        if not hasattr(namespace[name], "py_func"):
+            options = {"inline": "always"} if name in inline else {}
+            namespace[name] = njit(cache=True, **options)(namespace[name])
+    return njit(cache=True)
+
+
+def build(kernels, output_dir=None):
+    """Compile the entry of the kernel module ``kernels`` (AOT_EXPORT, AOT_SIGNATURE, its
+    ``jit_kernel()``) ahead of time into ``output_dir`` (default: beside its source); older
+    builds (AOT_PREFIX*) are removed. The extension's path."""
+    with warnings.catch_warnings():
+        warnings.simplefilter("ignore")  # pycc's pending-deprecation notice
+        from numba.pycc import CC
+    name = module_name(kernels)
+    output_dir = Path(kernels.__file__).resolve().parent if output_dir is None else Path(output_dir)
+    cc = CC(name)
+    cc.output_dir = str(output_dir)
+    cc.verbose = False
+    jit = kernels.jit_kernel()  # the helpers as numba functions, which the export calls
+    cc.export(kernels.AOT_EXPORT, kernels.AOT_SIGNATURE)(jit.py_func)
+    cc.compile()  # object files go to a temporary directory of pycc's own
+    built = [p for p in output_dir.glob(f"{name}.*") if p.suffix in (".so", ".pyd")]
+    if not built:
+        raise RuntimeError(f"numba.pycc wrote no {name}.* in {output_dir}")
+    for old in output_dir.glob(kernels.AOT_PREFIX + "*"):
+        if not old.name.startswith(name + "."):
+            old.unlink()
+    return built[0]
+
+
+def main(label, kernels, warm_jit):
+    """Build the kernel module ``kernels`` ahead of time (``build``); if that fails,
+    ``warm_jit()``. Exit code 0 either way: the kernel works, only its first call in a
+    process costs more."""
+    t = time.perf_counter()
+    try:
+        path = build(kernels)
+    except Exception as exc:  # noqa: BLE001 - any failure leaves the JIT, which works
+        print(f"{label}: ahead-of-time build failed ({type(exc).__name__}: {exc}); "
+              f"warming numba's JIT cache instead", file=sys.stderr)
+        warm_jit()
+        return 0
+    print(f"{label}: {path.name} built in {time.perf_counter() - t:.1f} s")
+    return 0
