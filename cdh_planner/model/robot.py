@@ -84,6 +84,11 @@ class Robot:
         description="axial stiffness EA of each cable: of unstretched length L0 under tension t "
                     "it is L0 (1 + t / EA) long; above the cable's greatest tension (absent: "
                     "rigid cables; required to execute by lengths alone with more than 6 cables)")
+    tension_rule: str = robot_field(
+        key="tension_rule", kind=NAME, unit="", default="centred",
+        description="how more than 6 cables share the wrench: a tension rule of "
+                    "cdh_planner.wrench.RULES (centred: the range-weighted pseudo-inverse, its "
+                    "nominal centred in the null space; docs/more-cables.md)")
     length_error: np.ndarray = robot_field(  # (m,) e_i, or None: exact winches
         key="length_error", kind=NUMBERS, unit="m", per_cable=True, broadcast=True,
         limit=MAX_POSITION_M, sign="non-negative", default=None,

@@ -1,0 +1,246 @@
+"""The facet test compiled by numba (maths: the package docstring, docs/more-cables.md).
+
+``facet_kernel`` is the facet test in the coordinates of a basis of 6 columns: with
+E = J_B^-1 (Gauss-Jordan, complete pivoting), N = E J has unit columns on the basis, so a
+subset S's normal is c = E^T y with y supported on the basis rows off S and orthogonal to
+the (at most m - 6) columns of S off the basis: a tiny null-vector problem (y = 1 for
+m = 6: c is a row of J^-1, the closed form). Then c.J_i = y.N_i, c.w0 = y.(E w0) and
+L^T c = (E L)^T y touch only the rows of y's support. The direct transcription (a normal
+per subset from J's columns) is the reference the tests compare it with
+(test/wrench_reference.py). Units: m, N, N m.
+"""
+
+import numpy as np
+from numba import njit, prange
+
+from .linalg import gauss_jordan, householder_r, null_vector
+
+# a 5-subset whose last pivot is below this fraction of its first one is rank 4: it spans
+# no facet (every facet hyperplane is spanned by some 5 independent columns)
+RANK_TOL = 1e-12
+PARALLEL_CHUNK = 512  # poses per task of the threaded kernels
+PARALLEL_MIN = 4096  # fewer poses than this: the serial kernels (thread start-up costs more)
+
+
+@njit(cache=True)
+def _subset_normal(T, zrow, xcol, nx, M, y, perm):
+    """y (nx + 1,) on the basis rows ``zrow`` off a subset, orthogonal to its off-basis
+    columns ``xcol`` of N (T's first columns); closed forms for nx <= 2 (m = 8 needs no
+    more). False when those columns are dependent (the subset has rank 4)."""
+    if nx == 0:
+        y[0] = 1.0
+        return True
+    if nx == 1:
+        a0, a1 = T[zrow[0], xcol[0]], T[zrow[1], xcol[0]]
+        y[0], y[1] = a1, -a0
+        return max(abs(a0), abs(a1)) > RANK_TOL
+    if nx == 2:
+        a0, a1, a2 = T[zrow[0], xcol[0]], T[zrow[1], xcol[0]], T[zrow[2], xcol[0]]
+        b0, b1, b2 = T[zrow[0], xcol[1]], T[zrow[1], xcol[1]], T[zrow[2], xcol[1]]
+        y[0], y[1], y[2] = a1 * b2 - a2 * b1, a2 * b0 - a0 * b2, a0 * b1 - a1 * b0
+        return max(abs(y[0]), abs(y[1]), abs(y[2])) > RANK_TOL * max(
+            abs(a0), abs(a1), abs(a2), abs(b0), abs(b1), abs(b2), 1.0)
+    for i in range(nx):
+        for b in range(nx + 1):
+            M[i, b] = T[zrow[b], xcol[i]]
+    return null_vector(M, nx, y, perm) > RANK_TOL
+
+
+@njit(cache=True)
+def pose_geometry(p, R, a, b, g):
+    """Per pose (p (N, 3) m, R (N, 3, 3)) of a robot with base anchors a (m, 3), platform
+    anchors b (m, 3) and load point g (3,): cable lengths (N, m) m, unit vectors u (N, m, 3)
+    from base to platform anchor, J (N, 6, m) with columns [u_i; a_i x u_i] (as
+    ``feasibility.screw_jacobian``) and the load point c = p + R g (N, 3) m."""
+    n, m = p.shape[0], a.shape[0]
+    lengths = np.empty((n, m))
+    u = np.empty((n, m, 3))
+    J = np.empty((n, 6, m))
+    c = np.empty((n, 3))
+    d = np.empty(3)
+    for q in range(n):
+        Rq = R[q]
+        for r in range(3):
+            c[q, r] = p[q, r] + Rq[r, 0] * g[0] + Rq[r, 1] * g[1] + Rq[r, 2] * g[2]
+        for i in range(m):
+            for r in range(3):
+                d[r] = p[q, r] + Rq[r, 0] * b[i, 0] + Rq[r, 1] * b[i, 1] + Rq[r, 2] * b[i, 2] - a[i, r]
+            length = np.sqrt(d[0] * d[0] + d[1] * d[1] + d[2] * d[2])
+            lengths[q, i] = length
+            s = 1.0 / length if length > 0.0 else 1.0
+            for r in range(3):
+                u[q, i, r] = d[r] * s
+                J[q, r, i] = d[r] * s
+            J[q, 3, i] = a[i, 1] * u[q, i, 2] - a[i, 2] * u[q, i, 1]
+            J[q, 4, i] = a[i, 2] * u[q, i, 0] - a[i, 0] * u[q, i, 2]
+            J[q, 5, i] = a[i, 0] * u[q, i, 1] - a[i, 1] * u[q, i, 0]
+    return lengths, u, J, c
+
+
+@njit(cache=True)
+def load_wrench(q, c, w_local, L3, load_frame, w0, L):
+    """w0 (6,) and L (6, 6) (L L^T = E^-1) of pose q in the base frame, from the ellipsoid's
+    centre w_local (6,) and factor L3 given in the load frame (``load_frame``, which moves
+    with the load point c[q]) or the base frame."""
+    for r in range(6):
+        w0[r] = w_local[r]
+        for j in range(6):
+            L[r, j] = L3[r, j]
+    if load_frame:
+        c0, c1, c2 = c[q, 0], c[q, 1], c[q, 2]
+        w0[3] += c1 * w_local[2] - c2 * w_local[1]
+        w0[4] += c2 * w_local[0] - c0 * w_local[2]
+        w0[5] += c0 * w_local[1] - c1 * w_local[0]
+        for j in range(6):
+            L[3, j] += c1 * L3[2, j] - c2 * L3[1, j]
+            L[4, j] += c2 * L3[0, j] - c0 * L3[2, j]
+            L[5, j] += c0 * L3[1, j] - c1 * L3[0, j]
+
+
+@njit(cache=True)
+def facet_kernel(J, c, w_local, L3, load_frame, tmin, tmax, subsets, singular_det):
+    """Per pose: J (N, 6, m), load point c (N, 3); the ellipsoid's centre w_local (6,) and
+    factor L3 (6, 6) in the load frame (``load_frame``) or the base frame; tension bounds
+    (m,) N; subsets (K, 5) of the cables (none: only the rank test). Returns
+    sqrt(det J J^T) (N,); the least facet slack (N,) N and normalised by the zonotope's
+    width (N,) (-inf where singular; +inf with no subset), the facet attaining it (2 k +
+    (0 for +c, 1 for -c), k the subset; -1 if none) and the bit mask of its cables at t_max
+    (bit i: cable i at t_max_i on that facet, the cables off the subset at t_min); and
+    ``ranked`` (N,): J of rank 6 (where a tension rule is defined)."""
+    out = _facet_outputs(J.shape[0])
+    _facet_poses(0, J.shape[0], J, c, w_local, L3, load_frame, tmin, tmax, subsets, singular_det,
+                 *out)
+    return out
+
+
+@njit(cache=True, parallel=True)
+def facet_kernel_parallel(J, c, w_local, L3, load_frame, tmin, tmax, subsets, singular_det):
+    """``facet_kernel`` over chunks of PARALLEL_CHUNK poses on numba's threads."""
+    n = J.shape[0]
+    out = _facet_outputs(n)
+    chunks = (n + PARALLEL_CHUNK - 1) // PARALLEL_CHUNK
+    for k in prange(chunks):
+        _facet_poses(k * PARALLEL_CHUNK, min(n, (k + 1) * PARALLEL_CHUNK), J, c, w_local, L3,
+                     load_frame, tmin, tmax, subsets, singular_det, *out)
+    return out
+
+
+@njit(cache=True)
+def _facet_outputs(n):
+    """The facet kernel's output arrays, filled as for singular poses."""
+    return (np.zeros(n), np.full(n, -np.inf), np.full(n, -np.inf), np.full(n, -1, np.int64),
+            np.zeros(n, np.int64), np.zeros(n, np.bool_))
+
+
+@njit(cache=True)
+def _facet_poses(q0, q1, J, c, w_local, L3, load_frame, tmin, tmax, subsets, singular_det,
+                 scale, out_n, out_r, arg_r, hi_r, ranked):
+    """``facet_kernel`` for poses q0 <= q < q1, into its output arrays."""
+    m = J.shape[2]
+    K = subsets.shape[0]
+    T = np.empty((6, m + 13))  # [J | I | w0 | L] -> [N | E | E w0 | E L]
+    pivcol = np.empty(6, np.int64)
+    rowof = np.empty(m, np.int64)
+    zrow = np.empty(6, np.int64)
+    zpos = np.empty(6, np.int64)
+    xcol = np.empty(6, np.int64)
+    inS = np.zeros(m, np.bool_)
+    M = np.empty((5, 6))
+    y = np.empty(6)
+    perm = np.empty(6, np.int64)
+    A = np.empty((m, 6))
+    R = np.empty((6, 6))
+    w0 = np.empty(6)
+    L = np.empty((6, 6))
+    EE = np.empty((6, 6))
+    GG = np.empty((6, 6))
+    hv0 = np.empty(6)
+    hvv = np.empty(6)
+    for q in range(q0, q1):
+        Jq = J[q]
+        load_wrench(q, c, w_local, L3, load_frame, w0, L)
+        for i in range(m):
+            for r in range(6):
+                A[i, r] = Jq[r, i]
+        scale[q] = householder_r(A, R, hv0, hvv)
+        if not scale[q] > singular_det:
+            continue
+        for r in range(6):
+            for i in range(m):
+                T[r, i] = Jq[r, i]
+            for j in range(6):
+                T[r, m + j] = 1.0 if j == r else 0.0
+                T[r, m + 7 + j] = L[r, j]
+            T[r, m + 6] = w0[r]
+        if not gauss_jordan(T, m, pivcol, rowof):
+            continue
+        ranked[q] = True
+        for r in range(6):  # Grams of E and E L: |c|^2 = y^T EE y, |L^T c|^2 = y^T GG y
+            for r2 in range(r, 6):
+                se, sg = 0.0, 0.0
+                for j in range(6):
+                    se += T[r, m + j] * T[r2, m + j]
+                    sg += T[r, m + 7 + j] * T[r2, m + 7 + j]
+                EE[r, r2], EE[r2, r], GG[r, r2], GG[r2, r] = se, se, sg, sg
+        best_n, best_r = np.inf, np.inf
+        for k in range(K):
+            S = subsets[k]
+            nx = 0
+            for s in range(5):
+                inS[S[s]] = True
+                if rowof[S[s]] < 0:
+                    xcol[nx] = S[s]
+                    nx += 1
+            nz = 0
+            for r in range(6):
+                if not inS[pivcol[r]]:
+                    zrow[nz], zpos[r] = r, nz
+                    nz += 1
+            if not _subset_normal(T, zrow, xcol, nx, M, y, perm):
+                for s in range(5):
+                    inS[S[s]] = False
+                continue  # rank 4: no facet
+            # p_i = c.J_i = y.N_i for the cables off S (0 on S: exactly)
+            hp, hm, width = 0.0, 0.0, 0.0
+            up, down = 0, 0
+            for i in range(m):
+                if inS[i]:
+                    continue
+                if rowof[i] >= 0:
+                    p = y[zpos[rowof[i]]]
+                else:
+                    p = 0.0
+                    for b in range(nz):
+                        p += y[b] * T[zrow[b], i]
+                lo, hi = p * tmin[i], p * tmax[i]
+                if lo > hi:
+                    hp += lo
+                    hm -= hi
+                    down |= 1 << i
+                else:
+                    hp += hi
+                    hm -= lo
+                    up |= 1 << i
+                width += abs(p) * (tmax[i] - tmin[i])
+            for s in range(5):
+                inS[S[s]] = False
+            cw, cc, lt = 0.0, 0.0, 0.0
+            for b in range(nz):
+                rb = zrow[b]
+                cw += y[b] * T[rb, m + 6]
+                se, sg = 0.0, 0.0
+                for b2 in range(nz):
+                    se += EE[rb, zrow[b2]] * y[b2]
+                    sg += GG[rb, zrow[b2]] * y[b2]
+                cc += y[b] * se
+                lt += y[b] * sg
+            lt, norm = np.sqrt(max(lt, 0.0)), np.sqrt(cc)
+            for sign in range(2):
+                slack = (hp - cw - lt) if sign == 0 else (hm + cw - lt)
+                if slack / norm < best_n:
+                    best_n = slack / norm
+                sr = slack / width if width > 0.0 else (-np.inf if slack < 0.0 else np.inf)
+                if sr < best_r:
+                    best_r, arg_r[q] = sr, 2 * k + sign
+                    hi_r[q] = up if sign == 0 else down
+        out_n[q], out_r[q] = best_n, best_r

@@ -1,0 +1,117 @@
+"""Tension rules: how an m-cable robot shares a wrench among its cables (m > 6), as
+registered classes (``RULES``, by name). The robot file chooses one (``robot.tension_rule``).
+
+A rule is affine in the wrench at each pose: t(w) = t0 + P (w - w0), J P = I, so J t(w) = w.
+It gives the nominal tensions t0 (published per waypoint) and over the wrench ellipsoid the
+band t0 +- v, v_i = |row i of P L| (L L^T = E^-1). A rule declares ``name``,
+``description`` and ``weights`` W (m,): its map is the weighted pseudo-inverse
+P = W J^T (J W J^T)^-1 (``weighted_pseudo_inverse``, the one place P is written); its t0
+is the weighted closed form's tensions toward the middle of the range,
+t_mid + P (w0 - J t_mid), unless the class overrides ``tensions`` (the centred rule shifts
+t0 in the null space of J). A new rule is one class here, decorated ``@register``.
+
+Whatever the rule, elastic cables under length control share a wrench change by their
+stiffness (``stiffness_band``), which replaces the band v. Six cables have one rule,
+P = J^-1 (the package decides that case before asking a rule). Units: m, N, N m.
+"""
+
+import numpy as np
+
+from ..errors import InputError
+from .geometry import inverse_ellipsoid_factor, inverse_factor, nominal_wrench
+
+RULES = {}  # name -> TensionRule instance
+DEFAULT_RULE = "centred"
+
+
+def register(cls):
+    """Class decorator: add a rule (an instance of ``cls``) to RULES under ``cls.name``."""
+    RULES[cls.name] = cls()
+    return cls
+
+
+def rule_of(robot):
+    """The TensionRule the robot file chose (``robot.tension_rule``)."""
+    name = robot.tension_rule
+    if name not in RULES:
+        raise InputError("robot.tension_rule", name, f"expected one of {sorted(RULES)}")
+    return RULES[name]
+
+
+def weighted_pseudo_inverse(J, W):
+    """P = W J^T (J W J^T)^-1, (N, m, 6), of J (N, 6, m) with positive weights W (m,) or
+    (N, m): the least W^-1-weighted change of tension that holds a wrench change."""
+    JW = J * np.asarray(W)[..., None, :]
+    return np.swapaxes(np.linalg.solve(JW @ np.swapaxes(J, -1, -2), JW), -1, -2)
+
+
+class TensionRule:
+    """A tension rule (module docstring). Subclasses set ``name``, ``description`` and
+    ``weights``; they may override ``tensions``."""
+
+    name = ""
+    description = ""
+
+    def weights(self, robot):
+        """W (m,) of the map P = W J^T (J W J^T)^-1."""
+        raise NotImplementedError
+
+    def map(self, robot, J):
+        """P (N, m, 6) at N poses with J (N, 6, m)."""
+        return weighted_pseudo_inverse(J, self.weights(robot))
+
+    def tensions(self, robot, J, c, ranked, centre):
+        """t0 and v (N, m) N at poses with J (N, 6, m) and load points c (N, 3) m, where
+        ``ranked`` (N,) (J of rank 6; elsewhere nan and inf). ``centre`` (N,): where the facet
+        test holds (a rule may use it: the centred rule centres only there)."""
+        n, m = J.shape[0], J.shape[2]
+        t0, v = np.full((n, m), np.nan), np.full((n, m), np.inf)
+        Jr, cr = J[ranked], c[ranked]
+        P = self.map(robot, Jr)
+        mid = 0.5 * (robot.tension_min + robot.tension_max)
+        t0[ranked] = mid + np.einsum("nij,nj->ni", P, nominal_wrench(robot, cr) - Jr @ mid)
+        v[ranked] = np.linalg.norm(P @ inverse_ellipsoid_factor(robot, cr), axis=-1)
+        return t0, v
+
+
+@register
+class CentredRule(TensionRule):
+    """The range-weighted pseudo-inverse (Pott, Bruckmann & Mikelsons 2009), W = D =
+    diag(t_max - t_min)^2, with the centred nominal: the closed form's t0 shifted in the null
+    space of J to the maximiser of s + CENTRE_MU sum log(slacks - s), s the least band
+    slack (unique and smooth in the pose; docs/more-cables.md). Compiled (``centred``)."""
+
+    name = "centred"
+    description = ("range-weighted pseudo-inverse P = D J^T (J D J^T)^-1, D = diag(t_max - "
+                   "t_min)^2; nominal centred in the null space of J within the limits")
+
+    def weights(self, robot):
+        return (robot.tension_max - robot.tension_min) ** 2
+
+    def tensions(self, robot, J, c, ranked, centre):
+        # the kernels load numba: imported on first use (six-cable commands never need it)
+        from .centred import centred_kernel, centred_kernel_parallel
+        from .kernel import PARALLEL_MIN
+        kernel = centred_kernel_parallel if len(J) >= PARALLEL_MIN else centred_kernel
+        return kernel(J, c, robot.wrench_center_local, inverse_factor(robot),
+                      robot.ellipsoid_frame == "load", robot.tension_min, robot.tension_max,
+                      ranked, centre)
+
+
+def stiffness_band(robot, J, c, t0, lengths, v):
+    """The band v (N, m) N under length control of elastic cables: a wrench change dw moves
+    the tensions of cables held at their lengths by P_K dw, P_K = K J^T (J K J^T)^-1,
+    K = diag(EA / L0) = diag((EA + t0) / L) at the nominal t0 (N, m) N and lengths (N, m) m,
+    whatever rule chose t0; over the ellipsoid that is +- |rows of P_K L| (L L^T = E^-1 at
+    the load points c (N, 3) m). J (N, 6, m). Rigid cables (no ``robot.cable_stiffness``),
+    six cables (P_K = J^-1 = P, whatever K: kept exact rather than rounded) and poses where
+    t0 is not finite: ``v`` unchanged."""
+    if robot.cable_stiffness is None or J.shape[-1] == 6:
+        return v
+    ok = np.all(np.isfinite(t0), axis=1)
+    if not ok.any():
+        return v
+    P = weighted_pseudo_inverse(J[ok], (robot.cable_stiffness + t0[ok]) / lengths[ok])
+    v = v.copy()
+    v[ok] = np.linalg.norm(P @ inverse_ellipsoid_factor(robot, c[ok]), axis=-1)
+    return v
