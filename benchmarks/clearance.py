@@ -21,7 +21,7 @@ from pathlib import Path
 
 import numpy as np
 
-from cdh_planner.feasibility import evaluate
+from cdh_planner.wrench import wrench_feasibility
 from cdh_planner.parsing.problem import load_problem
 from cdh_planner.planner import Planner
 from cdh_planner.settings import STRATEGY_CHOICES
@@ -41,7 +41,7 @@ def mean_margin(robot, path, step_m=1e-3, step_rad=np.deg2rad(0.2)):
     seg = np.repeat(np.arange(motion.n_segments), n)
     s = np.concatenate([(np.arange(k) + 0.5) / k for k in n])
     p, R = motion(seg, s)
-    return float(np.mean(evaluate(robot, p, R=R).margin))
+    return float(np.mean(wrench_feasibility(robot, p, R=R).margin))
 
 
 def draw_paths(ax, problem, paths):
@@ -52,7 +52,7 @@ def draw_paths(ax, problem, paths):
     hi = np.max([y.max(axis=0) for y in ys], axis=0) + 0.25
     a, b = np.meshgrid(np.linspace(lo[0], hi[0], 300), np.linspace(lo[1], hi[1], 200))
     p, tau = problem.task.pose(np.stack([a.ravel(), b.ravel()], axis=1))
-    m = evaluate(problem.robot, p, tau).margin.reshape(a.shape)
+    m = wrench_feasibility(problem.robot, p, tau).margin.reshape(a.shape)
     levels = [0.0, 0.002, 0.005, 0.01, 0.02, 0.05, 0.1, 0.2, 0.5]
     filled = ax.contourf(a, b, np.clip(m, -1.0, 0.5), levels=[-1.0] + levels, cmap="Greys_r")
     ax.figure.colorbar(filled, ax=ax, label="normalised margin (below 0: outside C)")

@@ -1,5 +1,5 @@
 """Throughput of the closed-form feasibility test: poses per second of
-``cdh_planner.feasibility.evaluate`` on 10^5 random poses, for the paper's two robots.
+``cdh_planner.wrench.wrench_feasibility`` (six cables: the closed form) on 10^5 random poses, for the paper's two robots.
 
     python benchmarks/feasibility_throughput.py [--poses N] [--runs K]
 
@@ -19,7 +19,7 @@ import numpy as np
 ROOT = Path(__file__).resolve().parents[1]
 sys.path.insert(0, str(ROOT))  # run from a checkout without installing
 
-from cdh_planner.feasibility import evaluate  # noqa: E402
+from cdh_planner.wrench import wrench_feasibility  # noqa: E402
 from cdh_planner.model.robot import load_robot  # noqa: E402
 
 TARGET = 1e5
@@ -34,12 +34,12 @@ def random_poses(n, seed=0):
 
 
 def throughput(robot, p, tau, runs):
-    """Median poses/s over ``runs`` calls of evaluate on all poses."""
-    evaluate(robot, p[:1000], tau[:1000])  # warm up (imports, allocator)
+    """Median poses/s over ``runs`` calls on all poses."""
+    wrench_feasibility(robot, p[:1000], tau[:1000])  # warm up (imports, allocator)
     rates = []
     for _ in range(runs):
         t0 = time.perf_counter()
-        evaluate(robot, p, tau)
+        wrench_feasibility(robot, p, tau)
         rates.append(p.shape[0] / (time.perf_counter() - t0))
     return statistics.median(rates)
 

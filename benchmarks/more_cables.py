@@ -26,7 +26,7 @@ import numpy as np
 ROOT = Path(__file__).resolve().parents[1]
 sys.path.insert(0, str(ROOT))
 
-from cdh_planner.cable_feasibility import planning_feasibility  # noqa: E402
+from cdh_planner.wrench import band_feasibility  # noqa: E402
 from cdh_planner.parsing.problem import load_problem  # noqa: E402
 from cdh_planner.model.pose import Pose, rotation_tt  # noqa: E402
 from cdh_planner.planner import Planner  # noqa: E402
@@ -47,11 +47,11 @@ def queries(robot, n, rng):
         yaw0 = rng.uniform(-2.8, -2.4)
         yaw = np.array([yaw0, yaw0 + rng.uniform(1.9, 2.3)]) + (0.0 if side > 0 else np.pi)
         tau = np.column_stack([np.zeros(2), np.zeros(2), (yaw + np.pi) % (2 * np.pi) - np.pi])
-        if np.any(planning_feasibility(robot, p, tau).margin < 0.01):
+        if np.any(band_feasibility(robot, p, tau).margin < 0.01):
             continue
         motion = SlerpPath(p, quaternion_from_tau(tau))
         pp, R = motion(np.zeros(64, dtype=int), np.linspace(0, 1, 64))
-        if np.all(planning_feasibility(robot, pp, R=R).margin > 0):
+        if np.all(band_feasibility(robot, pp, R=R).margin > 0):
             continue
         out.append((Pose(p[0], tau[0]), Pose(p[1], tau[1])))
     return out

@@ -17,7 +17,7 @@ from dataclasses import dataclass
 import numpy as np
 from cdh_planner.ports.rotation import Rotation
 
-from cdh_planner.cable_feasibility import feasibility_of as evaluate  # m > 6: the facet test
+from cdh_planner.wrench import wrench_feasibility  # m > 6: the facet test
 from cdh_planner.model.pose import Pose, quaternion_from_tau, tau_from_rotation
 from cdh_planner.model.robot import workspace_box
 from cdh_planner.trajectory.path_check import SlerpPath, check_path
@@ -44,7 +44,7 @@ def home_orientation(robot, draws=100_000, seed=0):
     lo, hi = workspace_box(robot)
     p = rng.uniform(lo, hi, size=(draws, 3))
     R = Rotation.random(draws, rng)
-    return R[int(np.argmax(evaluate(robot, p, R=R.as_matrix()).margin))]
+    return R[int(np.argmax(wrench_feasibility(robot, p, R=R.as_matrix()).margin))]
 
 
 def feasible_poses(robot, count, rng, min_margin=0.01, max_tilt=np.pi / 3, home=None):
@@ -59,7 +59,7 @@ def feasible_poses(robot, count, rng, min_margin=0.01, max_tilt=np.pi / 3, home=
         axis /= np.linalg.norm(axis, axis=1, keepdims=True)
         angle = max_tilt * rng.random((BATCH, 1)) ** (1 / 3)  # uniform in the ball of rotation vectors
         R = (home * Rotation.from_rotvec(axis * angle)).as_matrix()
-        f = evaluate(robot, p, R=R)
+        f = wrench_feasibility(robot, p, R=R)
         ok = np.flatnonzero(f.margin >= min_margin)
         ps.extend(p[ok])
         taus.extend(tau_from_rotation(R[ok]))
@@ -75,13 +75,13 @@ def random_free_queries(robot, count, seed=0, min_margin=0.01, max_tilt=np.pi / 
     out = []
     for _ in range(MAX_ROUNDS):
         p, tau = feasible_poses(robot, 2 * count, rng, min_margin, max_tilt, home)
-        margins = evaluate(robot, p, tau).margin
+        margins = wrench_feasibility(robot, p, tau).margin
         for a in range(0, len(p) - 1, 2):
             b = a + 1
             motion = SlerpPath(p[[a, b]], quaternion_from_tau(tau[[a, b]]))
             s = np.linspace(0.0, 1.0, PROBE_SAMPLES)
             pp, RR = motion(np.zeros(s.size, dtype=int), s)
-            if evaluate(robot, pp, R=RR).feasible.all():
+            if wrench_feasibility(robot, pp, R=RR).feasible.all():
                 continue  # most likely safe: not a query that needs a planner
             seg = check_path(robot, motion)[0]
             if seg.feasible:  # the probe's infeasible pose was between the dense samples

@@ -64,7 +64,7 @@ from pathlib import Path
 
 import numpy as np
 
-from cdh_planner.feasibility import evaluate
+from cdh_planner.wrench import wrench_feasibility
 from cdh_planner.parsing.problem import load_problem
 from random_queries import random_free_queries  # benchmarks/random_queries.py, beside this script
 from cdh_planner.model.robot import workspace_box as random_workspace_box
@@ -208,7 +208,7 @@ class SE3Adapter:
     def valid(self, s):
         r = s.rotation()
         R = quaternion_matrix(r.x, r.y, r.z, r.w)
-        return bool(evaluate(self.q.robot, [[s.getX(), s.getY(), s.getZ()]], R=R).margin[0] > 0)
+        return bool(wrench_feasibility(self.q.robot, [[s.getX(), s.getY(), s.getZ()]], R=R).margin[0] > 0)
 
     def state(self, pose):
         s = self.space.allocState()
@@ -250,7 +250,7 @@ class TaskAdapter:
 
     def valid(self, s):
         p, tau = self.q.task.pose(self.coords(s)[None])
-        return bool(evaluate(self.q.robot, p, tau).margin[0] > 0)
+        return bool(wrench_feasibility(self.q.robot, p, tau).margin[0] > 0)
 
     def state(self, pose):
         y = self.q.task.coords(pose.p[None], pose.tau[None])[0]

@@ -1,5 +1,5 @@
 """Throughput of the m-cable wrench-feasibility test: poses per second of
-``cdh_planner.zonotope.evaluate`` on 10^5 random poses of the 8-cable robots.
+``cdh_planner.wrench.wrench_feasibility`` (the facet test) on 10^5 random poses of the 8-cable robots.
 
     python benchmarks/zonotope_throughput.py [--poses N] [--runs K]
 
@@ -22,7 +22,7 @@ import numpy as np
 ROOT = Path(__file__).resolve().parents[1]
 sys.path.insert(0, str(ROOT))  # run from a checkout without installing
 
-from cdh_planner import zonotope  # noqa: E402
+from cdh_planner.wrench import wrench_feasibility  # noqa: E402
 from cdh_planner.model.robot import load_robot  # noqa: E402
 
 TARGET = 1e5
@@ -42,11 +42,11 @@ def random_poses(centre, half, n, seed=0):
 
 def rates(robot, p, tau, runs):
     """Median poses per wall second and per CPU second over ``runs`` calls."""
-    zonotope.evaluate(robot, p[:1000], tau[:1000])  # warm up (compiled code, allocator)
+    wrench_feasibility(robot, p[:1000], tau[:1000])  # warm up (compiled code, allocator)
     wall, cpu = [], []
     for _ in range(runs):
         w, c = time.perf_counter(), time.process_time()
-        zonotope.evaluate(robot, p, tau)
+        wrench_feasibility(robot, p, tau)
         wall.append(p.shape[0] / (time.perf_counter() - w))
         cpu.append(p.shape[0] / (time.process_time() - c))
     return statistics.median(wall), statistics.median(cpu)
@@ -56,7 +56,7 @@ def one_pose_us(robot, p, tau, calls=2000):
     """Median-free mean cost of a one-pose call, microseconds (CPU time)."""
     c = time.process_time()
     for k in range(calls):
-        zonotope.evaluate(robot, p[k:k + 1], tau[k:k + 1])
+        wrench_feasibility(robot, p[k:k + 1], tau[k:k + 1])
     return 1e6 * (time.process_time() - c) / calls
 
 
@@ -70,7 +70,7 @@ def main(argv=None):
         robot = load_robot(ROOT / "config" / f"{name}.yaml")
         p, tau = random_poses(centre, half, args.poses)
         wall, cpu = rates(robot, p, tau, args.runs)
-        feasible = zonotope.evaluate(robot, p[:10_000], tau[:10_000]).feasible.mean()
+        feasible = wrench_feasibility(robot, p[:10_000], tau[:10_000]).feasible.mean()
         print(f"{name} ({len(robot.winch_names)} cables, {feasible:.0%} of the poses feasible): "
               f"{wall:,.0f} poses/s wall, {cpu:,.0f} poses/CPU-s (median of {args.runs} runs of "
               f"{args.poses:,} poses; target {TARGET:,.0f}: "

@@ -8,7 +8,7 @@ from the base anchor to the platform anchor and r_i = R b_i the platform anchor 
 platform's origin, so that a small motion dx = [dp; dw] (dp m of the platform origin, dw
 rad a rotation vector, both in the base frame) changes the lengths by A^T dx. A cable of
 unstretched length L0_i carries t_i = k_i (L_i(x) - L0_i), k_i = EA_i / L0_i
-(``model.elastic``; L0 from the nominal tensions, ``cable_feasibility.nominal_tensions``),
+(``model.elastic``; L0 from the nominal tensions, ``wrench.rule_tensions``),
 and the platform is in equilibrium when A t balances the load. A winch error dl in L0
 moves the platform, to first order and leaving out the geometric stiffness (the tensions'
 own change of direction, t / L against EA / L0), by
@@ -39,9 +39,8 @@ from itertools import combinations
 
 import numpy as np
 
-from .cable_feasibility import nominal_tensions
 from .errors import InputError
-from .feasibility import cable_vectors, screw_jacobian
+from .wrench import cable_vectors, rule_tensions, screw_jacobian
 from .model import elastic
 from .model.pose import rotation_tt
 
@@ -82,11 +81,11 @@ def structure_matrix(robot, p, R):
 
 def cable_stiffness_matrix(robot, p, R, L, tensions=None):
     """k (N, m) N/m, the diagonal of K: EA_i / L0_i with L0 the unstretched lengths that
-    carry the nominal tensions (``tensions`` (N, m) N, else ``nominal_tensions``) at the
+    carry the nominal tensions (``tensions`` (N, m) N, else ``rule_tensions``'s t0) at the
     poses; rigid cables: 1 / L (equal EA)."""
     if not elastic.is_elastic(robot):
         return 1.0 / L
-    t = nominal_tensions(robot, p, R) if tensions is None else tensions
+    t = rule_tensions(robot, p, R)[0] if tensions is None else tensions
     L0 = elastic.unstretched_lengths(robot, L, t)
     return elastic.axial_stiffness(robot, L0)
 

@@ -52,7 +52,7 @@ class PlanResult:
     path: Optional["PlannedPath"] = None  # noqa: F821  (trajectory.path.PlannedPath)
     stats: dict = field(default_factory=dict)
     # over the waypoints and the motion between them (trajectory.clearance.path_margins)
-    least_margin: float = math.nan  # normalised (feasibility.evaluate)
+    least_margin: float = math.nan  # normalised (wrench.band_feasibility)
     least_tension_margin: float = math.nan  # N: min over cables of f - v - fmin, fmax - f - v
 
     def __post_init__(self):  # one closed vocabulary: a member, never a loose string

@@ -5,8 +5,8 @@ it for its own answers (test_zonotope, test_more_cables_planning)."""
 import numpy as np
 from scipy.optimize import linprog
 
-from cdh_planner import feasibility as fz
-from cdh_planner import zonotope as zt
+from cdh_planner import wrench as fz
+from wrench_reference import facet_test
 from cdh_planner.model.pose import rotation_tt
 
 
@@ -19,9 +19,9 @@ def lp_holds(J, w, robot):
 
 
 def pose_pieces(robot, p, tau=None, R=None):
-    """J (N, 6, m), w0 (N, 6), L (N, 6, 6) and zonotope.evaluate at the poses."""
+    """J (N, 6, m), w0 (N, 6), L (N, 6, 6) and the facet test at the poses."""
     R = rotation_tt(tau) if R is None else R
-    f = zt.evaluate(robot, p, R=R)
+    f = facet_test(robot, p, R=R)
     c = fz.load_point(robot, p, R)
     J = fz.screw_jacobian(robot, f.unit_vectors)
     L = np.broadcast_to(fz.inverse_ellipsoid_factor(robot, c), (len(p), 6, 6))

@@ -16,10 +16,10 @@ from conftest import CONFIG
 from cdh_planner import cli
 from cdh_planner.accuracy import (AccuracyLimits, bound, box_max_norm, error_map,
                                   pose_accuracy)
-from cdh_planner.cable_feasibility import nominal_tensions, planning_feasibility
+from cdh_planner.wrench import band_feasibility, rule_tensions
 from cdh_planner.commands.plan import plan_document
 from cdh_planner.errors import InputError
-from cdh_planner.feasibility import load_point, nominal_wrench, screw_jacobian
+from cdh_planner.wrench import load_point, nominal_wrench, screw_jacobian
 from cdh_planner.model import elastic
 from cdh_planner.model.kinematics import cable_lengths, forward_kinematics, rotation_vector_exp
 from cdh_planner.model.pose import Pose, rotation_from_quaternion, rotation_tt
@@ -194,8 +194,8 @@ def test_eight_cable_elastic_map_is_the_perturbed_equilibrium(EA, rtol):
     0.4 % at EA 1 kN (Robot 2-8's nylon), 4e-6 at 1 MN (1000 times less)."""
     robot = dataclasses.replace(load_robot(CONFIG / "robot2_8.yaml"), cable_stiffness=np.full(8, EA))
     p, R = np.array([0.0, 0.01, 0.25]), rotation_tt(np.array([[0.3, 0.2, 0.0]]))[0]
-    assert planning_feasibility(robot, p[None], R=R[None]).feasible[0]
-    t = nominal_tensions(robot, p[None], R[None])[0]
+    assert band_feasibility(robot, p[None], R=R[None]).feasible[0]
+    t = rule_tensions(robot, p[None], R[None])[0][0]
     L0 = elastic.unstretched_lengths(robot, cable_lengths(robot, p, R), t)
     p0, R0 = _elastic_equilibrium(robot, L0, p, R)
     np.testing.assert_allclose(_twist(p, R, p0, R0), 0.0, atol=1e-12)  # the planned pose

@@ -22,7 +22,7 @@ from cdh_planner import cli
 from cdh_planner import files
 from cdh_planner.commands import verify as verify_cmd
 from cdh_planner.errors import MAX_MESSAGE_CHARS, InputError
-from cdh_planner.feasibility import evaluate
+from cdh_planner.wrench import wrench_feasibility
 from cdh_planner.parsing.poses import load_poses, poses_from_obj
 from cdh_planner.parsing.problem import load_problem
 from cdh_planner.model.robot import load_robot
@@ -329,7 +329,7 @@ def test_verify_report_is_linear_in_the_poses():
         k = np.arange(n)
         poses = poses_from_obj([{"position": [0.01 * np.sin(i), 0.01 * np.cos(i), 0.3],
                                  "tau": [0.0, 0.1, 0.0]} for i in k.tolist()])
-        feas = evaluate(robot, poses.positions, R=poses.rotations)
+        feas = wrench_feasibility(robot, poses.positions, R=poses.rotations)
         segments = tv.check_motion(robot, poses.positions, poses.quaternions)
         best = np.inf
         for _ in range(2):
@@ -350,7 +350,7 @@ def test_verify_report_is_linear_in_the_poses():
 
 def test_feasibility_columns_are_computed_once():
     robot = load_robot(ROBOT2)
-    f = evaluate(robot, np.array([[0.0, 0.0, 0.35]]), tau=np.array([[0.0, 0.1, 0.0]]))
+    f = wrench_feasibility(robot, np.array([[0.0, 0.0, 0.35]]), tau=np.array([[0.0, 0.1, 0.0]]))
     assert f.tension_min is f.tension_min and f.feasible is f.feasible
 
 
@@ -456,7 +456,7 @@ def test_internal_errors_are_exit_3_and_one_line(capsys, poses, monkeypatch):
     def broken(*args, **kwargs):
         raise ZeroDivisionError("a bug")
 
-    monkeypatch.setattr("cdh_planner.commands.verify.evaluate", broken)
+    monkeypatch.setattr("cdh_planner.commands.verify.wrench_feasibility", broken)
     line = run_cli(capsys, ["verify", ROBOT2, poses], code=3)
     assert "internal error: ZeroDivisionError: a bug" in line and "--debug" in line
     rc = cli.main(["--debug", "verify", str(ROBOT2), str(poses)])
@@ -469,7 +469,7 @@ def test_recursion_and_memory_errors_are_internal(capsys, poses, monkeypatch):
         def broken(*args, **kwargs):
             raise exc("deep")
 
-        monkeypatch.setattr("cdh_planner.commands.verify.evaluate", broken)
+        monkeypatch.setattr("cdh_planner.commands.verify.wrench_feasibility", broken)
         assert exc.__name__ in run_cli(capsys, ["verify", ROBOT2, poses], code=3)
 
 

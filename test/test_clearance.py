@@ -12,7 +12,7 @@ import numpy as np
 import pytest
 
 from cdh_planner.cli import main
-from cdh_planner.feasibility import evaluate
+from cdh_planner.wrench import wrench_feasibility
 from cdh_planner.parsing.problem import load_problem
 from cdh_planner.planner import Planner
 from cdh_planner.trajectory import clearance
@@ -40,7 +40,7 @@ def dense_margins(robot, path, step_m=2.5e-4, step_rad=np.deg2rad(0.05)):
     seg = np.repeat(np.arange(motion.n_segments), n)
     s = np.concatenate([np.linspace(0.0, 1.0, k) for k in n])
     p, R = motion(seg, s)
-    f = evaluate(robot, p, R=R)
+    f = wrench_feasibility(robot, p, R=R)
     low = f.tension_nominal - f.tension_spread - robot.tension_min
     high = robot.tension_max - f.tension_nominal - f.tension_spread
     return float(f.margin.min()), float(np.minimum(low, high).min())

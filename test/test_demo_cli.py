@@ -15,7 +15,7 @@ from cdh_planner import cli
 from cdh_planner.commands import demo as demo_cmd
 from cdh_planner.commands.demo import paper
 from cdh_planner.commands.demo.steps import Step
-from cdh_planner.feasibility import evaluate
+from cdh_planner.wrench import wrench_feasibility
 from cdh_planner.trajectory.path_check import TaskLinePath
 
 from conftest import REPO as ROOT
@@ -190,7 +190,7 @@ def test_pose_verdicts_agree_with_the_closed_form_and_the_limits(checked):
         # Feasible: the whole tension envelope is strictly inside the limits.
         assert robot.tension_min.max() < v.tension_low < v.tension_high < robot.tension_max.min()
         # The margin is the normalised distance to the binding bound.
-        f = evaluate(robot, v.position[None], v.tau[None])
+        f = wrench_feasibility(robot, v.position[None], v.tau[None])
         kind, cable = v.binding[:-1].split("[")
         i = int(cable) - 1
         expected = {
@@ -221,14 +221,14 @@ def test_motion_verdicts_and_where_they_leave_c(checked):
     line = TaskLinePath(task, [[0.55, 0.75], [2.63, 0.75]])
     s = q2q3.leaves_at
     p, R = line(np.zeros(2, dtype=int), np.array([s - 1e-6, s + 1e-6]))
-    margin = evaluate(checked.robots["robot2"], p, R=R).margin
+    margin = wrench_feasibility(checked.robots["robot2"], p, R=R).margin
     assert margin[0] > 0 > margin[1]
     # Along q_1 -> q_2 the margin never falls below its value at the worst sample.
     safe = by_key[("robot2", "q_1", "q_2", "task")].check
     line = TaskLinePath(task, [[0.55, math.pi / 2], [0.55, 0.75]])
     s = np.linspace(0.0, 1.0, 2001)
     p, R = line(np.zeros(s.size, dtype=int), s)
-    assert evaluate(checked.robots["robot2"], p, R=R).margin.min() >= safe.worst.margin - 1e-9
+    assert wrench_feasibility(checked.robots["robot2"], p, R=R).margin.min() >= safe.worst.margin - 1e-9
 
 
 def test_a_verdict_that_differs_from_the_paper_gives_exit_1(tmp_path, monkeypatch):

@@ -9,7 +9,7 @@ import numpy as np
 import pytest
 
 from conftest import PROBLEMS
-from cdh_planner.feasibility import evaluate, screw_jacobian
+from cdh_planner.wrench import wrench_feasibility, screw_jacobian
 from cdh_planner.parsing.problem import load_problem
 from cdh_planner.planner import Planner
 from cdh_planner.trajectory.dynamics import dynamic_timing
@@ -51,7 +51,7 @@ def _dynamic_check(robot, t, p, R):
     Iw = np.einsum("nij,nj->ni", I_w, w)
     moment = np.cross(c[1:-1], MASS * acc) + np.einsum("nij,nj->ni", I_w, alpha) + np.cross(w, Iw)
     w_in = np.concatenate([MASS * acc, moment], axis=1)
-    f = evaluate(robot, p[1:-1], R=Rm)
+    f = wrench_feasibility(robot, p[1:-1], R=Rm)
     J = screw_jacobian(robot, f.unit_vectors)
     tension = f.tension_nominal - np.linalg.solve(J, w_in[..., None])[..., 0]
     margin = np.minimum(tension - f.tension_spread - robot.tension_min,

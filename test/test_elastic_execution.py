@@ -12,8 +12,8 @@ import pytest
 
 from conftest import PROBLEMS, REPO
 from elastic_plant import Plant, envelope_at, planned_at
-from cdh_planner.cable_feasibility import planning_feasibility
-from cdh_planner.feasibility import inverse_ellipsoid_factor, load_point, screw_jacobian
+from cdh_planner.wrench import band_feasibility
+from cdh_planner.wrench import inverse_ellipsoid_factor, load_point, screw_jacobian
 from cdh_planner.model import elastic as E
 from cdh_planner.model.forward_kinematics import current_pose, measured_cable_lengths
 from cdh_planner.model.kinematics import cable_lengths
@@ -92,7 +92,7 @@ def _feasible_poses(robot, n, rng):
     while len(p) < n:
         q = centre + rng.normal(scale=0.02, size=3)
         Q = Rotation.from_rotvec(rng.normal(scale=0.05, size=3)).as_matrix()
-        if planning_feasibility(robot, q[None], R=Q[None]).margin[0] > 0:
+        if band_feasibility(robot, q[None], R=Q[None]).margin[0] > 0:
             p.append(q), R.append(Q)
     return np.array(p), np.array(R)
 
@@ -131,7 +131,7 @@ def test_equilibrium_of_the_commanded_lengths_is_the_planned_pose(name):
     the pose itself, its tensions the nominal ones."""
     robot = load_robot(REPO / "config" / f"{name}.yaml")
     p, R = _feasible_poses(robot, 5, np.random.default_rng(4))
-    f = planning_feasibility(robot, p, R=R)
+    f = band_feasibility(robot, p, R=R)
     L0 = E.unstretched_lengths(robot, f.lengths, f.tension_nominal)
     rng = np.random.default_rng(5)
     start_R = Rotation.from_rotvec(rng.normal(scale=0.01, size=(len(p), 3))).as_matrix() @ R
@@ -145,12 +145,12 @@ def test_equilibrium_of_the_commanded_lengths_is_the_planned_pose(name):
 
 def test_length_control_shares_a_wrench_change_by_stiffness():
     """Eight cables held at their lengths: a small change dw of the load moves the tensions
-    by P_K dw, P_K = K A^T (A K A^T)^-1 (the band ``zonotope.stiffness_band`` publishes),
+    by P_K dw, P_K = K A^T (A K A^T)^-1 (the band ``wrench.stiffness_band`` publishes),
     not by the rule's P; the band is |rows of P_K L|."""
-    from cdh_planner.zonotope import rule_tensions, stiffness_band
+    from cdh_planner.wrench import rule_tensions, stiffness_band
     robot = load_robot(REPO / "config" / "robot2_8.yaml")
     p, R = _feasible_poses(robot, 3, np.random.default_rng(6))
-    f = planning_feasibility(robot, p, R=R)
+    f = band_feasibility(robot, p, R=R)
     L0 = E.unstretched_lengths(robot, f.lengths, f.tension_nominal)
     force, moment, arm = _load(robot, len(p))
     dw = 1e-4 * np.array([1.0, -0.5, 0.7, 0.0, 0.0, 0.0])
@@ -241,7 +241,7 @@ def test_the_elastic_check_fails_an_under_tensioned_command(plan):
 def test_forward_kinematics_with_measured_tensions_recovers_the_pose(name):
     robot = load_robot(REPO / "config" / f"{name}.yaml")
     p, R = _feasible_poses(robot, 3, np.random.default_rng(9))
-    f = planning_feasibility(robot, p, R=R)
+    f = band_feasibility(robot, p, R=R)
     for k in range(len(p)):
         L0 = E.unstretched_lengths(robot, f.lengths[k], f.tension_nominal[k])  # the winches'
         guess = (p[k] + 1e-3, R[k])

@@ -15,7 +15,7 @@ import pytest
 
 from conftest import PROBLEMS
 from cdh_planner.commands.plan import result_dict
-from cdh_planner.feasibility import evaluate, screw_jacobian
+from cdh_planner.wrench import wrench_feasibility, screw_jacobian
 from cdh_planner.parsing.problem import load_problem
 from cdh_planner.model.forward_kinematics import forward_kinematics_many
 from cdh_planner.model.kinematics import cable_lengths
@@ -107,7 +107,7 @@ def executed_margins(robot, msg, p0, R0):
     I_w = Rm @ robot.inertia @ np.swapaxes(Rm, 1, 2)
     moment = (np.cross(c[1:-1], robot.mass * acc) + np.einsum("nij,nj->ni", I_w, alpha)
               + np.cross(w, np.einsum("nij,nj->ni", I_w, w)))
-    f = evaluate(robot, p[1:-1], R=Rm)
+    f = wrench_feasibility(robot, p[1:-1], R=Rm)
     J = screw_jacobian(robot, f.unit_vectors)
     w_in = np.concatenate([robot.mass * acc, moment], axis=1)
     tension = f.tension_nominal - np.linalg.solve(J, w_in[..., None])[..., 0]
@@ -208,7 +208,7 @@ def test_slowing_down_scales_the_winch_ratios_exactly(problem, outputs):
     after = E.check_path(robot, slow, None, None, *FAST)
     assert after.speed_ratio == pytest.approx(before.speed_ratio / 2, rel=1e-3)
     assert after.accel_ratio == pytest.approx(before.accel_ratio / 4, rel=1e-2)
-    f0 = evaluate(robot, path.p, R=poses(path)[1]).tension_nominal
+    f0 = wrench_feasibility(robot, path.p, R=poses(path)[1]).tension_nominal
     assert np.allclose(slow.tension_nominal - f0, (path.tension_nominal - f0) / 4)
 
 

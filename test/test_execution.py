@@ -24,7 +24,7 @@ from sensor_msgs.msg import JointState  # noqa: E402
 from trajectory_msgs.msg import JointTrajectory, JointTrajectoryPoint  # noqa: E402
 
 from cdh_planner.errors import InputError  # noqa: E402
-from cdh_planner.feasibility import evaluate  # noqa: E402
+from cdh_planner.wrench import wrench_feasibility  # noqa: E402
 from cdh_planner.parsing.problem import load_problem  # noqa: E402
 from cdh_planner.model.kinematics import (cable_lengths, forward_kinematics,  # noqa: E402
                                           rotation_vector_exp)
@@ -199,7 +199,7 @@ def test_current_pose_without_a_guess_picks_the_level_one_of_two_feasible_soluti
     L = cable_lengths(pr.robot, p, R)
     twin = forward_kinematics(pr.robot, L, [-0.018, 0.0097, 0.188],
                               rotation_tt([-0.537, 3.059, -0.024]))
-    assert twin.ok and evaluate(pr.robot, twin.p[None], R=twin.R[None]).feasible[0]
+    assert twin.ok and wrench_feasibility(pr.robot, twin.p[None], R=twin.R[None]).feasible[0]
     assert rotation_angle_between(twin.R, R) > 2.0
     q, Q = X.current_pose(pr.robot, L)
     assert rotation_angle_between(Q, R) < 1e-9
@@ -232,10 +232,10 @@ def test_current_pose_without_a_guess_may_return_a_feasible_twin():
     higher, less tilted) is what the search finds; a guess near the pose gives it back."""
     p, R = np.array([0.02, -0.01, 0.30]), rotation_tt([0.3, 0.4, 0.1])
     L = cable_lengths(ROBOT2, p, R)
-    assert evaluate(ROBOT2, p[None], R=R[None]).feasible[0]
+    assert wrench_feasibility(ROBOT2, p[None], R=R[None]).feasible[0]
     q, Q = X.current_pose(ROBOT2, L)
     np.testing.assert_allclose(cable_lengths(ROBOT2, q, Q), L, rtol=0, atol=1e-12)
-    assert evaluate(ROBOT2, q[None], R=Q[None]).feasible[0]
+    assert wrench_feasibility(ROBOT2, q[None], R=Q[None]).feasible[0]
     assert np.linalg.norm(q - p) > 0.08
     q, Q = X.current_pose(ROBOT2, L, guess=(p + 0.01, R))
     assert np.max(np.abs(q - p)) < 1e-9 and rotation_angle_between(Q, R) < 1e-9

@@ -4,13 +4,14 @@ import dataclasses
 import numpy as np
 import pytest
 
-from cdh_planner import feasibility as fz
+from cdh_planner import wrench as fz
 from cdh_planner.model.pose import rotation_tt
 from cdh_planner.model.robot import load_robot
 from cdh_planner.model.task import SliceTask, SphereTask
 from cdh_planner.trajectory.path_check import check_task_motion
 
 from conftest import CONFIG
+from wrench_reference import ellipsoid_matrix
 ROBOT1 = load_robot(CONFIG / "robot1.yaml")
 ROBOT2 = load_robot(CONFIG / "robot2.yaml")
 RNG = np.random.default_rng(7)
@@ -44,10 +45,10 @@ def random_poses(robot, n=40):
 def pieces(robot, p, tau):
     """J, w0, E (in F1) and the evaluate() result for poses."""
     R = rotation_tt(tau)
-    f = fz.evaluate(robot, p, R=R)
+    f = fz.wrench_feasibility(robot, p, R=R)
     J = fz.screw_jacobian(robot, f.unit_vectors)
     c = fz.load_point(robot, p, R)
-    return J, fz.nominal_wrench(robot, c), fz.ellipsoid_matrix(robot, c), f
+    return J, fz.nominal_wrench(robot, c), ellipsoid_matrix(robot, c), f
 
 
 @pytest.mark.parametrize("name", ROBOTS)
@@ -127,7 +128,7 @@ def test_ellipsoid_transformation_matches_a_direct_computation_in_the_load_frame
     R = rotation_tt(tau)
     c = fz.load_point(robot, p, R)
     np.testing.assert_allclose(c, p + R @ robot.load_point)
-    E1 = fz.ellipsoid_matrix(robot, c)
+    E1 = ellipsoid_matrix(robot, c)
     w0_1 = fz.nominal_wrench(robot, c)
     E3 = robot.ellipsoid_matrix
     w0_3 = robot.wrench_center_local
@@ -147,7 +148,7 @@ def test_base_frame_ellipsoid_is_used_as_given():
     robot = dataclasses.replace(GENERIC, ellipsoid_frame="base")
     p, tau = random_poses(robot, 5)
     c = fz.load_point(robot, p, rotation_tt(tau))
-    np.testing.assert_allclose(fz.ellipsoid_matrix(robot, c), np.broadcast_to(robot.ellipsoid_matrix, (5, 6, 6)))
+    np.testing.assert_allclose(ellipsoid_matrix(robot, c), np.broadcast_to(robot.ellipsoid_matrix, (5, 6, 6)))
     np.testing.assert_allclose(fz.nominal_wrench(robot, c), np.broadcast_to(robot.wrench_center_local, (5, 6)))
 
 
@@ -155,7 +156,7 @@ def test_singular_jacobian_is_infeasible_without_nan():
     # All platform anchors at P: every cable passes through P, so J has rank 3.
     robot = dataclasses.replace(ROBOT2, platform_anchors=np.zeros((6, 3)))
     p = np.array([[0.0, 0.0, 0.3], [0.01, 0.02, 0.25]])
-    f = fz.evaluate(robot, p, tau=np.zeros((2, 3)))
+    f = fz.wrench_feasibility(robot, p, tau=np.zeros((2, 3)))
     assert np.all(f.singular)
     assert not np.any(f.feasible)
     assert np.all(f.margin == -np.inf)
@@ -168,7 +169,7 @@ def test_singular_jacobian_is_infeasible_without_nan():
 def test_singular_and_regular_poses_in_one_call():
     # Platform in the base plane: all cables horizontal, no vertical force possible.
     p = np.array([[0.0, 0.0, 0.0], [0.0, 0.0, 0.35]])
-    f = fz.evaluate(ROBOT1, p, tau=np.zeros((2, 3)))
+    f = fz.wrench_feasibility(ROBOT1, p, tau=np.zeros((2, 3)))
     assert list(f.singular) == [True, False]
     assert f.binding[0] == "singular" and f.binding[1] != "singular"
     assert np.isfinite(f.margin[1]) and np.all(np.isfinite(f.tension_nominal[1]))
@@ -176,7 +177,7 @@ def test_singular_and_regular_poses_in_one_call():
 
 def test_margins_name_the_binding_constraint():
     p, tau = random_poses(ROBOT2, 50)
-    f = fz.evaluate(ROBOT2, p, tau)
+    f = fz.wrench_feasibility(ROBOT2, p, tau)
     assert f.margins.shape == (50, 4, 6)
     flat = f.margins.reshape(50, -1)
     np.testing.assert_array_equal(f.margin, flat.min(axis=1))
@@ -194,14 +195,14 @@ def _slice_poses(points):
 
 
 def test_robot1_start_and_goal_are_feasible_with_the_config_file():
-    f = fz.evaluate(ROBOT1, *_slice_poses([Q_S, Q_G]))
+    f = fz.wrench_feasibility(ROBOT1, *_slice_poses([Q_S, Q_G]))
     assert np.all(f.feasible)
     assert np.all((f.margin > 0.03) & (f.margin < 0.05))  # "a normalised margin of about 0.04"
 
 
 def test_robot1_start_and_goal_are_not_feasible_with_plain_si_ellipsoid():
     robot = dataclasses.replace(ROBOT1, ellipsoid_matrix=1e4 * np.eye(6))
-    f = fz.evaluate(robot, *_slice_poses([Q_S, Q_G]))
+    f = fz.wrench_feasibility(robot, *_slice_poses([Q_S, Q_G]))
     assert not np.any(f.feasible)
 
 
@@ -212,7 +213,7 @@ def test_robot1_straight_segment_in_the_slice_leaves_c():
 
 def test_robot2_task_points_are_feasible():
     p, tau = SPHERE2.pose(np.array([Q1, Q2, Q3]))
-    f = fz.evaluate(ROBOT2, p, tau)
+    f = fz.wrench_feasibility(ROBOT2, p, tau)
     assert np.all(f.feasible), f.binding
 
 

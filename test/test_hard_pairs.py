@@ -6,7 +6,7 @@ from dataclasses import replace
 
 import numpy as np
 
-from cdh_planner.feasibility import evaluate
+from cdh_planner.wrench import wrench_feasibility
 from cdh_planner.parsing.problem import load_problem
 from cdh_planner.model.robot import load_robot
 from cdh_planner.model.pose import Pose
@@ -40,11 +40,11 @@ def test_a_link_across_a_wall_thinner_than_the_probe_is_found_on_the_route():
     robot = load_robot(ROOT / "config" / "robot2.yaml")
     planner = Planner(robot, FreeTask(), PlannerSettings(radius=0.25))
     p, tau = planner.task.pose(WALL)
-    assert np.all(evaluate(robot, p, tau).margin > 0.05)
+    assert np.all(wrench_feasibility(robot, p, tau).margin > 0.05)
     assert planner.validity.probe(WALL, CHORD_SAMPLES)  # the probe alone missed the wall
     s = np.linspace(0.0, 1.0, 401)
     pp, R = planner.validity.direct_motion(WALL)(np.zeros(s.size, dtype=int), s)
-    margin = evaluate(robot, pp, R=R).margin
+    margin = wrench_feasibility(robot, pp, R=R).margin
     assert margin.min() < -1.0 and 0.0 < np.mean(margin < 0) < 1 / (CHORD_SAMPLES - 1)
     xs = [planner.constraint.lift(p[k], tau[k]) for k in range(2)]
     assert planner.route.route_unsafe(xs, frozenset()) == 0
@@ -57,7 +57,7 @@ def test_the_hard_pair_lies_across_the_singularity_and_is_answered_at_once():
     says so before building a chart."""
     robot = load_robot(ROOT / "config" / "robot2.yaml")
     start, goal = (Pose(np.array(p), np.array(tau)) for p, tau in HARD_PAIR)
-    det = evaluate(robot, np.array([start.p, goal.p]), np.array([start.tau, goal.tau])).det_j
+    det = wrench_feasibility(robot, np.array([start.p, goal.p]), np.array([start.tau, goal.tau])).det_j
     assert det[0] * det[1] < 0
     res = Planner(robot, FreeTask(), PlannerSettings()).plan(start, goal)
     assert (res.success, res.reason, res.charts) == (False, Status.NO_PATH, 0)
@@ -75,5 +75,5 @@ def test_det_j_keeps_its_sign_along_every_planned_path():
         motion = SlerpPath(res.path.p, res.path.quaternion)
         seg = np.repeat(np.arange(motion.n_segments), s.size)
         p, R = motion(seg, np.tile(s, motion.n_segments))
-        det = evaluate(pr.robot, p, R=R).det_j
+        det = wrench_feasibility(pr.robot, p, R=R).det_j
         assert np.all(det * det[0] > 0)

@@ -5,7 +5,7 @@ import numpy as np
 import pytest
 
 from cdh_planner.errors import InputError
-from cdh_planner.feasibility import cable_vectors, evaluate
+from cdh_planner.wrench import cable_vectors, wrench_feasibility
 from cdh_planner.model.kinematics import (cable_lengths, forward_kinematics, length_jacobian,
                                           rotation_vector_exp)
 from cdh_planner.model.pose import rotation_angle_between, rotation_tt
@@ -24,7 +24,7 @@ def _feasible_poses(robot, rng, n):
         p = centre + rng.uniform(-0.5, 0.5, (4000, 3)) * spread
         tau = rng.uniform([-np.pi, 0.0, -np.pi], [np.pi, 0.8, np.pi], (4000, 3))
         R = rotation_tt(tau)
-        ok = evaluate(robot, p, R=R).feasible
+        ok = wrench_feasibility(robot, p, R=R).feasible
         ps.extend(p[ok])
         Rs.extend(R[ok])
         if len(ps) >= n:

@@ -6,7 +6,7 @@ from scipy.spatial import HalfspaceIntersection
 
 from cdh_planner.atlas.charts import Atlas
 from cdh_planner.atlas.polytope import Polytope
-from cdh_planner.feasibility import evaluate
+from cdh_planner.wrench import wrench_feasibility
 from cdh_planner.manifold.constraint import TaskConstraint
 from cdh_planner.manifold.navigation import I_G, I_V, N_EQS, N_VARS, NavigationManifold
 from cdh_planner.model.robot import load_robot
@@ -48,7 +48,7 @@ def test_lift_is_on_the_manifold_and_on_the_right_branch(robot):
     F, _ = nav.residual_and_jacobian(X)
     assert X.shape == (N_VARS,) and F.shape == (N_EQS,)
     assert np.max(np.abs(F / np.r_[nav.equation_scale()])) < 1e-10
-    f = evaluate(robot, p[None], tau[None])
+    f = wrench_feasibility(robot, p[None], tau[None])
     G = X[I_V:I_G].reshape(6, 6)
     vdiag = np.linalg.norm(G, axis=1)
     assert np.all(vdiag > 0)
@@ -111,7 +111,7 @@ def test_newton_projection_converges_from_chart_points(case):
         np.testing.assert_allclose(atlas.coordinates(i, x), s, atol=1e-9)
         # a feasible pose on the task (residual: arccos resolves angles to ~1e-8)
         pp, tt = c.pose(x)
-        assert evaluate(robot, pp[None], tt[None]).feasible[0]
+        assert wrench_feasibility(robot, pp[None], tt[None]).feasible[0]
         assert float(np.max(task.residual(pp[None], tt[None]))) < 1e-6 if hasattr(task, "residual") else True
 
 

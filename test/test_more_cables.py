@@ -1,12 +1,13 @@
 """Robots with more than six cables: the config robots, forward kinematics by
-least squares, and the callers still written for six cables refusing by name."""
+least squares, and the robot file choosing the tension rule."""
+
+import dataclasses
 
 import numpy as np
 import pytest
 from scipy.optimize import least_squares
 
-from cdh_planner import feasibility as fz
-from cdh_planner import zonotope as zt
+from cdh_planner import wrench as fz
 from cdh_planner.errors import InputError
 from cdh_planner.model.kinematics import cable_lengths, forward_kinematics, length_jacobian, \
     rotation_vector_exp
@@ -34,19 +35,21 @@ def test_the_8_cable_robots_hold_a_central_pose_with_a_usable_band():
     with 8 cables: 0.3 m below the base), both wrench-feasible, the rule's band inside the
     limits, J t0 = w0."""
     for robot, p in ((COGIRO, [0.0, 0.0, 2.0]), (ROBOT2_8, [0.0, 0.0, 0.3])):
-        f = zt.evaluate(robot, np.array([p]), np.zeros((1, 3)))
-        assert f.feasible[0] and f.tension_status[0] == zt.STATUS_OK, (robot.name, f.binding)
+        f = fz.wrench_feasibility(robot, np.array([p]), np.zeros((1, 3)))
+        assert f.feasible[0] and f.tension_status[0] == fz.STATUS_OK, (robot.name, f.binding)
         assert np.all(f.tension_min[0] > robot.tension_min) and np.all(f.tension_max[0] < robot.tension_max)
         J = fz.screw_jacobian(robot, f.unit_vectors)[0]
         w0 = fz.nominal_wrench(robot, fz.load_point(robot, np.array([p]), np.eye(3)[None]))[0]
         np.testing.assert_allclose(J @ f.tension_nominal[0], w0, rtol=0, atol=1e-9 * np.abs(w0).max())
 
 
-def test_six_cable_callers_refuse_more_cables_by_name():
-    """feasibility.evaluate (the closed form, J square) is what the planner and commands
-    call today: an 8-cable robot gets one line naming robot.winch_names, not a traceback."""
-    with pytest.raises(InputError, match=r"robot.winch_names = .*8 cables: this command handles 6-cable"):
-        fz.evaluate(COGIRO, np.array([[0.0, 0.0, 2.0]]), np.zeros((1, 3)))
+def test_the_robot_file_chooses_the_tension_rule_by_name():
+    """``tension_rule`` defaults to the centred rule; an unknown name is one line naming
+    robot.tension_rule and the known rules, not a traceback."""
+    assert COGIRO.tension_rule == fz.DEFAULT_RULE == "centred" and "centred" in fz.RULES
+    robot = dataclasses.replace(COGIRO, tension_rule="greedy")
+    with pytest.raises(InputError, match=r"robot.tension_rule = .*greedy.*expected one of \['centred'"):
+        fz.wrench_feasibility(robot, np.array([[0.0, 0.0, 2.0]]), np.zeros((1, 3)))
 
 
 def _pose(rng):
@@ -101,7 +104,7 @@ def test_slice_of_cogiro(tmp_path, capsys):
     assert rc == 0 and out.stat().st_size > 0, text
     share = float(text.split("classified in")[1].split(";")[1].split("%")[0])
     assert 30.0 < share < 90.0, text
-    inside = zt.evaluate(COGIRO, np.array([[0.0, 0.0, 2.5], [7.0, 5.0, 2.5]]), np.zeros((2, 3)))
+    inside = fz.wrench_feasibility(COGIRO, np.array([[0.0, 0.0, 2.5], [7.0, 5.0, 2.5]]), np.zeros((2, 3)))
     assert inside.feasible.tolist() == [True, False]
 
 

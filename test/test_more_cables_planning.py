@@ -8,9 +8,7 @@ import dataclasses
 import numpy as np
 import pytest
 
-from cdh_planner import zonotope as zt
-from cdh_planner.cable_feasibility import planning_feasibility
-from cdh_planner.feasibility import evaluate
+from cdh_planner.wrench import band_feasibility, wrench_feasibility
 from cdh_planner.parsing.problem import load_problem
 from cdh_planner.manifold.configuration import ConfigurationConstraint
 from cdh_planner.model.forward_kinematics import forward_kinematics_many
@@ -61,7 +59,7 @@ def test_robot2_8_plans_every_task(name, atlas, strategy):
     assert res.stats["direct"] is not atlas  # the sphere, pivot and slice queries need the atlas
     path = res.path
     assert path.lengths.shape == (len(path), 8)
-    f = planning_feasibility(pr.robot, path.p, path.tau)
+    f = band_feasibility(pr.robot, path.p, path.tau)
     assert np.all(f.margin > 0)
     # the published band is the rule's and inside the limits at every waypoint
     assert np.all(path.tension_min >= pr.robot.tension_min - 1e-9)
@@ -96,7 +94,7 @@ def test_the_configuration_manifold_has_the_task_dimension():
     fd = (c.residual_and_jacobian(x + h * d)[0] - c.residual_and_jacobian(x - h * d)[0]) / (2 * h)
     assert np.allclose(fd, J @ d, atol=1e-6)
     assert c.inside(x)
-    assert c.margin(x) == pytest.approx(float(planning_feasibility(
+    assert c.margin(x) == pytest.approx(float(band_feasibility(
         pr.robot, pr.start.p[None], pr.start.tau[None]).margin[0]))
 
 
@@ -105,16 +103,16 @@ def test_planning_margin_is_the_closed_form_for_six_cables_and_the_band_for_more
     r6 = load_robot(CONFIG / "robot2.yaml")
     p = np.array([0.0, 0.0, 0.3]) + rng.uniform(-0.05, 0.05, (200, 3))
     tau = rng.uniform(-0.5, 0.5, (200, 3))
-    a, b = planning_feasibility(r6, p, tau), evaluate(r6, p, tau)
+    a, b = band_feasibility(r6, p, tau), wrench_feasibility(r6, p, tau)
     assert np.array_equal(a.margin, b.margin) and np.array_equal(a.binding, b.binding)
     r8 = load_robot(CONFIG / "robot2_8.yaml")
     p = np.array([0.0, 0.0, 0.3]) + rng.uniform(-0.1, 0.1, (400, 3))
     tau = rng.uniform(-0.8, 0.8, (400, 3))
-    f, z = planning_feasibility(r8, p, tau), zt.evaluate(r8, p, tau)
+    f, z = band_feasibility(r8, p, tau), wrench_feasibility(r8, p, tau)
     band_ok = np.all(f.margins > 0, axis=(1, 2))
     assert np.array_equal(f.margin > 0, band_ok) and 0 < band_ok.sum() < len(p)
-    # where the facet test holds, the band is evaluate's (the same centred rule), and a band
-    # inside the tension limits is exactly evaluate's "ok" (lengths aside): it implies the
+    # where the facet test holds, the band is the facet test's (the same centred rule), and a band
+    # inside the tension limits is exactly the facet test's "ok" (lengths aside): it implies the
     # facet test
     held = z.wrench_margin > 0
     assert np.allclose(f.margins[held], z.margins[held], rtol=0, atol=1e-12)

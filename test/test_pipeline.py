@@ -1,5 +1,5 @@
 """The planning pipeline's stages one at a time (cdh_planner/pipeline): what each one
-promises, checked against the closed form (feasibility.evaluate, the dense check) and
+promises, checked against the closed form (wrench.wrench_feasibility, the dense check) and
 against identities (a straight evenly spaced line is smoothing's fixed point, densifying
 only inserts, the metrics are distances)."""
 
@@ -10,7 +10,7 @@ import pytest
 
 from conftest import PROBLEMS
 from cdh_planner.errors import InputError
-from cdh_planner.feasibility import evaluate
+from cdh_planner.wrench import wrench_feasibility
 from cdh_planner.parsing.problem import load_problem
 from cdh_planner.model.pose import Pose, quaternion_from_tau, rotation_angle_between, rotation_tt
 from cdh_planner.pipeline import lift as L
@@ -47,7 +47,7 @@ def test_validity_of_poses_is_the_margin_above_the_floor():
     rng = np.random.default_rng(3)
     y = ends[0] + rng.normal(scale=0.3, size=(200, ends.shape[1]))
     p, tau = pr.task.pose(y)
-    margin = evaluate(pr.robot, p, tau).margin
+    margin = wrench_feasibility(pr.robot, p, tau).margin
     np.testing.assert_array_equal(v.margins(y), margin)
     np.testing.assert_array_equal(v.pose(y), margin >= pr.settings.margin_floor)
     assert 0 < v.pose(y).sum() < len(y)  # both kinds were drawn
@@ -93,7 +93,7 @@ def test_lift_says_why_not():
     points, (reason, message) = planner.lift(pr.start, off, 1e-3)
     assert points is None and reason == Status.INVALID and message.startswith("goal pose is off")
     far = Pose(pr.start.p, pr.start.tau + np.array([0.0, 1.5, 0.0]))   # a steep tilt
-    if not evaluate(pr.robot, far.p[None], far.tau[None]).feasible[0]:
+    if not wrench_feasibility(pr.robot, far.p[None], far.tau[None]).feasible[0]:
         points, (reason, message) = planner.lift(far, pr.goal, 1e-3)
         assert reason == Status.infeasible("start") and "not wrench-feasible" in message
     with pytest.raises(InputError) as err:
@@ -192,7 +192,7 @@ def test_densify_only_inserts_and_ends_dense_feasible():
     assert all(s.feasible and s.unresolved == 0
                for s in planner.validity.segments(p, quaternion_from_tau(tau)))
     path = planner.densify.planned_path(dense, verified)
-    np.testing.assert_allclose(path.lengths, evaluate(pr.robot, p, tau).lengths)
+    np.testing.assert_allclose(path.lengths, wrench_feasibility(pr.robot, p, tau).lengths)
     assert np.all(np.diff(path.t) > 0)
 
 
@@ -212,7 +212,7 @@ def test_time_stage_checks_the_path_as_executed_and_reports_its_least_margins():
     assert timed.executed.ok and np.all(np.diff(timed.path.t) > 0)
     least, least_n = timed.least
     assert 0 < least <= float(np.min(path.margin)) + 1e-12
-    f = evaluate(pr.robot, path.p, path.tau)
+    f = wrench_feasibility(pr.robot, path.p, path.tau)
     assert least_n <= float(np.min(np.minimum(f.tension_min - pr.robot.tension_min,
                                               pr.robot.tension_max - f.tension_max))) + 1e-9
 
@@ -251,7 +251,7 @@ def test_with_a_scene_validity_is_the_least_of_wrench_and_collision_margins():
     y = v.direct_motion(ends)
     s = np.linspace(0.0, 1.0, 41)
     pp, R = y(np.zeros(s.size, dtype=int), s)
-    wrench = evaluate(pr.robot, pp, R=R).margin
+    wrench = wrench_feasibility(pr.robot, pp, R=R).margin
     clear = np.array([v.collision.clearance(a, b).margin for a, b in zip(pp, R)]) / COLLISION_UNIT_M
     np.testing.assert_allclose(v.pose_margins(pp, R=R)[0], np.minimum(wrench, clear), rtol=1e-9)
     assert np.min(clear) < 0 < np.min(wrench)

@@ -6,7 +6,7 @@ import numpy as np
 import pytest
 
 from cdh_planner.cli import main
-from cdh_planner.feasibility import evaluate
+from cdh_planner.wrench import wrench_feasibility
 from cdh_planner.parsing.problem import load_problem
 from cdh_planner.model.pose import quaternion_from_tau
 from cdh_planner.planner import Planner, PlannerSettings, Pose
@@ -41,7 +41,7 @@ def plan(problem, **settings):
 def assert_dense_feasible(robot, path, start, goal):
     """Every waypoint and the motion between them (position linear, slerp) is feasible,
     the path joins start to goal, times increase, lengths are the poses' lengths."""
-    assert np.all(evaluate(robot, path.p, path.tau).feasible)
+    assert np.all(wrench_feasibility(robot, path.p, path.tau).feasible)
     assert np.all(path.margin > 0)
     segments = check_motion(robot, path.p, path.quaternion)
     assert all(s.feasible and s.unresolved == 0 for s in segments)
@@ -51,7 +51,7 @@ def assert_dense_feasible(robot, path, start, goal):
         q = quaternion_from_tau(pose.tau)
         assert abs(abs(float(q @ path.quaternion[k])) - 1.0) < 1e-9
     assert np.all(np.diff(path.t) > 0)
-    np.testing.assert_allclose(path.lengths, evaluate(robot, path.p, path.tau).lengths)
+    np.testing.assert_allclose(path.lengths, wrench_feasibility(robot, path.p, path.tau).lengths)
 
 
 @pytest.mark.parametrize("name,strategy", [("robot2_q1_q2", "astar"), ("robot2_q2_q3", "gbf"),
@@ -84,7 +84,7 @@ def test_different_components_answer_no_path(tmp_path):
     _, pr, res = plan(problem, strategy="gbf")
     assert not res.success and res.reason == "no_path"
     assert "singularity det J = 0" in res.message and res.path is None and res.charts == 0
-    det = evaluate(pr.robot, np.array([pr.start.p, pr.goal.p]), np.array([pr.start.tau, pr.goal.tau])).det_j
+    det = wrench_feasibility(pr.robot, np.array([pr.start.p, pr.goal.p]), np.array([pr.start.tau, pr.goal.tau])).det_j
     assert det[0] * det[1] < 0
     ends = pr.task.coords(np.array([pr.start.p, pr.goal.p]), np.array([pr.start.tau, pr.goal.tau]))
     assert not check_task_motion(pr.robot, pr.task, ends)[0].feasible
@@ -124,7 +124,7 @@ def test_infeasible_start_and_goal_are_refused():
     pr = load_problem(PROBLEMS / "robot2_q1_q2.yaml")
     planner = Planner(pr.robot, pr.task, pr.settings)
     bad = Pose(*[a[0] for a in pr.task.pose(np.array([[1.0, 0.0]]))])  # on the equator: not feasible
-    assert not evaluate(pr.robot, bad.p[None], bad.tau[None]).feasible[0]
+    assert not wrench_feasibility(pr.robot, bad.p[None], bad.tau[None]).feasible[0]
     res = planner.plan(bad, pr.goal)
     assert (res.success, res.reason) == (False, "start_infeasible") and "violated" in res.message
     res = planner.plan(pr.start, bad)

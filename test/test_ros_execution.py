@@ -215,7 +215,7 @@ def test_the_simulated_robot_measures_the_tensions_and_the_run_file_records_them
     effort = np.array([msg.effort[list(msg.name).index(n)] for n in ROBOT.winch_names])
     assert effort.shape == (6,) and np.all(effort > 0), msg
     # statics at q2 from the measured lengths: J(x) t = w0 to the cables' compliance
-    from cdh_planner.feasibility import cable_vectors, load_point, nominal_wrench, screw_jacobian
+    from cdh_planner.wrench import cable_vectors, load_point, nominal_wrench, screw_jacobian
     q2 = sphere_pose_msg(Q2).pose
     p = np.array([q2.position.x, q2.position.y, q2.position.z])
     R = rotation_from_quaternion(np.array([q2.orientation.x, q2.orientation.y,

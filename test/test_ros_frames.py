@@ -16,7 +16,7 @@ from std_msgs.msg import Float64
 from visualization_msgs.msg import MarkerArray
 from tf2_msgs.msg import TFMessage
 
-from cdh_planner.feasibility import evaluate
+from cdh_planner.wrench import wrench_feasibility
 from cdh_planner.model.pose import rotation_from_quaternion
 from cdh_planner.ros.msgs import messages as M
 from cdh_planner.ros.core import plan_requests
@@ -110,7 +110,7 @@ def test_tf_gives_the_platform_pose_during_an_execution(tmp_path):
         last = platform[-1]
         assert cables.messages[-1].header.stamp == last.header.stamp
         p, R = _pose(last)
-        expected = evaluate(ROBOT, p[None], R=R[None]).margin[0]
+        expected = wrench_feasibility(ROBOT, p[None], R=R[None]).margin[0]
         assert margins.messages[-1].data == pytest.approx(expected, abs=1e-9)
         drawn = {m.ns: m for m in live.messages[-1].markers}
         assert set(drawn) == {"platform_measured", "cables_measured"}

@@ -16,7 +16,7 @@ from nav_msgs.msg import Path  # noqa: E402
 from visualization_msgs.msg import Marker  # noqa: E402
 
 from cdh_planner.errors import InputError  # noqa: E402
-from cdh_planner.feasibility import evaluate  # noqa: E402
+from cdh_planner.wrench import wrench_feasibility  # noqa: E402
 from cdh_planner.model.pose import quaternion_from_tau, rotation_from_quaternion, rotation_tt  # noqa: E402
 from cdh_planner.model.robot import load_robot  # noqa: E402
 from cdh_planner.planner import PlanResult, Pose  # noqa: E402
@@ -41,7 +41,7 @@ def planned_path(n=40):
     ang = 2 * np.pi * 0.2 * s
     p = np.column_stack([0.05 * np.cos(ang), 0.05 * np.sin(ang), 0.30 + 0.02 * s])
     tau = np.column_stack([ang, 0.1 + 0.1 * s, 0.2 * s])
-    f = evaluate(ROBOT, p, tau)
+    f = wrench_feasibility(ROBOT, p, tau)
     assert np.all(f.feasible)
     zeros = np.zeros((n, 6))
     path = PlannedPath(p=p, quaternion=quaternion_from_tau(tau), tau=tau, lengths=f.lengths,

@@ -14,7 +14,7 @@ from nav_msgs.srv import GetPlan  # noqa: E402
 
 from cdh_planner.commands.slice import task_in_yaml  # noqa: E402
 from cdh_planner.errors import InputError  # noqa: E402
-from cdh_planner.feasibility import evaluate  # noqa: E402
+from cdh_planner.wrench import wrench_feasibility  # noqa: E402
 from cdh_planner.model.pose import quaternion_from_tau  # noqa: E402
 from cdh_planner.model.robot import load_robot  # noqa: E402
 from cdh_planner.model.task import PivotTask, SliceTask  # noqa: E402
@@ -226,7 +226,7 @@ def _path():
     task = task_in_yaml(ROBOT2)
     y = np.array(Q1) + np.linspace(0, 1, 20)[:, None] * (np.array(Q2) - np.array(Q1))
     p, tau = task.pose(y)
-    f = evaluate(robot, p, tau)
+    f = wrench_feasibility(robot, p, tau)
     z = np.zeros((20, 6))
     path = PlannedPath(p=p, quaternion=quaternion_from_tau(tau), tau=tau, lengths=f.lengths,
                        tension_min=f.tension_min, tension_nominal=f.tension_nominal,

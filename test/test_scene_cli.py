@@ -93,7 +93,7 @@ def test_slice_colours_collision_apart_where_a_cable_meets_the_ball(tmp_path, ca
     written with the collision legend."""
     from cdh_planner.commands.slice import task_in_yaml
     from cdh_planner.pictures.slices import COLLISION, SliceView, classify, compute_slice
-    from cdh_planner.cable_feasibility import feasibility_of
+    from cdh_planner.wrench import wrench_feasibility
     from cdh_planner.model.pose import rotation_tt
     from cdh_planner.model.robot import load_robot
     from cdh_planner.scene.collision import CollisionModel
@@ -115,7 +115,7 @@ def test_slice_colours_collision_apart_where_a_cable_meets_the_ball(tmp_path, ca
     classes = grid.classes.ravel()
     assert 0 < hit.sum() < hit.size
     assert np.array_equal(classes == COLLISION, hit)
-    wrench = classify(feasibility_of(robot, p, R=R))
+    wrench = classify(wrench_feasibility(robot, p, R=R))
     assert np.array_equal(classes[~hit], wrench[~hit])
     out = tmp_path / "slice.png"
     rc = cli.main(["slice", str(CONFIG / "robot2.yaml"), "--sphere", "0,0,0.306,0.13",

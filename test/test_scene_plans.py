@@ -2,7 +2,7 @@
 do not use coal: closed-form distances of spheres (to a cable: point-segment; to the
 platform's sphere shape: point-point), point-box and point-cylinder distances of the
 platform's centre, and box / cylinder distances sampled along each cable; wrench
-feasibility by the closed form (feasibility.evaluate). Robot 2 free flight q2 -> q3
+feasibility by the closed form (wrench.wrench_feasibility). Robot 2 free flight q2 -> q3
 (Table 1), whose direct motion is the answer without a scene."""
 
 import dataclasses
@@ -11,7 +11,7 @@ import numpy as np
 import pytest
 from scipy.spatial.transform import Rotation
 
-from cdh_planner.feasibility import evaluate
+from cdh_planner.wrench import wrench_feasibility
 from cdh_planner.parsing.problem import load_problem
 from cdh_planner.model.pose import Pose, quaternion_from_tau, tau_from_quaternion
 from cdh_planner.planner import Planner
@@ -105,7 +105,7 @@ def check_dense(result, obstacle, platform=True):
     """The planned path, sampled densely: wrench-feasible and clear of the obstacle."""
     assert result.success, result.message
     p, R = poses_along(result.path.p, result.path.quaternion)
-    assert evaluate(ROBOT, p, R=R).margin.min() > 0.0
+    assert wrench_feasibility(ROBOT, p, R=R).margin.min() > 0.0
     d, _ = least_distance(obstacle, p, R, platform)
     assert d > 0.0, d
     return d

@@ -17,7 +17,7 @@ mujoco = pytest.importorskip("mujoco")
 
 from conftest import CONFIG, PROBLEMS, REPO  # noqa: E402
 from cdh_planner import cli  # noqa: E402
-from cdh_planner.cable_feasibility import nominal_tensions  # noqa: E402
+from cdh_planner.wrench import rule_tensions  # noqa: E402
 from cdh_planner.model.elastic import unstretched_lengths  # noqa: E402
 from cdh_planner.model.kinematics import cable_lengths  # noqa: E402
 from cdh_planner.model.pose import rotation_from_quaternion  # noqa: E402
@@ -76,7 +76,7 @@ def compensated(robot, doc):
     plan = plan_from_waypoints(doc["path"], len(robot.base_anchors))
     if plan.source == "commanded_lengths":
         return plan
-    t = nominal_tensions(robot, plan.p, rotation_from_quaternion(plan.quaternion))
+    t = rule_tensions(robot, plan.p, rotation_from_quaternion(plan.quaternion))[0]
     L0 = unstretched_lengths(robot, plan.L, t)
     plan.V = np.gradient(L0, plan.t, axis=0, edge_order=2)
     plan.V[[0, -1]] = 0.0
@@ -179,7 +179,7 @@ def test_load_cells_read_what_the_cables_apply():
     model, data = plant.model, plant.data
     p, R = np.array([0.0, 0.0, 0.306]), np.eye(3)
     L = cable_lengths(robot, p, R)
-    L0 = unstretched_lengths(robot, L, nominal_tensions(robot, p[None], R[None])[0])
+    L0 = unstretched_lengths(robot, L, rule_tensions(robot, p[None], R[None])[0][0])
     plant.reset(p, [0, 0, 0, 1], L0)
     times = np.array([0.0, 0.05, 0.1, 0.15, 0.4])
     swing = np.array([0.0, 0.004, -0.004, 0.0, 0.0])[:, None] * np.array([1, -1, 1, -1, 1, -1])
@@ -210,7 +210,7 @@ def test_static_holds_give_the_plans_nominal_tensions(name, plans):
     path = plans[name][1]["path"]
     for w in (path[0], path[len(path) // 2], path[-1]):
         p, q = np.array(w["p"]), np.array(w["quaternion"])
-        t = nominal_tensions(robot, p[None], rotation_from_quaternion(q)[None])[0]
+        t = rule_tensions(robot, p[None], rotation_from_quaternion(q)[None])[0][0]
         plant.reset(p, q, unstretched_lengths(robot, w["lengths"], t))
         for _ in range(500):
             plant.step()
@@ -227,7 +227,7 @@ def test_a_stiff_cable_substeps_and_still_holds(tmp_path):
     robot = load_robot(stiff)
     plant = SimulatedRobot(robot)
     p, R = np.array([0.0, 0.0, 0.306]), np.eye(3)
-    t = nominal_tensions(robot, p[None], R[None])[0]
+    t = rule_tensions(robot, p[None], R[None])[0][0]
     plant.reset(p, [0, 0, 0, 1], unstretched_lengths(robot, cable_lengths(robot, p, R), t))
     assert plant.substeps > 1
     for _ in range(300):

@@ -7,7 +7,7 @@ import pytest
 import yaml
 
 from cdh_planner import cli
-from cdh_planner.feasibility import evaluate
+from cdh_planner.wrench import wrench_feasibility
 from cdh_planner.pictures import slices
 from cdh_planner.model.robot import load_robot
 from cdh_planner.model.task import SliceTask, SphereTask
@@ -69,9 +69,9 @@ def test_default_resolution_is_classified_in_whole_chunks(tmp_path, monkeypatch,
 
     def counted(robot, p, *args, **kwargs):
         sizes.append(len(p))
-        return evaluate(robot, p, *args, **kwargs)
+        return wrench_feasibility(robot, p, *args, **kwargs)
 
-    monkeypatch.setattr(slices, "evaluate", counted)
+    monkeypatch.setattr(slices, "wrench_feasibility", counted)
     assert cli.main(["slice", str(ROBOT1_FILE), *SLICE1, "-o", str(tmp_path / "s.png")]) == 0
     assert "400 x 400 grid" in capsys.readouterr().out
     assert sum(sizes) == 400 * 400 and len(sizes) == -(-400 * 400 // slices.CHUNK)
@@ -123,7 +123,7 @@ def test_classes_follow_the_documented_rule():
                            axes=("z", "z"), ranges=((0.0, 0.7), (0.0, 0.7)))
     z = np.linspace(0.0, 0.7, 300)
     p = np.column_stack([np.zeros_like(z), np.zeros_like(z), z])
-    f = evaluate(robot, p, tau=np.tile([0.3, 0.4, 0.0], (z.size, 1)))
+    f = wrench_feasibility(robot, p, tau=np.tile([0.3, 0.4, 0.0], (z.size, 1)))
     cls = slices.classify(f)
     length_out = np.any(f.margins[:, :2] <= 0, axis=(1, 2))
     assert np.all((cls == slices.FEASIBLE) == f.feasible)
@@ -142,7 +142,7 @@ def test_compute_slice_matches_pointwise_evaluation():
     assert grid.classes.shape == (30, 30)
     j, i = 7, 21  # row (alpha2), column (alpha1)
     p, tau = task.pose([[grid.xs[i], grid.ys[j]]])
-    f = evaluate(robot, p, tau)
+    f = wrench_feasibility(robot, p, tau)
     assert grid.margin[j, i] == pytest.approx(f.margin[0])
     assert grid.det_j[j, i] == pytest.approx(f.det_j[0])
     assert grid.classes[j, i] == slices.classify(f)[0]

@@ -7,7 +7,7 @@ import pytest
 from scipy.spatial.transform import Rotation, Slerp
 
 from cdh_planner import cli
-from cdh_planner.feasibility import evaluate
+from cdh_planner.wrench import wrench_feasibility
 from cdh_planner.model.pose import quaternion_from_tau, rotation_angle_between, rotation_from_quaternion
 from cdh_planner.model.robot import load_robot
 from cdh_planner.trajectory import path_check as tv
@@ -60,7 +60,7 @@ def test_json_values_agree_with_the_library(tmp_path):
              {"position": [0.0, 0.0, 0.35], "tau": [1.7, 1.7, SIGMA]}]
     rc, doc = run_verify(tmp_path, ROBOT1_FILE, poses)
     robot = load_robot(ROBOT1_FILE)
-    f = evaluate(robot, [[0, 0, 0.35]] * 2, tau=[p["tau"] for p in poses])
+    f = wrench_feasibility(robot, [[0, 0, 0.35]] * 2, tau=[p["tau"] for p in poses])
     for i, row in enumerate(doc["poses"]):
         assert row["margin"] == pytest.approx(f.margin[i])
         assert row["binding"] == f.binding[i]
@@ -82,7 +82,7 @@ def test_json_values_agree_with_the_library(tmp_path):
                                   [0, 0, 0.35], quaternion_from_tau(poses[1]["tau"]), [bad["s"]])
     np.testing.assert_allclose(bad["position"], p[0], atol=1e-12)
     np.testing.assert_allclose(bad["quaternion"], q[0], atol=1e-9)
-    check = evaluate(robot, [bad["position"]], R=rotation_from_quaternion(np.array([bad["quaternion"]])))
+    check = wrench_feasibility(robot, [bad["position"]], R=rotation_from_quaternion(np.array([bad["quaternion"]])))
     assert check.margin[0] <= 1e-9 and check.binding[0] == bad["binding"]
 
 
@@ -165,7 +165,7 @@ def fake_evaluate(margin_of_s):
 def test_refinement_catches_a_dip_between_coarse_samples(monkeypatch):
     # V-shaped margin dipping below zero on [0.5025, 0.5035]: samples every 0.1 all see
     # positive margins, but the steep secants around s = 0.5 trigger refinement.
-    monkeypatch.setattr(tv, "evaluate", fake_evaluate(lambda s: 2 * np.abs(s - 0.503) - 0.001))
+    monkeypatch.setattr(tv, "wrench_feasibility", fake_evaluate(lambda s: 2 * np.abs(s - 0.503) - 0.001))
     (check,) = tv.check_path(None, LinePath(), max_step_m=0.1)
     assert not check.feasible
     assert check.first_unsafe.s == pytest.approx(0.5025, abs=1e-9)
@@ -173,14 +173,14 @@ def test_refinement_catches_a_dip_between_coarse_samples(monkeypatch):
 
 
 def test_no_refinement_where_the_margin_is_comfortable(monkeypatch):
-    monkeypatch.setattr(tv, "evaluate", fake_evaluate(lambda s: 0.5 + 0.1 * np.sin(3 * s)))
+    monkeypatch.setattr(tv, "wrench_feasibility", fake_evaluate(lambda s: 0.5 + 0.1 * np.sin(3 * s)))
     (check,) = tv.check_path(None, LinePath(), max_step_m=0.1)
     assert check.feasible and check.first_unsafe is None
     assert check.samples == 11
 
 
 def test_first_unsafe_at_the_start(monkeypatch):
-    monkeypatch.setattr(tv, "evaluate", fake_evaluate(lambda s: s - 0.5))
+    monkeypatch.setattr(tv, "wrench_feasibility", fake_evaluate(lambda s: s - 0.5))
     (check,) = tv.check_path(None, LinePath(), max_step_m=0.1)
     assert check.first_unsafe.s == 0.0 and check.worst.s == 0.0
 
@@ -188,7 +188,7 @@ def test_first_unsafe_at_the_start(monkeypatch):
 def test_margin_grazing_zero_is_reported_unresolved(monkeypatch):
     # Tangent to zero at s = 0.5037 (between samples): sampling cannot decide; refinement
     # stops at its limits and says so in ``unresolved`` instead of looping.
-    monkeypatch.setattr(tv, "evaluate", fake_evaluate(lambda s: (s - 0.5037) ** 2))
+    monkeypatch.setattr(tv, "wrench_feasibility", fake_evaluate(lambda s: (s - 0.5037) ** 2))
     monkeypatch.setattr(tv, "MAX_SAMPLES", 5000)
     (check,) = tv.check_path(None, LinePath(), max_step_m=0.01)
     assert check.unresolved > 0
@@ -197,7 +197,7 @@ def test_margin_grazing_zero_is_reported_unresolved(monkeypatch):
 
 
 def test_margin_close_to_zero_is_resolved_by_refinement(monkeypatch):
-    monkeypatch.setattr(tv, "evaluate", fake_evaluate(lambda s: (s - 0.5037) ** 2 + 1e-10))
+    monkeypatch.setattr(tv, "wrench_feasibility", fake_evaluate(lambda s: (s - 0.5037) ** 2 + 1e-10))
     (check,) = tv.check_path(None, LinePath(), max_step_m=0.01)
     assert check.feasible and check.unresolved == 0
     assert check.worst.margin == pytest.approx(1e-10, rel=0.5)
@@ -212,5 +212,5 @@ def test_task_motion_first_unsafe_is_at_the_boundary():
     s = check.first_unsafe.s
     a1 = 0.55 + np.array([s - 1e-6, s]) * (2.63 - 0.55)
     p, tau = task.pose(np.column_stack([a1, [0.75, 0.75]]))
-    f = evaluate(robot, p, tau)
+    f = wrench_feasibility(robot, p, tau)
     assert f.feasible[0] and not f.feasible[1]

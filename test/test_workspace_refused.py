@@ -4,7 +4,7 @@ the published tension rule's band does not fit is a goal the planner refuses
 
 import numpy as np
 
-from cdh_planner.cable_feasibility import feasibility_of, planning_feasibility
+from cdh_planner.wrench import wrench_feasibility, band_feasibility
 from cdh_planner.model.pose import quaternion_from_tau
 from cdh_planner.model.robot import load_robot
 from cdh_planner.studies import workspace as ws
@@ -18,8 +18,8 @@ def _facet_feasible_band_not(robot):
     rng = np.random.default_rng(0)
     p = rng.uniform(low, high, (20000, 3))
     tau = rng.uniform(-0.5, 0.5, (20000, 3))
-    k = np.flatnonzero((feasibility_of(robot, p, tau).margin > 0)
-                       & (planning_feasibility(robot, p, tau).margin < 0))
+    k = np.flatnonzero((wrench_feasibility(robot, p, tau).margin > 0)
+                       & (band_feasibility(robot, p, tau).margin < 0))
     assert k.size, "no such pose among the draws"
     return p[k[0]], tau[k[0]]
 
@@ -34,7 +34,7 @@ def test_a_goal_whose_band_does_not_fit_is_refused_not_without_a_path():
     res = ws.run_workspace(robot, spec, SerialExecutor())
     sample_p, sample_q = ws.sample_poses(spec, 0, 1)
     assert res.feasible.tolist() == [True]  # verify's facet test
-    assert planning_feasibility(robot, sample_p, tau[None]).margin[0] < 0  # the band's
+    assert band_feasibility(robot, sample_p, tau[None]).margin[0] < 0  # the band's
     assert res.reach_status == ["goal_infeasible"] and res.reachable == [False]
     c = res.counts()
     assert (c["refused"], c["unreachable_feasible"], c["reachable"]) == (1, 0, 0)
@@ -51,7 +51,7 @@ def test_six_cable_goals_under_the_margin_floor_are_refused_naming_the_floor(cap
     low, high = ws.default_box(robot)
     rng = np.random.default_rng(1)
     p, tau = rng.uniform(low, high, (20000, 3)), rng.uniform(-0.5, 0.5, (20000, 3))
-    margin = feasibility_of(robot, p, tau).margin
+    margin = wrench_feasibility(robot, p, tau).margin
     k = np.flatnonzero((margin > 0) & (margin < 1e-3))
     assert k.size, "no pose just inside the boundary among the draws"
     q = quaternion_from_tau(tau[k[0]][None])[0]

@@ -1,4 +1,4 @@
-"""Wrench feasibility for m >= 6 cables (zonotope.py, docs/more-cables.md): m = 6 is the
+"""Wrench feasibility for m >= 6 cables (the facet test of ``wrench``, docs/more-cables.md): m = 6 is the
 closed form; for any m an independent linear programme (scipy's HiGHS: is there t in the
 box with J t = w?) confirms the facet test's answers; the tension rule's band is exact."""
 
@@ -12,8 +12,8 @@ from hypothesis import HealthCheck, given, settings
 from hypothesis import strategies as st
 from scipy.optimize import linprog
 
-from cdh_planner import feasibility as fz
-from cdh_planner import zonotope as zt
+import wrench_reference as zt
+from cdh_planner import wrench as fz
 from cdh_planner.model.pose import rotation_tt
 from cdh_planner.model.robot import load_robot, robot_from_dict
 
@@ -104,7 +104,7 @@ def test_six_cables_agree_with_the_closed_form(name):
     n = 3000
     p = np.column_stack([rng.uniform(-0.1, 0.1, n), rng.uniform(-0.1, 0.1, n), rng.uniform(0.15, 0.45, n)])
     tau = np.column_stack([rng.uniform(-np.pi, np.pi, n), rng.uniform(0, np.pi, n), rng.uniform(-np.pi, np.pi, n)])
-    a, b = fz.evaluate(robot, p, tau), zt.evaluate(robot, p, tau)
+    a, b = fz.wrench_feasibility(robot, p, tau), zt.facet_test(robot, p, tau)
     assert 0.01 < a.feasible.mean() < 0.99  # both answers are exercised
     np.testing.assert_array_equal(a.singular, b.singular)
     np.testing.assert_array_equal(a.feasible, b.feasible)
@@ -117,7 +117,7 @@ def test_six_cables_agree_with_the_closed_form(name):
     assert np.all(np.abs(a.tension_nominal - b.tension_nominal)[well] <= 1e-9 * scale)
     assert np.all(np.abs(a.tension_spread - b.tension_spread)[well] <= 1e-9 * scale)
     np.testing.assert_allclose(a.margins, b.margins, rtol=0, atol=1e-9 * np.abs(a.margins).max())
-    assert set(np.unique(b.tension_status)) <= {zt.STATUS_OK, zt.STATUS_INFEASIBLE, zt.STATUS_SINGULAR}
+    assert set(np.unique(b.tension_status)) <= {fz.STATUS_OK, fz.STATUS_INFEASIBLE, fz.STATUS_SINGULAR}
 
 
 def test_six_cable_facet_slack_is_the_closed_form_slack_over_the_row_norm():
@@ -128,7 +128,7 @@ def test_six_cable_facet_slack_is_the_closed_form_slack_over_the_row_norm():
     p = np.column_stack([rng.uniform(-0.05, 0.05, 50), rng.uniform(-0.05, 0.05, 50), rng.uniform(0.25, 0.4, 50)])
     tau = np.column_stack([rng.uniform(-np.pi, np.pi, 50), rng.uniform(0, 0.6, 50), rng.uniform(-0.5, 0.5, 50)])
     J, w0, L, f = pose_pieces(robot, p, tau)
-    a = fz.evaluate(robot, p, tau)
+    a = fz.wrench_feasibility(robot, p, tau)
     rows = np.linalg.norm(np.linalg.inv(J), axis=-1)
     slack = np.concatenate([(robot.tension_max - a.tension_max) / rows,
                             (a.tension_min - robot.tension_min) / rows], axis=1)
@@ -151,7 +151,7 @@ def test_facet_test_agrees_with_the_lp(m):
 
 @pytest.mark.parametrize("m", [7, 8, 12])
 def test_compiled_kernel_matches_the_direct_facet_test(m):
-    """evaluate_kernel (basis coordinates) = facet_margins (a normal per subset from J's
+    """The compiled facet test (basis coordinates) = facet_margins (a normal per subset from J's
     columns, as written) and tension_rule (numpy), to 1e-9."""
     rng = np.random.default_rng(200 + m)
     robot = robot_from_dict(random_robot(rng, m))
@@ -162,13 +162,10 @@ def test_compiled_kernel_matches_the_direct_facet_test(m):
     np.testing.assert_allclose(f.wrench_margin, mr, rtol=1e-9, atol=1e-12)
     p, tau = random_poses(np.random.default_rng(200 + m), 200)  # the same poses again
     R = rotation_tt(tau)
-    out = zt.evaluate_kernel(J, fz.load_point(robot, p, R), robot.wrench_center_local,
-                             zt._inverse_factor(robot.ellipsoid_matrix.tobytes()), True,
-                             robot.tension_min, robot.tension_max, zt.facet_subsets(m), fz.SINGULAR_DET,
-                             False)  # the rule before centring
+    out = zt.uncentred_rule(robot, J, fz.load_point(robot, p, R))  # the rule before centring
     t0, v = zt.tension_rule(robot, J, w0, L)
-    np.testing.assert_allclose(out[5], t0, rtol=1e-9, atol=1e-9)
-    np.testing.assert_allclose(out[6], v, rtol=1e-9, atol=1e-9)
+    np.testing.assert_allclose(out[0], t0, rtol=1e-9, atol=1e-9)
+    np.testing.assert_allclose(out[1], v, rtol=1e-9, atol=1e-9)
     np.testing.assert_allclose(f.tension_spread, v, rtol=1e-9, atol=1e-9)  # centring keeps v
 
 
@@ -195,11 +192,11 @@ def test_tension_band_is_exact_for_the_rule(m):
         PL = P @ L[q]
         attained = t0[q] + np.einsum("ij,ij->i", PL, PL / v[q][:, None])
         np.testing.assert_allclose(attained, t0[q] + v[q], rtol=1e-9)
-    ok = f.tension_status == zt.STATUS_OK
+    ok = f.tension_status == fz.STATUS_OK
     assert ok.any() and (~ok).any()
     assert np.all(f.wrench_margin[ok] > 0)
     assert np.all((t0 - v >= robot.tension_min)[ok]) and np.all((t0 + v <= robot.tension_max)[ok])
-    exceeds = f.tension_status == zt.STATUS_EXCEEDS
+    exceeds = f.tension_status == fz.STATUS_EXCEEDS
     assert np.all(f.wrench_margin[exceeds] > 0)
 
 
@@ -232,10 +229,10 @@ def test_centred_nominal_holds_every_pose_a_shift_can_hold(name):
     for q in np.flatnonzero(f.wrench_margin > 0):
         best = _best_shift(robot, J[q], f.tension_nominal[q], f.tension_spread[q])
         if best > 2 * m * zt.CENTRE_MU * (1 + 1e-6):
-            assert f.tension_status[q] == zt.STATUS_OK, (q, best)
+            assert f.tension_status[q] == fz.STATUS_OK, (q, best)
             checked += 1
         if best < -1e-9:
-            assert f.tension_status[q] == zt.STATUS_EXCEEDS
+            assert f.tension_status[q] == fz.STATUS_EXCEEDS
     assert checked > 50
 
 
@@ -246,8 +243,8 @@ def test_centred_nominal_is_smooth_along_a_motion():
     s = np.linspace(0.0, 2.0, 2001)[:, None]
     p = np.array([-1.0, -0.5, 2.0]) + s * np.array([1.0, 0.6, 0.4])
     tau = np.column_stack([np.full(len(s), 0.5), 0.05 + 0.05 * s[:, 0], np.zeros(len(s))])
-    f = zt.evaluate(robot, p, tau)
-    assert np.all(f.tension_status == zt.STATUS_OK)
+    f = zt.facet_test(robot, p, tau)
+    assert np.all(f.tension_status == fz.STATUS_OK)
     second = np.abs(np.diff(f.tension_nominal, 2, axis=0)).max()
     first = np.abs(np.diff(f.tension_nominal, axis=0)).max()
     assert second < 0.05 * first, (first, second)
@@ -270,7 +267,7 @@ def test_robot_files_with_any_m(m, seed, frame):
     J, w0, L, f = pose_pieces(robot, *random_poses(rng, 8))
     assert f.tension_nominal.shape == f.margins[:, 2, :].shape == (8, m)
     assert np.all((f.margin > 0) == ((f.wrench_margin > 0) & (f.margins[:, :2].min(axis=(1, 2)) > 0)))
-    assert np.all((f.tension_status == zt.STATUS_INFEASIBLE) == (f.wrench_margin <= 0))
+    assert np.all((f.tension_status == fz.STATUS_INFEASIBLE) == (f.wrench_margin <= 0))
     assert np.all(np.sign(f.margin_newtons) == np.sign(f.wrench_margin))
     check_against_lp(robot, J, w0, L, f, rng, boundary=3)
 
@@ -292,7 +289,7 @@ def test_threaded_kernel_gives_the_serial_answers():
     rng = np.random.default_rng(400)
     robot = robot_from_dict(random_robot(rng, 8))
     p, tau = random_poses(rng, zt.PARALLEL_MIN + 100, spread=0.3)
-    whole = zt.evaluate(robot, p, tau)
-    parts = [zt.evaluate(robot, p[k:k + 1000], tau[k:k + 1000]) for k in range(0, len(p), 1000)]
+    whole = zt.facet_test(robot, p, tau)
+    parts = [zt.facet_test(robot, p[k:k + 1000], tau[k:k + 1000]) for k in range(0, len(p), 1000)]
     for name in ("margin", "margin_newtons", "tension_nominal", "tension_spread", "binding"):
         np.testing.assert_array_equal(getattr(whole, name), np.concatenate([getattr(f, name) for f in parts]))

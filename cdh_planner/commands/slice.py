@@ -31,7 +31,7 @@ from typing import Optional
 
 from ..accuracy import accuracy_limits
 from ..errors import InputError, check_text
-from ..cable_feasibility import feasibility_of as evaluate  # 6 cables: the closed form
+from ..wrench import wrench_feasibility
 from .outputs import check_output, writing
 from ..pictures.slices import FEASIBLE, INACCURATE, Marker, SegmentOverlay, SliceGrid, SliceView, \
     compute_slice, plot_slice
@@ -389,7 +389,7 @@ def _report(robot, view, grid, elapsed, markers, out, size):
     if markers:
         coords = view.coords([m.a for m in markers], [m.b for m in markers])
         p, tau = view.task.pose(coords)
-        f = evaluate(robot, p, R=rotation_tt(tau))
+        f = wrench_feasibility(robot, p, R=rotation_tt(tau))
         for m, ok, margin, binding in zip(markers, f.feasible, f.margin, f.binding):
             print(f"  {m.label} ({m.a:.4g}, {m.b:.4g}): {'feasible' if ok else 'NOT feasible'}, "
                   f"margin {margin:+.4f} ({binding})")

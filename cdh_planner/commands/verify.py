@@ -39,7 +39,7 @@ import numpy as np
 
 from ..accuracy import has_accuracy, pose_accuracy
 from ..errors import InputError
-from ..cable_feasibility import feasibility_of as evaluate  # 6 cables: the closed form
+from ..wrench import wrench_feasibility
 from .outputs import check_output, write_text
 from ..parsing.poses import load_poses, parse_angle, parse_length
 from ..model.robot import load_robot
@@ -83,7 +83,7 @@ def run(args):
 
     collision = _collision(robot, args.scene)
 
-    feas = evaluate(robot, poses.positions, R=poses.rotations)
+    feas = wrench_feasibility(robot, poses.positions, R=poses.rotations)
     if collision is not None:  # margins and bindings of wrench feasibility and collision
         margin, binding = combine(feas.margin, feas.binding, collision, poses.positions,
                                   poses.rotations)

@@ -8,7 +8,7 @@ smooth per-cable closed form, so the manifold here is the task's configuration m
     X = [p (3, m) | tau (3, rad) | the task's variables],   F = the task's equations
 
 (free flight: no equation, n = 6), and wrench feasibility is the atlas's domain: a point
-is inside when its pose's margin (``cable_feasibility.feasibility_of``: the facet test) is
+is inside when its pose's margin (``wrench.band_margin``: the tension rule's band within the limits) is
 at least the margin floor, as the slack variables' lower bounds are on the navigation
 manifold. The atlas ends a chart where a new point would leave that domain.
 
@@ -18,6 +18,7 @@ Same duck type as ``constraint.TaskConstraint`` (the atlas's, the planner's).
 import numpy as np
 
 from ..model.task import COORDINATES
+from ..wrench import band_margin
 from .constraint import PHI, SIGMA, THETA
 
 N_POSE = 6  # p (3) and tau (3): the first variables of X
@@ -78,7 +79,7 @@ class ConfigurationConstraint:
     def inside_many(self, xs):
         """``inside`` of the rows of xs (N, n_vars), in one call: (N,) bool."""
         X = np.asarray(xs)[:, :N_POSE] * self.scale[:N_POSE]
-        return _band_margin(self.robot, X[:, :3], X[:, 3:N_POSE]) >= self.margin_floor
+        return band_margin(self.robot, X[:, :3], X[:, 3:N_POSE]) >= self.margin_floor
 
     def key(self, x):
         """Pose (and task variables) with angles as (cos, sin): 1-Lipschitz in x."""
@@ -100,14 +101,6 @@ class ConfigurationConstraint:
         return X[:3].copy(), X[3:N_POSE].copy()
 
     def margin(self, x):
-        """The normalised margin the planner asks (``cable_feasibility.planning_feasibility``,
-        for m > 6 ``zonotope.band_margin``) of the pose of x."""
+        """The normalised margin the planner asks (``wrench.band_margin``) of the pose of x."""
         p, tau = self.pose(x)
-        return float(_band_margin(self.robot, p[None], tau[None])[0])
-
-
-def _band_margin(robot, p, tau):
-    """``zonotope.band_margin``, imported on first use: the compiled kernels load numba,
-    which a six-cable planner never needs (test_startup_imports)."""
-    from ..zonotope import band_margin
-    return band_margin(robot, p, tau)
+        return float(band_margin(self.robot, p[None], tau[None])[0])

@@ -36,7 +36,7 @@ import math
 
 import numpy as np
 
-from ..feasibility import evaluate, skew
+from ..wrench import skew, wrench_feasibility
 from ..model.pose import rotation_tt
 from .layout import I_D, I_F, I_G, I_L, I_P, I_S, I_T, I_TAU, I_V, N_EQS, N_VARS  # noqa: F401  (re-exported)
 KAPPA = 0.1  # default slack scale kappa (see NavigationManifold)
@@ -238,7 +238,7 @@ class NavigationManifold:
     def lift(self, p, tau):
         """The point X on M above a feasible pose (p m, tau rad); ValueError if infeasible."""
         p, tau = np.asarray(p, dtype=float), np.asarray(tau, dtype=float)
-        fz = evaluate(self.robot, p[None], tau[None])
+        fz = wrench_feasibility(self.robot, p[None], tau[None])
         if not fz.feasible[0]:
             raise ValueError(f"pose is not wrench-feasible (binding {fz.binding[0]}, margin {fz.margin[0]:.3g})")
         R = rotation_tt(tau)
@@ -258,7 +258,7 @@ class NavigationManifold:
         return float(np.exp(np.min(X[I_G:N_VARS]) / self.kappa))
 
     def margin(self, X):
-        """The normalised margin of ``feasibility.evaluate`` at the pose of X on M, read from
+        """The normalised margin of ``wrench.wrench_feasibility`` at the pose of X on M, read from
         X without evaluating the pose: the cable lengths over their range and the tension
         margins exp(s / kappa), exp(t / kappa) (the length slacks g use another
         normalisation, see the module doc)."""

@@ -132,7 +132,7 @@ def current_pose(robot, lengths, guess=None, feasible=None):
     InputError (field ``joint_states``) naming why when no pose is found (singular cable
     Jacobian, no convergence) or the lengths are not numbers > 0. ``feasible(p, R) -> bool``
     tells the poses the platform can hang in (the caller's wrench check: model/ knows no
-    wrenches, ``ros.winches.current_pose`` passes ``feasibility.evaluate``); None: all.
+    wrenches, ``ros.winches.current_pose`` passes ``wrench.wrench_feasibility``); None: all.
     """
     L = np.asarray(lengths, dtype=float)
     if L.shape != (len(robot.winch_names),) or not np.all(np.isfinite(L)) or np.any(L <= 0):

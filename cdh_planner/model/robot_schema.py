@@ -9,7 +9,7 @@ built from it too, so a new robot field is one ``Robot`` field.
 
 Sizes per cable follow the number of winches, m = len(winch_names): a per-cable field
 holds ``count`` numbers per cable (``count * m`` in all). ``cable_count`` bounds m:
-MIN_CABLES <= m <= MAX_CABLES (the wrench-feasibility test of ``zonotope`` holds for any
+MIN_CABLES <= m <= MAX_CABLES (the wrench-feasibility test of ``wrench`` holds for any
 m >= 6: docs/more-cables.md).
 """
 

@@ -32,7 +32,7 @@ from matplotlib.lines import Line2D  # noqa: E402
 from matplotlib.patches import Patch  # noqa: E402
 from matplotlib.ticker import FuncFormatter, MultipleLocator  # noqa: E402
 
-from ..cable_feasibility import feasibility_of as evaluate  # noqa: E402  (6 cables: the closed form)
+from ..wrench import wrench_feasibility  # noqa: E402
 from ..model.pose import rotation_tt  # noqa: E402
 from ..model.task import COORDINATES  # noqa: E402
 
@@ -109,7 +109,7 @@ def compute_slice(robot, view, resolution=400, collision=None, accuracy=None):
     classes = np.empty(n, dtype=np.int8)
     margin, det = np.empty(n), np.empty(n)
     for a in range(0, n, CHUNK):
-        f = evaluate(robot, p[a:a + CHUNK], R=rotation_tt(tau[a:a + CHUNK]))
+        f = wrench_feasibility(robot, p[a:a + CHUNK], R=rotation_tt(tau[a:a + CHUNK]))
         classes[a:a + CHUNK] = classify(f)
         margin[a:a + CHUNK], det[a:a + CHUNK] = f.margin, f.det_j
         if accuracy is not None:

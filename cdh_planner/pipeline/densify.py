@@ -4,7 +4,7 @@ dense-valid, then the PlannedPath through them (quasi-static cable-space timing)
 
 import numpy as np
 
-from ..cable_feasibility import planning_feasibility as evaluate
+from ..wrench import band_feasibility as evaluate
 from ..model.pose import quaternion_from_tau
 from ..trajectory.path import PlannedPath
 from ..trajectory.timing import time_path

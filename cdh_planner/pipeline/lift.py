@@ -7,7 +7,7 @@ only and snapped onto the task (``model.task.end_taus``) before the lift.
 import numpy as np
 
 from ..errors import InputError
-from ..cable_feasibility import planning_feasibility as evaluate
+from ..wrench import band_feasibility as evaluate
 from ..model.pose import rotation_tt
 from ..model.task import end_taus
 from ..status import Status

@@ -13,7 +13,7 @@ import math
 
 import numpy as np
 
-from ..cable_feasibility import planning_feasibility as evaluate
+from ..wrench import band_feasibility as evaluate
 from ..model.pose import quaternion_from_tau, tau_from_rotation
 from ..search.strategies import STRATEGIES, run
 from ..status import Status

@@ -16,7 +16,7 @@ import dataclasses
 import numpy as np
 
 from ..accuracy import accuracy_limits
-from ..cable_feasibility import planning_feasibility as evaluate  # m > 6: the rule's band
+from ..wrench import band_feasibility as evaluate  # m > 6: the rule's band
 from ..model.pose import quaternion_from_tau, rotation_tt, wrap_angle
 from ..scene.margin import COLLISION_UNIT_M, combine
 from ..trajectory.path_check import SlerpPath, TaskLinePath, check_motion, check_path

@@ -31,14 +31,14 @@ SETPOINT_PERIOD_S = (0.001, 0.1, 0.02)   # s: least, largest, first setpoint int
 
 class LivePlant:
     def __init__(self, robot, initial, time_scale=1.0, scene=None):
-        from ..cable_feasibility import feasibility_of
+        from ..wrench import wrench_feasibility
         from ..model.forward_kinematics import current_pose
         from ..ports import Rotation
         from .plant import SimulatedRobot
         self.plant = SimulatedRobot(robot, scene)
         L = np.asarray(initial, dtype=float)
         p, R = current_pose(robot, L, feasible=lambda p, R: bool(
-            feasibility_of(robot, p[None], R=R[None]).feasible[0]))
+            wrench_feasibility(robot, p[None], R=R[None]).feasible[0]))
         self.plant.reset(p, Rotation.from_matrix(R).as_quat(), L)
         self.source = hold(L, 0.0)
         self.scale = float(time_scale)

@@ -29,7 +29,7 @@ import math
 
 import numpy as np
 
-from ..feasibility import nominal_wrench
+from ..wrench import nominal_wrench, rule_tensions
 from .mjcf import DAMPING_TIME_S, TIMESTEP_S, cable_stiffness, load_mass, mjcf
 
 OMEGA_DT = 0.5            # largest (natural frequency x MuJoCo step) allowed
@@ -69,9 +69,8 @@ def rest_lengths(robot, p, R):
     """The winch lengths (m,) m at which the platform rests at pose (p (3,) m, R (3, 3)):
     the unstretched lengths that carry the tension rule's nominal tensions there,
     L0 = L / (1 + t / EA) (the plant's stiffness, ``mjcf.cable_stiffness``)."""
-    from ..cable_feasibility import nominal_tensions
     from ..model.kinematics import cable_lengths
-    t = nominal_tensions(robot, np.asarray(p, float)[None], np.asarray(R, float)[None])[0]
+    t = rule_tensions(robot, np.asarray(p, float)[None], np.asarray(R, float)[None])[0][0]
     return cable_lengths(robot, p, R) / (1.0 + t / cable_stiffness(robot))
 
 
@@ -160,7 +159,7 @@ class SimulatedRobot:
 
     def _apply_extra_wrench(self):
         """What gravity on the mass does not give of the load wrench w0 (force; moment about
-        the base origin, ``feasibility.nominal_wrench``), at the centre of mass c."""
+        the base origin, ``wrench.nominal_wrench``), at the centre of mass c."""
         c = self.data.xipos[self.body].copy()
         w = nominal_wrench(self.robot, c[None])[0]
         force = w[:3] - self.mass * self.model.opt.gravity

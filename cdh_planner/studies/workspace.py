@@ -11,7 +11,7 @@ uniform in the ball of radius ``tilt`` (axis uniform on the sphere, angle ``tilt
 
 Feasibility and margin are the planner's validity at margin floor 0
 (``pipeline.validity.Validity.pose_margins``, ``pose_margins`` here): wrench feasibility of
-any number of cables (``cable_feasibility.feasibility_of``) and, with a scene, the least of
+any number of cables (``wrench.wrench_feasibility``) and, with a scene, the least of
 it and the collision margin (``scene.margin.combine``), as ``verify --scene`` reports them.
 With ``reach``, each feasible sample gets a plan from the home pose (free flight, a fresh
 planner per query so that the answer does not depend on what the worker planned before; the
@@ -33,7 +33,7 @@ from dataclasses import dataclass, field, replace
 
 import numpy as np
 
-from ..cable_feasibility import feasibility_of
+from ..wrench import wrench_feasibility
 from ..errors import InputError
 from ..model.pose import (Pose, quaternion_from_tau, rotation_from_quaternion, tau_from_quaternion,
                           tau_from_rotation)
@@ -169,7 +169,7 @@ def point_validity(robot, scene=None):
     m > 6 cables the facet test; the planner keeps to the tension rule's band, a subset:
     docs/more-cables.md). Building it with a scene loads the collision library and compiles
     its kernel: once per worker."""
-    return Validity(robot, FreeTask(), 0.0, scene, feasibility=feasibility_of)
+    return Validity(robot, FreeTask(), 0.0, scene, feasibility=wrench_feasibility)
 
 
 def pose_margins(validity, p, q):

@@ -1,7 +1,7 @@
 """Clearance: how far a path keeps from the boundary of C, and the cost that trades length for it.
 
 The planner's clearance cost of a motion of length ds (in the task's metric) at normalised
-margin m (``feasibility.evaluate``: the least of the 24 distances to a length or tension
+margin m (``wrench.band_feasibility``: the least of the 24 distances to a length or tension
 bound, each over its range) is
 
     dJ = (1 + w phi(m)) ds,    phi(m) = ln(M / m),    M = 1/2,
@@ -31,7 +31,7 @@ margin in N of a path, sampled as densely as ``verify`` checks it.
 
 import numpy as np
 
-from ..cable_feasibility import planning_feasibility as evaluate
+from ..wrench import band_feasibility
 from .path_check import DEFAULT_STEP_M, DEFAULT_STEP_RAD, SlerpPath
 
 MAX_MARGIN = 0.5  # no pose has a larger normalised margin
@@ -80,7 +80,7 @@ def path_margins(robot, positions, quaternions, max_step_m=DEFAULT_STEP_M,
     least, least_n = np.inf, np.inf
     for a in range(0, seg.size, 20_000):  # bounded memory
         p, R = motion(seg[a:a + 20_000], s[a:a + 20_000])
-        f = evaluate(robot, p, R=R)
+        f = band_feasibility(robot, p, R=R)
         least = min(least, float(np.min(f.margin)))
         tm = tension_margins(robot, f)
         least_n = min(least_n, float(np.min(np.where(np.isfinite(tm), tm, -np.inf))))

@@ -42,8 +42,7 @@ from functools import partial
 import numpy as np
 
 from ..errors import InputError, check_finite
-from ..cable_feasibility import planning_feasibility as evaluate, tension_map
-from ..feasibility import cable_vectors, inverse_ellipsoid_factor, nominal_wrench, screw_jacobian
+from ..wrench import band_feasibility, cable_vectors, rule_tensions, screw_jacobian, tension_map
 from ..model.elastic import is_elastic
 from ..model.pose import tau_from_rotation
 from .executed import executable, spline_rates, unique_sorted
@@ -130,16 +129,10 @@ def _terms(robot, geo, s, mass, inertia):
     L = np.linalg.norm(d, axis=-1)
     u = d / L[..., None]
     J = screw_jacobian(robot, u)
-    if J.shape[-1] == 6:
-        J_inv = np.linalg.inv(J)
-        f0 = np.einsum("nij,nj->ni", J_inv, nominal_wrench(robot, c))
-        v = np.linalg.norm(J_inv @ inverse_ellipsoid_factor(robot, c), axis=-1)
-    else:  # m > 6: the published rule, t0 + P (w - w0) (cable_feasibility.tension_map), its
-        # t0 and band v = |rows of P L| from the compiled kernel (with elastic cables
-        # P_K's: zonotope.stiffness_band)
-        from ..zonotope import rule_tensions  # six-cable commands load no numba
-        J_inv = tension_map(robot, J)
-        f0, v = rule_tensions(robot, p, R)
+    # the published rule, t0 + P (w - w0) (P = J^-1 for six cables), its band v = |rows of
+    # P L| (with elastic cables P_K's: wrench.stiffness_band)
+    J_inv = tension_map(robot, J)
+    f0, v = rule_tensions(robot, p, R)
     # the platform anchor q_i = p + R b_i: q_s = p_s + R (w x b), q_ss = p_ss + R (w_s x b +
     # w x (w x b)); L = |q - a| gives L_s = u . q_s and L_ss = (|q_s|^2 - L_s^2) / L + u . q_ss
     b = robot.platform_anchors[None]
@@ -396,7 +389,7 @@ def motion_rows(robot, timing, t, mass, inertia, scale=1.0):
     R = rot.as_matrix()
     return PlannedPath(p=p, quaternion=q, tau=tau_from_rotation(R), lengths=L,
                        tension_min=f - v, tension_nominal=f, tension_max=f + v,
-                       margin=evaluate(robot, p, R=R).margin, t=t * scale,
+                       margin=band_feasibility(robot, p, R=R).margin, t=t * scale,
                        velocities=L_s * sdot[:, None],
                        accelerations=L_s * sddot[:, None] + L_ss * (sdot ** 2)[:, None])
 

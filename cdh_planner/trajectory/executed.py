@@ -39,9 +39,7 @@ from dataclasses import dataclass, field, replace
 
 import numpy as np
 
-from ..cable_feasibility import nominal_tensions, tension_map
-from ..feasibility import (cable_vectors, inverse_ellipsoid_factor, load_point, nominal_wrench,
-                           screw_jacobian)
+from ..wrench import load_point, rule_tensions
 from ..model.elastic import equilibrium_poses, is_elastic
 from ..model.forward_kinematics import forward_kinematics_many
 from ..model.pose import tau_from_rotation
@@ -191,7 +189,7 @@ def check_executed(robot, t_wp, L, V, A, seed, mass=None, inertia=None, max_cabl
     the quintic (each segment's own from its two end points) and the seed (interpolated
     between the same two waypoints) are unchanged, so forward kinematics and the tensions
     (row by row) are the same numbers (with m > 6 to rounding: the centred nominal's Newton
-    starts from the previous sample's, ``zonotope``). The answer is the whole check's.
+    starts from the previous sample's, ``wrench``). The answer is the whole check's.
     ``collision``: the scene's CollisionModel (or None): the executed poses at the same
     samples must keep its clearance too."""
     t_wp, L, V, A = (np.asarray(x, dtype=float) for x in (t_wp, L, V, A))
@@ -305,7 +303,7 @@ def _executed_margins(robot, t_wp, L, V, A, seed, ts, mid, q, mass, inertia, col
 
 def _equilibria(robot, L0, p, R, inertial=None):
     """``model.elastic.equilibrium_poses`` of cables of unstretched lengths L0 (M, m) m
-    under the load wrench (``feasibility.nominal_wrench``'s force at the load point and
+    under the load wrench (``wrench.nominal_wrench``'s force at the load point and
     moment) minus ``inertial`` (M, 6), the motion's wrench about the origin (None: at rest),
     from the poses (p (M, 3) m, R (M, 3, 3))."""
     w = np.broadcast_to(robot.wrench_center_local, (len(p), 6))
@@ -320,38 +318,18 @@ def _equilibria(robot, L0, p, R, inertial=None):
 
 def _band(robot, p, R):
     """The ellipsoid's spread v (M, m) N of the tensions at poses (p (M, 3) m,
-    R (M, 3, 3)): |rows of J^-1 L| for six cables, the rule's band for more."""
-    if len(robot.base_anchors) > 6:
-        from ..zonotope import rule_tensions  # m > 6 only: six-cable commands load no numba
-        return rule_tensions(robot, p, R)[1]
-    u = cable_vectors(robot, p, R)
-    u /= np.linalg.norm(u, axis=-1)[..., None]
-    J_inv = np.linalg.inv(screw_jacobian(robot, u))
-    return np.linalg.norm(J_inv @ inverse_ellipsoid_factor(robot, load_point(robot, p, R)), axis=-1)
+    R (M, 3, 3)): the rule's band (|rows of J^-1 L| for six cables)."""
+    return rule_tensions(robot, p, R)[1]
 
 
 def _tensions(robot, p, R, c, c_dd, omega, alpha, mass, inertia):
     """Tensions f (M, m) balancing the load wrench minus the inertial wrench, and the
-    ellipsoid's spread v (M, m), N. With m > 6, those of the published tension rule
-    (``cable_feasibility.tension_map``): its centred nominal t0 moved by P times the
-    inertial wrench, and its band v = |rows of P L| (P_K's with elastic cables,
-    ``zonotope.stiffness_band``)."""
-    u = cable_vectors(robot, p, R)
-    u /= np.linalg.norm(u, axis=-1)[..., None]
-    w = nominal_wrench(robot, c)
-    if len(robot.base_anchors) > 6:
-        return _rule_tensions(robot, p, R, c, u, w, _inertial(R, c, c_dd, omega, alpha, mass,
-                                                                  inertia))
-    J_inv = np.linalg.inv(screw_jacobian(robot, u))
-    if mass is not None:
-        I = np.asarray(inertia, dtype=float).reshape(3, 3)
-        Iw = omega @ I.T
-        moment = np.einsum("nij,nj->ni", R, alpha @ I.T + np.cross(omega, Iw))
-        force = mass * c_dd
-        w = w - np.concatenate([force, np.cross(c, force) + moment], axis=1)
-    f = np.einsum("nij,nj->ni", J_inv, w)
-    v = np.linalg.norm(J_inv @ inverse_ellipsoid_factor(robot, c), axis=-1)
-    return f, v
+    ellipsoid's spread v (M, m), N: those of the published tension rule
+    (``wrench.rule_tensions``: J^-1 for six cables; with more its centred nominal t0 moved
+    by P times the inertial wrench, and its band v = |rows of P L|, P_K's with elastic
+    cables)."""
+    inertial = None if mass is None else _inertial(R, c, c_dd, omega, alpha, mass, inertia)
+    return rule_tensions(robot, p, R, inertial)
 
 
 def _inertial(R, c, c_dd, omega, alpha, mass, inertia):
@@ -362,15 +340,6 @@ def _inertial(R, c, c_dd, omega, alpha, mass, inertia):
     moment = np.einsum("nij,nj->ni", R, alpha @ I.T + np.cross(omega, omega @ I.T))
     force = mass * c_dd
     return np.concatenate([force, np.cross(c, force) + moment], axis=1)
-
-
-def _rule_tensions(robot, p, R, c, u, w0, inertial):
-    """The tension rule's f = t0 + P (w - w0), w = w0 - inertial, and its band v (M, m) N
-    (the compiled kernel's t0 and v = |rows of P L|; numpy's P for the inertial wrench)."""
-    from ..zonotope import rule_tensions  # m > 6 only: six-cable commands load no numba
-    P = tension_map(robot, screw_jacobian(robot, u))
-    t0, v = rule_tensions(robot, p, R)
-    return t0 - np.einsum("nij,nj->ni", P, inertial), v
 
 
 def _reason(least_n, lengths_ok, speed, accel, no_pose, blocked=()):
@@ -512,7 +481,7 @@ def slow_down(robot, path, scale):
     accelerations / scale^2, and the dynamic part of the tensions / scale^2 (the static
     tensions of each pose, f0, unchanged; the ellipsoid's spread unchanged)."""
     R = Rotation.from_quat(path.quaternion).as_matrix()
-    f0 = nominal_tensions(robot, path.p, R)
+    f0 = rule_tensions(robot, path.p, R)[0]
     f = f0 + (path.tension_nominal - f0) / scale ** 2
     return replace(path, t=path.t * scale, velocities=path.velocities / scale,
                    accelerations=path.accelerations / scale ** 2, tension_nominal=f,

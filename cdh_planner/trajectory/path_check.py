@@ -22,7 +22,7 @@ A violation narrower than the sampling that the slope estimate does not anticipa
 still be missed; ``SegmentCheck.unresolved`` counts the intervals where the slope test
 still allowed a dip when the refinement stopped (0 in the normal case; a motion tangent
 to the boundary of C, margin touching 0, is one that sampling cannot decide).
-The margin is the normalised one of ``feasibility.evaluate`` (positive iff feasible);
+The margin is the normalised one of ``wrench.wrench_feasibility`` (positive iff feasible);
 with a scene's collision model (``collision``), the least of it and the collision margin
 (``scene.collision.combine``: positive iff also clear of obstacles and other cables).
 """
@@ -34,7 +34,7 @@ import numpy as np
 from ..ports import Rotation
 
 from ..errors import InputError
-from ..cable_feasibility import feasibility_of as evaluate  # 6 cables: the closed form
+from ..wrench import wrench_feasibility
 from ..model.pose import rotation_angle_between, rotation_tt
 from ..scene.margin import combine
 
@@ -162,10 +162,10 @@ def check_path(robot, path, max_step_m=DEFAULT_STEP_M, max_step_rad=DEFAULT_STEP
     """Dense check of every segment of ``path`` (SlerpPath, TaskLinePath or alike:
     ``path(seg, s) -> (p, R)``, ``path.speeds()``, ``path.n_segments``); ``collision``: a
     scene's CollisionModel or None; ``feasibility(robot, p, R=R)``: the margin checked
-    (default ``feasibility_of``; the planner's is ``planning_feasibility``)."""
+    (default ``wrench_feasibility``; the planner's is ``band_feasibility``)."""
     if path.n_segments < 1:
         return []
-    samples = _Samples(robot, path, collision, feasibility or evaluate)
+    samples = _Samples(robot, path, collision, feasibility or wrench_feasibility)
     samples.add(*_initial_grid(path, max_step_m, max_step_rad))
     unresolved = _refine(samples)
     first = _first_unsafe(samples)
@@ -200,7 +200,7 @@ def _initial_grid(path, max_step_m, max_step_rad):
 class _Samples:
     """Evaluated samples of all segments, kept sorted by (segment, s)."""
 
-    def __init__(self, robot, path, collision=None, feasibility=evaluate):
+    def __init__(self, robot, path, collision=None, feasibility=wrench_feasibility):
         self.robot, self.path, self.collision = robot, path, collision
         self.feasibility = feasibility
         self.seg = np.empty(0, dtype=int)

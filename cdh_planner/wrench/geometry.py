@@ -57,7 +57,7 @@ def inverse_ellipsoid_factor(robot, c):
 
     E_F1^-1 = e^-1 E3^-1 e^-T and e(c)^-1 = e(-c), so L = e(-c) chol(E3^-1).
     """
-    L3 = np.linalg.cholesky(np.linalg.inv(robot.ellipsoid_matrix))
+    L3 = inverse_factor(robot)
     if robot.ellipsoid_frame == "base":
         return np.broadcast_to(L3, c.shape[:-1] + (6, 6))
     return wrench_transform(-c) @ L3

@@ -51,7 +51,7 @@ def pose_geometry(p, R, a, b, g):
     """Per pose (p (N, 3) m, R (N, 3, 3)) of a robot with base anchors a (m, 3), platform
     anchors b (m, 3) and load point g (3,): cable lengths (N, m) m, unit vectors u (N, m, 3)
     from base to platform anchor, J (N, 6, m) with columns [u_i; a_i x u_i] (as
-    ``feasibility.screw_jacobian``) and the load point c = p + R g (N, 3) m."""
+    ``geometry.screw_jacobian``) and the load point c = p + R g (N, 3) m."""
     n, m = p.shape[0], a.shape[0]
     lengths = np.empty((n, m))
     u = np.empty((n, m, 3))

@@ -17,7 +17,7 @@ import time
 
 import numpy as np
 
-from cdh_planner.feasibility import evaluate
+from cdh_planner.wrench import wrench_feasibility
 from cdh_planner.model.pose import quaternion_from_tau
 from cdh_planner.planner import PlanResult
 from cdh_planner.status import Status
@@ -67,13 +67,13 @@ class FakePlanner:
         a = self.task.coords(start.p[None], start.tau[None])[0]
         b = self.task.coords(goal.p[None], goal.tau[None])[0]
         for label, pose in (("start", start), ("goal", goal)):
-            f = evaluate(self.robot, pose.p[None], pose.tau[None])
+            f = wrench_feasibility(self.robot, pose.p[None], pose.tau[None])
             if not f.feasible[0]:
                 return self._result(False, Status.infeasible(label),
                                     f"{label} pose is not wrench-feasible", t0=t0)
         y = a + np.linspace(0.0, 1.0, WAYPOINTS)[:, None] * (b - a)
         p, tau = self.task.pose(y)
-        f = evaluate(self.robot, p, tau)
+        f = wrench_feasibility(self.robot, p, tau)
         if not np.all(f.feasible):
             return self._result(False, Status.NO_PATH, "the straight line leaves C", t0=t0)
         zeros = np.zeros((WAYPOINTS, 6))

@@ -13,7 +13,7 @@ from typing import Optional
 import numpy as np
 
 from ...errors import InputError
-from ...feasibility import evaluate
+from ...wrench import wrench_feasibility
 from ...pictures.slices import FEASIBLE, Marker, SliceView
 from ...model.pose import quaternion_from_tau
 from ...model.robot import load_robot
@@ -171,7 +171,7 @@ def check_poses(demo):
     for spec in PAPER_POSES:
         robot = demo.robots[spec.robot]
         p, tau = demo.pose(spec.robot, spec.label)
-        f = evaluate(robot, p[None], tau[None])
+        f = wrench_feasibility(robot, p[None], tau[None])
         feasible = bool(f.feasible[0])
         v = PoseVerdict(pose=spec, position=p, tau=tau, feasible=feasible, margin=float(f.margin[0]),
                         binding=str(f.binding[0]), tension_low=float(np.min(f.tension_min[0])),

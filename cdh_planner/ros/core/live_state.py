@@ -19,7 +19,7 @@ from sensor_msgs.msg import JointState
 from std_msgs.msg import Float64
 from visualization_msgs.msg import MarkerArray
 
-from ...cable_feasibility import feasibility_of as evaluate
+from ...wrench import wrench_feasibility as evaluate
 from ..msgs.markers import pose_markers
 
 CABLE_STATE, LEAST_MARGIN, LIVE_MARKERS = "cable_state", "least_margin", "live_markers"

@@ -32,7 +32,7 @@ from sensor_msgs.msg import JointState
 from trajectory_msgs.msg import JointTrajectory, JointTrajectoryPoint
 
 from ...errors import InputError, check_finite, exception_line
-from ...cable_feasibility import feasibility_of as evaluate
+from ...wrench import wrench_feasibility
 from ...model.forward_kinematics import current_pose as _current_pose, nearest_pose  # noqa: F401 (API)
 from ..interface import ACTION_QOS
 from ..core.live_state import measured_tensions
@@ -156,7 +156,7 @@ def start_mismatch(measured, planned_first, tolerance_m, winch_names):
 def current_pose(robot, lengths, guess=None):
     """``model.forward_kinematics.current_pose``, wrench-feasible solutions preferred."""
     return _current_pose(robot, lengths, guess, feasible=lambda p, R: bool(
-        evaluate(robot, p[None], R=R[None]).feasible[0]))
+        wrench_feasibility(robot, p[None], R=R[None]).feasible[0]))
 
 
 # ----------------------------------------------------------------------------- joint states
