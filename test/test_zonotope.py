@@ -2,6 +2,7 @@
 closed form; for any m an independent linear programme (scipy's HiGHS: is there t in the
 box with J t = w?) confirms the facet test's answers; the tension rule's band is exact."""
 
+import dataclasses
 import tempfile
 from pathlib import Path
 
@@ -212,6 +213,35 @@ def _best_shift(robot, J, t0, v):
                   bounds=[(None, None)] * (m - 6) + [(None, 1.0)], method="highs")
     assert res.status == 0, res.message
     return res.x[-1]
+
+
+@pytest.mark.parametrize("rule", sorted(fz.RULES))
+def test_every_registered_rule_holds_the_wrench_and_its_band_is_exact(rule):
+    """Each rule of wrench.RULES (chosen by robot.tension_rule) on robot2_8, rigid cables:
+    its map is a right inverse, J P = I; its t0 holds the nominal wrench, J t0 = w0; its
+    band is v = |rows of P L|, so t0 + P (w - w0) over the ellipsoid's wrenches stays in
+    t0 +- v and reaches it along L^T P_i."""
+    robot = dataclasses.replace(load_robot(CONFIG / "robot2_8.yaml"), cable_stiffness=None,
+                                tension_rule=rule)
+    rng = np.random.default_rng(31)
+    p = np.array([0.0, 0.0, 0.3]) + rng.uniform(-0.05, 0.05, (20, 3))
+    R = rotation_tt(rng.uniform(-0.2, 0.2, (20, 3)))
+    t0, v = fz.rule_tensions(robot, p, R)
+    u = fz.cable_vectors(robot, p, R)
+    J = fz.screw_jacobian(robot, u / np.linalg.norm(u, axis=-1)[..., None])
+    P = fz.tension_map(robot, J)
+    c = fz.load_point(robot, p, R)
+    L = fz.inverse_ellipsoid_factor(robot, c)
+    np.testing.assert_allclose(J @ P, np.broadcast_to(np.eye(6), (20, 6, 6)), atol=1e-9)
+    w0 = fz.nominal_wrench(robot, c)
+    np.testing.assert_allclose(np.einsum("nij,nj->ni", J, t0), w0, atol=1e-9 * np.abs(w0).max())
+    PL = P @ L
+    np.testing.assert_allclose(v, np.linalg.norm(PL, axis=-1), rtol=1e-9)
+    x = rng.normal(size=(20, 50, 6))
+    moved = np.einsum("nij,nkj->nki", PL, x / np.linalg.norm(x, axis=-1, keepdims=True))
+    assert np.all(np.abs(moved) <= v[:, None, :] * (1 + 1e-12))
+    extreme = np.einsum("nij,nij->ni", PL, PL / np.linalg.norm(PL, axis=-1, keepdims=True))
+    np.testing.assert_allclose(extreme, v, rtol=1e-12)
 
 
 @pytest.mark.parametrize("name", ["cogiro", "robot2_8"])
