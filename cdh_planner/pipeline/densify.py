@@ -4,7 +4,7 @@ dense-valid, then the PlannedPath through them (quasi-static cable-space timing)
 
 import numpy as np
 
-from ..wrench import band_feasibility as evaluate
+from ..wrench import band_feasibility
 from ..model.pose import quaternion_from_tau
 from ..trajectory.path import PlannedPath
 from ..trajectory.timing import time_path
@@ -50,7 +50,7 @@ class Densify:
         v = self.validity
         p, tau = v.task.pose(y)
         q = quaternion_from_tau(tau)
-        f = evaluate(v.robot, p, tau)
+        f = band_feasibility(v.robot, p, tau)
         if not np.all(f.feasible) or not np.all(v.pose_margins(p, tau)[0] > 0):
             return None
         if not verified and not all(seg.feasible and seg.unresolved == 0

@@ -7,7 +7,7 @@ only and snapped onto the task (``model.task.end_taus``) before the lift.
 import numpy as np
 
 from ..errors import InputError
-from ..wrench import band_feasibility as evaluate
+from ..wrench import band_feasibility
 from ..model.pose import rotation_tt
 from ..model.task import end_taus
 from ..status import Status
@@ -60,7 +60,7 @@ class Lift:
             return None, (Status.INVALID, f"{label} pose is off the {task.type} task by "
                                           f"{off:.3g} (m or rad) and cannot be projected onto "
                                           f"it: {describe(p, tau)}")
-        f = evaluate(self.robot, p[None], tau[None])
+        f = band_feasibility(self.robot, p[None], tau[None])
         if not f.feasible[0]:
             return None, (Status.infeasible(label), f"{label} pose is not wrench-feasible: "
                           f"{f.binding[0]} violated (margin {f.margin[0]:.3g}) at {describe(p, tau)}")

@@ -13,7 +13,7 @@ import math
 
 import numpy as np
 
-from ..wrench import band_feasibility as evaluate
+from ..wrench import band_feasibility
 from ..model.pose import quaternion_from_tau, tau_from_rotation
 from ..search.strategies import STRATEGIES, run
 from ..status import Status
@@ -91,7 +91,7 @@ class Route:
         singular J makes the tension set of the wrench ellipsoid unbounded: the tension set is the image of the ellipsoid under J^-1),
         so its sign is the same all along any path: ends of opposite signs have none."""
         poses = [self.constraint.pose(x) for x in xs]
-        return evaluate(self.validity.robot, np.array([a for a, _ in poses]),
+        return band_feasibility(self.validity.robot, np.array([a for a, _ in poses]),
                         np.array([b for _, b in poses])).det_j
 
     def route_unsafe(self, xs, direct):

@@ -1,7 +1,7 @@
 """Which poses and motions the planner may use: the one place every stage asks.
 
 A pose is valid when its margin is at least the planner's margin floor: the wrench
-feasibility margin (normalised, ``feasibility.evaluate``), with a scene the least of it
+feasibility margin (normalised, ``wrench.band_feasibility``), with a scene the least of it
 and the collision margin (``scene.collision.combine``) and, with accuracy limits
 (``accuracy.AccuracyLimits``: planner.accuracy_position_m / _orientation_rad), the accuracy
 margin; a motion between two poses when it is, densely (``trajectory.path_check``, with the
@@ -16,7 +16,7 @@ import dataclasses
 import numpy as np
 
 from ..accuracy import accuracy_limits
-from ..wrench import band_feasibility as evaluate  # m > 6: the rule's band
+from ..wrench import band_feasibility  # m > 6: the rule's band
 from ..model.pose import quaternion_from_tau, rotation_tt, wrap_angle
 from ..scene.margin import COLLISION_UNIT_M, combine
 from ..trajectory.path_check import SlerpPath, TaskLinePath, check_motion, check_path
@@ -27,11 +27,11 @@ COARSE_SAMPLES = 17  # a direct motion is first checked at these few points (a c
 class Validity:
     """Valid poses and motions of one robot and task (module docstring)."""
 
-    def __init__(self, robot, task, margin_floor, scene=None, feasibility=evaluate,
+    def __init__(self, robot, task, margin_floor, scene=None, feasibility=band_feasibility,
                  accuracy=(0.0, 0.0)):
         """``scene`` (scene.schema.Scene or None): obstacles the poses keep clear of;
         ``feasibility(robot, p, tau, R)``: the wrench margin asked (default the planner's,
-        ``cable_feasibility.planning_feasibility``; ``feasibility_of`` gives ``verify``'s,
+        ``wrench.band_feasibility``; ``wrench.wrench_feasibility`` gives ``verify``'s,
         the facet test, for m > 6 cables); ``accuracy``: the largest position (m) and
         rotation (rad) error of a pose from the winches' errors, 0 for none (InputError
         without robot.length_error)."""

@@ -9,7 +9,7 @@ COLLISION_UNIT_M = 0.1  # m of clearance that count as a normalised margin of 1
 
 def combine(margin, binding, collision, p, R):
     """The margins (N,) and bindings (N,) of wrench feasibility (normalised, from
-    ``feasibility.evaluate``) and of collision (``collision``: a CollisionModel or None)
+    ``wrench``) and of collision (``collision``: a CollisionModel or None)
     at poses (p, R): the least of the two, the collision margin in units of
     COLLISION_UNIT_M; positive iff the pose is wrench-feasible and collision-free."""
     if collision is None:

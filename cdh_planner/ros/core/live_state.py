@@ -7,7 +7,7 @@ joint state only, at the rates ``LiveRates`` says (``live_state_rate_hz``,
   as positions, and the measured tensions (N) as efforts when the joint state carries one
   per winch (else none);
 - ``~/least_margin`` (std_msgs/Float64): the normalised feasibility margin of the measured
-  pose (cable_feasibility.feasibility_of: positive inside, the least over lengths and
+  pose (wrench.wrench_feasibility: positive inside, the least over lengths and
   tensions; with m > 6 cables the facet test's);
 - ``~/live_markers`` (visualization_msgs/MarkerArray): the platform and the cables at the
   measured pose, each cable coloured by its margin (ns ``platform_measured``,
@@ -19,7 +19,7 @@ from sensor_msgs.msg import JointState
 from std_msgs.msg import Float64
 from visualization_msgs.msg import MarkerArray
 
-from ...wrench import wrench_feasibility as evaluate
+from ...wrench import wrench_feasibility
 from ..msgs.markers import pose_markers
 
 CABLE_STATE, LEAST_MARGIN, LIVE_MARKERS = "cable_state", "least_margin", "live_markers"
@@ -39,7 +39,7 @@ def live_messages(robot, lengths, p, R, joint_state, frame_id, stamp):
     """(cable_state JointState, least_margin Float64, the margin of each cable (m,)) of the
     measured lengths ``lengths`` (m, winch order) at the pose (p m, R) of their forward
     kinematics; ``live_markers`` draws them."""
-    feasibility = evaluate(robot, np.asarray(p)[None], R=np.asarray(R)[None])
+    feasibility = wrench_feasibility(robot, np.asarray(p)[None], R=np.asarray(R)[None])
     state = JointState(name=list(robot.winch_names), position=[float(x) for x in lengths])
     state.header.stamp, state.header.frame_id = stamp, frame_id
     tensions = measured_tensions(joint_state, robot.winch_names)
