@@ -20,6 +20,7 @@ values in 4 levels).
 """
 
 import json
+import itertools
 import os
 import re
 import stat
@@ -254,7 +255,8 @@ def check_structure(doc, where, label, limits):
         if len(items) > limits.max_items:
             raise InputError(where, label, f"a list or mapping of {len(items)} entries "
                                            f"(at most {limits.max_items})")
-        nodes += sum(1 for x in items if not isinstance(x, (list, dict)))
-        stack.extend((x, depth + 1) for x in items if isinstance(x, (list, dict)))
+        inner = [x for x in items if isinstance(x, (list, dict))]  # one pass: 10^5 poses
+        nodes += len(items) - len(inner)
+        stack.extend(zip(inner, itertools.repeat(depth + 1)))
     if nodes > limits.max_nodes:
         raise InputError(where, label, f"more than {limits.max_nodes} values")

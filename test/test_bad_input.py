@@ -340,7 +340,7 @@ def test_verify_report_is_linear_in_the_poses():
                     verify_cmd.print_report(robot, poses, feas, segments, True)
                 finally:
                     sys.stdout = stdout
-            verify_cmd.dump_rows(verify_cmd.result_dict(robot, poses, feas, segments, True, 1e-3, 1e-3))
+            verify_cmd.result_text(robot, poses, feas, segments, True, 1e-3, 1e-3)
             best = min(best, time.perf_counter() - t0)
         return best
 

@@ -48,6 +48,8 @@ from ..scene.schema import default_scene, load_scene
 from ..trajectory.path_check import DEFAULT_STEP_M, DEFAULT_STEP_RAD, check_motion
 
 EXIT_OK, EXIT_INFEASIBLE = 0, 1
+FULL_REPORT_POSES = 20  # more poses: the text report lists only those not feasible
+LISTED_NOT_FEASIBLE = 10  # ... and at most this many poses and segments of them (without --all)
 
 
 def add_parser(subparsers):
@@ -63,6 +65,9 @@ def add_parser(subparsers):
     p.add_argument("--json", metavar="OUT", help="also write the results as JSON")
     p.add_argument("--scene", metavar="FILE", help="scene file (YAML, scene: obstacles, cable "
                                                    "radius, platform shape): also check collisions")
+    p.add_argument("--all", action="store_true", dest="all_poses",
+                   help=f"print every pose and segment in full (default: all of them up to "
+                        f"{FULL_REPORT_POSES} poses, beyond that only those not feasible)")
     p.add_argument("--step", default=str(DEFAULT_STEP_M), metavar="S",
                    help="largest position step between samples, m or with unit (default 0.001 = 1 mm)")
     angle_default = f"{np.rad2deg(DEFAULT_STEP_RAD):g}deg"
@@ -93,10 +98,11 @@ def run(args):
     ok = bool(np.all(feas.feasible)) and all(s.feasible for s in segments)
 
     acc = pose_accuracy(robot, poses.positions, R=poses.rotations) if has_accuracy(robot) else None
-    print_report(robot, poses, feas, segments, ok, acc)
+    print_report(robot, poses, feas, segments, ok, acc,
+                 every=args.all_poses or len(poses) <= FULL_REPORT_POSES)
     if json_out:
-        doc = result_dict(robot, poses, feas, segments, ok, step_m, step_rad, acc)
-        write_text("--json", json_out, dump_rows(doc))
+        write_text("--json", json_out,
+                   result_text(robot, poses, feas, segments, ok, step_m, step_rad, acc))
         print(f"wrote {json_out}")
     return EXIT_OK if ok else EXIT_INFEASIBLE
 
@@ -107,9 +113,24 @@ def _positive(value, option, text):
     return value
 
 
-def result_dict(robot, poses, feas, segments, ok, step_m, step_rad, accuracy=None):
-    """The JSON document (plain Python types; non-finite floats still present);
+def result_text(robot, poses, feas, segments, ok, step_m, step_rad, accuracy=None):
+    """The JSON document as ``dump_rows`` lays it out (a pose or a segment a line), built
+    column by column: each array goes through the C encoder once, then the rows are
+    assembled by one template (the encoder per row costs 3x more for 10^4 poses);
     ``accuracy``: the poses' ``accuracy.Accuracy`` (robots with length_error), or None."""
+    pose_rows = _rows_text(pose_columns(poses, feas, accuracy))
+    seg_rows = _rows_text(segment_columns(segments)) if segments else []
+    head = {"robot": robot.name, "robot_file": robot.source, "max_step_m": step_m,
+            "max_step_rad": step_rad}
+    parts = [f"  {_encode(k)}: {_encode(v)}" for k, v in head.items()]
+    for key, rows in (("poses", pose_rows), ("segments", seg_rows)):
+        parts.append(f'  "{key}": ' + ("[\n" + ",\n".join(rows) + "\n  ]" if rows else "[]"))
+    parts.append(f'  "all_feasible": {_encode(bool(ok))}')
+    return "{\n" + ",\n".join(parts) + "\n}\n"
+
+
+def pose_columns(poses, feas, accuracy=None):
+    """The poses' JSON fields, name -> array (first axis the poses), in the file's order."""
     columns = {"position": poses.positions, "quaternion": poses.quaternions, "tau": poses.tau,
                "feasible": feas.feasible, "margin": feas.margin, "binding": feas.binding,
                "lengths": feas.lengths, "tension_min": feas.tension_min,
@@ -119,17 +140,66 @@ def result_dict(robot, poses, feas, segments, ok, step_m, step_rad, accuracy=Non
     if accuracy is not None:
         columns["position_error_m"] = accuracy.position_m
         columns["orientation_error_rad"] = accuracy.orientation_rad
-    columns = {k: _finite_list(v) for k, v in columns.items()}  # Python types, once
-    pose_rows = [{k: v[i] for k, v in columns.items()} for i in range(len(poses))]
-    seg_rows = [{
-        "from": s.index_from, "to": s.index_to, "feasible": bool(s.feasible),
-        "samples": s.samples, "unresolved": s.unresolved,
-        "worst": _point_dict(s.worst),
-        "first_unsafe": None if s.first_unsafe is None else _point_dict(s.first_unsafe),
-    } for s in segments]
-    return {"robot": robot.name, "robot_file": robot.source, "max_step_m": step_m,
-            "max_step_rad": step_rad, "poses": pose_rows, "segments": seg_rows,
-            "all_feasible": bool(ok)}
+    return columns
+
+
+def segment_columns(segments):
+    """The segments' JSON fields, name -> array or a nested mapping of them (``worst``), or a
+    list of ready texts (``first_unsafe``: null for most segments)."""
+    worst = [s.worst for s in segments]
+    return {"from": np.array([s.index_from for s in segments]),
+            "to": np.array([s.index_to for s in segments]),
+            "feasible": np.array([bool(s.feasible) for s in segments]),
+            "samples": np.array([s.samples for s in segments]),
+            "unresolved": np.array([s.unresolved for s in segments]),
+            "worst": {"s": np.array([p.s for p in worst]),
+                      "margin": np.array([p.margin for p in worst]),
+                      "binding": [p.binding for p in worst],
+                      "position": np.array([p.position for p in worst]),
+                      "quaternion": np.array([p.quaternion for p in worst])},
+            "first_unsafe": _Texts(_encode(None if s.first_unsafe is None else
+                                           _point_dict(s.first_unsafe)) for s in segments)}
+
+
+class _Texts(list):
+    """A column given as the JSON text of each entry."""
+
+
+def _rows_text(columns):
+    """One JSON object text a row (indented 4) from ``columns`` (name -> array, list of
+    strings, nested mapping of them, or a ``_Texts`` of ready texts)."""
+    template, texts = _row_template(columns)
+    return ["    " + template % row for row in zip(*texts)]
+
+
+def _row_template(columns):
+    """(a %-template of one row's object, the per-row texts of its fields in order)."""
+    fields, texts = [], []
+    for key, col in columns.items():
+        if isinstance(col, dict):
+            inner, inner_texts = _row_template(col)
+            fields.append(f"{_encode(key)}: {inner}")
+            texts.extend(inner_texts)
+            continue
+        brackets, col_texts = _column_texts(col)
+        fields.append(f"{_encode(key)}: " + ("[%s]" if brackets else "%s"))
+        texts.append(col_texts)
+    return "{" + ", ".join(fields) + "}", texts  # the keys are this module's, without "%"
+
+
+def _column_texts(col):
+    """(whether each text still needs its list brackets, the JSON text of each entry of
+    ``col``): numbers and booleans by one encoder call split at the entries (their texts
+    hold no ", " or "], ["), strings (binding names) one by one."""
+    if isinstance(col, _Texts):
+        return False, col
+    arr = np.asarray(col)
+    if arr.dtype.kind not in "biuf":
+        return False, [_encode(v) for v in arr.tolist()]
+    text = _ENCODER.encode(_finite_list(arr))
+    if arr.ndim == 1:
+        return False, text[1:-1].split(", ")
+    return True, text[2:-2].split("], [")
 
 
 def _point_dict(pt):
@@ -185,9 +255,11 @@ def finite_or_none(obj):
     return obj
 
 
-def print_report(robot, poses, feas, segments, ok, accuracy=None):
+def print_report(robot, poses, feas, segments, ok, accuracy=None, every=True):
     """Human-readable tables on stdout (linear in the number of poses: the arrays are
-    turned into Python lists once)."""
+    turned into Python lists once). ``every``: every pose and segment in full; else only
+    the first LISTED_NOT_FEASIBLE poses and segments that are not feasible, and a count of
+    the rest."""
     print(f"robot {robot.name} ({robot.source}): {len(poses)} poses, {len(segments)} segments")
     if accuracy is None:
         print("accuracy: not given (the robot file has no robot.length_error)")
@@ -195,19 +267,27 @@ def print_report(robot, poses, feas, segments, ok, accuracy=None):
         print(f"accuracy: the largest platform error over winch length errors up to "
               f"{_vec(1e3 * robot.length_error, '.3g')} mm")
     print()
+    n_pose_ok = int(np.sum(feas.feasible))
+    n_seg_ok = sum(s.feasible for s in segments)
+    listed = range(len(poses)) if every else np.flatnonzero(~feas.feasible)[:LISTED_NOT_FEASIBLE]
+    seg_listed = segments if every else [s for s in segments if not s.feasible][:LISTED_NOT_FEASIBLE]
+    if not every:
+        print(f"listing only poses and segments that are not feasible, at most "
+              f"{LISTED_NOT_FEASIBLE} of each (--all lists every one, --json OUT writes all)")
+        print()
     rows = _PoseRows(robot, poses, feas, accuracy)
     lines = []
-    for i in range(len(poses)):
-        lines.extend(rows.lines(i))
+    for i in listed:
+        lines.extend(rows.lines(int(i)))
         if len(lines) > 10_000:
             print("\n".join(lines))
             lines = []
     if lines:
         print("\n".join(lines))
-    for s in segments:
+    for s in seg_listed:
         _print_segment(s)
-    n_pose_ok = int(np.sum(feas.feasible))
-    n_seg_ok = sum(s.feasible for s in segments)
+    if not every:
+        _print_least_margin(feas, segments)
     verdict = "ALL FEASIBLE" if ok else "NOT FEASIBLE"
     print(f"summary: {n_pose_ok}/{len(poses)} poses and {n_seg_ok}/{len(segments)} segments "
           f"feasible: {verdict}")
@@ -249,6 +329,16 @@ class _PoseRows:
         e_p, e_w = self.accuracy[0][i], self.accuracy[1][i]
         return [f"  accuracy: position error {_num(1e3 * e_p, '.4g')} mm, orientation error "
                 f"{_num(1e3 * e_w, '.4g')} mrad"]
+
+
+def _print_least_margin(feas, segments):
+    """The pose and the segment point of least margin (the report that lists few poses)."""
+    i = int(np.argmin(feas.margin))
+    print(f"least margin: pose {i} {_num(float(feas.margin[i]), '+.4f')} ({feas.binding[i]})")
+    if segments:
+        s = min(segments, key=lambda s: s.worst.margin)
+        print(f"  segment {s.index_from} -> {s.index_to} {_point_text(s.worst)}")
+    print()
 
 
 def _print_segment(s):

@@ -15,6 +15,7 @@ Command-line quantities: ``parse_angle`` accepts radians (``0.75``, ``-pi``, ``p
 both within +-1e3.
 """
 
+import itertools
 import re
 from dataclasses import dataclass
 
@@ -62,6 +63,9 @@ def poses_from_obj(doc, where="poses"):
         raise InputError(where, doc, "empty pose list: give at least one pose")
     if len(doc) > MAX_POSES:
         raise InputError(where, f"{len(doc)} poses", f"at most {MAX_POSES} poses")
+    bulk = _bulk_poses(doc)
+    if bulk is not None:
+        return bulk
     fields = [_pose_fields(d, f"{where}[{i}]") for i, d in enumerate(doc)]
     p = np.array([f[0] for f in fields], dtype=float)
     has_q = np.array([f[1] == "quaternion" for f in fields])
@@ -75,6 +79,66 @@ def poses_from_obj(doc, where="poses"):
         tau[~has_q] = np.array([f[2] for f in fields if f[1] == "tau"], dtype=float)
         q[~has_q] = quaternion_from_tau(tau[~has_q])
     return PoseList(positions=p, quaternions=q, rotations=rotation_from_quaternion(q), tau=tau)
+
+
+def _bulk_poses(doc):
+    """The PoseList of ``doc`` (a list of poses) checked as whole arrays, or None if any pose
+    might be bad: then the pose-by-pose check (``_pose_fields``) names the first bad field.
+    Every test here is one that ``_pose_fields`` makes, so both accept the same files."""
+    if set(map(type, doc)) != {dict}:
+        return None
+    kinds = set(map(frozenset, doc))
+    if not kinds <= {_Q_KEYS, _TAU_KEYS}:
+        return None
+    p = _bulk_numbers([d["position"] for d in doc], 3, MAX_POSITION_M)
+    if p is None:
+        return None
+    has_q = np.fromiter(("quaternion" in d for d in doc), bool, len(doc))
+    q, tau = np.empty((len(doc), 4)), np.empty((len(doc), 3))
+    if has_q.any():
+        values = _bulk_numbers([d["quaternion"] for d in doc if "quaternion" in d], 4, 2.0)
+        if values is None:
+            return None
+        norm = np.sqrt(np.vecdot(values, values))  # np.linalg.norm's rounding, row by row
+        if not np.all(np.abs(norm - 1.0) <= QUATERNION_TOL):
+            return None
+        values = values / norm[:, None]
+        values[values[:, 3] < 0] *= -1.0
+        q[has_q], tau[has_q] = values, tau_from_quaternion(values)
+    if not has_q.all():
+        values = _bulk_numbers([d["tau"] for d in doc if "tau" in d], 3, None)
+        if values is None or not _tau_in_range(values):
+            return None
+        values[:, 1] = np.clip(values[:, 1], 0.0, np.pi)
+        tau[~has_q], q[~has_q] = values, quaternion_from_tau(values)
+    return PoseList(positions=p, quaternions=q, rotations=rotation_from_quaternion(q), tau=tau)
+
+
+_Q_KEYS, _TAU_KEYS = frozenset(("position", "quaternion")), frozenset(("position", "tau"))
+QUATERNION_TOL = 1e-3  # check_quaternion's default tolerance on |q| - 1
+
+
+def _bulk_numbers(rows, n, limit):
+    """``rows`` (lists of ``n`` ints or floats, not booleans) as an (len, n) float array if
+    all are finite and within +-``limit`` (when given), else None."""
+    if set(map(type, rows)) != {list} or set(map(len, rows)) != {n}:
+        return None
+    flat = list(itertools.chain.from_iterable(rows))
+    if not set(map(type, flat)) <= {int, float}:
+        return None
+    try:
+        values = np.array(flat, dtype=float).reshape(-1, n)
+    except OverflowError:  # an integer beyond the float range
+        return None
+    if not np.all(np.isfinite(values)) or (limit is not None and np.any(np.abs(values) > limit)):
+        return None
+    return values
+
+
+def _tau_in_range(tau):
+    """Whether every row of ``tau`` (N, 3) rad passes ``check_tau``."""
+    return bool(np.all((tau[:, 1] >= -THETA_TOL) & (tau[:, 1] <= np.pi + THETA_TOL))
+                and np.all(np.abs(tau[:, [0, 2]]) <= ANGLE_LIMIT))
 
 
 def pose_from_dict(d, where):
