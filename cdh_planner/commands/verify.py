@@ -1,7 +1,7 @@
 """``cdh-planner verify``: wrench feasibility of poses and of the motion between them.
 
     cdh-planner verify ROBOT.yaml POSES.json [--json OUT] [--step S] [--angle-step A]
-                       [--scene SCENE.yaml]
+                       [--scene SCENE.yaml] [--all]
 
 For every pose: feasible or not, normalised margin, binding constraint, cable lengths and
 the tension envelope (min / nominal / max over the wrench ellipsoid). For every pair of
