@@ -97,7 +97,8 @@ def run(args):
                             collision)
     ok = bool(np.all(feas.feasible)) and all(s.feasible for s in segments)
 
-    acc = pose_accuracy(robot, poses.positions, R=poses.rotations) if has_accuracy(robot) else None
+    acc = (pose_accuracy(robot, poses.positions, R=poses.rotations,  # the tensions: once
+                         tensions=feas.tension_nominal) if has_accuracy(robot) else None)
     print_report(robot, poses, feas, segments, ok, acc,
                  every=args.all_poses or len(poses) <= FULL_REPORT_POSES)
     if json_out:
