@@ -271,16 +271,16 @@ def print_report(robot, poses, feas, segments, ok, accuracy=None, every=True):
     print()
     n_pose_ok = int(np.sum(feas.feasible))
     n_seg_ok = sum(s.feasible for s in segments)
-    listed = range(len(poses)) if every else np.flatnonzero(~feas.feasible)[:LISTED_NOT_FEASIBLE]
+    listed = np.arange(len(poses)) if every else np.flatnonzero(~feas.feasible)[:LISTED_NOT_FEASIBLE]
     seg_listed = segments if every else [s for s in segments if not s.feasible][:LISTED_NOT_FEASIBLE]
     if not every:
         print(f"listing only poses and segments that are not feasible, at most "
               f"{LISTED_NOT_FEASIBLE} of each (--all lists every one, --json OUT writes all)")
         print()
-    rows = _PoseRows(robot, poses, feas, accuracy)
+    rows = _PoseRows(robot, poses, feas, accuracy, listed)
     lines = []
-    for i in listed:
-        lines.extend(rows.lines(int(i)))
+    for k in range(len(listed)):
+        lines.extend(rows.lines(k))
         if len(lines) > 10_000:
             print("\n".join(lines))
             lines = []
@@ -296,23 +296,25 @@ def print_report(robot, poses, feas, segments, ok, accuracy=None, every=True):
 
 
 class _PoseRows:
-    """The report lines of each pose, from Python lists made once."""
+    """The report lines of the poses ``listed`` (indices), from Python lists made once;
+    ``lines(k)`` is the k-th listed pose's."""
 
-    def __init__(self, robot, poses, feas, accuracy=None):
-        self.feasible, self.margin = feas.feasible.tolist(), feas.margin.tolist()
-        self.accuracy = None if accuracy is None else (accuracy.position_m.tolist(),
-                                                       accuracy.orientation_rad.tolist())
-        self.binding = [str(b) for b in feas.binding]
-        self.p, self.q, self.tau = (a.tolist() for a in (poses.positions, poses.quaternions, poses.tau))
-        self.lengths, self.f_min = feas.lengths.tolist(), feas.tension_min.tolist()
-        self.f_nom, self.f_max = feas.tension_nominal.tolist(), feas.tension_max.tolist()
+    def __init__(self, robot, poses, feas, accuracy, listed):
+        self.index, self.feasible = listed.tolist(), feas.feasible[listed].tolist()
+        self.margin = feas.margin[listed].tolist()
+        self.accuracy = None if accuracy is None else (accuracy.position_m[listed].tolist(),
+                                                       accuracy.orientation_rad[listed].tolist())
+        self.binding = [str(b) for b in feas.binding[listed]]
+        self.p, self.q, self.tau = (a[listed].tolist() for a in (poses.positions, poses.quaternions, poses.tau))
+        self.lengths, self.f_min = feas.lengths[listed].tolist(), feas.tension_min[listed].tolist()
+        self.f_nom, self.f_max = feas.tension_nominal[listed].tolist(), feas.tension_max[listed].tolist()
         self.cables = [(name, f"d ({robot.length_min[c]:g}, {robot.length_max[c]:g}) "
                               f"f ({robot.tension_min[c]:g}, {robot.tension_max[c]:g})")
                        for c, name in enumerate(robot.winch_names)]
 
     def lines(self, i):
         state = "feasible" if self.feasible[i] else "NOT FEASIBLE"
-        out = [f"pose {i}: {state}, margin {_num(self.margin[i], '+.4f')}, binding {self.binding[i]}",
+        out = [f"pose {self.index[i]}: {state}, margin {_num(self.margin[i], '+.4f')}, binding {self.binding[i]}",
                f"  position {_vec(self.p[i], '.4f')} m, quaternion {_vec(self.q[i], '.4f')}, "
                f"tau {_vec(self.tau[i], '.4f')} rad",
                *self.accuracy_line(i),
