@@ -13,9 +13,9 @@ from pathlib import Path
 import numpy as np
 
 from .. import aot
+from ..model.shape_forms import BOX_FORM, CAPSULE_FORM, COAL_FORM, SPHERE_FORM
 
 EPS = 1e-300
-MESH_CODE = 3.0   # a platform the kernel leaves to coal (a mesh)
 GOLDEN_STEPS = 40   # golden-section steps on a cable: 0.618^40 = 4e-9 of its length (~1 nm)
 
 
@@ -91,7 +91,7 @@ def _own(a, b, pc, prad, M, form, r, rho, frame):
     ok, q0, q1 = _cut(a, b, 0.0, 1.0, rho)
     if not ok:
         return np.inf, np.inf
-    if form[0] < MESH_CODE:
+    if form[0] != COAL_FORM:
         return np.inf, _segment_sdf(_local(M, pc, q0), _local(M, pc, q1), form) - r
     _frame(q0, q1, frame)
     return _point_segment(pc, q0, q1) - prad - r, np.inf
@@ -121,11 +121,11 @@ def _axes(R, form):
 
 
 def _sdf(x, form):
-    """Signed distance (m) of the point x (shape frame) to a sphere (code 0: radius), box
-    (1: half edges) or cylinder (2: radius, half height; axis z)."""
-    if form[0] == 0.0:
+    """Signed distance (m) of the point x (shape frame) to a sphere (SPHERE_FORM: radius),
+    box (BOX_FORM: half edges) or cylinder (CYLINDER_FORM: radius, half height; axis z)."""
+    if form[0] == SPHERE_FORM:
         return _norm(x) - form[1]
-    if form[0] == 1.0:
+    if form[0] == BOX_FORM:
         q = (abs(x[0]) - form[1], abs(x[1]) - form[2], abs(x[2]) - form[3])
     else:
         q = (math.hypot(x[0], x[1]) - form[1], abs(x[2]) - form[2], -np.inf)
@@ -136,10 +136,12 @@ def _sdf(x, form):
 def _segment_sdf(x0, x1, form):
     """Least signed distance of the segment x0..x1 (shape frame) to the shape: the signed
     distance to a convex set is convex, so golden-section search on the segment finds its
-    minimum (GOLDEN_STEPS steps: within 4e-9 of the segment's length); a sphere's in
-    closed form."""
-    if form[0] == 0.0:
+    minimum (GOLDEN_STEPS steps: within 4e-9 of the segment's length); a sphere's and a
+    capsule's (CAPSULE_FORM: radius, half length; axis z) in closed form."""
+    if form[0] == SPHERE_FORM:
         return _point_segment((0.0, 0.0, 0.0), x0, x1) - form[1]
+    if form[0] == CAPSULE_FORM:
+        return _segment_segment(x0, x1, (0.0, 0.0, -form[2]), (0.0, 0.0, form[2])) - form[1]
     d = _sub(x1, x0)
     lo, hi, g = 0.0, 1.0, 0.6180339887498949
     c, e = hi - g, g
@@ -267,7 +269,8 @@ AOT_PREFIX = "_kernels_aot_"
 
 def source_digest():
     """12 hex digits of sha256 over this file: what the machine code is of."""
-    return aot.source_digest(Path(__file__).resolve().parent, ("kernels.py",))
+    return aot.source_digest(Path(__file__).resolve().parent,
+                             ("kernels.py", "../model/shape_forms.py"))
 
 
 def aot_module_name():
