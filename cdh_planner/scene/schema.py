@@ -222,7 +222,7 @@ def shape_from_dict(d, where, shape_id, base_dir=".", extra=()):
     if not isinstance(d, dict):
         raise InputError(where, d, "expected a mapping (type, ...)")
     kind = d.get("type")
-    if kind not in SHAPES:
+    if not isinstance(kind, str) or kind not in SHAPES:  # a list is no type (nor hashable)
         raise InputError(f"{where}.type", kind, f"expected one of {', '.join(SHAPES)}")
     cls = SHAPES[kind]
     check_keys(where, d, _COMMON + cls.required + cls.optional + tuple(extra),
