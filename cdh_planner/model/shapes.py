@@ -110,6 +110,8 @@ class ShapeType:
 
 @register
 class Sphere(ShapeType):
+    """A ball of ``radius`` about its position."""
+
     type, required, platform_extents, markers = "sphere", ("radius",), 3, ("SPHERE",)
     primitive, dimensions = "SPHERE", 1
 
@@ -153,6 +155,8 @@ class Sphere(ShapeType):
 
 @register
 class Box(ShapeType):
+    """Full edge lengths ``size`` along its own x, y, z, centred on its position."""
+
     type, required, platform_extents, markers = "box", ("size",), 1, ("CUBE",)
     primitive, dimensions = "BOX", 3
 
@@ -197,17 +201,36 @@ class Box(ShapeType):
         return "box", 0.5 * np.asarray(s.size)
 
 
+class Axial(ShapeType):
+    """A solid of revolution about its own z, centred: ``radius`` and the length named
+    ``axis`` (a file key and Shape field), sent over ROS as [that length, radius]."""
+
+    axis, form, dimensions = "", COAL_FORM, 2
+
+    @classmethod
+    def fields(cls, d, where, base_dir):
+        return dict(radius=positive(f"{where}.radius", d["radius"]),
+                    **{cls.axis: positive(f"{where}.{cls.axis}", d[cls.axis])})
+
+    @classmethod
+    def kernel_form(cls, s):
+        return (cls.form, s.radius, 0.5 * getattr(s, cls.axis), 0.0)
+
+    @classmethod
+    def primitive_dimensions(cls, s):
+        return [getattr(s, cls.axis), s.radius]
+
+    @classmethod
+    def primitive_fields(cls, dims):
+        return {cls.axis: dims[0], "radius": dims[1]}
+
+
 @register
-class Cylinder(ShapeType):
+class Cylinder(Axial):
     """Axis z, ``height`` its full length, centred on its position."""
 
     type, required, platform_extents, markers = "cylinder", ("radius", "height"), 2, ("CYLINDER",)
-    primitive, dimensions = "CYLINDER", 2
-
-    @staticmethod
-    def fields(d, where, base_dir):
-        return dict(radius=positive(f"{where}.radius", d["radius"]),
-                    height=positive(f"{where}.height", d["height"]))
+    axis, form, primitive = "height", CYLINDER_FORM, "CYLINDER"
 
     @staticmethod
     def platform_fields(size):
@@ -221,18 +244,6 @@ class Cylinder(ShapeType):
     def coal_geometry(s):
         import coal
         return coal.Cylinder(s.radius, s.height)
-
-    @staticmethod
-    def kernel_form(s):
-        return (CYLINDER_FORM, s.radius, 0.5 * s.height, 0.0)
-
-    @staticmethod
-    def primitive_dimensions(s):
-        return [s.height, s.radius]
-
-    @staticmethod
-    def primitive_fields(dims):
-        return {"height": dims[0], "radius": dims[1]}
 
     @staticmethod
     def marker_parts(s):
@@ -288,18 +299,13 @@ class Mesh(ShapeType):
 
 
 @register
-class Capsule(ShapeType):
+class Capsule(Axial):
     """A cylinder of ``length`` along its own z with hemispherical caps of ``radius``,
     centred on its position: the points within ``radius`` of the segment z in
     [-length / 2, length / 2]. Over ROS: Obstacle.CAPSULE, dimensions [length, radius]."""
 
     type, required, markers = "capsule", ("radius", "length"), ("CYLINDER", "SPHERE", "SPHERE")
-    primitive, dimensions = "CAPSULE", 2
-
-    @staticmethod
-    def fields(d, where, base_dir):
-        return dict(radius=positive(f"{where}.radius", d["radius"]),
-                    length=positive(f"{where}.length", d["length"]))
+    axis, form, primitive = "length", CAPSULE_FORM, "CAPSULE"
 
     @staticmethod
     def bounding_radius(s):
@@ -309,18 +315,6 @@ class Capsule(ShapeType):
     def coal_geometry(s):
         import coal
         return coal.Capsule(s.radius, s.length)
-
-    @staticmethod
-    def kernel_form(s):
-        return (CAPSULE_FORM, s.radius, 0.5 * s.length, 0.0)
-
-    @staticmethod
-    def primitive_dimensions(s):
-        return [s.length, s.radius]
-
-    @staticmethod
-    def primitive_fields(dims):
-        return {"length": dims[0], "radius": dims[1]}
 
     @staticmethod
     def marker_parts(s):

@@ -33,7 +33,7 @@ radius): with r = 1 mm and rho = 10 mm, iff alpha < 11.5 degrees.
 Every field is checked here; an error names the field and value (errors.InputError).
 """
 
-from dataclasses import dataclass, field, replace
+from dataclasses import dataclass, field, fields, replace
 from pathlib import Path
 
 import numpy as np
@@ -87,11 +87,10 @@ class Shape:
 
     def same_geometry(self, other):
         """True when ``other`` is the same shape in the same place (ids, kinds, sizes and
-        poses exactly equal; the source file's name aside)."""
-        arrays = ("position", "quaternion", "size", "vertices")
-        numbers = ("id", "kind", "radius", "height", "length", "scale")
-        return (other is not None and all(getattr(self, a) == getattr(other, a) for a in numbers)
-                and all(_same_array(getattr(self, a), getattr(other, a)) for a in arrays))
+        poses exactly equal; the source file's name aside): every field, so a shape type's
+        new field counts without a change here."""
+        return other is not None and all(_same_value(getattr(self, f.name), getattr(other, f.name))
+                                         for f in fields(self) if f.name not in ("file", "rotation"))
 
     def bounding_radius(self):
         """Radius (m) of a sphere about ``position`` that holds the whole shape."""
@@ -136,10 +135,11 @@ class Scene:
         raise KeyError(obstacle_id)
 
 
-def _same_array(a, b):
-    if a is None or b is None:
-        return a is None and b is None
-    return np.shape(a) == np.shape(b) and bool(np.array_equal(a, b))
+def _same_value(a, b):
+    if isinstance(a, np.ndarray) or isinstance(b, np.ndarray):
+        return a is not None and b is not None and np.shape(a) == np.shape(b) \
+            and bool(np.array_equal(a, b))
+    return a == b
 
 
 def load_scene(path, robot=None):
