@@ -1,6 +1,6 @@
 """The capsule shape (model.shapes.Capsule) and the shape registry: a capsule's file keys
-and their errors, its bounding radius, its distances (as an obstacle: coal's, against the
-closed form segment-segment less both radii; as the platform's shape: the compiled
+and their errors, its bounding radius, its distances (as an obstacle: coal's and the
+kernel's lower bound, against the closed form segment-segment less both radii; as the platform's shape: the compiled
 kernel's segment-segment, against coal) at random poses, over ROS (Obstacle.CAPSULE, both
 ways) and as markers (a cylinder with two sphere caps); the robot's platform choices read
 from the registry; docs/scenes.md lists every registered shape."""
@@ -86,11 +86,13 @@ def test_cables_against_a_capsule_obstacle_match_segment_segment_less_both_radii
         s = cm.obstacles[0]
         q0, q1 = capsule_axis(s)
         Bw = platform_anchors(ROBOT2, p, R)
+        lb = cm.lower_bounds(p, R)
         for kind, _, cables, d in cm.distances(p, R):
             if kind != "cable-obstacle":
                 continue
             i = cables[0]
             exact = segment_segment(ROBOT2.base_anchors[i], Bw[i], q0, q1) - R_CABLE - s.radius
+            assert lb[i, 0] == pytest.approx(exact, abs=1e-9)  # the kernel's bound is exact
             if exact >= 0.0:  # in contact coal gives the penetration depth, not this
                 assert d == pytest.approx(exact, abs=TOL_M)
             hits += exact < 0.0

@@ -77,6 +77,13 @@ class ShapeType:
         """Radius (m) of a sphere about the shape's position that holds it."""
         raise NotImplementedError
 
+    @classmethod
+    def bounding_capsule(cls, s):
+        """(half axis (3,) m in the shape's parent frame, radius m): the capsule about its
+        position that holds it, for the kernel's lower bounds; a sphere (zero axis) but
+        for a capsule."""
+        return np.zeros(3), cls.bounding_radius(s)
+
     @staticmethod
     def coal_geometry(s):
         """The coal geometry, in the shape's own frame."""
@@ -310,6 +317,10 @@ class Capsule(Axial):
     @staticmethod
     def bounding_radius(s):
         return 0.5 * s.length + s.radius
+
+    @staticmethod
+    def bounding_capsule(s):
+        return 0.5 * s.length * np.asarray(s.rotation)[:, 2], s.radius
 
     @staticmethod
     def coal_geometry(s):

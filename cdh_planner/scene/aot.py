@@ -19,7 +19,7 @@ def warm_jit():
     """Compile the JIT kernel once (two cables, one obstacle, one pose) so that its cache
     (in __pycache__) is there."""
     m, K, n = 2, 1, 1
-    o = 6 * m + 4 * K + 2  # the offset of the cable radius (one pair: 2 trims)
+    o = 6 * m + 7 * K + 2  # the offset of the cable radius (one pair: 2 trims)
     static = np.zeros(o + 19)
     static[o + 5] = -1.0  # no platform
     static[o + 6] = COAL_FORM

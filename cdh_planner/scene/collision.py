@@ -17,7 +17,8 @@ the deepest point of the cable's axis less its radius, where coal (a mesh platfo
 obstacles) gives the penetration depth: the same sign, a smaller magnitude.
 
 Speed: a compiled kernel computes all cable pairs and a lower bound for every
-cable-obstacle and platform-obstacle pair (bounding spheres of the obstacles); coal is
+cable-obstacle and platform-obstacle pair (bounding capsules of the obstacles: a sphere,
+or for a capsule the capsule itself, whose bound is then its exact distance); coal is
 then called in the order of those bounds only while a bound is below the least distance
 found, so the result is the exact least distance with a few library calls.
 benchmarks/collision.py measures it.
@@ -85,10 +86,12 @@ class CollisionModel:
         self.platform = scene.platform
         self.pairs, trims = _cable_pairs(A, B)
         centres = np.array([o.position for o in self.obstacles], dtype=float).reshape(-1, 3)
-        radii = np.array([o.bounding_radius() for o in self.obstacles], dtype=float)
+        cores = [o.type.bounding_capsule(o) for o in self.obstacles]  # (half axis, radius)
+        axes = np.array([h for h, _ in cores], dtype=float).reshape(-1, 3)
+        radii = np.array([rad for _, rad in cores], dtype=float)
         plat = self.platform
         self.static = np.concatenate([  # the kernel's constants (offsets: kernels._kernel)
-            A.ravel(), B.ravel(), centres.ravel(), radii, trims.ravel(),
+            A.ravel(), B.ravel(), centres.ravel(), axes.ravel(), radii, trims.ravel(),
             [scene.cable_radius, scene.shared_anchor_exemption],
             plat.position if plat else np.zeros(3),
             [plat.bounding_radius() if plat else -1.0],  # < 0: no platform

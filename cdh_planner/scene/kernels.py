@@ -29,9 +29,10 @@ def _batch(P, Rs, static, pairs, lb, frames, frames_p, cc, cp, least):
 
 
 def _kernel(p, R, static, pairs, lb, frames, frames_p, cc, cp):
-    """For pose (p, R): lb[i, k] = dist(segment a_i b_i, c_k) - rho_k - r, a lower bound
-    of cable i's distance to obstacle k (c_k, rho_k its bounding sphere), and lb[m, k]
-    the platform's (|centre - c_k| - rho_k - rho_platform; inf without a platform);
+    """For pose (p, R): lb[i, k] = dist(segment a_i b_i, core_k) - rho_k - r, a lower
+    bound of cable i's distance to obstacle k (its bounding capsule: the core segment
+    c_k -+ h_k, a point for h_k = 0, and radius rho_k; exact for a capsule), and lb[m, k]
+    the platform's (dist(centre, core_k) - rho_k - rho_platform; inf without a platform);
     lb[i, K] cable i's (cut by rho at its platform anchor) to the platform's own shape
     (inf without one, or if nothing is left; lb[m, K] inf); frames[i]: cable i's capsule
     frame (rotation taking z to the cable, row-major; centre; half length), frames_p[i]
@@ -41,7 +42,8 @@ def _kernel(p, R, static, pairs, lb, frames, frames_p, cc, cp):
     Scalar code on 3-tuples: no allocation in the loops."""
     m, K, P = lb.shape[0] - 1, lb.shape[1] - 1, pairs.shape[0]
     oB, oC = 3 * m, 6 * m
-    oR = oC + 3 * K
+    oH = oC + 3 * K   # the obstacles' bounding capsules: half axes, then radii
+    oR = oH + 3 * K
     oT = oR + K
     o = oT + 2 * P
     r, rho = static[o], static[o + 1]
@@ -55,18 +57,34 @@ def _kernel(p, R, static, pairs, lb, frames, frames_p, cc, cp):
         frames[i, 13], frames[i, 14], frames[i, 15] = b  # the platform anchor, for the pairs
         _frame(a, b, frames[i])
         for k in range(K):
-            lb[i, k] = _point_segment(_v(static, oC + 3 * k), a, b) - static[oR + k] - r
+            lb[i, k] = _core_distance(_v(static, oC + 3 * k), _v(static, oH + 3 * k), a, b) \
+                - static[oR + k] - r
         lb[i, K], cp[i] = _own(a, b, pc, prad, M, form, r, rho, frames_p[i])
     lb[m, K] = np.inf
     for k in range(K):
-        lb[m, k] = _norm(_sub(_v(static, oC + 3 * k), pc)) - static[oR + k] - prad \
-            if prad >= 0.0 else np.inf
+        lb[m, k] = _point_core(_v(static, oC + 3 * k), _v(static, oH + 3 * k), pc) \
+            - static[oR + k] - prad if prad >= 0.0 else np.inf
     for n in range(P):
         i, j = pairs[n, 0], pairs[n, 1]
         cut_a, cut_b = static[oT + 2 * n], static[oT + 2 * n + 1]
         ok1, p0, p1 = _cut(_v(static, 3 * i), _v(frames[i], 13), cut_a, cut_b, rho)
         ok2, q0, q1 = _cut(_v(static, 3 * j), _v(frames[j], 13), cut_a, cut_b, rho)
         cc[n] = _segment_segment(p0, p1, q0, q1) - 2.0 * r if ok1 and ok2 else np.inf
+
+
+def _core_distance(c, h, a, b):
+    """Distance of the segment a..b to the core segment c - h .. c + h (the point c if
+    h = 0: a bounding sphere's centre)."""
+    if h[0] == 0.0 and h[1] == 0.0 and h[2] == 0.0:
+        return _point_segment(c, a, b)
+    return _segment_segment(a, b, _sub(c, h), _add(c, h))
+
+
+def _point_core(c, h, x):
+    """Distance of the point x to the core segment c - h .. c + h (a point if h = 0)."""
+    if h[0] == 0.0 and h[1] == 0.0 and h[2] == 0.0:
+        return _norm(_sub(c, x))
+    return _point_segment(x, _sub(c, h), _add(c, h))
 
 
 def _least(cc, cp, out):
@@ -256,7 +274,7 @@ def _segment_segment(p0, p1, q0, q1):
 
 
 # ----- compilation -------------------------------------------------------------------------
-HELPERS = ("_kernel", "_least", "_own", "_local", "_axes", "_sdf", "_segment_sdf", "_v", "_add",
+HELPERS = ("_kernel", "_core_distance", "_point_core", "_least", "_own", "_local", "_axes", "_sdf", "_segment_sdf", "_v", "_add",
            "_sub", "_scale", "_dot", "_norm", "_rot", "_frame", "_cut", "_point_segment",
            "_segment_segment")
 INLINE = ("_v", "_add", "_sub", "_scale", "_dot", "_norm", "_rot")
