@@ -109,7 +109,7 @@ def main():
         med, mean = per_call_us(cm._pose, pairs, args.repeats)
         print(f"{name}: kernel (15 cable pairs, 6 cables against the platform, 70 lower "
               f"bounds): median {med:.1f} us")
-    med, _ = per_call_us(lambda: cm._cable_obstacle(0, 1), [()] * 2000, args.repeats)
+    med, _ = per_call_us(lambda: cm._cable_obstacle(0, 1, cm.frames), [()] * 2000, args.repeats)
     print(f"one coal capsule-box distance from Python (with its transform): median {med:.1f} us")
     plan_times(args.plans)
 

@@ -17,7 +17,7 @@ from cdh_planner.scene import kernels as scene_kernels
 AOT_BUILT = importlib.util.find_spec(f"cdh_planner.manifold.{kernels.aot_module_name()}") is not None
 
 
-SOURCES = [(kernels, ("kernels.py", "layout.py")), (scene_kernels, ("kernels.py",))]
+SOURCES = [(kernels, ("kernels.py", "layout.py")), (scene_kernels, ("kernels.py", "../model/shape_forms.py"))]
 
 
 @pytest.mark.parametrize("module, sources", SOURCES, ids=["manifold", "scene"])

@@ -21,7 +21,8 @@ from test_scene_distances import ROBOT2, model, near_cable_point, random_quatern
 AOT_BUILT = importlib.util.find_spec(f"cdh_planner.scene.{kernels.aot_module_name()}") is not None
 PLATFORMS = [None, {"type": "box", "size": [0.14, 0.14, 0.01]},
              {"type": "cylinder", "radius": 0.09, "height": 0.01},
-             {"type": "sphere", "radius": 0.05, "position": [0.0, 0.0, 0.02]}]
+             {"type": "sphere", "radius": 0.05, "position": [0.0, 0.0, 0.02]},
+             {"type": "capsule", "radius": 0.03, "length": 0.1, "quaternion": [0.6, 0, 0, 0.8]}]
 
 
 def poses(rng, n, spread=0.06):
@@ -45,7 +46,7 @@ def crowded_model(rng, platform, clearance=0.0001):
     return model(obstacles, platform=platform, clearance=clearance)
 
 
-@pytest.mark.parametrize("platform", PLATFORMS, ids=["none", "box", "cylinder", "sphere"])
+@pytest.mark.parametrize("platform", PLATFORMS, ids=["none", "box", "cylinder", "sphere", "capsule"])
 def test_batch_margins_equal_the_clearance_of_each_pose(platform):
     rng = np.random.default_rng(11)
     hit = 0
@@ -81,7 +82,7 @@ def test_an_empty_scene_batch_names_cable_pairs():
 
 @pytest.mark.skipif(not AOT_BUILT, reason="no ahead-of-time collision kernel built (make, or "
                                           "python -m cdh_planner.scene.aot)")
-@pytest.mark.parametrize("platform", PLATFORMS, ids=["none", "box", "cylinder", "sphere"])
+@pytest.mark.parametrize("platform", PLATFORMS, ids=["none", "box", "cylinder", "sphere", "capsule"])
 def test_aot_and_jit_kernels_agree_bit_for_bit(platform):
     rng = np.random.default_rng(8)
     cm = crowded_model(rng, platform)

@@ -21,6 +21,7 @@ import numpy as np
 
 from ..errors import MAX_FORCE_N, MAX_POSITION_M, InputError
 from .. import files
+from .shapes import SHAPES, platform_types
 from .robot_schema import CHOICE, MATRIX, N_CABLES, NAME, NAMES, NUMBER, NUMBERS, check_groups, \
     read_fields, robot_field, schema_of
 
@@ -32,7 +33,8 @@ SINGULAR_RCOND = 1e-9  # J with smallest / largest singular value below this is 
 JACOBIAN_PROBES = 16  # poses at which a robot's J must be regular at least once
 GRAVITY = 9.80665  # m/s^2: |force| of a load with a mass is its weight (within 2 %)
 OPTIONAL_GROUPS = ("contact_ellipsoid",)
-PLATFORM_SHAPES = ("none", "box", "cylinder", "sphere")   # robot.platform_shape.type  # absent, or given with its required keys
+# robot.platform_shape.type: none, or a shape class that can be a platform (model.shapes)
+PLATFORM_SHAPES = ("none", *sorted(platform_types()))
 WINCH_NAMES = tuple(f"winch_{i + 1}" for i in range(N_CABLES))
 
 
@@ -254,7 +256,7 @@ def _check_platform_shape(v):
         return
     if size is None:
         raise InputError("robot.platform_shape.size", None, f"required with type {kind}")
-    same = {"box": 1, "cylinder": 2, "sphere": 3}[kind]
+    same = SHAPES[kind].platform_extents
     if not np.allclose(size[:same], size[0], rtol=1e-9, atol=0.0):
         raise InputError("robot.platform_shape.size", list(map(float, size)),
                          f"a {kind}'s first {same} extents are one diameter")

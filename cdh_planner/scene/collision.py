@@ -10,13 +10,15 @@ coal library (GJK / EPA and closed forms), except cable against cable: two capsu
 one radius are the distance of two segments less 2 r, computed for all pairs at once in
 the compiled kernel below.
 
-Cable against a sphere, box or cylinder platform: the kernel minimises the shape's signed
-distance (convex) along the cable by golden-section search, exactly; in contact that is
+Cable against a sphere, box, cylinder or capsule platform: the kernel minimises the shape's signed
+distance (convex) along the cable by golden-section search (a capsule: segment against
+segment, closed form), exactly; in contact that is
 the deepest point of the cable's axis less its radius, where coal (a mesh platform, the
 obstacles) gives the penetration depth: the same sign, a smaller magnitude.
 
 Speed: a compiled kernel computes all cable pairs and a lower bound for every
-cable-obstacle and platform-obstacle pair (bounding spheres of the obstacles); coal is
+cable-obstacle and platform-obstacle pair (bounding capsules of the obstacles: a sphere,
+or for a capsule the capsule itself, whose bound is then its exact distance); coal is
 then called in the order of those bounds only while a bound is below the least distance
 found, so the result is the exact least distance with a few library calls.
 benchmarks/collision.py measures it.
@@ -28,7 +30,8 @@ from dataclasses import dataclass
 import coal
 import numpy as np
 
-from .kernels import MESH_CODE, collision_batch
+from ..model.shape_forms import COAL_FORM
+from .kernels import collision_batch
 from .margin import COLLISION_UNIT_M, combine  # noqa: F401  (their home; re-exported)
 from .schema import SHARED_ANCHOR_M
 
@@ -83,10 +86,12 @@ class CollisionModel:
         self.platform = scene.platform
         self.pairs, trims = _cable_pairs(A, B)
         centres = np.array([o.position for o in self.obstacles], dtype=float).reshape(-1, 3)
-        radii = np.array([o.bounding_radius() for o in self.obstacles], dtype=float)
+        cores = [o.type.bounding_capsule(o) for o in self.obstacles]  # (half axis, radius)
+        axes = np.array([h for h, _ in cores], dtype=float).reshape(-1, 3)
+        radii = np.array([rad for _, rad in cores], dtype=float)
         plat = self.platform
         self.static = np.concatenate([  # the kernel's constants (offsets: kernels._kernel)
-            A.ravel(), B.ravel(), centres.ravel(), radii, trims.ravel(),
+            A.ravel(), B.ravel(), centres.ravel(), axes.ravel(), radii, trims.ravel(),
             [scene.cable_radius, scene.shared_anchor_exemption],
             plat.position if plat else np.zeros(3),
             [plat.bounding_radius() if plat else -1.0],  # < 0: no platform
@@ -126,8 +131,8 @@ class CollisionModel:
         self.capsules_p = [coal.Capsule(float(scene.cable_radius), 1.0) for _ in range(m)]
         self.platform_T = coal.Transform3s()
         # ComputeDistance keeps pointers to its shapes: the model holds them
-        self.geometry = geometry = [_geometry(o) for o in self.obstacles]
-        self.platform_geometry = _geometry(plat) if plat else None
+        self.geometry = geometry = [o.type.coal_geometry(o) for o in self.obstacles]
+        self.platform_geometry = plat.type.coal_geometry(plat) if plat else None
         self.placement = [coal.Transform3s(o.rotation, o.position) for o in self.obstacles]
         self.cable_fn = [[coal.ComputeDistance(c, g) for g in geometry] for c in self.capsules]
         self.platform_fn = [coal.ComputeDistance(self.platform_geometry, g) for g in geometry] \
@@ -271,30 +276,12 @@ class CollisionModel:
 
 
 def _platform_form(shape):
-    """The kernel's description of a platform shape (13 numbers): kind code (0 sphere, 1
-    box, 2 cylinder, MESH_CODE a mesh or none: coal's), dimensions (radius; half edges;
-    radius, half height), its rotation in the platform frame (row-major)."""
+    """The kernel's description of a platform shape (13 numbers): its form code and three
+    numbers (model.shapes: ``kernel_form``; COAL_FORM without a platform), its rotation in
+    the platform frame (row-major)."""
     if shape is None:
-        return np.r_[MESH_CODE, 0.0, 0.0, 0.0, np.eye(3).ravel()]
-    dims = {"sphere": lambda: (0.0, shape.radius, 0.0, 0.0),
-            "box": lambda: (1.0, *(0.5 * np.asarray(shape.size, float))),
-            "cylinder": lambda: (2.0, shape.radius, 0.5 * shape.height, 0.0),
-            "mesh": lambda: (MESH_CODE, 0.0, 0.0, 0.0)}[shape.kind]()
-    return np.r_[dims, np.asarray(shape.rotation, float).ravel()]
-
-
-def _geometry(shape):
-    """The coal geometry of a Shape, in its own frame."""
-    if shape.kind == "sphere":
-        return coal.Sphere(shape.radius)
-    if shape.kind == "box":
-        return coal.Box(*map(float, shape.size))
-    if shape.kind == "cylinder":
-        return coal.Cylinder(shape.radius, shape.height)
-    points = coal.StdVec_Vec3s()
-    for v in shape.vertices:
-        points.append(np.asarray(v, dtype=float))
-    return coal.Convex.convexHull(points, False, "")
+        return np.r_[COAL_FORM, 0.0, 0.0, 0.0, np.eye(3).ravel()]
+    return np.r_[shape.type.kernel_form(shape), np.asarray(shape.rotation, float).ravel()]
 
 
 def _cable_pairs(A, B):

@@ -13,9 +13,9 @@ from pathlib import Path
 import numpy as np
 
 from .. import aot
+from ..model.shape_forms import BOX_FORM, CAPSULE_FORM, COAL_FORM, SPHERE_FORM
 
 EPS = 1e-300
-MESH_CODE = 3.0   # a platform the kernel leaves to coal (a mesh)
 GOLDEN_STEPS = 40   # golden-section steps on a cable: 0.618^40 = 4e-9 of its length (~1 nm)
 
 
@@ -29,9 +29,10 @@ def _batch(P, Rs, static, pairs, lb, frames, frames_p, cc, cp, least):
 
 
 def _kernel(p, R, static, pairs, lb, frames, frames_p, cc, cp):
-    """For pose (p, R): lb[i, k] = dist(segment a_i b_i, c_k) - rho_k - r, a lower bound
-    of cable i's distance to obstacle k (c_k, rho_k its bounding sphere), and lb[m, k]
-    the platform's (|centre - c_k| - rho_k - rho_platform; inf without a platform);
+    """For pose (p, R): lb[i, k] = dist(segment a_i b_i, core_k) - rho_k - r, a lower
+    bound of cable i's distance to obstacle k (its bounding capsule: the core segment
+    c_k -+ h_k, a point for h_k = 0, and radius rho_k; exact for a capsule), and lb[m, k]
+    the platform's (dist(centre, core_k) - rho_k - rho_platform; inf without a platform);
     lb[i, K] cable i's (cut by rho at its platform anchor) to the platform's own shape
     (inf without one, or if nothing is left; lb[m, K] inf); frames[i]: cable i's capsule
     frame (rotation taking z to the cable, row-major; centre; half length), frames_p[i]
@@ -41,7 +42,8 @@ def _kernel(p, R, static, pairs, lb, frames, frames_p, cc, cp):
     Scalar code on 3-tuples: no allocation in the loops."""
     m, K, P = lb.shape[0] - 1, lb.shape[1] - 1, pairs.shape[0]
     oB, oC = 3 * m, 6 * m
-    oR = oC + 3 * K
+    oH = oC + 3 * K   # the obstacles' bounding capsules: half axes, then radii
+    oR = oH + 3 * K
     oT = oR + K
     o = oT + 2 * P
     r, rho = static[o], static[o + 1]
@@ -55,18 +57,34 @@ def _kernel(p, R, static, pairs, lb, frames, frames_p, cc, cp):
         frames[i, 13], frames[i, 14], frames[i, 15] = b  # the platform anchor, for the pairs
         _frame(a, b, frames[i])
         for k in range(K):
-            lb[i, k] = _point_segment(_v(static, oC + 3 * k), a, b) - static[oR + k] - r
+            lb[i, k] = _core_distance(_v(static, oC + 3 * k), _v(static, oH + 3 * k), a, b) \
+                - static[oR + k] - r
         lb[i, K], cp[i] = _own(a, b, pc, prad, M, form, r, rho, frames_p[i])
     lb[m, K] = np.inf
     for k in range(K):
-        lb[m, k] = _norm(_sub(_v(static, oC + 3 * k), pc)) - static[oR + k] - prad \
-            if prad >= 0.0 else np.inf
+        lb[m, k] = _point_core(_v(static, oC + 3 * k), _v(static, oH + 3 * k), pc) \
+            - static[oR + k] - prad if prad >= 0.0 else np.inf
     for n in range(P):
         i, j = pairs[n, 0], pairs[n, 1]
         cut_a, cut_b = static[oT + 2 * n], static[oT + 2 * n + 1]
         ok1, p0, p1 = _cut(_v(static, 3 * i), _v(frames[i], 13), cut_a, cut_b, rho)
         ok2, q0, q1 = _cut(_v(static, 3 * j), _v(frames[j], 13), cut_a, cut_b, rho)
         cc[n] = _segment_segment(p0, p1, q0, q1) - 2.0 * r if ok1 and ok2 else np.inf
+
+
+def _core_distance(c, h, a, b):
+    """Distance of the segment a..b to the core segment c - h .. c + h (the point c if
+    h = 0: a bounding sphere's centre)."""
+    if h[0] == 0.0 and h[1] == 0.0 and h[2] == 0.0:
+        return _point_segment(c, a, b)
+    return _segment_segment(a, b, _sub(c, h), _add(c, h))
+
+
+def _point_core(c, h, x):
+    """Distance of the point x to the core segment c - h .. c + h (a point if h = 0)."""
+    if h[0] == 0.0 and h[1] == 0.0 and h[2] == 0.0:
+        return _norm(_sub(c, x))
+    return _point_segment(x, _sub(c, h), _add(c, h))
 
 
 def _least(cc, cp, out):
@@ -91,7 +109,7 @@ def _own(a, b, pc, prad, M, form, r, rho, frame):
     ok, q0, q1 = _cut(a, b, 0.0, 1.0, rho)
     if not ok:
         return np.inf, np.inf
-    if form[0] < MESH_CODE:
+    if form[0] != COAL_FORM:
         return np.inf, _segment_sdf(_local(M, pc, q0), _local(M, pc, q1), form) - r
     _frame(q0, q1, frame)
     return _point_segment(pc, q0, q1) - prad - r, np.inf
@@ -121,11 +139,11 @@ def _axes(R, form):
 
 
 def _sdf(x, form):
-    """Signed distance (m) of the point x (shape frame) to a sphere (code 0: radius), box
-    (1: half edges) or cylinder (2: radius, half height; axis z)."""
-    if form[0] == 0.0:
+    """Signed distance (m) of the point x (shape frame) to a sphere (SPHERE_FORM: radius),
+    box (BOX_FORM: half edges) or cylinder (CYLINDER_FORM: radius, half height; axis z)."""
+    if form[0] == SPHERE_FORM:
         return _norm(x) - form[1]
-    if form[0] == 1.0:
+    if form[0] == BOX_FORM:
         q = (abs(x[0]) - form[1], abs(x[1]) - form[2], abs(x[2]) - form[3])
     else:
         q = (math.hypot(x[0], x[1]) - form[1], abs(x[2]) - form[2], -np.inf)
@@ -136,10 +154,12 @@ def _sdf(x, form):
 def _segment_sdf(x0, x1, form):
     """Least signed distance of the segment x0..x1 (shape frame) to the shape: the signed
     distance to a convex set is convex, so golden-section search on the segment finds its
-    minimum (GOLDEN_STEPS steps: within 4e-9 of the segment's length); a sphere's in
-    closed form."""
-    if form[0] == 0.0:
+    minimum (GOLDEN_STEPS steps: within 4e-9 of the segment's length); a sphere's and a
+    capsule's (CAPSULE_FORM: radius, half length; axis z) in closed form."""
+    if form[0] == SPHERE_FORM:
         return _point_segment((0.0, 0.0, 0.0), x0, x1) - form[1]
+    if form[0] == CAPSULE_FORM:
+        return _segment_segment(x0, x1, (0.0, 0.0, -form[2]), (0.0, 0.0, form[2])) - form[1]
     d = _sub(x1, x0)
     lo, hi, g = 0.0, 1.0, 0.6180339887498949
     c, e = hi - g, g
@@ -254,7 +274,7 @@ def _segment_segment(p0, p1, q0, q1):
 
 
 # ----- compilation -------------------------------------------------------------------------
-HELPERS = ("_kernel", "_least", "_own", "_local", "_axes", "_sdf", "_segment_sdf", "_v", "_add",
+HELPERS = ("_kernel", "_core_distance", "_point_core", "_least", "_own", "_local", "_axes", "_sdf", "_segment_sdf", "_v", "_add",
            "_sub", "_scale", "_dot", "_norm", "_rot", "_frame", "_cut", "_point_segment",
            "_segment_segment")
 INLINE = ("_v", "_add", "_sub", "_scale", "_dot", "_norm", "_rot")
@@ -267,7 +287,8 @@ AOT_PREFIX = "_kernels_aot_"
 
 def source_digest():
     """12 hex digits of sha256 over this file: what the machine code is of."""
-    return aot.source_digest(Path(__file__).resolve().parent, ("kernels.py",))
+    return aot.source_digest(Path(__file__).resolve().parent,
+                             ("kernels.py", "../model/shape_forms.py"))
 
 
 def aot_module_name():

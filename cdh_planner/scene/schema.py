@@ -12,10 +12,13 @@ One format everywhere (problem files' ``scene:`` key, ``verify --scene FILE``, t
         - {id: ball, type: sphere, radius: 0.02, position: [x, y, z]}
         - {id: post, type: box, size: [sx, sy, sz], position: [...], quaternion: [x, y, z, w]}
         - {id: pipe, type: cylinder, radius: r, height: h, position: [...], quaternion: [...]}
+        - {id: rod, type: capsule, radius: r, length: l, position: [...], quaternion: [...]}
         - {id: fixture, type: mesh, file: fixture.stl, scale: 1.0, position: [...], quaternion: [...]}
 
-SI units. A box's ``size`` is its full edge lengths; a cylinder's axis is its own z,
-``height`` its full length, centred on ``position``; a mesh file (STL, OBJ, PLY; read by
+SI units. The types are model.shapes.SHAPES (one class each: keys, checks, geometry). A
+box's ``size`` is its full edge lengths; a cylinder's axis is its own z, ``height`` its
+full length, centred on ``position``; a capsule is a cylinder of ``length`` along its z
+with hemispherical caps of ``radius`` (length + 2 radius overall), centred; a mesh file (STL, OBJ, PLY; read by
 trimesh) is relative to the scene file's folder, scaled by ``scale`` then placed by
 ``position`` / ``quaternion``, and checked as its convex hull (conservative: a concave
 fixture is best given as several meshes). ``position`` defaults to 0 and ``quaternion``
@@ -30,9 +33,7 @@ radius): with r = 1 mm and rho = 10 mm, iff alpha < 11.5 degrees.
 Every field is checked here; an error names the field and value (errors.InputError).
 """
 
-import math
-import os
-from dataclasses import dataclass, field, replace
+from dataclasses import dataclass, field, fields, replace
 from pathlib import Path
 
 import numpy as np
@@ -41,26 +42,19 @@ from .. import files
 from ..errors import MAX_POSITION_M, InputError, check_finite, check_keys, check_numbers
 from ..model.pose import check_quaternion, rotation_from_quaternion
 from ..model.robot import MAX_CABLE_RADIUS_M
+from ..model.shapes import SHAPES
 
-TYPES = ("sphere", "box", "cylinder", "mesh")
-PLATFORM_TYPES = TYPES  # a platform shape may be any of them, in the platform frame
 MAX_OBSTACLES = 1000  # per scene: every one is checked at every pose
 # a scene file's lists hold obstacles or a few numbers: more than MAX_OBSTACLES entries is
 # refused while parsing, before the file's values add up to the generic bound
 SCENE_FILE_LIMITS = replace(files.YAML_LIMITS, max_items=MAX_OBSTACLES,
                             items_note=f" (a scene has at most {MAX_OBSTACLES} obstacles)")
 MAX_ID_CHARS = 64
-MAX_MESH_BYTES = 16 << 20  # a mesh file's size
-MAX_MESH_VERTICES = 100_000  # of a mesh, before its convex hull is taken
 DEFAULT_EXEMPTION_M = 0.01
 SHARED_ANCHOR_M = 1e-6  # two anchors closer than this are one shared anchor point
 IDENTITY = (0.0, 0.0, 0.0, 1.0)
 
 _COMMON = ("type", "position", "quaternion")
-_KEYS = {"sphere": ("radius",), "box": ("size",), "cylinder": ("radius", "height"),
-         "mesh": ("file", "scale")}
-_REQUIRED = {"sphere": ("radius",), "box": ("size",), "cylinder": ("radius", "height"),
-             "mesh": ("file",)}
 SCENE_KEYS = ("cable_radius", "clearance", "shared_anchor_exemption", "platform", "obstacles")
 
 
@@ -68,8 +62,9 @@ SCENE_KEYS = ("cable_radius", "clearance", "shared_anchor_exemption", "platform"
 class Shape:
     """A solid in its frame (base frame for an obstacle, platform frame for the platform).
 
-    ``kind``: one of TYPES; ``radius`` (m, sphere and cylinder), ``height`` (m, cylinder,
-    along its z), ``size`` (3,) m (box, full edges), ``vertices`` (n, 3) m (mesh: its convex
+    ``kind``: a type of model.shapes.SHAPES; ``radius`` (m, sphere, cylinder, capsule),
+    ``height`` (m, cylinder, along its z), ``length`` (m, capsule: its cylinder's, along
+    its z), ``size`` (3,) m (box, full edges), ``vertices`` (n, 3) m (mesh: its convex
     hull's vertices, scaled, in the shape's own frame), ``file`` and ``scale`` as given.
     ``position`` (3,) m and ``quaternion`` (x, y, z, w) place it; ``rotation`` is the
     quaternion's matrix. ``id``: an obstacle's unique name ("platform" for the platform)."""
@@ -80,6 +75,7 @@ class Shape:
     quaternion: np.ndarray
     radius: float = 0.0
     height: float = 0.0
+    length: float = 0.0
     size: np.ndarray = None
     vertices: np.ndarray = None
     file: str = ""
@@ -91,21 +87,19 @@ class Shape:
 
     def same_geometry(self, other):
         """True when ``other`` is the same shape in the same place (ids, kinds, sizes and
-        poses exactly equal; the source file's name aside)."""
-        arrays = ("position", "quaternion", "size", "vertices")
-        return (other is not None and (self.id, self.kind, self.radius, self.height, self.scale)
-                == (other.id, other.kind, other.radius, other.height, other.scale)
-                and all(_same_array(getattr(self, a), getattr(other, a)) for a in arrays))
+        poses exactly equal; the source file's name aside): every field, so a shape type's
+        new field counts without a change here."""
+        return other is not None and all(_same_value(getattr(self, f.name), getattr(other, f.name))
+                                         for f in fields(self) if f.name not in ("file", "rotation"))
 
     def bounding_radius(self):
         """Radius (m) of a sphere about ``position`` that holds the whole shape."""
-        if self.kind == "sphere":
-            return self.radius
-        if self.kind == "box":
-            return 0.5 * float(np.linalg.norm(self.size))
-        if self.kind == "cylinder":
-            return math.hypot(self.radius, 0.5 * self.height)
-        return float(np.max(np.linalg.norm(self.vertices, axis=1)))
+        return self.type.bounding_radius(self)
+
+    @property
+    def type(self):
+        """Its class in model.shapes.SHAPES."""
+        return SHAPES[self.kind]
 
 
 @dataclass(frozen=True, eq=False)
@@ -141,10 +135,11 @@ class Scene:
         raise KeyError(obstacle_id)
 
 
-def _same_array(a, b):
-    if a is None or b is None:
-        return a is None and b is None
-    return np.shape(a) == np.shape(b) and bool(np.array_equal(a, b))
+def _same_value(a, b):
+    if isinstance(a, np.ndarray) or isinstance(b, np.ndarray):
+        return a is not None and b is not None and np.shape(a) == np.shape(b) \
+            and bool(np.array_equal(a, b))
+    return a == b
 
 
 def load_scene(path, robot=None):
@@ -190,9 +185,7 @@ def robot_platform(robot):
     kind = getattr(robot, "platform_shape", "none")
     if kind == "none":
         return None
-    size = np.asarray(robot.platform_size, dtype=float)
-    fields = {"box": dict(size=size), "sphere": dict(radius=0.5 * size[0]),
-              "cylinder": dict(radius=0.5 * size[0], height=size[2])}[kind]
+    fields = SHAPES[kind].platform_fields(np.asarray(robot.platform_size, dtype=float))
     return Shape(id="platform", kind=kind, position=np.asarray(robot.platform_center, float),
                  quaternion=np.array(IDENTITY), **fields)
 
@@ -229,86 +222,17 @@ def shape_from_dict(d, where, shape_id, base_dir=".", extra=()):
     if not isinstance(d, dict):
         raise InputError(where, d, "expected a mapping (type, ...)")
     kind = d.get("type")
-    if kind not in TYPES:
-        raise InputError(f"{where}.type", kind, f"expected one of {', '.join(TYPES)}")
-    check_keys(where, d, _COMMON + _KEYS[kind] + tuple(extra), required=_REQUIRED[kind])
+    if not isinstance(kind, str) or kind not in SHAPES:  # a list is no type (nor hashable)
+        raise InputError(f"{where}.type", kind, f"expected one of {', '.join(SHAPES)}")
+    cls = SHAPES[kind]
+    check_keys(where, d, _COMMON + cls.required + cls.optional + tuple(extra),
+               required=cls.required)
     position = np.array(check_numbers(f"{where}.position", d.get("position", [0.0] * 3), 3,
                                       MAX_POSITION_M))
     q = check_numbers(f"{where}.quaternion", d.get("quaternion", list(IDENTITY)), 4)
     quaternion = check_quaternion(q, f"{where}.quaternion")
-    common = dict(id=shape_id, kind=kind, position=position, quaternion=quaternion)
-    if kind == "sphere":
-        return Shape(**common, radius=_positive(f"{where}.radius", d["radius"]))
-    if kind == "cylinder":
-        return Shape(**common, radius=_positive(f"{where}.radius", d["radius"]),
-                     height=_positive(f"{where}.height", d["height"]))
-    if kind == "box":
-        size = check_numbers(f"{where}.size", d["size"], 3, MAX_POSITION_M)
-        for i, s in enumerate(size):
-            _positive(f"{where}.size[{i}]", s)
-        return Shape(**common, size=np.array(size))
-    scale = _positive(f"{where}.scale", d.get("scale", 1.0))
-    name = d["file"]
-    if not isinstance(name, str) or not name or "\x00" in name:
-        raise InputError(f"{where}.file", name, "expected a file name (STL, OBJ or PLY)")
-    path = Path(base_dir) / name
-    vertices = mesh_hull(path, f"{where}.file") * scale
-    if float(np.max(np.abs(vertices))) > MAX_POSITION_M:
-        raise InputError(f"{where}.scale", scale, f"the scaled mesh reaches beyond "
-                                                  f"+-{MAX_POSITION_M:g} m")
-    return Shape(**common, vertices=vertices, file=str(path), scale=scale)
-
-
-def mesh_hull(path, where):
-    """The vertices (n, 3) of the convex hull of the mesh file ``path`` (trimesh reads
-    it); InputError naming ``where`` if it cannot be read or encloses no volume."""
-    import trimesh  # only scenes with meshes need it
-
-    try:
-        st = os.stat(path)
-    except (OSError, ValueError) as exc:
-        raise InputError(where, str(path), f"cannot read: {getattr(exc, 'strerror', None) or exc}") \
-            from None
-    if not os.path.isfile(path):
-        raise InputError(where, str(path), "not a regular file")
-    if st.st_size > MAX_MESH_BYTES:
-        raise InputError(where, str(path), f"file too large: {st.st_size} bytes "
-                                           f"(at most {MAX_MESH_BYTES})")
-    try:
-        mesh = trimesh.load(str(path), force="mesh", process=False)
-        return _hull(np.asarray(mesh.vertices, dtype=float))
-    except Exception as exc:  # trimesh's many parsers raise many kinds: all are bad input
-        raise InputError(where, str(path), f"not a mesh trimesh can read: "
-                                           f"{type(exc).__name__}: {exc}") from None
-
-
-def hull_of_points(points, where):
-    """The vertices (n, 3) of the convex hull of ``points`` (m; a mesh given by its
-    vertices, as shape_msgs/Mesh gives it); InputError naming ``where`` if there are not 4
-    to MAX_MESH_VERTICES finite points enclosing a volume."""
-    try:
-        return _hull(np.asarray(points, dtype=float).reshape(-1, 3))
-    except Exception as exc:  # noqa: BLE001 - qhull and trimesh raise many kinds
-        raise InputError(where, f"{np.size(points) // 3} vertices", f"not a solid mesh: "
-                                                                    f"{exc}") from None
-
-
-def _hull(v):
-    """Convex hull vertices of the points v (n, 3); ValueError saying why there are none."""
-    import trimesh
-
-    if not 4 <= len(v) <= MAX_MESH_VERTICES or not np.all(np.isfinite(v)):
-        raise ValueError(f"{len(v)} vertices (need 4 to {MAX_MESH_VERTICES}, finite)")
-    with np.errstate(all="ignore"):  # a flat set's volume is 0 / 0: refused below
-        hull = trimesh.convex.convex_hull(v)
-        volume = hull.volume
-    if not volume > 0.0:
-        raise ValueError("encloses no volume")
-    return np.asarray(hull.vertices, dtype=float)
-
-
-def _positive(where, value):
-    return check_finite(where, value, positive=True, limit=MAX_POSITION_M)
+    return Shape(id=shape_id, kind=kind, position=position, quaternion=quaternion,
+                 **cls.fields(d, where, base_dir))
 
 
 def _non_negative(where, value, limit):

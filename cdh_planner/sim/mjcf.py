@@ -16,7 +16,8 @@ plant (``sim.plant``) loads. Every value comes from the robot file (and a scene 
   DAMPING_TIME_S k (N s/m); the plant sets both for the commanded L0 at every step and
   ctrl = L0 + DAMPING_TIME_S L0' so that the damping acts on the stretch rate. In the file
   k is that of the keyframe ``home`` (``home_pose``).
-- Obstacles of the scene are static geoms (sphere, box, cylinder, mesh: its convex hull).
+- Obstacles of the scene are static geoms (sphere, box, cylinder, capsule, mesh: its convex
+  hull).
 - Camera ``workspace`` looks at the base anchors' centre from the side, the picture's up
   against gravity (the base frame may be z down).
 
@@ -109,21 +110,16 @@ def _wxyz(q):
 
 
 def _shape_geom(parent, shape, name, assets, **attrs):
-    """A geom of a scene Shape (sphere, box, cylinder, mesh) placed by its pose."""
+    """A geom of a scene Shape placed by its pose (its class's MuJoCo type and size; a mesh
+    its hull's vertices as an asset)."""
     geom = ET.SubElement(parent, "geom", name=name, pos=_num(shape.position),
                          quat=_wxyz(shape.quaternion), **attrs)
-    if shape.kind == "sphere":
-        geom.set("type", "sphere")
-        geom.set("size", _num([shape.radius]))
-    elif shape.kind == "box":
-        geom.set("type", "box")
-        geom.set("size", _num(0.5 * np.asarray(shape.size)))
-    elif shape.kind == "cylinder":
-        geom.set("type", "cylinder")
-        geom.set("size", _num([shape.radius, 0.5 * shape.height]))
+    kind, size = shape.type.mjcf(shape)
+    geom.set("type", kind)
+    if kind != "mesh":
+        geom.set("size", _num(size))
     else:
         ET.SubElement(assets, "mesh", name=f"{name}_mesh", vertex=_num(shape.vertices))
-        geom.set("type", "mesh")
         geom.set("mesh", f"{name}_mesh")
     return geom
 

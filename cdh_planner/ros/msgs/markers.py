@@ -52,8 +52,9 @@ def markers_msg(path, robot, frame_id, stamp, *, line_width=LINE_WIDTH_M, delete
       cables from the base anchor a_i to p + R b_i, each coloured by its tension margin.
 
     - with a ``scene`` (scene.schema.Scene), ns ``obstacles`` id k: obstacle k as a SPHERE,
-      CUBE, CYLINDER (RViz's: along z, as the scene's) or, for a mesh, the TRIANGLE_LIST of
-      its convex hull (what the checks use).
+      CUBE, CYLINDER (RViz's: along z, as the scene's), for a capsule a CYLINDER with two
+      SPHERE caps (ns ``obstacles/1`` and ``obstacles/2``) or, for a mesh, the
+      TRIANGLE_LIST of its convex hull (what the checks use).
 
     With ``delete_all`` a DELETEALL marker comes first, so a new plan replaces the old one.
     """
@@ -83,30 +84,25 @@ def markers_msg(path, robot, frame_id, stamp, *, line_width=LINE_WIDTH_M, delete
 
 def obstacle_markers(scene, frame_id, stamp):
     """One marker per obstacle of ``scene`` (ns ``obstacles``, ids in scene order), placed
-    by its pose in ``frame_id`` (m)."""
+    by its pose in ``frame_id`` (m); a shape of several parts (model.shapes: ``markers``,
+    a capsule's two caps) adds part j in ns ``obstacles/<j>`` under the same id."""
     from scipy.spatial import ConvexHull
 
-    kinds = {"sphere": Marker.SPHERE, "box": Marker.CUBE, "cylinder": Marker.CYLINDER,
-             "mesh": Marker.TRIANGLE_LIST}
     out = []
     for k, o in enumerate(scene.obstacles):
-        m = _marker(frame_id, stamp, "obstacles", k, kinds[o.kind], 1.0, OBSTACLE_COLOR)
-        m.pose.position = _point(o.position)
+        R = np.asarray(o.rotation, float)
         x, y, z, w = (float(v) for v in o.quaternion)
-        m.pose.orientation.x, m.pose.orientation.y, m.pose.orientation.z = x, y, z
-        m.pose.orientation.w = w
-        if o.kind == "sphere":
-            m.scale.x = m.scale.y = m.scale.z = 2.0 * o.radius
-        elif o.kind == "box":
-            m.scale.x, m.scale.y, m.scale.z = (float(s) for s in o.size)
-        elif o.kind == "cylinder":
-            m.scale.x = m.scale.y = 2.0 * o.radius
-            m.scale.z = float(o.height)
-        else:
-            m.scale.x = m.scale.y = m.scale.z = 1.0
-            hull = ConvexHull(o.vertices)
-            m.points = [_point(o.vertices[i]) for tri in hull.simplices for i in tri]
-        out.append(m)
+        for j, (kind, (offset, scale)) in enumerate(zip(o.type.markers, o.type.marker_parts(o))):
+            ns = "obstacles" if j == 0 else f"obstacles/{j}"  # a capsule's caps: parts 1, 2
+            m = _marker(frame_id, stamp, ns, k, getattr(Marker, kind), 1.0, OBSTACLE_COLOR)
+            m.pose.position = _point(o.position + R @ offset)
+            m.pose.orientation.x, m.pose.orientation.y, m.pose.orientation.z = x, y, z
+            m.pose.orientation.w = w
+            m.scale.x, m.scale.y, m.scale.z = (float(v) for v in scale)
+            if kind == "TRIANGLE_LIST":  # a mesh: its convex hull, what the checks use
+                m.points = [_point(o.vertices[i]) for tri in ConvexHull(o.vertices).simplices
+                            for i in tri]
+            out.append(m)
     return out
 
 

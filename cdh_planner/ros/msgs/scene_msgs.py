@@ -7,7 +7,8 @@
     array = scene_change(current, target)               # the ObstacleArray from one to the other
 
 A SolidPrimitive SPHERE (radius), BOX (x, y, z: full edges) or CYLINDER (height, radius) is
-the scene file's sphere, box or cylinder; a Mesh is checked as the convex hull of its
+the scene file's sphere, box or cylinder, and type Obstacle.CAPSULE (length, radius) its
+capsule (each shape class of model.shapes gives its type number and dimensions); a Mesh is checked as the convex hull of its
 vertices (as a mesh file is). Poses are in the base frame (m), orientations unit quaternions
 (within 1e-3, as the goals').
 """
@@ -20,11 +21,18 @@ from cdh_planner_interfaces.msg import Obstacle, ObstacleArray, Scene
 
 from ...errors import MAX_POSITION_M, InputError, check_numbers
 from ...model.pose import check_quaternion
-from ...scene.schema import MAX_ID_CHARS, Shape, hull_of_points, shape_from_dict
+from ...model.shapes import SHAPES, hull_of_points
+from ...scene.schema import MAX_ID_CHARS, Shape, shape_from_dict
 
-PRIMITIVES = {SolidPrimitive.SPHERE: "sphere", SolidPrimitive.BOX: "box",
-              SolidPrimitive.CYLINDER: "cylinder"}
-DIMENSIONS = {"sphere": 1, "box": 3, "cylinder": 2}
+# {type number: shape type} of the classes with a primitive: SolidPrimitive's constant of
+# that name, else the Obstacle message's own (CAPSULE)
+PRIMITIVES = {getattr(SolidPrimitive, c.primitive, None) or getattr(Obstacle, c.primitive): t
+              for t, c in SHAPES.items() if c.primitive is not None}
+
+
+def _listed(words):
+    """"a, b or c"."""
+    return f"{', '.join(words[:-1])} or {words[-1]}"
 
 
 def check_id(oid, where):
@@ -45,8 +53,9 @@ def shape_of_obstacle(msg, where):
     q = check_quaternion([o.x, o.y, o.z, o.w], f"{where}.pose.orientation")
     has_mesh = len(msg.mesh.vertices) > 0
     if has_mesh == (msg.primitive.type != 0):
-        raise InputError(where, oid, "give exactly one shape: a primitive (type SPHERE, BOX or "
-                                     "CYLINDER) or a mesh (its vertices)")
+        names = _listed([SHAPES[t].primitive for t in PRIMITIVES.values()])
+        raise InputError(where, oid, f"give exactly one shape: a primitive (type {names}) or "
+                                     "a mesh (its vertices)")
     if has_mesh:
         v = np.array([[p.x, p.y, p.z] for p in msg.mesh.vertices], dtype=float)
         hull = hull_of_points(v, f"{where}.mesh.vertices")
@@ -57,13 +66,13 @@ def shape_of_obstacle(msg, where):
     kind = PRIMITIVES.get(msg.primitive.type)
     if kind is None:
         raise InputError(f"{where}.primitive.type", int(msg.primitive.type),
-                         "expected SPHERE (2), BOX (1) or CYLINDER (3)")
+                         "expected " + _listed([f"{SHAPES[t].primitive} ({n})"
+                                                for n, t in PRIMITIVES.items()]))
     dims = [float(d) for d in msg.primitive.dimensions]
-    if len(dims) != DIMENSIONS[kind]:
-        raise InputError(f"{where}.primitive.dimensions", dims,
-                         f"a {kind} has {DIMENSIONS[kind]}")
-    fields = {"sphere": lambda: {"radius": dims[0]}, "box": lambda: {"size": dims},
-              "cylinder": lambda: {"height": dims[0], "radius": dims[1]}}[kind]()
+    count = SHAPES[kind].dimensions
+    if len(dims) != count:
+        raise InputError(f"{where}.primitive.dimensions", dims, f"a {kind} has {count}")
+    fields = SHAPES[kind].primitive_fields(dims)
     return shape_from_dict(dict(type=kind, position=position, quaternion=q.tolist(), **fields),
                            f"{where}.primitive", oid)
 
@@ -75,16 +84,17 @@ def obstacle_msg(shape, operation=Obstacle.ADD):
     x, y, z, w = (float(v) for v in shape.quaternion)
     msg.pose.orientation.x, msg.pose.orientation.y = x, y
     msg.pose.orientation.z, msg.pose.orientation.w = z, w
-    if shape.kind == "mesh":
+    if shape.type.primitive is None and shape.vertices is not None:
         from scipy.spatial import ConvexHull
         msg.mesh.vertices = [_point(v) for v in shape.vertices]
         msg.mesh.triangles = [MeshTriangle(vertex_indices=[int(i) for i in tri])
                               for tri in ConvexHull(shape.vertices).simplices]
         return msg
-    kind = {v: k for k, v in PRIMITIVES.items()}[shape.kind]
-    dims = {"sphere": lambda: [shape.radius], "box": lambda: list(shape.size),
-            "cylinder": lambda: [shape.height, shape.radius]}[shape.kind]()
-    msg.primitive = SolidPrimitive(type=kind, dimensions=[float(d) for d in dims])
+    if shape.type.primitive is None:
+        raise ValueError(f"a {shape.kind} has no Obstacle message: {shape.type.no_primitive}")
+    dims = shape.type.primitive_dimensions(shape)
+    number = {t: n for n, t in PRIMITIVES.items()}[shape.kind]
+    msg.primitive = SolidPrimitive(type=number, dimensions=[float(d) for d in dims])
     return msg
 
 
