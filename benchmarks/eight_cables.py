@@ -24,10 +24,8 @@ median over ``--repeats`` runs, then the median over the queries (a failure coun
 """
 
 import argparse
-import json
 import os
 import statistics
-import subprocess
 import sys
 import tempfile
 import time
@@ -36,6 +34,7 @@ from pathlib import Path
 import numpy as np
 import yaml
 
+from compare_plans import plan_json  # beside this script
 from random_queries import random_free_queries  # benchmarks/random_queries.py, beside this script
 from cdh_planner.model.robot import load_robot
 from cdh_planner.wrench import band_feasibility
@@ -73,24 +72,19 @@ def run_plan(robot_file, robot, query, timeout, checkout=ROOT):
     """(status, seconds, safe) of one whole ``cdh-planner plan`` call (``checkout``'s
     cdh_planner first on PYTHONPATH); safe is None without a path."""
     with tempfile.TemporaryDirectory() as tmp:
-        problem, out = problem_file(tmp, robot_file, query, timeout), Path(tmp) / "plan.json"
+        problem = problem_file(tmp, robot_file, query, timeout)
         t = time.perf_counter()
-        try:
-            subprocess.run([sys.executable, "-m", "cdh_planner.cli", "plan", str(problem), "--json",
-                            str(out), "--quiet"], cwd=checkout, timeout=timeout + 30,
-                           env=dict(os.environ, PYTHONPATH=str(checkout)),
-                           stdout=subprocess.DEVNULL, stderr=subprocess.DEVNULL)
-        except subprocess.TimeoutExpired:
-            return "timeout", timeout, None
+        d = plan_json(checkout, problem, timeout + 30)
         seconds = time.perf_counter() - t
-        if not out.exists():
-            return "error", seconds, None
-        d = json.loads(out.read_text())
-        if not d["success"]:
-            return d["reason"], seconds, None
-        p = np.array([w["p"] for w in d["path"]])
-        q = np.array([w["quaternion"] for w in d["path"]])
-        return "path", seconds, all(s.feasible for s in check_motion(robot, p, q))
+    if d is None:
+        return "timeout", timeout, None
+    if "no output" in d:
+        return "error", seconds, None
+    if not d["success"]:
+        return d["reason"], seconds, None
+    p = np.array([w["p"] for w in d["path"]])
+    q = np.array([w["quaternion"] for w in d["path"]])
+    return "path", seconds, all(s.feasible for s in check_motion(robot, p, q))
 
 
 def main():
