@@ -47,9 +47,12 @@ def home_orientation(robot, draws=100_000, seed=0):
     return R[int(np.argmax(wrench_feasibility(robot, p, R=R.as_matrix()).margin))]
 
 
-def feasible_poses(robot, count, rng, min_margin=0.01, max_tilt=np.pi / 3, home=None):
+def feasible_poses(robot, count, rng, min_margin=0.01, max_tilt=np.pi / 3, home=None,
+                   feasibility=wrench_feasibility):
     """``count`` random wrench-feasible poses within ``max_tilt`` (rad) of the ``home``
-    orientation (default: ``home_orientation``): positions (count, 3) m, tau (count, 3) rad."""
+    orientation (default: ``home_orientation``): positions (count, 3) m, tau (count, 3) rad.
+    ``feasibility``: the test whose margin is at least ``min_margin`` (the planner's domain
+    is ``band_feasibility``'s, stronger for more than six cables)."""
     lo, hi = workspace_box(robot)
     home = home_orientation(robot) if home is None else home
     ps, taus = [], []
@@ -59,8 +62,7 @@ def feasible_poses(robot, count, rng, min_margin=0.01, max_tilt=np.pi / 3, home=
         axis /= np.linalg.norm(axis, axis=1, keepdims=True)
         angle = max_tilt * rng.random((BATCH, 1)) ** (1 / 3)  # uniform in the ball of rotation vectors
         R = (home * Rotation.from_rotvec(axis * angle)).as_matrix()
-        f = wrench_feasibility(robot, p, R=R)
-        ok = np.flatnonzero(f.margin >= min_margin)
+        ok = np.flatnonzero(feasibility(robot, p, R=R).margin >= min_margin)
         ps.extend(p[ok])
         taus.extend(tau_from_rotation(R[ok]))
         if len(ps) >= count:
@@ -68,22 +70,24 @@ def feasible_poses(robot, count, rng, min_margin=0.01, max_tilt=np.pi / 3, home=
     raise RuntimeError(f"fewer than {count} feasible poses in {MAX_ROUNDS * BATCH} draws")
 
 
-def random_free_queries(robot, count, seed=0, min_margin=0.01, max_tilt=np.pi / 3):
-    """``count`` FreeQuery, reproducible from ``seed``."""
+def random_free_queries(robot, count, seed=0, min_margin=0.01, max_tilt=np.pi / 3,
+                        feasibility=wrench_feasibility):
+    """``count`` FreeQuery, reproducible from ``seed``; ``feasibility``: the test of the
+    ends (as in ``feasible_poses``) and of the straight motion."""
     rng = np.random.default_rng(seed)
     home = home_orientation(robot)
     out = []
     for _ in range(MAX_ROUNDS):
-        p, tau = feasible_poses(robot, 2 * count, rng, min_margin, max_tilt, home)
-        margins = wrench_feasibility(robot, p, tau).margin
+        p, tau = feasible_poses(robot, 2 * count, rng, min_margin, max_tilt, home, feasibility)
+        margins = feasibility(robot, p, tau).margin
         for a in range(0, len(p) - 1, 2):
             b = a + 1
             motion = SlerpPath(p[[a, b]], quaternion_from_tau(tau[[a, b]]))
             s = np.linspace(0.0, 1.0, PROBE_SAMPLES)
             pp, RR = motion(np.zeros(s.size, dtype=int), s)
-            if wrench_feasibility(robot, pp, R=RR).feasible.all():
+            if np.all(feasibility(robot, pp, R=RR).margin > 0):
                 continue  # most likely safe: not a query that needs a planner
-            seg = check_path(robot, motion)[0]
+            seg = check_path(robot, motion, feasibility=feasibility)[0]
             if seg.feasible:  # the probe's infeasible pose was between the dense samples
                 continue
             out.append(FreeQuery(Pose(p[a], tau[a]), Pose(p[b], tau[b]),

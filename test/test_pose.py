@@ -125,3 +125,11 @@ def test_check_quaternion_errors_name_the_field(q, reason):
         check_quaternion(q, field="poses[3].quaternion")
     assert exc.value.field == "poses[3].quaternion"
     assert reason in str(exc.value)
+
+
+def test_cross_is_numpys_cross_to_the_bit():
+    from cdh_planner.model.pose import cross
+    rng = np.random.default_rng(3)
+    a, b = rng.normal(size=(5, 3)), rng.normal(size=(7, 5, 3))
+    assert np.array_equal(cross(a, b), np.cross(a, b))
+    assert np.array_equal(cross(b[0], a), np.cross(b[0], a))

@@ -8,6 +8,7 @@ from dataclasses import dataclass
 import numpy as np
 
 from ..ports import Rotation
+from .pose import cross
 
 
 def is_elastic(robot):
@@ -84,15 +85,15 @@ def wrench_balance(robot, L0, p, R, force, moment, arm, bilateral=False, jacobia
         t = np.maximum(t, 0.0)
         k = np.where(t > 0, k, 0.0)
     c = p + R @ robot.load_point
-    w = np.concatenate([force, moment + np.cross(c, arm)], axis=1)
-    au = np.cross(a, u)                                                 # a_i x u_i (M, m, 3)
+    w = np.concatenate([force, moment + cross(c, arm)], axis=1)
+    au = cross(a, u)                                                 # a_i x u_i (M, m, 3)
     res = np.concatenate([(t[:, None, :] @ u)[:, 0], (t[:, None, :] @ au)[:, 0]], axis=1) - w
     if not jacobian:
         return res, None, t
     # dq_i = dp + dtheta x r_i; dL_i = [u_i; r_i x u_i] . [dp; dtheta];
     # d(t_i u_i) = k_i u_i dL_i + (t_i / L_i) (dq_i - u_i dL_i), summed over the cables with
     # matrix products (M, 3, m) @ (M, m, 6), the [a]x [r]x terms as r a^T - (a . r) I
-    dL = np.concatenate([u, np.cross(r, u)], axis=-1)                   # (M, m, 6)
+    dL = np.concatenate([u, cross(r, u)], axis=-1)                   # (M, m, 6)
     tl = t / L                                                          # (M, m) N/m
     cu = (k - tl)[..., None] * dL                                        # (M, m, 6)
     wr = tl[..., None] * r                                               # (t_i / L_i) r_i (M, m, 3)
@@ -129,13 +130,13 @@ def equilibrium_poses(robot, L0, p0, R0, force, moment, arm,
 
 
 def _newton(robot, L0, p, R, load, bilateral, max_iterations):
-    """Newton with line search on ``wrench_balance`` (in place on p, R); converged (M,)."""
+    """Newton with line search on ``wrench_balance`` (in place on p, R); converged (M,).
+    The residual at the poses a line search accepts is the one it computed there."""
     scale = EQUILIBRIUM_TOL * np.maximum(1.0, np.linalg.norm(load[0], axis=1))
     ok = np.zeros(len(p), dtype=bool)
     todo = np.arange(len(p))
+    res, _, _ = wrench_balance(robot, L0, p, R, *load, bilateral, jacobian=False)
     for _ in range(max_iterations):
-        res, _, _ = wrench_balance(robot, L0[todo], p[todo], R[todo],
-                                   *(x[todo] for x in load), bilateral, jacobian=False)
         done = np.max(np.abs(res), axis=1) <= scale[todo]
         ok[todo[done]] = True
         todo, res = todo[~done], res[~done]
@@ -148,9 +149,9 @@ def _newton(robot, L0, p, R, load, bilateral, max_iterations):
         todo, res, step = todo[keep], res[keep], step[keep]
         if todo.size == 0:
             break
-        p[todo], R[todo], moved = _line_search(robot, L0[todo], p[todo], R[todo], step, res,
-                                               tuple(x[todo] for x in load), bilateral)
-        todo = todo[moved]  # no step lowers the residual: stuck, not converged
+        p[todo], R[todo], moved, res = _line_search(robot, L0[todo], p[todo], R[todo], step, res,
+                                                    tuple(x[todo] for x in load), bilateral)
+        todo, res = todo[moved], res[moved]  # no step lowers the residual: stuck, not converged
     return ok
 
 
@@ -170,9 +171,10 @@ def _line_search(robot, L0, p, R, step, res, load, bilateral, halvings=LINE_SEAR
     """The poses moved by the Newton ``step`` (K, 6), halved while the largest residual
     does not fall below that at (p, R) (``res``): far from the equilibrium a stiff
     cable's slack or the geometric stiffness can make the full step overshoot. Also which
-    poses moved (K,) (the others found no lower residual)."""
+    poses moved (K,) (the others found no lower residual) and the residual (K, 6) at the
+    returned poses (``res`` where none moved)."""
     before = np.max(np.abs(res), axis=1)
-    p_new, R_new = p.copy(), R.copy()
+    p_new, R_new, res_new = p.copy(), R.copy(), res.copy()
     scale = np.ones(len(p))
     todo = np.arange(len(p))
     for _ in range(halvings):
@@ -183,13 +185,14 @@ def _line_search(robot, L0, p, R, step, res, load, bilateral, halvings=LINE_SEAR
                                      *(x[todo] for x in load), bilateral, jacobian=False)
         better = np.max(np.abs(after), axis=1) < before[todo]
         p_new[todo[better]], R_new[todo[better]] = p_try[better], R_try[better]
+        res_new[todo[better]] = after[better]
         todo = todo[~better]
         if todo.size == 0:
             break
         scale[todo] *= 0.5
     moved = np.ones(len(p), dtype=bool)
     moved[todo] = False
-    return p_new, R_new, moved
+    return p_new, R_new, moved, res_new
 
 
 def _skew(v):

@@ -42,7 +42,7 @@ import numpy as np
 from ..wrench import load_point, rule_tensions
 from ..model.elastic import equilibrium_poses, is_elastic
 from ..model.forward_kinematics import forward_kinematics_many
-from ..model.pose import tau_from_rotation
+from ..model.pose import cross, tau_from_rotation
 from ..ports import CubicSpline, Rotation, Slerp
 from .path import with_commands
 from .timing import limit_ratio
@@ -311,7 +311,7 @@ def _equilibria(robot, L0, p, R, inertial=None):
     arm = force if robot.ellipsoid_frame == "load" else np.zeros_like(force)
     if inertial is not None:  # [m c''; c x m c'' + R (I alpha + omega x I omega)]
         c = load_point(robot, p, R)
-        moment = moment - (inertial[:, 3:] - np.cross(c, inertial[:, :3]))
+        moment = moment - (inertial[:, 3:] - cross(c, inertial[:, :3]))
         force, arm = force - inertial[:, :3], arm - inertial[:, :3]
     return equilibrium_poses(robot, L0, p, R, force, moment, arm)
 
@@ -337,9 +337,9 @@ def _inertial(R, c, c_dd, omega, alpha, mass, inertia):
     if mass is None:
         return np.zeros((len(c), 6))
     I = np.asarray(inertia, dtype=float).reshape(3, 3)
-    moment = np.einsum("nij,nj->ni", R, alpha @ I.T + np.cross(omega, omega @ I.T))
+    moment = np.einsum("nij,nj->ni", R, alpha @ I.T + cross(omega, omega @ I.T))
     force = mass * c_dd
-    return np.concatenate([force, np.cross(c, force) + moment], axis=1)
+    return np.concatenate([force, cross(c, force) + moment], axis=1)
 
 
 def _reason(least_n, lengths_ok, speed, accel, no_pose, blocked=()):

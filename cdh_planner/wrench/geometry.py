@@ -6,6 +6,8 @@ from functools import lru_cache
 
 import numpy as np
 
+from ..model.pose import cross
+
 
 def skew(v):
     """Cross-product matrices [v]x, shape (..., 3, 3)."""
@@ -26,7 +28,7 @@ def screw_jacobian(robot, u):
     """J with column i = [u_i; a_i x u_i] (moments about the base origin), shape (N, 6, m)."""
     J = np.empty(u.shape[:-2] + (6, u.shape[-2]))
     J[..., :3, :] = np.swapaxes(u, -1, -2)
-    J[..., 3:, :] = np.swapaxes(np.cross(robot.base_anchors, u), -1, -2)
+    J[..., 3:, :] = np.swapaxes(cross(robot.base_anchors, u), -1, -2)
     return J
 
 
@@ -48,7 +50,7 @@ def nominal_wrench(robot, c):
     """w0 in F1 (force; moment about O), shape (N, 6)."""
     w = np.broadcast_to(robot.wrench_center_local, c.shape[:-1] + (6,)).copy()
     if robot.ellipsoid_frame == "load":
-        w[..., 3:] += np.cross(c, w[..., :3])
+        w[..., 3:] += cross(c, w[..., :3])
     return w
 
 

@@ -1,0 +1,124 @@
+"""Eight-cable free flight: whole ``cdh-planner plan`` calls on random CoGiRo and IPAnema 2
+queries whose straight motion is infeasible (issue 32, item 3).
+
+    .venv/bin/python benchmarks/eight_cables.py [--per-robot 5 4] [--seed 0] [--repeats 3]
+        [--timeout 60] [--only 0 3 ...] [--checkout DIR]
+
+Queries (fixed seed): benchmarks/random_queries.py's ``random_free_queries`` on
+config/cogiro.yaml (the first ``--per-robot`` count) and config/ipanema2.yaml (the second):
+both ends inside the planner's domain (``wrench.band_feasibility``: the tension rule's
+band within the limits, stronger than the facet test) with a margin >= 0.01, within 60 deg
+of the robot's home orientation (CoGiRo) or any orientation (IPAnema 2), the straight motion
+(position linear, orientation slerp) leaving that domain (the dense check
+``trajectory.path_check.check_path`` with ``band_feasibility``): the planner cannot take
+it. 5 + 4 = 9 queries by default.
+
+Each query is a problem file (free flight; radius 0.5, winch limits 1 m/s and 2 m/s^2 as
+config/problems/cogiro_turn_at_edge.yaml) planned by ``cdh-planner plan PROBLEM --json OUT
+--quiet`` in a fresh process; seconds = the process's wall clock (start-up included).
+Every returned path is re-checked densely (``check_motion``, the default 1 mm / 0.2 deg
+steps, wrench feasibility): "unsafe" counts paths that fail it. Printed: per query the
+median over ``--repeats`` runs, then the median over the queries (a failure counts as
+--timeout), solved count and unsafe count against the issue's target (median <= 2 s,
+>= 8 of 9 solved, 0 unsafe), with the load average (2 CPUs shared). Exit code 0 always.
+"""
+
+import argparse
+import os
+import statistics
+import sys
+import tempfile
+import time
+from pathlib import Path
+
+import numpy as np
+import yaml
+
+from compare_plans import plan_json  # beside this script
+from random_queries import random_free_queries  # benchmarks/random_queries.py, beside this script
+from cdh_planner.model.robot import load_robot
+from cdh_planner.wrench import band_feasibility
+from cdh_planner.trajectory.path_check import check_motion
+
+ROOT = Path(__file__).resolve().parents[1]
+# robot file, largest tilt from home (rad): IPAnema 2's cables pull from above and below;
+# within pi/2 of home 1 % of its straight motions leave the domain (CoGiRo: 14 % within pi/3)
+ROBOTS = ((ROOT / "config" / "cogiro.yaml", np.pi / 3), (ROOT / "config" / "ipanema2.yaml", np.pi))
+PLANNER = {"radius": 0.5, "max_cable_speed": 1.0, "max_cable_accel": 2.0}
+TARGET_S, TARGET_SOLVED = 2.0, 8
+
+
+def cases(per_robot, seed):
+    """[(robot file, robot, FreeQuery), ...]: per_robot[i] queries of ROBOTS[i]."""
+    out = []
+    for (path, tilt), count in zip(ROBOTS, per_robot):
+        robot = load_robot(path)
+        out += [(path, robot, q) for q in random_free_queries(robot, count, seed, max_tilt=tilt,
+                                                              feasibility=band_feasibility)]
+    return out
+
+
+def problem_file(folder, robot_file, query, timeout):
+    path = Path(folder) / "problem.yaml"
+    path.write_text(yaml.safe_dump({
+        "description": "benchmarks/eight_cables.py query", "robot": str(robot_file),
+        "task": {"type": "free"}, "planner": dict(PLANNER, timeout_s=float(timeout)),
+        "start": {"position": query.start.p.tolist(), "tau": query.start.tau.tolist()},
+        "goal": {"position": query.goal.p.tolist(), "tau": query.goal.tau.tolist()}}))
+    return path
+
+
+def run_plan(robot_file, robot, query, timeout, checkout=ROOT):
+    """(status, seconds, safe) of one whole ``cdh-planner plan`` call (``checkout``'s
+    cdh_planner first on PYTHONPATH); safe is None without a path."""
+    with tempfile.TemporaryDirectory() as tmp:
+        problem = problem_file(tmp, robot_file, query, timeout)
+        t = time.perf_counter()
+        d = plan_json(checkout, problem, timeout + 30)
+        seconds = time.perf_counter() - t
+    if d is None:
+        return "timeout", timeout, None
+    if "no output" in d:
+        return "error", seconds, None
+    if not d["success"]:
+        return d["reason"], seconds, None
+    p = np.array([w["p"] for w in d["path"]])
+    q = np.array([w["quaternion"] for w in d["path"]])
+    return "path", seconds, all(s.feasible for s in check_motion(robot, p, q))
+
+
+def main():
+    ap = argparse.ArgumentParser(description=__doc__.splitlines()[0])
+    ap.add_argument("--per-robot", type=int, nargs=2, default=[5, 4],
+                    help="queries of cogiro.yaml and of ipanema2.yaml")
+    ap.add_argument("--seed", type=int, default=0)
+    ap.add_argument("--repeats", type=int, default=3)
+    ap.add_argument("--timeout", type=float, default=60.0)
+    ap.add_argument("--only", type=int, nargs="*", help="query indices to run")
+    ap.add_argument("--checkout", type=Path, default=ROOT,
+                    help="plan with this checkout's cdh_planner (e.g. main's, for a before/after)")
+    args = ap.parse_args()
+    print(f"load average {os.getloadavg()[0]:.1f} on {os.cpu_count()} CPUs", flush=True)
+    meds, solved, unsafe = [], 0, 0
+    for k, (robot_file, robot, query) in enumerate(cases(args.per_robot, args.seed)):
+        if args.only and k not in args.only:
+            continue
+        runs = [run_plan(robot_file, robot, query, args.timeout, args.checkout.resolve())
+                for _ in range(args.repeats)]
+        ok = [r for r in runs if r[0] == "path"]
+        solved += bool(ok)
+        unsafe += sum(r[2] is False for r in runs)
+        med = statistics.median(r[1] if r[0] == "path" else args.timeout for r in runs)
+        meds.append(med)
+        print(f"{k:>2} {robot.name:>8} unsafe at {query.unsafe_at:4.2f} | {med:6.2f} s "
+              f"({', '.join(f'{r[1]:.2f}' for r in runs)}) {runs[0][0]}", flush=True)
+    med = statistics.median(meds)
+    print(f"median {med:.2f} s ({min(meds):.2f} - {max(meds):.2f}), {solved} of {len(meds)} solved, "
+          f"{unsafe} unsafe paths; target median <= {TARGET_S:g} s, >= {TARGET_SOLVED} solved: "
+          f"{'met' if med <= TARGET_S and solved >= TARGET_SOLVED and not unsafe else 'NOT MET'}; "
+          f"load average {os.getloadavg()[0]:.1f}")
+    return 0
+
+
+if __name__ == "__main__":
+    sys.exit(main())
