@@ -14,6 +14,24 @@ PROBLEMS = CONFIG / "problems"
 PACKAGE = REPO / "cdh_planner"
 
 
+def pytest_configure(config):
+    """A short temporary root of the run's own (/tmp/cdh-test-XXXX; the workers of
+    pytest-xdist take popen-gwN folders inside it), unless --basetemp is given: error lines
+    show at most 80 characters of a value (errors.MAX_VALUE_CHARS), and the tests that
+    read a file's whole path in them need it shorter than pytest-of-USER/pytest-N/popen-gwN/
+    makes it. pytest empties a basetemp it is given, so each run has a new one."""
+    if config.option.basetemp is None and not hasattr(config, "workerinput"):
+        config.option.basetemp = config._cdh_basetemp = tempfile.mkdtemp(prefix="cdh-test-",
+                                                                          dir="/tmp")
+
+
+def pytest_sessionfinish(session, exitstatus):
+    """The run's temporary root goes when every test passed (kept to look at otherwise)."""
+    made = getattr(session.config, "_cdh_basetemp", None)
+    if made is not None and exitstatus == 0:
+        shutil.rmtree(made, ignore_errors=True)
+
+
 @pytest.fixture(scope="session", autouse=True)
 def ray_temp_dir():
     """Ray's session folders (and ``ray start``'s address file) in a folder of the run's own,

@@ -88,8 +88,8 @@ def prepare_out_dir(path, config_dir=None):
         for name, robot_file in ((o, config_dir / f) for o in outputs
                                  for f in paper.ROBOT_FILES.values()):
             if same_file(out / name, robot_file):
-                raise InputError("--out", str(path), f"its {name} would overwrite the input "
-                                                     f"{robot_file}")
+                raise InputError("--out", str(path), f"its {name} would overwrite the robot "
+                                                     f"file {robot_file.name} of --config-dir")
     try:
         out.mkdir(parents=True, exist_ok=True)
     except OSError as exc:
