@@ -44,8 +44,10 @@ def _pose(tf):
 
 
 def test_tf_gives_the_platform_pose_during_an_execution(tmp_path):
+    # the live state at every joint state the double publishes (50 Hz), not at the default
+    # 20 Hz: more than 10 poses during the motion on a loaded machine too
     params = ["execution.mode:=follow_joint_trajectory", f"execution.controller_action:={ACTION}",
-              f"execution.joint_states_topic:={JOINT_STATES}"]
+              f"execution.joint_states_topic:={JOINT_STATES}", "live_state_rate_hz:=200.0"]
     with claimed_domain() as domain, \
             ControllerDouble(domain, *ROBOT.winch_names, "--action", ACTION, "--joint-states",
                              JOINT_STATES, "--time-scale", 1.0,   # real time: the node
