@@ -173,3 +173,34 @@ def test_a_sweep_on_two_ray_workers_answers_as_in_this_process(tmp_path, capsys)
         rows[name] = [[line.split(",")[k] for k in keep] for line in lines]
     assert rows["serial"] == rows["ray"] and len(rows["ray"]) == 3
     capsys.readouterr()
+
+
+def test_ctrl_c_while_ray_workers_plan_leaves_stdout_clean(tmp_path):
+    """SIGINT to ``workspace --reach --workers 2`` while the actors have plans in flight
+    (seen by a "reach: k/N" progress line, k < N): exit 130, "interrupted" on stderr and
+    nothing of Ray's on stdout (killing busy actors first made the raylet print a coloured
+    "will be retried" line per call there)."""
+    proc = subprocess.Popen(
+        [sys.executable, "-m", "cdh_planner.cli", "workspace", str(ROBOT2), "--samples", "500",
+         "--seed", "3", "--workers", "2", "--reach", "--timeout", "600"],
+        stdout=subprocess.PIPE, stderr=subprocess.PIPE, cwd=tmp_path, env=dict(os.environ),
+        preexec_fn=lambda: signal.signal(signal.SIGINT, signal.SIG_DFL))
+    try:
+        seen = []
+        for raw in proc.stderr:   # the event: the reach stage under way, not finished
+            line = raw.decode(errors="replace")
+            seen.append(line)
+            done, _, total = line.partition(" ")[2].partition(" ")[0].partition("/")
+            if line.startswith("reach: ") and done.isdigit() and int(done) < int(total):
+                break
+        else:
+            pytest.fail(f"no reach progress before the end: {''.join(seen)[-500:]}")
+        proc.send_signal(signal.SIGINT)
+        out, err = proc.communicate(timeout=120)
+    finally:
+        if proc.poll() is None:
+            proc.kill()
+            proc.wait(30)
+    assert proc.returncode == 130, err.decode(errors="replace")[-500:]
+    assert b"interrupted" in err
+    assert out == b"", out[:300]
