@@ -56,7 +56,9 @@ def answers(res):
 
 
 def test_one_and_two_ray_workers_answer_as_this_process(robot, spec):
-    small = ws.WorkspaceSpec(**{**spec.__dict__, "samples": 400})
+    # 150 samples, about 40 reach plans: the answers compared, not the throughput (400 passed
+    # its 300 s bound on a quiet machine in 30 s but not with every core busy and 2 workers)
+    small = ws.WorkspaceSpec(**{**spec.__dict__, "samples": 150})
     serial = ws.run_workspace(robot, small, SerialExecutor())
     for workers in (1, 2):
         ex = RayExecutor(workers)
