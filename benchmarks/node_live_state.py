@@ -17,10 +17,10 @@ that the machine's changing load falls on each alike); and the library's own tim
 the same query (``Planner.plan`` in this process on the node's configuration, cold then
 warm).
 
-Targets (issue 32): idle <= 10 % of a core at 50 Hz, <= 25 % at 500 Hz; planning with a
+Targets (docs/performance.md, the node's live state): idle <= 10 % of a core at 50 Hz, <= 25 % at 500 Hz; planning with a
 50 Hz publisher within 1.2x of without, within 1.3x of the library. ``--python`` runs the
 node (not the publisher or the client) with another checkout's interpreter (e.g.
-/work/main/.venv/bin/python: before and after). Timings depend on the machine's load:
+OTHER/.venv/bin/python: before and after). Timings depend on the machine's load:
 report it with them.
 """
 

@@ -36,8 +36,23 @@ def register(cls):
     if cls.type in SHAPES and SHAPES[cls.type] is not cls:
         raise ValueError(f"shape type {cls.type!r} is already registered "
                          f"({SHAPES[cls.type].__name__})")
+    missing = [m for m in _methods_owed(cls) if not callable(getattr(cls, m, None))]
+    if missing:
+        raise TypeError(f"shape type {cls.type!r} ({cls.__name__}) lacks {', '.join(missing)}")
     SHAPES[cls.type] = cls
     return cls
+
+
+def _methods_owed(cls):
+    """What a shape class must define (ShapeType's docstring): every type its fields,
+    bounding radius, coal geometry, markers and MuJoCo geom; a platform type
+    ``platform_fields``; a type with a ROS primitive its ``primitive_*`` pair."""
+    owed = ["fields", "bounding_radius", "coal_geometry", "marker_parts", "mjcf"]
+    if cls.platform_extents:
+        owed.append("platform_fields")
+    if cls.primitive is not None:
+        owed += ["primitive_dimensions", "primitive_fields"]
+    return owed
 
 
 def platform_types():
@@ -51,7 +66,16 @@ class ShapeType:
     many leading extents of platform_shape.size are one diameter; ``primitive``: the name
     of its type constant in shape_msgs/SolidPrimitive or else cdh_planner_interfaces/
     Obstacle, with ``dimensions`` numbers; None with ``no_primitive`` saying why;
-    ``markers``: RViz Marker type names of its parts (the first is the obstacle's marker)."""
+    ``markers``: RViz Marker type names of its parts (the first is the obstacle's marker).
+
+    A class defines, as static methods (``register`` refuses one that lacks any it owes):
+    ``fields(d, where, base_dir)``, the Shape fields (dict) of the checked file mapping;
+    ``bounding_radius(s)``, m about the position; ``coal_geometry(s)``, in the shape's own
+    frame; ``marker_parts(s)``, [(offset (3,), scale (3,))] for each of ``markers``;
+    ``mjcf(s)``, (MuJoCo geom type, its sizes); a platform type ``platform_fields(size)``,
+    the fields of robot.platform_shape.size (3,) m; a type with a primitive
+    ``primitive_dimensions(s)`` (SolidPrimitive.dimensions, m) and ``primitive_fields(dims)``
+    (the file keys of such dimensions)."""
 
     type = ""
     required = ()
@@ -62,21 +86,6 @@ class ShapeType:
     no_primitive = ""
     markers = ()
 
-    @staticmethod
-    def fields(d, where, base_dir):
-        """The Shape fields (dict) of the checked file mapping ``d``."""
-        raise NotImplementedError
-
-    @staticmethod
-    def platform_fields(size):
-        """The Shape fields of robot.platform_shape.size (3,) m."""
-        raise NotImplementedError
-
-    @staticmethod
-    def bounding_radius(s):
-        """Radius (m) of a sphere about the shape's position that holds it."""
-        raise NotImplementedError
-
     @classmethod
     def bounding_capsule(cls, s):
         """(half axis (3,) m in the shape's parent frame, radius m): the capsule about its
@@ -85,34 +94,9 @@ class ShapeType:
         return np.zeros(3), cls.bounding_radius(s)
 
     @staticmethod
-    def coal_geometry(s):
-        """The coal geometry, in the shape's own frame."""
-        raise NotImplementedError
-
-    @staticmethod
     def kernel_form(s):
         """(form code, three numbers) for the compiled kernel; COAL_FORM: left to coal."""
         return (COAL_FORM, 0.0, 0.0, 0.0)
-
-    @staticmethod
-    def primitive_dimensions(s):
-        """SolidPrimitive.dimensions of the shape (m)."""
-        raise NotImplementedError
-
-    @staticmethod
-    def primitive_fields(dims):
-        """The file keys (dict) of SolidPrimitive.dimensions ``dims`` (their count checked)."""
-        raise NotImplementedError
-
-    @staticmethod
-    def marker_parts(s):
-        """[(offset (3,) in the shape's frame, scale (3,))] for each of ``markers``."""
-        raise NotImplementedError
-
-    @staticmethod
-    def mjcf(s):
-        """(MuJoCo geom type, its size numbers)."""
-        raise NotImplementedError
 
 
 @register
