@@ -181,9 +181,11 @@ def test_ctrl_c_while_ray_workers_plan_leaves_stdout_clean(tmp_path):
     """SIGINT to ``workspace --reach --workers 2`` while the actors have plans in flight
     (seen by a "reach: k/N" progress line, k < N): exit 130, "interrupted" on stderr and
     nothing of Ray's on stdout (killing busy actors first made the raylet print a coloured
-    "will be retried" line per call there)."""
+    "will be retried" line per call there). 4000 samples give some 340 reach plans: tens of
+    seconds on a fast machine, so a progress line (one per 5 s off a terminal) comes before
+    the end; 500 samples (43 plans) once ended inside the first 5 s."""
     proc = subprocess.Popen(
-        [sys.executable, "-m", "cdh_planner.cli", "workspace", str(ROBOT2), "--samples", "500",
+        [sys.executable, "-m", "cdh_planner.cli", "workspace", str(ROBOT2), "--samples", "4000",
          "--seed", "3", "--workers", "2", "--reach", "--timeout", "600"],
         stdout=subprocess.PIPE, stderr=subprocess.PIPE, cwd=tmp_path, env=dict(os.environ),
         preexec_fn=lambda: signal.signal(signal.SIGINT, signal.SIG_DFL))
