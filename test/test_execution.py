@@ -352,7 +352,7 @@ class Side:
 
     def __init__(self, domain):
         import rclpy
-        from rclpy.action import ActionClient
+        from cdh_planner.ros.actions import RaceFreeActionClient
         from rclpy.callback_groups import ReentrantCallbackGroup
         from rclpy.executors import MultiThreadedExecutor
         from control_msgs.action import FollowJointTrajectory
@@ -362,8 +362,8 @@ class Side:
         self.group = ReentrantCallbackGroup()
         self.executor = X.TrajectoryExecutor(self.node, ACTION, self.group)
         self.monitor = X.JointStateMonitor(self.node, "/joint_states", WINCHES)
-        self.raw = ActionClient(self.node, FollowJointTrajectory, ACTION,
-                                callback_group=self.group)
+        self.raw = RaceFreeActionClient(self.node, FollowJointTrajectory, ACTION,
+                                        callback_group=self.group)
         self._retired = []
         self.spinner = MultiThreadedExecutor(num_threads=4, context=self.context)
         self.spinner.add_node(self.node)

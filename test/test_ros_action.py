@@ -15,7 +15,7 @@ rclpy = pytest.importorskip("rclpy")
 
 from action_msgs.msg import GoalStatus  # noqa: E402
 from diagnostic_msgs.msg import DiagnosticStatus  # noqa: E402
-from rclpy.action import ActionClient  # noqa: E402
+from cdh_planner.ros.actions import RaceFreeActionClient  # noqa: E402
 from sensor_msgs.msg import JointState  # noqa: E402
 
 from cdh_planner_interfaces.action import PlanPath  # noqa: E402
@@ -264,7 +264,7 @@ def test_every_goal_gets_a_result_when_more_arrive_than_are_queued(tmp_path):
                         env={"FAKE_PLANNER_DELAY_FILE": str(delay)}) as node, \
             PlannerClient(domain_id=domain) as client:
         client.wait_for_node(30.0)
-        action = ActionClient(client.node, PlanPath, client.topic("plan_path"))
+        action = RaceFreeActionClient(client.node, PlanPath, client.topic("plan_path"))
         assert action.wait_for_server(timeout_sec=10.0)
         goal = plan_path_goal(sphere_pose_msg(Q1), sphere_pose_msg(Q2))
         sent = [action.send_goal_async(goal) for _ in range(1 + PLAN_QUEUE_DEPTH + extra)]

@@ -15,7 +15,7 @@ import pytest
 rclpy = pytest.importorskip("rclpy")
 
 from action_msgs.msg import GoalStatus  # noqa: E402
-from rclpy.action import ActionClient  # noqa: E402
+from cdh_planner.ros.actions import RaceFreeActionClient  # noqa: E402
 
 from cdh_planner_interfaces.action import PlanPath  # noqa: E402
 
@@ -49,8 +49,8 @@ def test_a_burst_of_goals_with_random_cancels_is_answered_in_full(tmp_path):
                         env={"FAKE_PLANNER_DELAY_FILE": str(delay)}) as node:
         clients = [PlannerClient(domain_id=domain, name=f"burst{i}") for i in range(CLIENTS)]
         try:
-            actions = [ActionClient(c.node, PlanPath, c.topic("plan_path"), **ACTION_QOS)
-                       for c in clients]
+            actions = [RaceFreeActionClient(c.node, PlanPath, c.topic("plan_path"),
+                                            **ACTION_QOS) for c in clients]
             for c, a in zip(clients, actions):
                 c.wait_for_node(30.0)
                 assert a.wait_for_server(timeout_sec=10.0)

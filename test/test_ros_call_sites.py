@@ -1,10 +1,11 @@
-"""Two classes of defect found by the second reliability campaign, checked over every call
+"""Classes of defect found by the reliability campaigns, checked over every call
 site of the package (and the test doubles), read as Python syntax:
 
 - a logging call whose severity is computed (``(logger.error if x else logger.info)(...)``,
   ``getattr(logger, level)(...)``): rclpy remembers the severity of each call site and raises
   ``ValueError: Logger severity cannot be changed between calls`` the second time, which
   wedged and crashed the node;
+- an rclpy ``ActionClient`` (its futures can stay pending for good: ``ros/actions.py``);
 - a service, service client, action server or client, or parameter client built with
   rclpy's default QoS (10 requests kept, older ones dropped silently): a burst of goals lost
   some without an answer. Ours are built with ``interface.SERVICE_QOS`` / ``ACTION_QOS``.
@@ -28,6 +29,7 @@ QOS_KEYWORDS = {
     "ActionClient": {"goal_service_qos_profile", "result_service_qos_profile",
                      "cancel_service_qos_profile"},
 }
+QOS_KEYWORDS["RaceFreeActionClient"] = QOS_KEYWORDS["ActionClient"]
 
 
 def calls():
@@ -85,6 +87,12 @@ def test_every_service_and_action_endpoint_has_deep_queues():
             missing.append(f"{path}:{call.lineno}: {_name(call.func)} without "
                            f"{sorted(needed - _keywords(call))}")
     assert not missing, missing
+
+
+def test_every_action_client_is_race_free():
+    plain = [f"{path}:{call.lineno}" for path, call in calls()
+             if _name(call.func) == "ActionClient"]
+    assert not plain, f"use ros.actions.RaceFreeActionClient: {plain}"
 
 
 @pytest.mark.parametrize("source,ok", [

@@ -164,7 +164,7 @@ class ActionCaller:
 
     def __init__(self, domain):
         import rclpy
-        from rclpy.action import ActionClient
+        from cdh_planner.ros.actions import RaceFreeActionClient
         from rclpy.executors import SingleThreadedExecutor
         from cdh_planner_interfaces.action import PlanPath
         self.context = rclpy.Context()
@@ -172,7 +172,7 @@ class ActionCaller:
         self.node = rclpy.create_node("plan_path_caller", context=self.context)
         self.executor = SingleThreadedExecutor(context=self.context)
         self.executor.add_node(self.node)
-        self.client = ActionClient(self.node, PlanPath, ACTION)
+        self.client = RaceFreeActionClient(self.node, PlanPath, ACTION)
         self.feedback = []
 
     def close(self):

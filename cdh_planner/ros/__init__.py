@@ -7,6 +7,6 @@
 - ``node/``: the PlannerNode and its thin rclpy adapters (``node/main.py`` runs it);
 - ``execution/``: command outlets, controller clients, the simulated controller;
 - ``client.py`` (PlannerClient), ``replay.py``, ``interface.py`` (names and QoS), ``polled.py``
-  (subscriptions read on demand, not served by the executor),
-  ``context.py``, ``isolation.py``: what clients, commands and tests share with the node.
+  (subscriptions read on demand, not served by the executor), ``actions.py`` (an action
+  client whose futures always complete), ``context.py``, ``isolation.py``: what clients, commands and tests share with the node.
 """

@@ -29,7 +29,7 @@ from nav_msgs.srv import GetPlan
 from rclpy.executors import SingleThreadedExecutor
 from rclpy.node import Node
 from rclpy.qos import QoSProfile, ReliabilityPolicy
-from rclpy.action import ActionClient
+from .actions import RaceFreeActionClient
 from std_srvs.srv import Trigger
 from trajectory_msgs.msg import JointTrajectory
 
@@ -190,8 +190,8 @@ class PlannerClient:
         self.plan_client = create(GetPlan, self.topic(PLAN), qos_profile=SERVICE_QOS)
         self.execute_client = create(Trigger, self.topic(EXECUTE), qos_profile=SERVICE_QOS)
         self.stop_client = create(Trigger, self.topic(STOP), qos_profile=SERVICE_QOS)
-        self.plan_path_client = ActionClient(self.node, PlanPath, self.topic(PLAN_PATH),
-                                             **ACTION_QOS)
+        self.plan_path_client = RaceFreeActionClient(self.node, PlanPath,
+                                                     self.topic(PLAN_PATH), **ACTION_QOS)
         self.results = []
         self.node.create_subscription(
             DiagnosticStatus, self.topic(PLAN_RESULT), self.results.append,

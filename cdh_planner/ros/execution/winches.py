@@ -26,7 +26,7 @@ import numpy as np
 from action_msgs.msg import GoalStatus
 from action_msgs.srv import CancelGoal
 from control_msgs.action import FollowJointTrajectory
-from rclpy.action import ActionClient
+from ..actions import RaceFreeActionClient
 from rclpy.qos import DurabilityPolicy, QoSProfile, ReliabilityPolicy
 from sensor_msgs.msg import JointState
 from trajectory_msgs.msg import JointTrajectory, JointTrajectoryPoint
@@ -269,8 +269,8 @@ class TrajectoryExecutor:
                  goal_time_tolerance_s=GOAL_TIME_TOLERANCE_S, result_margin_s=RESULT_MARGIN_S):
         self._node = node
         self._group = callback_group
-        self._client = ActionClient(node, FollowJointTrajectory, action_name,
-                                    callback_group=callback_group, **ACTION_QOS)
+        self._client = RaceFreeActionClient(node, FollowJointTrajectory, action_name,
+                                            callback_group=callback_group, **ACTION_QOS)
         self.action_name = action_name
         self.server_wait_s = float(server_wait_s)
         self.goal_time_tolerance_s = goal_time_tolerance_s
