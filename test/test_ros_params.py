@@ -14,6 +14,7 @@ from nav_msgs.srv import GetPlan  # noqa: E402
 
 from cdh_planner.commands.slice import task_in_yaml  # noqa: E402
 from cdh_planner.errors import InputError  # noqa: E402
+from cdh_planner.fields import REQUIRED  # noqa: E402
 from cdh_planner.wrench import wrench_feasibility  # noqa: E402
 from cdh_planner.model.pose import quaternion_from_tau  # noqa: E402
 from cdh_planner.model.robot import load_robot  # noqa: E402
@@ -273,7 +274,7 @@ def test_robot_parameters_are_the_declared_robot_fields():
         [f"robot.{f.key}" for f in ROBOT_FIELDS]
     for f in ROBOT_FIELDS:
         spec = SPEC[f"robot.{f.key}"]
-        required = f.default is robot_schema.REQUIRED and f.group not in OPTIONAL_GROUPS
+        required = f.default is REQUIRED and f.group not in OPTIONAL_GROUPS
         assert (spec.default is params.REQUIRED) == required, f.key
         assert spec.choices == f.choices and robot_schema.describe(f) == spec.description
 

@@ -29,6 +29,7 @@ from dataclasses import dataclass, field
 
 import numpy as np
 
+from ... import fields as fl
 from ...errors import InputError
 from ...model import robot_schema as rs
 from ...model.robot import FIELDS as ROBOT_FIELDS, OPTIONAL_GROUPS, robot_from_dict
@@ -66,8 +67,8 @@ def _setting_spec(name):
                 open_low=s.open_low, open_high=s.open_high, choices=s.choices)
 
 
-_ROBOT_KINDS = {rs.NAME: STRING, rs.NAMES: STRINGS, rs.CHOICE: STRING, rs.NUMBER: DOUBLE,
-                rs.NUMBERS: DOUBLES, rs.MATRIX: DOUBLES}
+_ROBOT_KINDS = {fl.NAME: STRING, fl.NAMES: STRINGS, fl.CHOICE: STRING, fl.NUMBER: DOUBLE,
+                fl.NUMBERS: DOUBLES, fl.MATRIX: DOUBLES}
 
 
 def _robot_spec(f):
@@ -82,7 +83,7 @@ def _robot_spec(f):
     elif isinstance(default, tuple):
         default = list(default)
     bounds = {}
-    if f.kind == rs.NUMBER:
+    if f.kind == fl.NUMBER:
         bounds = dict(low=0.0 if f.sign else None, open_low=f.sign == "positive", high=f.limit)
     return Spec("robot." + f.key, _ROBOT_KINDS[f.kind], default, rs.describe(f),
                 choices=f.choices, **bounds)
@@ -364,7 +365,7 @@ def _robot_dict(checked):
             node = node.setdefault(key, {})
         node[keys[-1]] = value
     for f in ROBOT_FIELDS:  # an optional group without its required fields is not given
-        if f.group in OPTIONAL_GROUPS and f.default is rs.REQUIRED and f.name not in out.get(f.group, {}):
+        if f.group in OPTIONAL_GROUPS and f.default is rs.REQUIRED and f.leaf not in out.get(f.group, {}):
             out.pop(f.group, None)
     return out
 
