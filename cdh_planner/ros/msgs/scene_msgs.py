@@ -22,7 +22,7 @@ from cdh_planner_interfaces.msg import Obstacle, ObstacleArray, Scene
 from ...errors import MAX_POSITION_M, InputError, check_numbers
 from ...model.pose import check_quaternion
 from ...model.shapes import SHAPES, hull_of_points
-from ...scene.schema import MAX_ID_CHARS, Shape, shape_from_dict
+from ...scene.schema import Shape, check_obstacle_id, shape_from_dict
 
 # {type number: shape type} of the classes with a primitive: SolidPrimitive's constant of
 # that name, else the Obstacle message's own (CAPSULE)
@@ -35,18 +35,10 @@ def _listed(words):
     return f"{', '.join(words[:-1])} or {words[-1]}"
 
 
-def check_id(oid, where):
-    """An obstacle id: 1 to MAX_ID_CHARS characters, not "platform" (the platform's)."""
-    if not 0 < len(oid) <= MAX_ID_CHARS or oid == "platform":
-        raise InputError(where, oid, f"expected a name of 1 to {MAX_ID_CHARS} characters, "
-                                     "not 'platform'")
-    return oid
-
-
 def shape_of_obstacle(msg, where):
     """The Shape (base frame) of an ADD Obstacle message; InputError naming the field
     (``<where>.primitive.dimensions``, ``<where>.pose.orientation``, ...)."""
-    oid = check_id(msg.id, f"{where}.id")
+    oid = check_obstacle_id(msg.id, f"{where}.id")
     pos = msg.pose.position
     position = check_numbers(f"{where}.pose.position", [pos.x, pos.y, pos.z], 3, MAX_POSITION_M)
     o = msg.pose.orientation
