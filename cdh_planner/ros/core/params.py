@@ -39,6 +39,7 @@ from ...pipeline.metrics import task_cost
 from ...scene.schema import default_scene, load_scene
 from ...settings import SETTINGS, LiveChoices, PlannerSettings
 from ..execution.command_outlets import OUTLETS, modes_description, outlet_specs, reserve
+from ..msgs.scene_msgs import check_sendable
 from .param_spec import ROS_TYPES, Spec
 
 # the groups whose change means a new Planner (the others only affect the node)
@@ -298,8 +299,8 @@ def node_config(values, source="ROS parameters"):
         task_cost(robot, task, settings.cost)   # e.g. great_circle needs the sphere task
     except InputError as exc:
         raise InputError("planner.cost", settings.cost, exc.reason) from None
-    scene = load_scene(os.path.expanduser(checked["scene_file"]), robot) \
-        if checked["scene_file"] else default_scene(robot)
+    scene = check_sendable(load_scene(os.path.expanduser(checked["scene_file"]), robot)
+                           if checked["scene_file"] else default_scene(robot))
     log_dir = checked["log_dir"]
     if not log_dir and checked["log_enabled"]:
         raise InputError("log_dir", log_dir, "must name a directory while log_enabled is true")

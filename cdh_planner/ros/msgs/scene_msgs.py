@@ -69,6 +69,26 @@ def shape_of_obstacle(msg, where):
                            f"{where}.primitive", oid)
 
 
+def sendable(shape):
+    """Does ``shape`` have an Obstacle message: a primitive, or a mesh's vertices?"""
+    return shape.type.primitive is not None or shape.vertices is not None
+
+
+def check_sendable(scene, where="scene"):
+    """``scene`` (scene.schema.Scene or None) if every shape of it has an Obstacle message;
+    else InputError naming the first shape's type with its class's reason (``no_primitive``):
+    the node refuses such a scene when it loads it, rather than failing to publish ~/scene."""
+    if scene is None:
+        return scene
+    shapes = [("platform", scene.platform)] * (scene.platform is not None) + [
+        (f"obstacles[{i}]", o) for i, o in enumerate(scene.obstacles)]
+    for name, shape in shapes:
+        if not sendable(shape):
+            raise InputError(f"{where}.{name}.type", shape.kind,
+                             f"has no Obstacle message for the node: {shape.type.no_primitive}")
+    return scene
+
+
 def obstacle_msg(shape, operation=Obstacle.ADD):
     """The Obstacle message of a Shape (a mesh: its convex hull's vertices and triangles)."""
     msg = Obstacle(id=shape.id, operation=operation)
@@ -76,14 +96,14 @@ def obstacle_msg(shape, operation=Obstacle.ADD):
     x, y, z, w = (float(v) for v in shape.quaternion)
     msg.pose.orientation.x, msg.pose.orientation.y = x, y
     msg.pose.orientation.z, msg.pose.orientation.w = z, w
-    if shape.type.primitive is None and shape.vertices is not None:
+    if not sendable(shape):
+        raise ValueError(f"a {shape.kind} has no Obstacle message: {shape.type.no_primitive}")
+    if shape.type.primitive is None:
         from scipy.spatial import ConvexHull
         msg.mesh.vertices = [_point(v) for v in shape.vertices]
         msg.mesh.triangles = [MeshTriangle(vertex_indices=[int(i) for i in tri])
                               for tri in ConvexHull(shape.vertices).simplices]
         return msg
-    if shape.type.primitive is None:
-        raise ValueError(f"a {shape.kind} has no Obstacle message: {shape.type.no_primitive}")
     dims = shape.type.primitive_dimensions(shape)
     number = {t: n for n, t in PRIMITIVES.items()}[shape.kind]
     msg.primitive = SolidPrimitive(type=number, dimensions=[float(d) for d in dims])
