@@ -20,6 +20,9 @@ accelerations, and with robot.length_error position_error_m, orientation_error_r
 quintic through these points is the motion that was checked, ``trajectory.executed``).
 """
 
+ORDER = 30  # its place in `cdh-planner --help`
+SUMMARY = "plan a wrench-feasible path for a problem file (no ROS needed)"
+
 import json
 import math
 from dataclasses import replace
@@ -42,7 +45,7 @@ EXIT_CODES = {s: EXIT_OK if s is Status.OK else EXIT_INTERNAL if s is Status.INT
 
 def add_parser(subparsers):
     p = subparsers.add_parser(
-        "plan", help="plan a wrench-feasible path for a problem file (no ROS needed)",
+        "plan", help=SUMMARY,
         description="Try the direct motion, then grow atlases of the navigation manifold from "
                     "the start and the goal and search them (A* or Greedy Best-First) until they "
                     "meet, a component is exhausted (no path at this resolution), or a limit. "
