@@ -10,8 +10,8 @@ time of the first call (in a fresh process: importing the ahead-of-time kernel t
 or compiling it when there is none); which kernel ran is printed. With ``--table1`` it also
 runs ``benchmarks/table1.py --only robot1_qs_qg --strategies astar`` in a fresh process
 and prints its output and wall time (process start included). ``--reference`` measures
-the numpy reference (``NavigationManifold.residual_and_jacobian_reference``) instead of
-the compiled kernel, in both.
+the numpy reference (test/navigation_reference.py, ``residual_and_jacobian_reference``)
+instead of the compiled kernel, in both.
 """
 
 import argparse
@@ -21,12 +21,15 @@ import time
 from pathlib import Path
 
 ROOT = Path(__file__).resolve().parents[1]
+sys.path.insert(0, str(ROOT / "test"))  # the numpy reference is test code
 TABLE1_ARGS = ["--only", "robot1_qs_qg", "--strategies", "astar"]
 # table1.py with the numpy reference in place of the kernel
 TABLE1_REFERENCE = f"""
 import runpy, sys
+sys.path.insert(0, {str(ROOT / "test")!r})
 from cdh_planner.manifold.navigation import NavigationManifold
-NavigationManifold.residual_and_jacobian = NavigationManifold.residual_and_jacobian_reference
+from navigation_reference import residual_and_jacobian_reference
+NavigationManifold.residual_and_jacobian = residual_and_jacobian_reference
 sys.argv = ["table1.py"] + {TABLE1_ARGS!r}
 runpy.run_path({str(ROOT / "benchmarks" / "table1.py")!r}, run_name="__main__")
 """
@@ -57,7 +60,8 @@ def main(argv=None):
     from cdh_planner.model.task import FreeTask
     t_import = time.perf_counter() - t0
     if args.reference:
-        NavigationManifold.residual_and_jacobian = NavigationManifold.residual_and_jacobian_reference
+        from navigation_reference import residual_and_jacobian_reference
+        NavigationManifold.residual_and_jacobian = residual_and_jacobian_reference
 
     pr = load_problem(ROOT / "config" / "problems" / "robot2_q2_q3_free_flight.yaml")
     c = TaskConstraint(pr.robot, FreeTask())

@@ -1,6 +1,7 @@
 """``cdh-planner``: the single command-line entry point.
 
-Subcommands live in ``cdh_planner.commands.<name>`` (see that package's docstring).
+Subcommands live in ``cdh_planner.commands.<name>`` (see that package's docstring), each
+declaring its place in --help (ORDER) and its one-line summary (SUMMARY) in its header.
 This module only builds the top-level parser, collects the subcommands that exist
 and holds the exit-code contract of every command:
 
@@ -21,40 +22,47 @@ traceback; ``cdh-planner --debug COMMAND ...`` prints the traceback as well.
 from __future__ import annotations
 
 import argparse
+import ast
 import importlib
 import importlib.util
 import os
+import re
 import sys
 import traceback
+from pathlib import Path
 
 from cdh_planner import __version__
 from cdh_planner.errors import MAX_MESSAGE_CHARS, InputError, clip
 
 PROG = 'cdh-planner'
 
-# Order here is the order in --help. A name whose module does not exist yet is skipped.
-COMMANDS = ['verify', 'slice', 'plan', 'workspace', 'sweep', 'node', 'call', 'replay', 'recover', 'urdf',
-            'mjcf', 'simulate', 'demo']
+COMMANDS_DIR = Path(__file__).parent / 'commands'
 
-# The one-line summaries of `cdh-planner --help`, the same as each module's add_parser help
-# (test_startup_imports checks). Held here so that a run imports only the module of the command it runs:
-# a module imports what its command needs (the planner, plotting, ROS), up to seconds.
-SUMMARIES = {
-    'verify': 'check poses and the motion between them for wrench feasibility',
-    'slice': 'draw a 2-D slice of the wrench-feasible C-space to a PNG',
-    'plan': 'plan a wrench-feasible path for a problem file (no ROS needed)',
-    'workspace': 'sample poses: wrench feasibility, margin and reachability from home',
-    'sweep': 'compare robot designs: the workspace (and queries) of each, to a CSV',
-    'node': 'run the ROS 2 planner node',
-    'call': "plan through a running node's ~/plan_path action (and execute)",
-    'replay': 'republish a recorded run, or re-send its plan requests',
-    'recover': 'complete the run file of a killed node (summary, indexes, footer)',
-    'urdf': 'print the robot description (URDF) of a robot file',
-    'mjcf': 'print the MuJoCo model (MJCF) of a robot file',
-    'simulate': "run a plan's trajectory on the simulated robot (MuJoCo physics)",
-    'demo': "the whole story: the paper's robots, poses and motions checked, then the ROS "
-            "node planning, streaming, recording and replaying Robot 2's sphere task",
-}
+
+def declared_commands(folder=COMMANDS_DIR) -> dict[str, tuple[int, str]]:
+    """{name: (ORDER, SUMMARY)} of the modules of ``cdh_planner.commands`` (``name.py`` or
+    ``name/__init__.py``) that declare a SUMMARY at the top level: the commands. Read from
+    their source (``SUMMARY = <a string literal, maybe continued on indented lines>``,
+    ``ORDER = <an integer>``) without importing them: a run imports only the module of the
+    command it runs (a module imports what its command needs, the planner, plotting, ROS: up
+    to seconds), and a new command is its one file."""
+    out = {}
+    for path in sorted([*folder.glob('*.py'), *folder.glob('*/__init__.py')]):
+        text = path.read_text(encoding='utf-8')
+        summary = _SUMMARY.search(text)
+        if summary:
+            order = _ORDER.search(text)
+            name = path.parent.name if path.name == '__init__.py' else path.stem
+            out[name] = (int(order.group(1)) if order else 0, ast.literal_eval(summary.group(1)))
+    return out
+
+
+_SUMMARY = re.compile(r'^SUMMARY = (.*(?:\n[ \t]+.*)*)', re.M)
+_ORDER = re.compile(r'^ORDER = (\d+)', re.M)
+_DECLARED = declared_commands()
+# in the order of --help (ORDER, then name), and the one-line summaries it shows
+COMMANDS = sorted(_DECLARED, key=lambda n: (_DECLARED[n][0], n))
+SUMMARIES = {name: _DECLARED[name][1] for name in COMMANDS}
 
 EXIT_OK = 0
 EXIT_NO = 1  # no path, infeasible

@@ -43,6 +43,22 @@ def test_help_exits_0_and_lists_existing_commands(fake, capsys):
             assert name in out
 
 
+def test_a_new_command_is_one_file(tmp_path):
+    """The command list and the summaries are read from the command modules' own headers
+    (ORDER, SUMMARY; a module without SUMMARY is no command), without importing them: a
+    module that would fail on import is listed all the same."""
+    (tmp_path / 'hello.py').write_text(
+        '"""``cdh-planner hello``."""\n\nORDER = 35  # its place\nSUMMARY = ("say "\n'
+        '           "hello")\n\nimport no_such_module_xyz\n')
+    (tmp_path / 'story').mkdir()
+    (tmp_path / 'story' / '__init__.py').write_text('ORDER = 5\nSUMMARY = "tell it"\n')
+    (tmp_path / 'helpers.py').write_text('"""Not a command."""\nORDER = 1\n')
+    assert cli.declared_commands(tmp_path) == {'hello': (35, 'say hello'), 'story': (5, 'tell it')}
+    # the package's own: every command module, in the order of --help
+    assert cli.COMMANDS[:3] == ['verify', 'slice', 'plan'] and 'outputs' not in cli.COMMANDS
+    assert set(cli.SUMMARIES) == set(cli.COMMANDS)
+
+
 def test_missing_command_modules_are_skipped(monkeypatch):
     monkeypatch.setattr(cli, 'COMMANDS', ['no_such_command_xyz'])
     parser = cli.build_parser()  # must not raise

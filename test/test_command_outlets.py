@@ -12,7 +12,8 @@ from cdh_planner.ros.core import params
 from cdh_planner.ros.execution.command_outlets import (OUTLETS, FollowJointTrajectory, ForwardCommand,
                                              JointStateStream, StreamedOutlet,
                                              check_joint_order, register)
-from cdh_planner.ros.core.param_spec import STRING, Spec
+from cdh_planner.fields import TEXT
+from cdh_planner.ros.core.param_spec import Spec
 
 TOPIC = "/winches/lengths_velocities"
 JOINT_ORDER = ForwardCommand.specs[1]      # execution.joint_order, shared as declared
@@ -25,7 +26,7 @@ class LengthsAndVelocities(StreamedOutlet):
     name = "lengths_velocities"
     description = ("std_msgs/Float64MultiArray cable lengths then velocities on "
                    "execution.lengths_velocities_topic at stream_rate_hz")
-    specs = (Spec("execution.lengths_velocities_topic", STRING, TOPIC,
+    specs = (Spec("execution.lengths_velocities_topic", TEXT, TOPIC,
                   "lengths_velocities mode: its topic (set at start)", start_only=True),
              JOINT_ORDER)
 
@@ -98,11 +99,11 @@ def test_register_refuses_what_would_be_ambiguous():
 
     class OtherOrder(LengthsAndVelocities):
         name = "other_order"
-        specs = (Spec("execution.joint_order", STRING, "", "another order"),)
+        specs = (Spec("execution.joint_order", TEXT, "", "another order"),)
 
     def declaring(name):
         return type("Declaring", (LengthsAndVelocities,), {
-            "name": "declaring", "specs": (Spec(name, STRING, "/x", "a topic"),)})
+            "name": "declaring", "specs": (Spec(name, TEXT, "/x", "a topic"),)})
 
     for cls, match in ((Undescribed, "description must be"),
                        (OtherStream, "'stream' is already registered"),

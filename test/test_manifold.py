@@ -154,7 +154,7 @@ def test_polytope_clipping_matches_qhull(n):
 
 
 def test_scalar_rotation_derivatives_match_the_vectorised_ones():
-    from cdh_planner.manifold.navigation import rotation_and_derivatives
+    from navigation_reference import rotation_and_derivatives
     from cdh_planner.model.pose import rotation_tt, rotation_tt_derivatives
     for tau in np.random.default_rng(5).uniform(-3, 3, (10, 3)):
         R, dR = rotation_and_derivatives(tau)

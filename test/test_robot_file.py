@@ -12,6 +12,7 @@ import yaml
 
 from cdh_planner import cli
 from cdh_planner.errors import InputError
+from cdh_planner.fields import MATRIX, NUMBER, NUMBERS, REQUIRED, read
 from cdh_planner.parsing.poses import load_poses
 from cdh_planner.model import robot_schema
 from cdh_planner.model.robot import FIELDS, OPTIONAL_GROUPS, Robot, load_robot, read_yaml, \
@@ -256,7 +257,7 @@ class WinchRobot(Robot):
     """A new robot field is one declaration: the drum radius of the winches."""
 
     drum_radius: float = robot_schema.robot_field(
-        key="drum_radius", kind=robot_schema.NUMBER, unit="m", sign="positive", limit=1.0,
+        key="drum_radius", kind=NUMBER, unit="m", sign="positive", limit=1.0,
         default=0.05, description="winch drum radius")
 
 
@@ -276,11 +277,10 @@ def test_a_new_robot_field_is_one_declaration():
 def test_every_declared_field_has_a_unit_or_kind_that_needs_none_and_a_description():
     keys = [f.key for f in FIELDS]
     assert len(set(keys)) == len(keys) and all(f.description for f in FIELDS)
-    assert all(f.unit for f in FIELDS if f.kind in (robot_schema.NUMBER, robot_schema.NUMBERS,
-                                                    robot_schema.MATRIX))
+    assert all(f.unit for f in FIELDS if f.kind in (NUMBER, NUMBERS, MATRIX))
     for f in FIELDS:  # a default is a valid value of its own field
-        if f.default not in (None, robot_schema.REQUIRED):
-            robot_schema.read_value(f, f.key, f.default, 6)
+        if f.default not in (None, REQUIRED):
+            read(f, f.default, f.key, 6)
 
 
 @pytest.mark.parametrize("f", FIELDS, ids=[f.key for f in FIELDS])
@@ -291,7 +291,7 @@ def test_a_null_value_is_refused_naming_the_field_unless_the_field_is_optional(f
     doc.setdefault("contact_ellipsoid", {"matrix": [1e4] * 3 + [1e10] * 3})
     doc.setdefault("platform_shape", {"type": "none"})
     group = doc[f.group] if f.group else doc
-    group[f.name] = None
+    group[f.leaf] = None
     if f.key == "load.mass":
         doc["load"].pop("inertia", None)
     if f.default is None:

@@ -14,6 +14,7 @@ from nav_msgs.srv import GetPlan  # noqa: E402
 
 from cdh_planner.commands.slice import task_in_yaml  # noqa: E402
 from cdh_planner.errors import InputError  # noqa: E402
+from cdh_planner.fields import REQUIRED  # noqa: E402
 from cdh_planner.wrench import wrench_feasibility  # noqa: E402
 from cdh_planner.model.pose import quaternion_from_tau  # noqa: E402
 from cdh_planner.model.robot import load_robot  # noqa: E402
@@ -91,9 +92,9 @@ def test_integers_are_accepted_for_numbers():
     ("robot.winch_names", ["w1", "w2"], "robot.winch_names = ['w1', 'w2']: expected 6 to 16 distinct"),
     ("robot.wrench_ellipsoid.frame", "world", "robot.wrench_ellipsoid.frame = 'world'"),
     ("task.type", "cube", "task.type = 'cube': expected one of free, slice, sphere, pivot"),
-    ("task.radius", 0.0, "task.radius = 0.0: must be > 0"),
+    ("task.radius", 0.0, "task.radius = 0.0: must be positive"),
     ("task.center", [0.0, 1.0], "task.center"),
-    ("task.fixed.x", math.inf, "task.fixed.x = inf: must be a finite number"),
+    ("task.fixed.x", math.inf, "task.fixed.x = inf: expected a finite number"),
     ("planner.strategy", "bfs", "planner.strategy = 'bfs'"),
     ("planner.max_charts", 2.5, "planner.max_charts = 2.5: expected an integer"),
     ("planner.timeout_s", "long", "planner.timeout_s = 'long': expected a number"),
@@ -273,7 +274,7 @@ def test_robot_parameters_are_the_declared_robot_fields():
         [f"robot.{f.key}" for f in ROBOT_FIELDS]
     for f in ROBOT_FIELDS:
         spec = SPEC[f"robot.{f.key}"]
-        required = f.default is robot_schema.REQUIRED and f.group not in OPTIONAL_GROUPS
+        required = f.default is REQUIRED and f.group not in OPTIONAL_GROUPS
         assert (spec.default is params.REQUIRED) == required, f.key
         assert spec.choices == f.choices and robot_schema.describe(f) == spec.description
 

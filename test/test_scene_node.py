@@ -79,3 +79,33 @@ def test_a_scene_set_over_the_parameter_service_changes_the_next_plan(tmp_path):
         node.set_parameters([Parameter("scene_file", value="")])
         again, _ = plan(node, Q2, Q3)
         assert np.allclose(path_arrays(again)[0], path_arrays(first)[0])
+
+
+def test_a_shape_without_an_obstacle_message_is_refused_when_the_node_loads_it(tmp_path):
+    """A registered shape type with no ROS primitive (and no mesh vertices) could not be
+    published on ~/scene: the node refuses the scene file naming the shape and the reason
+    its class gives, rather than failing later. A scratch type, registered for the test."""
+    from cdh_planner.model import shapes
+    from cdh_planner.ros.msgs.scene_msgs import check_sendable
+
+    @shapes.register
+    class Cone(shapes.ShapeType):
+        type, markers = "cone", ("SPHERE",)
+        keys = (shapes.RADIUS, shapes.length("height", "height along z"))
+        no_primitive = "no SolidPrimitive nor Obstacle constant for a cone"
+        bounding_radius = staticmethod(lambda s: s.radius + s.height)
+        coal_geometry = staticmethod(lambda s: None)
+        marker_parts = staticmethod(lambda s: [(np.zeros(3), np.full(3, 2.0 * s.radius))])
+        mjcf = staticmethod(lambda s: ("sphere", [s.radius]))
+
+    cone = {"id": "cone", "type": "cone", "radius": 0.01, "height": 0.02}
+    try:
+        with pytest.raises(InputError) as info:
+            config_with(tmp_path, {"obstacles": [BALL, cone]})
+        assert str(info.value) == ("scene.obstacles[1].type = 'cone': has no Obstacle message for "
+                                   "the node: no SolidPrimitive nor Obstacle constant for a cone")
+        # a scene of shapes that have a message passes as it is
+        scene = config_with(tmp_path, {"obstacles": [BALL]}).scene
+        assert check_sendable(scene) is scene
+    finally:
+        del shapes.SHAPES["cone"]

@@ -10,6 +10,7 @@ from cdh_planner.cli import build_parser
 from cdh_planner.errors import InputError
 from cdh_planner.parsing.problem import SETTING_KEYS, TOP_KEYS, TOP_SETTINGS, settings_from_dict
 from cdh_planner.ros.core.params import SETTING_PARAMETERS, SPEC, check_value
+from cdh_planner.fields import BOOL, CHOICE
 from cdh_planner.settings import SETTINGS, PlannerSettings, check_setting
 
 
@@ -20,9 +21,9 @@ def _plan_parser():
 
 def _bad_values(kind, s):
     """Values the schema must refuse: outside the range, at an open bound, wrong type."""
-    if kind is bool:
+    if kind == BOOL:
         return [1, "yes"]
-    if kind is str:
+    if kind == CHOICE:
         return ["nonsense", 3]
     out = ["5", math.nan, math.inf]
     if s.low is not None:
@@ -34,7 +35,8 @@ def _bad_values(kind, s):
 
 @pytest.mark.parametrize("name", list(SETTINGS))
 def test_every_setting_reaches_every_edge_alike(name):
-    kind, default, s = SETTINGS[name]
+    s = SETTINGS[name]
+    kind, default = s.kind, s.default
     # the node: a parameter of that name, default, range and choices
     spec = SPEC[s.parameter]
     assert SETTING_PARAMETERS[name] == s.parameter
@@ -63,6 +65,6 @@ def test_every_setting_reaches_every_edge_alike(name):
 def test_defaults_are_valid_and_fields_all_have_a_schema():
     assert PlannerSettings().check() == PlannerSettings()
     assert {f.name for f in fields(PlannerSettings)} == set(SETTINGS)
-    flags = [s.flag for _, _, s in SETTINGS.values()]
-    params = [s.parameter for _, _, s in SETTINGS.values()]
+    flags = [s.flag for s in SETTINGS.values()]
+    params = [s.parameter for s in SETTINGS.values()]
     assert len(set(flags)) == len(flags) and len(set(params)) == len(params)

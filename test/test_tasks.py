@@ -13,6 +13,7 @@ import pytest
 
 from conftest import CONFIG, PROBLEMS
 from cdh_planner.cli import main
+from cdh_planner.fields import NUMBERS
 from cdh_planner.errors import InputError
 from cdh_planner.parsing.problem import load_problem
 from cdh_planner.manifold.constraint import TaskConstraint
@@ -141,10 +142,10 @@ def test_every_task_field_is_a_node_parameter_with_its_default():
     from cdh_planner.ros.core.params import SPEC
     assert SPEC["task.type"].choices == tuple(T.TASKS)
     for cls in T.TASKS.values():
-        for name, meta, default in cls.parameters():
-            spec = SPEC[name]
-            expected = list(default) if meta.kind == "point" else default
-            assert spec.default == expected or (math.isnan(spec.default) and math.isnan(default)), name
+        for f in cls.parameters():
+            spec = SPEC[f.key]
+            expected = list(f.default) if f.kind == NUMBERS else f.default
+            assert spec.default == expected or (math.isnan(spec.default) and math.isnan(f.default)), f.key
 
 
 @dataclass(frozen=True)
@@ -207,8 +208,8 @@ class RingTask(PlaneTask):
 
 def test_a_task_declaring_a_shared_parameter_otherwise_is_refused_at_registration():
     before = dict(T.TASKS)
-    with pytest.raises(ValueError, match=r"task 'ring': parameter task.center \(double, default "
-                                         r"0.0\) is declared otherwise by task 'sphere' \(point"):
+    with pytest.raises(ValueError, match=r"task 'ring': parameter task.center \(number, default "
+                                         r"0.0\) is declared otherwise by task 'sphere' \(numbers"):
         T.register(RingTask)
     with pytest.raises(ValueError, match="task type 'pivot' is already registered"):
         T.register(dataclass(frozen=True)(type("OtherPivot", (T.PivotTask,), {})))
@@ -220,8 +221,8 @@ def test_a_task_declaring_a_shared_parameter_otherwise_is_refused_at_registratio
     assert T.register(T.PivotTask) is T.PivotTask  # the same class again: nothing changes
     # declared alike (sphere and pivot share task.center) is one parameter
     params = T.task_parameters()
-    assert params["task.center"][2] == "sphere" and params["task.center"][:2] == \
-        (T.SphereTask.task_fields()[0][1], (0.0, 0.0, 0.0))
+    assert params["task.center"] == (T.SphereTask.parameters()[0], "sphere")
+    assert params["task.center"][0].default == (0.0, 0.0, 0.0)
 
 
 def test_pivot_plans_over_the_node(tmp_path):

@@ -1,10 +1,13 @@
-"""Subcommands of ``cdh-planner``, one module per subcommand.
+"""Subcommands of ``cdh-planner``, one module per subcommand: a new command is one file.
 
-``cdh_planner.cli`` imports ``cdh_planner.commands.<name>`` of the command being run (of
-each name in ``cdh_planner.cli.COMMANDS`` for the full parser; ``--help`` lists them from
-``cli.SUMMARIES`` without importing any) and calls its ``add_parser(subparsers)``: a
-module's imports are paid by its own command only.
-A module adds its own parser and sets ``func`` with ``set_defaults(func=run)``,
+A command module declares in its header, above its first ``def``, ``class`` or decorator,
+``ORDER`` (its place in ``cdh-planner --help``: 10, 20, ...) and ``SUMMARY`` (its one-line
+help); ``cdh_planner.cli`` reads them from the source without importing the module
+(``cli.declared_commands``: a module without SUMMARY, ``outputs.py``, is no command),
+imports ``cdh_planner.commands.<name>`` of the command being run only (of every command
+for the full parser) and calls its ``add_parser(subparsers)``: a module's imports are paid
+by its own command only.
+A module adds its own parser (``help=SUMMARY``) and sets ``func`` with ``set_defaults(func=run)``,
 where ``run(args) -> int`` returns the process exit code (0 ok, 1 no path / not
 feasible). Raise ``cdh_planner.errors.InputError`` for bad user input: the CLI prints it
 as one line and exits 2, with no traceback; any other exception is exit 3 (internal
@@ -15,8 +18,12 @@ with its ``write_text`` / ``writing``.
 
 Example::
 
+    # cdh_planner/commands/verify.py, below its docstring
+    ORDER = 10  # its place in `cdh-planner --help`
+    SUMMARY = 'check a robot / problem file'
+
     def add_parser(subparsers):
-        p = subparsers.add_parser('verify', help='check a robot / problem file')
+        p = subparsers.add_parser('verify', help=SUMMARY)
         p.add_argument('file')
         p.set_defaults(func=run)
 

@@ -20,6 +20,9 @@ none, refused the execution or cut it short, or no node answered (not running, a
 ROS_DOMAIN_ID or name; one line saying so); 2 bad input.
 """
 
+ORDER = 70  # its place in `cdh-planner --help`
+SUMMARY = "plan through a running node's ~/plan_path action (and execute)"
+
 import argparse
 import math
 import sys
@@ -34,7 +37,7 @@ NODE_WAIT_S = 5.0   # s to wait for the node's services (a DDS announcement peri
 
 def add_parser(subparsers):
     p = subparsers.add_parser(
-        "call", help="plan through a running node's ~/plan_path action (and execute)",
+        "call", help=SUMMARY,
         description="Plan with a running cdh_planner node (its ~/plan_path action) from a "
                     "start pose (or the measured one) to a goal pose, print the outcome, path "
                     "length, duration, lowest tension margin and the log file; --execute then "

@@ -10,10 +10,13 @@ Printed on stdout, or written to OUT. Exit 0, or 2 for bad input (the robot or s
 an output that cannot be written or is an input).
 """
 
+ORDER = 110  # its place in `cdh-planner --help`
+SUMMARY = "print the MuJoCo model (MJCF) of a robot file"
+
 
 def add_parser(subparsers):
     p = subparsers.add_parser(
-        "mjcf", help="print the MuJoCo model (MJCF) of a robot file",
+        "mjcf", help=SUMMARY,
         description="The MJCF of a robot file (and a scene): anchors, cables as tendons with "
                     "tension-only actuators of the robot's stiffness, the platform body, "
                     "obstacles, gravity, a camera; it loads in mujoco.MjModel.from_xml_path.")

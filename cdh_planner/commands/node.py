@@ -6,13 +6,16 @@ Everything after ``--ros-args`` goes to rclpy unchanged (parameters, remapping, 
 Stops cleanly on SIGINT / SIGTERM, closing the run's MCAP file.
 """
 
+ORDER = 60  # its place in `cdh-planner --help`
+SUMMARY = "run the ROS 2 planner node"
+
 import argparse
 import sys
 
 
 def add_parser(subparsers):
     p = subparsers.add_parser(
-        "node", help="run the ROS 2 planner node",
+        "node", help=SUMMARY,
         description="Run the ROS 2 node cdh_planner: action ~/plan_path "
                     "(cdh_planner_interfaces/PlanPath); services ~/plan (nav_msgs/GetPlan), "
                     "~/execute and ~/stop (std_srvs/Trigger); topics ~/path, "

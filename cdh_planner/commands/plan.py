@@ -20,6 +20,9 @@ accelerations, and with robot.length_error position_error_m, orientation_error_r
 quintic through these points is the motion that was checked, ``trajectory.executed``).
 """
 
+ORDER = 30  # its place in `cdh-planner --help`
+SUMMARY = "plan a wrench-feasible path for a problem file (no ROS needed)"
+
 import json
 import math
 from dataclasses import replace
@@ -30,6 +33,7 @@ from .outputs import check_output, write_text, writing
 from ..parsing.problem import load_problem
 from ..progress import chart_progress
 from ..planner import Planner
+from ..fields import BOOL, CHOICE
 from ..settings import SETTINGS, check_setting
 from ..status import Status
 
@@ -41,7 +45,7 @@ EXIT_CODES = {s: EXIT_OK if s is Status.OK else EXIT_INTERNAL if s is Status.INT
 
 def add_parser(subparsers):
     p = subparsers.add_parser(
-        "plan", help="plan a wrench-feasible path for a problem file (no ROS needed)",
+        "plan", help=SUMMARY,
         description="Try the direct motion, then grow atlases of the navigation manifold from "
                     "the start and the goal and search them (A* or Greedy Best-First) until they "
                     "meet, a component is exhausted (no path at this resolution), or a limit. "
@@ -49,13 +53,13 @@ def add_parser(subparsers):
         epilog="example: cdh-planner plan config/problems/robot2_q2_q3.yaml --json out.json "
                "--plot out.png")
     p.add_argument("problem", help="problem file (YAML: robot, task, start, goal; see config/problems)")
-    for name, (kind, default, s) in SETTINGS.items():  # one flag per setting, from the schema
+    for name, s in SETTINGS.items():  # one flag per setting, from the schema
         unit = f", {s.unit}" if s.unit else ""
-        help_text = f"{s.description} (default: the file's, else {default}{unit})"
-        if kind is bool:
+        help_text = f"{s.description} (default: the file's, else {s.default}{unit})"
+        if s.kind == BOOL:
             p.add_argument(s.flag, dest=name, action="store_const", const=True, help=help_text)
         else:
-            p.add_argument(s.flag, dest=name, type=str if kind is str else float,
+            p.add_argument(s.flag, dest=name, type=str if s.kind == CHOICE else float,
                            choices=s.choices or None, metavar=None if s.choices else name.upper(),
                            help=help_text)
     p.add_argument("--json", metavar="OUT", help="write the result as JSON")
@@ -70,7 +74,7 @@ def run(args):
     problem = load_problem(args.problem)
     settings = problem.settings
     overrides = {name: check_setting(name, getattr(args, name), s.flag)
-                 for name, (_, _, s) in SETTINGS.items() if getattr(args, name) is not None}
+                 for name, s in SETTINGS.items() if getattr(args, name) is not None}
     settings = replace(settings, **overrides)
     check_outputs(args, problem)
     planner = Planner(problem.robot, problem.task, settings, scene=problem.scene)

@@ -16,13 +16,16 @@ Exit codes: 0 recovered; 2 bad input (not a recording, damaged data in a complet
 chunk CRC), no complete message, an output that exists, is the input or cannot be written).
 """
 
+ORDER = 90  # its place in `cdh-planner --help`
+SUMMARY = "complete the run file of a killed node (summary, indexes, footer)"
+
 import argparse
 from pathlib import Path
 
 
 def add_parser(subparsers):
     p = subparsers.add_parser(
-        "recover", help="complete the run file of a killed node (summary, indexes, footer)",
+        "recover", help=SUMMARY,
         description="Copy every complete message of a run file whose node was killed (no "
                     "MCAP summary, maybe a torn last record) to a complete file that rosbag2, "
                     "rosbags and mcap's indexed reader open. The input is not changed.",

@@ -37,6 +37,9 @@ Exit codes: 0 done (every answer matches); 1 an answer differs, or no node answe
 line saying so); 2 bad input (a file that is not a recording, damaged data, bad --ros-args).
 """
 
+ORDER = 80  # its place in `cdh-planner --help`
+SUMMARY = "republish a recorded run, or re-send its plan requests"
+
 import argparse
 import math
 import sys
@@ -49,7 +52,7 @@ MAX_GAP_S = 5.0     # = ros.replay.MAX_GAP_S (not imported: --help needs no rclp
 
 def add_parser(subparsers):
     p = subparsers.add_parser(
-        "replay", help="republish a recorded run, or re-send its plan requests",
+        "replay", help=SUMMARY,
         description="Republish the topics of a run file (MCAP) with their recorded timing, or "
                     "with --requests re-send its plan requests to a running node and compare "
                     "the answers with the recorded ones.",

@@ -19,6 +19,9 @@ rendered frames along the motion (MUJOCO_GL=egl unless MUJOCO_GL is set; without
 library one line says so and the rest is done).
 """
 
+ORDER = 120  # its place in `cdh-planner --help`
+SUMMARY = "run a plan's trajectory on the simulated robot (MuJoCo physics)"
+
 import os
 
 SERIES_EVERY = 10   # samples between the rows of the --json time series (10 ms)
@@ -26,7 +29,7 @@ SERIES_EVERY = 10   # samples between the rows of the --json time series (10 ms)
 
 def add_parser(subparsers):
     p = subparsers.add_parser(
-        "simulate", help="run a plan's trajectory on the simulated robot (MuJoCo physics)",
+        "simulate", help=SUMMARY,
         description="Run a plan JSON's trajectory on the physics plant (elastic tension-only "
                     "cables, a free platform, 1 kHz) as a JointTrajectoryController executes "
                     "it; report the measured tensions against the limits and the published "

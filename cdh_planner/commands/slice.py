@@ -23,6 +23,9 @@ metres (``0.35``) or ``350mm``. A value starting with '-' that is not a plain nu
 (``-pi``) must be attached with '=': ``--start=-pi,1.6``, ``--range phi=-pi:pi`` is fine.
 """
 
+ORDER = 20  # its place in `cdh-planner --help`
+SUMMARY = "draw a 2-D slice of the wrench-feasible C-space to a PNG"
+
 import argparse
 import time
 from dataclasses import dataclass
@@ -56,7 +59,7 @@ MAX_LABEL_CHARS = 200
 def add_parser(subparsers):
     """Register ``slice`` on the top-level subparsers."""
     p = subparsers.add_parser(
-        "slice", help="draw a 2-D slice of the wrench-feasible C-space to a PNG",
+        "slice", help=SUMMARY,
         description="Classify a grid over two free coordinates of a task (green: feasible, "
                     "orange: a cable length out of range, blue: a tension out of range; red: "
                     "det J = 0) and draw it, with optional start/goal and the straight segment. "

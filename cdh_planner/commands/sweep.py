@@ -11,6 +11,9 @@ Exit 0 when every design is done, 2 for bad input (the whole file is checked fir
 interrupted (the designs done are kept).
 """
 
+ORDER = 50  # its place in `cdh-planner --help`
+SUMMARY = "compare robot designs: the workspace (and queries) of each, to a CSV"
+
 import os
 from pathlib import Path
 
@@ -24,7 +27,7 @@ from ..studies.progress import count_progress
 def add_parser(subparsers):
     """Register ``sweep`` on the top-level subparsers."""
     p = subparsers.add_parser(
-        "sweep", help="compare robot designs: the workspace (and queries) of each, to a CSV",
+        "sweep", help=SUMMARY,
         description="Run the workspace analysis (and plan the queries) on every design of the "
                     "cartesian product of the SWEEP file's varied robot keys; write one JSON "
                     "per design, results.csv and sweep.png to DIR. Exit 0 when done, 2 for bad "

@@ -9,10 +9,13 @@ platform on a floating joint. Printed on stdout, or written to OUT. Exit 0, or 2
 input (the robot file, an output that cannot be written or is the robot file).
 """
 
+ORDER = 100  # its place in `cdh-planner --help`
+SUMMARY = "print the robot description (URDF) of a robot file"
+
 
 def add_parser(subparsers):
     p = subparsers.add_parser(
-        "urdf", help="print the robot description (URDF) of a robot file",
+        "urdf", help=SUMMARY,
         description="The URDF of a robot file: the frames, the anchors, the platform (as the "
                     "node publishes it on robot_description).")
     p.add_argument("robot", help="robot file (ROS 2 parameters YAML)")

@@ -31,6 +31,9 @@ are linear in the number of poses.
 pose (``accuracy.pose_accuracy``, exact over the box of errors).
 """
 
+ORDER = 10  # its place in `cdh-planner --help`
+SUMMARY = "check poses and the motion between them for wrench feasibility"
+
 import dataclasses
 import json
 import math
@@ -55,7 +58,7 @@ LISTED_NOT_FEASIBLE = 10  # ... and at most this many poses and segments of them
 def add_parser(subparsers):
     """Register ``verify`` on the top-level subparsers."""
     p = subparsers.add_parser(
-        "verify", help="check poses and the motion between them for wrench feasibility",
+        "verify", help=SUMMARY,
         description="Check each pose and, by dense sampling, the motion between consecutive "
                     "poses (position linear, orientation slerp). Exit 0 if all feasible, 1 if not, "
                     "2 for bad input.")

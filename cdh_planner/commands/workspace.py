@@ -17,6 +17,9 @@ Runs on a local Ray of ``--workers`` actors (default: the cores), on a cluster w
 --max-seconds stopped it: the JSON says ``"complete": false``), 2 for bad input.
 """
 
+ORDER = 40  # its place in `cdh-planner --help`
+SUMMARY = "sample poses: wrench feasibility, margin and reachability from home"
+
 import math
 from dataclasses import replace
 
@@ -39,7 +42,7 @@ MAX_SECONDS = 7 * 24 * 3600.0  # one run at most a week
 def add_parser(subparsers):
     """Register ``workspace`` on the top-level subparsers."""
     p = subparsers.add_parser(
-        "workspace", help="sample poses: wrench feasibility, margin and reachability from home",
+        "workspace", help=SUMMARY,
         description="Sample poses in a box and within a tilt of the home orientation; give "
                     "each its feasibility and margin and, with --reach, whether a path from "
                     "the home pose reaches it. Runs on Ray (local or a cluster) or in this "

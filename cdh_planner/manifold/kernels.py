@@ -1,9 +1,9 @@
 """Compiled kernel of the navigation manifold: F (84,) and F_X (84, 90) in scalar loops.
 
-``navigation_residual_and_jacobian(X, params, jacobian)`` computes exactly what
-``NavigationManifold.residual_and_jacobian_reference`` computes (same equations, same
-variable and equation order, see navigation.py); the Python version stays as the
-reference and test/test_manifold_kernel.py checks the two agree to 1e-12.
+``navigation_residual_and_jacobian(X, params, jacobian)`` computes exactly what the numpy
+reference (test/navigation_reference.py) computes (same equations, same variable and
+equation order, see navigation.py); test/test_manifold_kernel.py checks the two agree to
+1e-12.
 
 The robot's constants travel in one flat float64 vector (``pack_parameters``) so that a
 call unboxes two arrays only: numba's per-argument dispatch cost is a visible part of a

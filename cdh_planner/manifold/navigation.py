@@ -32,11 +32,10 @@ The atlas sees scaled variables x = X / scale, so one chart radius is meaningful
 over the platform radius, tensions over the tension range, angles in radians, slacks as is.
 """
 
-import math
 
 import numpy as np
 
-from ..wrench import skew, wrench_feasibility
+from ..wrench import wrench_feasibility
 from ..model.pose import rotation_tt
 from .layout import I_D, I_F, I_G, I_L, I_P, I_S, I_T, I_TAU, I_V, N_EQS, N_VARS  # noqa: F401  (re-exported)
 KAPPA = 0.1  # default slack scale kappa (see NavigationManifold)
@@ -58,12 +57,7 @@ class NavigationManifold:
         self.range_f = robot.tension_max - robot.tension_min
         self.length_ref = float(np.mean(np.linalg.norm(self.b, axis=1))) or 0.1
         self.tension_ref = float(np.mean(self.range_f))
-        self.a_skew = skew(self.a)  # (6, 3, 3)
         self.L3T = np.linalg.cholesky(self.E3).T  # E3 = L3 L3^T
-        self.de_dc = np.zeros((3, 6, 6))  # d e(c) / dc_m
-        for m in range(3):
-            self.de_dc[m, 3:, :3] = -skew(np.eye(3)[m])
-        self._index_tables()
         self._kernel = self._kernel_params = None  # see _load_kernel
 
     def _load_kernel(self):
@@ -76,25 +70,6 @@ class NavigationManifold:
             self.a, self.b, self.g_load, self.w_local, self.L3T, r.length_min, r.length_max,
             r.tension_min, r.tension_max, self.kappa, self.load_frame)
         self._kernel = navigation_residual_and_jacobian
-
-    def _index_tables(self):
-        """Constant entries and scatter indices of F_X, computed once."""
-        self._rows6 = np.arange(6)
-        self._template = np.zeros((N_EQS, N_VARS))
-        for i in range(6):
-            r0 = 3 * i
-            self._template[r0:r0 + 3, I_P:I_TAU] = -np.eye(3)
-            self._template[r0:r0 + 3, I_D + r0:I_D + r0 + 3] = np.eye(3)
-        self._r2 = 18 + np.repeat(self._rows6, 3)
-        self._c2 = I_D + np.arange(18)
-        self._col_dd = np.concatenate([np.broadcast_to(np.eye(3), (6, 3, 3)), self.a_skew], axis=1)
-        idx_k, idx_j = np.repeat(self._rows6, 6), np.tile(self._rows6, 6)
-        self._r_env = np.arange(36)[:, None]
-        self._c_env = I_V + 6 * self._rows6[None, :] + idx_j[:, None]
-        self._k_env = idx_k
-        self._r_v = np.repeat(self._rows6, 6)
-        self._c_v = np.arange(36)
-        self._force_skew = skew(self.w_local[:3])
 
     # ----- scaling -------------------------------------------------------------------
     def variable_scale(self):
@@ -124,13 +99,6 @@ class NavigationManifold:
         return r
 
     # ----- pieces ----------------------------------------------------------------------
-    def _unpack(self, X):
-        p, tau = X[I_P:I_TAU], X[I_TAU:I_D]
-        d = X[I_D:I_L].reshape(6, 3)
-        l, f0 = X[I_L:I_F], X[I_F:I_V]
-        G = X[I_V:I_G].reshape(6, 6)  # tension envelope map: f = f0 + G z, |z| <= 1
-        return p, tau, d, l, f0, G, X[I_G:I_S], X[I_S:I_T], X[I_T:N_VARS]
-
     def _wrench_and_factor(self, c):
         """w0(c) in the base frame and P(c) = L3^T e(c), so that E_base = P^T P."""
         w0 = self.w_local.copy()
@@ -155,8 +123,8 @@ class NavigationManifold:
     def residual_and_jacobian(self, X, jacobian=True):
         """F(X) (84,) and F_X(X) (84, 90) in physical units (F_X None if not ``jacobian``).
 
-        The compiled kernel (kernels.py, numba); ``residual_and_jacobian_reference`` is the
-        same computation in numpy, kept as the reference the kernel is tested against.
+        The compiled kernel (kernels.py, numba); test/navigation_reference.py holds the same
+        computation in numpy, the reference the kernel is tested against.
         """
         X = np.ascontiguousarray(X, dtype=np.float64)
         if X.shape != (N_VARS,):  # the kernel does not bounds-check
@@ -165,74 +133,6 @@ class NavigationManifold:
             self._load_kernel()
         F, Jx = self._kernel(X, self._kernel_params, bool(jacobian))
         return F, (Jx if jacobian else None)
-
-    def residual_and_jacobian_reference(self, X, jacobian=True):
-        """F(X) (84,) and F_X(X) (84, 90) in physical units: numpy reference of the kernel."""
-        p, tau, d, l, f0, G, g, s, t = self._unpack(X)
-        R, dR = rotation_and_derivatives(tau)
-        c = p + R @ self.g_load
-        w0, P = self._wrench_and_factor(c)
-        cols = np.concatenate([d, np.einsum("kij,kj->ki", self.a_skew, d)], axis=1)  # row i = l_i J col i
-        J = (cols / l[:, None]).T
-        JG = J @ G
-        M = P @ J
-        vdiag = np.linalg.norm(G, axis=1)
-        mu_l, mu_lo, mu_hi = self.margins(l, f0, vdiag)
-
-        Fv = np.empty(N_EQS)
-        Fv[0:18] = (d - (p + self.b @ R.T - self.a)).ravel()
-        Fv[18:24] = l ** 2 - np.einsum("ij,ij->i", d, d)
-        Fv[24:30] = J @ f0 - w0
-        Fv[30:66] = (P @ JG - np.eye(6)).ravel()
-        Fv[66:72] = mu_l - np.exp(g / self.kappa)
-        Fv[72:78] = mu_lo - np.exp(s / self.kappa)
-        Fv[78:84] = mu_hi - np.exp(t / self.kappa)
-        if not jacobian:
-            return Fv, None
-
-        Jx = self._template.copy()  # the constant entries (identities of Eq. 1)
-        db = np.einsum("ijk,nj->nik", dR, self.b)  # (6 cables, 3, 3 angles)
-        dc_dtau = np.einsum("ijk,j->ik", dR, self.g_load)  # (3, 3)
-        rows = self._rows6
-        # (1)
-        Jx[0:18, I_TAU:I_D] = -db.reshape(18, 3)
-        # (2)
-        Jx[18 + rows, I_L + rows] = 2.0 * l
-        Jx[self._r2, self._c2] = -2.0 * d.ravel()
-        # dJcol_i / dd_i = [I; [a_i]x] / l_i and dJcol_i / dl_i = -Jcol_i / l_i
-        dcol_dd = self._col_dd / l[:, None, None]  # (6, 6, 3)
-        dcol_dl = -J.T / l[:, None]  # (6, 6): row i = d Jcol_i / d l_i
-        # (4) J f0 - w0
-        Jx[24:30, I_F:I_V] = J
-        Jx[24:30, I_D:I_L] = (f0[:, None, None] * dcol_dd).transpose(1, 0, 2).reshape(6, 18)
-        Jx[24:30, I_L:I_F] = (f0[:, None] * dcol_dl).T
-        if self.load_frame:
-            Fx = self._force_skew  # d(-w0)/dc = [0; [F]x]
-            Jx[27:30, I_P:I_TAU] = Fx
-            Jx[27:30, I_TAU:I_D] = Fx @ dc_dtau
-        # envelope: P J G - I, rows (k, j) row-major
-        blk = Jx[30:66]
-        blk[self._r_env, self._c_env] = M[self._k_env]
-        # d(P J G)_kj / dJcol_i = P_k: G_ij
-        D = np.einsum("ka,ij->ikja", P, G).reshape(6, 36, 6)
-        blk[:, I_D:I_L] = np.einsum("ira,iac->ric", D, dcol_dd).reshape(36, 18)
-        blk[:, I_L:I_F] = np.einsum("ira,ia->ri", D, dcol_dl)
-        if self.load_frame:
-            dc = np.einsum("kb,mbc,cj->kjm", self.L3T, self.de_dc, JG).reshape(36, 3)
-            blk[:, I_P:I_TAU] = dc
-            blk[:, I_TAU:I_D] = dc @ dc_dtau
-        # (10)-(12)
-        rr = self.robot
-        dv = (G / vdiag[:, None] / self.range_f[:, None]).ravel()  # d|G_i| / dG_i over the range
-        Jx[66 + rows, I_L + rows] = (rr.length_max + rr.length_min - 2.0 * l) / self.half_range_l ** 2
-        Jx[66 + rows, I_G + rows] = -np.exp(g / self.kappa) / self.kappa
-        Jx[72 + rows, I_F + rows] = 1.0 / self.range_f
-        Jx[78 + rows, I_F + rows] = -1.0 / self.range_f
-        Jx[72 + self._r_v, I_V + self._c_v] = -dv
-        Jx[78 + self._r_v, I_V + self._c_v] = -dv
-        Jx[72 + rows, I_S + rows] = -np.exp(s / self.kappa) / self.kappa
-        Jx[78 + rows, I_T + rows] = -np.exp(t / self.kappa) / self.kappa
-        return Fv, Jx
 
     # ----- lifting -----------------------------------------------------------------------
     def lift(self, p, tau):
@@ -273,25 +173,3 @@ def _cross(a, b):
 
 def _skew3(v):
     return np.array([[0.0, -v[2], v[1]], [v[2], 0.0, -v[0]], [-v[1], v[0], 0.0]])
-
-
-def rotation_and_derivatives(tau):
-    """R = Rz(phi) Ry(theta) Rz(sigma - phi) of one pose and dR / d(phi, theta, sigma)
-    stacked as (3, 3, 3) (last index = angle); scalar code, the Newton loop's hot path."""
-    phi, theta, sigma = float(tau[0]), float(tau[1]), float(tau[2])
-    cf, sf = math.cos(phi), math.sin(phi)
-    ct, st = math.cos(theta), math.sin(theta)
-    cp, sp = math.cos(sigma - phi), math.sin(sigma - phi)
-    Rzf = np.array([[cf, -sf, 0.0], [sf, cf, 0.0], [0.0, 0.0, 1.0]])
-    dRzf = np.array([[-sf, -cf, 0.0], [cf, -sf, 0.0], [0.0, 0.0, 0.0]])
-    Ry = np.array([[ct, 0.0, st], [0.0, 1.0, 0.0], [-st, 0.0, ct]])
-    dRy = np.array([[-st, 0.0, ct], [0.0, 0.0, 0.0], [-ct, 0.0, -st]])
-    Rzp = np.array([[cp, -sp, 0.0], [sp, cp, 0.0], [0.0, 0.0, 1.0]])
-    dRzp = np.array([[-sp, -cp, 0.0], [cp, -sp, 0.0], [0.0, 0.0, 0.0]])
-    A = Rzf @ Ry
-    d_sigma = A @ dRzp
-    dR = np.empty((3, 3, 3))
-    dR[:, :, 0] = dRzf @ Ry @ Rzp - d_sigma
-    dR[:, :, 1] = Rzf @ dRy @ Rzp
-    dR[:, :, 2] = d_sigma
-    return A @ Rzp, dR

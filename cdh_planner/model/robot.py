@@ -10,7 +10,7 @@ Arrays are flat because ROS 2 parameters cannot nest lists: ``base_anchors`` hol
 A_1..A_m, x y z each (metres, base frame F1; m cables, one per winch name, 6 to 16),
 ``platform_anchors`` B_1..B_m (metres, platform frame F2); a 6x6 matrix is 36 numbers
 row-major, or 6 numbers for a diagonal. Every field is declared once, on ``Robot``
-(key, unit, size, bounds, description: ``robot_schema.RobotField``); the table of them
+(key, unit, size, bounds, description: a ``fields.Field``); the table of them
 is docs/parameters.md (``robot.*``).
 """
 
@@ -22,8 +22,8 @@ import numpy as np
 from ..errors import MAX_FORCE_N, MAX_POSITION_M, InputError
 from .. import files
 from .shapes import SHAPES, platform_types
-from .robot_schema import CHOICE, MATRIX, N_CABLES, NAME, NAMES, NUMBER, NUMBERS, check_groups, \
-    read_fields, robot_field, schema_of
+from ..fields import CHOICE, MATRIX, NAME, NAMES, NUMBER, NUMBERS
+from .robot_schema import N_CABLES, check_groups, read_fields, robot_field, schema_of
 
 MAX_CABLE_RADIUS_M = 1.0  # m: a thicker "cable" is a unit mistake
 MAX_STIFFNESS_N = 1e10  # N: EA of a 100 mm steel rope is about 1e9 N; more is a unit mistake
@@ -50,7 +50,7 @@ class Robot:
     (``contact_matrix``, ``contact_center`` as given, or None) is already folded into
     ``ellipsoid_matrix`` and ``ellipsoid_offset`` (paper Eqs. 22-23).
 
-    Each field read from the robot file carries its declaration (``RobotField``, see
+    Each field read from the robot file carries its declaration (a ``fields.Field``, see
     ``robot_schema``): the file's key, unit, size, bounds and description. The node's
     ``robot.*`` parameters and docs/parameters.md are built from them; a new robot field is
     one field here. m, the number of cables, is the number of ``winch_names``.

@@ -1,9 +1,9 @@
 """The robot file's schema: how one field of the ``robot:`` block is declared and read.
 
-``model/robot.py`` declares each field once, as metadata (``RobotField``) on a field of the
-``Robot`` dataclass, as ``settings.py`` does for the planner settings: its key in the file
-(dotted inside a group: ``load.force``), kind, unit, size, bounds and description.
-``read_fields`` reads and checks a ``robot:`` mapping by that declaration; the node's
+``model/robot.py`` declares each field once, as metadata (a ``fields.Field``, the schema
+style of every input) on a field of the ``Robot`` dataclass: its key in the file (dotted
+inside a group: ``load.force``), kind, unit, size, bounds and description. ``read_fields``
+reads and checks a ``robot:`` mapping by that declaration (``fields.read``); the node's
 parameters (``ros/core/params.py``: ``robot.<key>``) and their table (docs/parameters.md) are
 built from it too, so a new robot field is one ``Robot`` field.
 
@@ -13,73 +13,28 @@ MIN_CABLES <= m <= MAX_CABLES (the wrench-feasibility test of ``wrench`` holds f
 m >= 6: docs/more-cables.md).
 """
 
-from dataclasses import dataclass, field, fields
+from dataclasses import field
 
-import numpy as np
+from ..errors import InputError, check_keys
+from ..fields import MATRIX, MAX_NAME_CHARS, NAME, NAMES, NUMBER, CHOICE, REQUIRED, Field, declared, \
+    read
 
-from ..errors import InputError, check_finite, check_keys, check_numbers, is_number
-
-NAME, NAMES, CHOICE, NUMBER, NUMBERS, MATRIX = "name", "names", "choice", "number", "numbers", \
-    "matrix"
-REQUIRED = object()  # the default of a field the file must give
-MAX_NAME_CHARS = 64
 N_CABLES = 6  # the default number of winches (the default winch names)
 MIN_CABLES = 6  # fewer cables cannot hold a 6-D wrench ellipsoid: J (6 x m) has rank < 6
 # the facet test visits C(m, 5) cable subsets per pose: 4368 for 16 cables (bounded work)
 MAX_CABLES = 16
 
 
-@dataclass(frozen=True)
-class RobotField:
-    """One field of the ``robot:`` block.
-
-    ``key``: its path in the block (``load.force``); ``kind``: NAME (1 to MAX_NAME_CHARS
-    characters), NAMES (one distinct NAME per winch: they give m), CHOICE (one of
-    ``choices``), NUMBER, NUMBERS (``count`` numbers; ``per_cable``: ``count`` per cable;
-    ``broadcast``: one number may stand for every entry) or MATRIX (``count`` x ``count``,
-    row-major, or its ``count`` diagonal entries; ``definite``: "positive" (symmetric
-    positive definite) or "semi" (symmetric positive semi-definite)). Numbers lie within
-    +-``limit``; ``sign``: "positive" (> 0) or "non-negative" (>= 0) entries. ``default``:
-    REQUIRED, None (optional, left empty) or the value an absent key takes. ``unit`` and
-    ``description`` document it."""
-
-    key: str
-    kind: str
-    unit: str
-    description: str
-    default: object = REQUIRED
-    count: int = 1
-    per_cable: bool = False
-    broadcast: bool = False
-    limit: float = None
-    sign: str = ""
-    definite: str = ""
-    choices: tuple = ()
-
-    @property
-    def group(self):
-        """The mapping the key sits in ("" for the top of ``robot:``)."""
-        return self.key.rpartition(".")[0]
-
-    @property
-    def name(self):
-        return self.key.rpartition(".")[2]
-
-    def size(self, m):
-        """How many numbers (or names) the field holds for m cables."""
-        if self.kind == NAMES:
-            return m
-        return self.count * (m if self.per_cable else 1)
-
-
 def robot_field(**meta):
-    """A dataclass field carrying its RobotField (``robot.py``'s Robot)."""
-    return field(metadata={"robot": RobotField(**meta)})
+    """A dataclass field carrying its ``fields.Field`` (``robot.py``'s Robot): key (dotted
+    in a group: ``load.force``), kind, unit, size, bounds, description; ``default`` REQUIRED,
+    None (optional, left empty) or the value an absent key takes."""
+    return field(metadata={"robot": Field(**meta)})
 
 
 def schema_of(cls):
-    """The RobotFields of the dataclass ``cls``, in declaration order."""
-    return tuple(f.metadata["robot"] for f in fields(cls) if "robot" in f.metadata)
+    """The Fields of the dataclass ``cls``, in declaration order."""
+    return declared(cls, "robot")
 
 
 def cable_count(names):
@@ -101,9 +56,9 @@ def check_groups(d, schema, optional_groups=()):
     groups = {"": ([], set())}  # group -> (its keys in declaration order, required ones)
     for f in schema:
         allowed, required = groups.setdefault(f.group, ([], set()))
-        allowed.append(f.name)
+        allowed.append(f.leaf)
         if f.default is REQUIRED:
-            required.add(f.name)
+            required.add(f.leaf)
     top_allowed, top_required = groups.pop("")
     for g, (_, required) in groups.items():
         top_allowed.append(g)
@@ -124,88 +79,14 @@ def read_fields(d, schema, defaults=None):
     out, m = {}, N_CABLES
     for f in schema:
         group = d.get(f.group, {}) if f.group else d
-        value = group[f.name] if f.name in group else defaults.get(f.key, f.default)
+        value = group[f.leaf] if f.leaf in group else defaults.get(f.key, f.default)
         if value is REQUIRED or (value is None and f.default is None):
             out[f.key] = None  # not given: an optional field, or a field of an absent group
             continue
-        out[f.key] = read_value(f, f"robot.{f.key}", value, m)
+        out[f.key] = read(f, value, f"robot.{f.key}", m)
         if f.kind == NAMES:
             m = cable_count(out[f.key])
     return out
-
-
-def read_value(f, where, value, m):
-    """The checked value of field ``f`` (``where``: its name in errors) for m cables."""
-    if f.kind == NAME:
-        if not isinstance(value, str) or not value or len(value) > MAX_NAME_CHARS:
-            raise InputError(where, value, f"expected a name of 1 to {MAX_NAME_CHARS} characters")
-        return value
-    if f.kind == NAMES:
-        if (not isinstance(value, (list, tuple)) or not value
-                or not all(isinstance(w, str) and 0 < len(w) <= MAX_NAME_CHARS for w in value)
-                or len(set(value)) != len(value)):
-            raise InputError(where, value, f"expected distinct non-empty names of at most "
-                                           f"{MAX_NAME_CHARS} characters, one per winch")
-        return tuple(value)
-    if f.kind == CHOICE:
-        if not isinstance(value, str) or value not in f.choices:
-            raise InputError(where, value, f"expected one of {', '.join(f.choices)}")
-        return value
-    if f.kind == NUMBER:
-        value = check_finite(where, value, positive=f.sign == "positive", limit=f.limit)
-        _signed(f, where, np.array([value]))
-        return value
-    if f.kind == MATRIX:
-        return _matrix(f, where, value)
-    n = f.size(m)
-    if f.broadcast and is_number(value):
-        value = [value] * n
-    arr = _signed(f, where, _numbers(where, value, n, f.limit))
-    return arr.reshape(-1, f.count) if f.per_cable and f.count > 1 else arr
-
-
-def _numbers(where, value, n, limit):
-    """``n`` finite numbers within +-``limit`` (a single number when n is 1; numpy arrays
-    flattened); InputError naming the list or its first bad entry."""
-    if is_number(value):
-        value = [value]
-    if isinstance(value, np.ndarray):
-        value = value.ravel().tolist()
-    return np.array(check_numbers(where, value, n, limit), dtype=float)
-
-
-def _signed(f, where, arr):
-    """``arr`` if its entries have the field's sign; else InputError naming the first bad one
-    (``where[i]`` for a list)."""
-    if not f.sign:
-        return arr
-    positive = f.sign == "positive"
-    bad = np.flatnonzero(arr <= 0 if positive else arr < 0)
-    if bad.size:
-        name = where if f.kind == NUMBER else f"{where}[{bad[0]}]"
-        raise InputError(name, float(arr[bad[0]]), f"must be {f.sign}")
-    return arr
-
-
-def _matrix(f, where, value):
-    """An n x n matrix from n*n numbers (row-major) or n numbers (its diagonal), checked
-    for the field's ``definite``."""
-    n = f.count
-    if isinstance(value, (list, tuple)) and len(value) == n:
-        M = np.diag(_numbers(where, value, n, f.limit))
-    else:
-        M = _numbers(where, value, n * n, f.limit).reshape(n, n)
-    if f.definite == "positive":
-        if not np.allclose(M, M.T, rtol=1e-9, atol=0.0):
-            raise InputError(where, value, "must be symmetric")
-        eig = np.linalg.eigvalsh(M)
-        if eig[0] <= 0:
-            raise InputError(where, value, f"must be positive definite (smallest eigenvalue "
-                                           f"{eig[0]:.3g})")
-    elif f.definite == "semi":
-        if not np.allclose(M, M.T, rtol=1e-9, atol=1e-15) or np.linalg.eigvalsh(M)[0] < -1e-12:
-            raise InputError(where, value, f"must be symmetric positive semi-definite ({f.unit})")
-    return M
 
 
 def size_text(f):

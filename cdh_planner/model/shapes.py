@@ -21,13 +21,22 @@ import os
 
 import numpy as np
 
-from ..errors import MAX_POSITION_M, InputError, check_finite, check_numbers
+from ..errors import MAX_POSITION_M, InputError
+from ..fields import NUMBER, NUMBERS, REQUIRED, TEXT, Field, read
 from .shape_forms import BOX_FORM, CAPSULE_FORM, COAL_FORM, CYLINDER_FORM, SPHERE_FORM
 
 MAX_MESH_BYTES = 16 << 20  # a mesh file's size
 MAX_MESH_VERTICES = 100_000  # of a mesh, before its convex hull is taken
 
 SHAPES = {}
+RADIUS = Field("radius", NUMBER, unit="m", sign="positive", limit=MAX_POSITION_M,
+               description="radius")
+
+
+def length(key, description):
+    """A shape's positive length key (m), up to MAX_POSITION_M."""
+    return Field(key, NUMBER, unit="m", sign="positive", limit=MAX_POSITION_M,
+                 description=description)
 
 
 def register(cls):
@@ -44,10 +53,10 @@ def register(cls):
 
 
 def _methods_owed(cls):
-    """What a shape class must define (ShapeType's docstring): every type its fields,
-    bounding radius, coal geometry, markers and MuJoCo geom; a platform type
-    ``platform_fields``; a type with a ROS primitive its ``primitive_*`` pair."""
-    owed = ["fields", "bounding_radius", "coal_geometry", "marker_parts", "mjcf"]
+    """What a shape class must define (ShapeType's docstring): every type its bounding
+    radius, coal geometry, markers and MuJoCo geom; a platform type ``platform_fields``; a
+    type with a ROS primitive its ``primitive_*`` pair."""
+    owed = ["bounding_radius", "coal_geometry", "marker_parts", "mjcf"]
     if cls.platform_extents:
         owed.append("platform_fields")
     if cls.primitive is not None:
@@ -61,16 +70,17 @@ def platform_types():
 
 
 class ShapeType:
-    """One shape type. ``required`` / ``optional``: its file keys besides type, position
-    and quaternion; ``platform_extents``: 0 if it cannot be robot.platform_shape, else how
+    """One shape type. ``keys``: its file keys besides type, position and quaternion, each a
+    ``fields.Field`` (``required`` / ``optional``: their names, by default REQUIRED or not);
+    ``platform_extents``: 0 if it cannot be robot.platform_shape, else how
     many leading extents of platform_shape.size are one diameter; ``primitive``: the name
     of its type constant in shape_msgs/SolidPrimitive or else cdh_planner_interfaces/
     Obstacle, with ``dimensions`` numbers; None with ``no_primitive`` saying why;
     ``markers``: RViz Marker type names of its parts (the first is the obstacle's marker).
 
-    A class defines, as static methods (``register`` refuses one that lacks any it owes):
-    ``fields(d, where, base_dir)``, the Shape fields (dict) of the checked file mapping;
-    ``bounding_radius(s)``, m about the position; ``coal_geometry(s)``, in the shape's own
+    ``fields(d, where, base_dir)`` gives the Shape fields (dict) of the file mapping, each
+    key read by its Field (a type that derives more overrides it). A class defines, as static
+    methods (``register`` refuses one that lacks any it owes): ``bounding_radius(s)``, m about the position; ``coal_geometry(s)``, in the shape's own
     frame; ``marker_parts(s)``, [(offset (3,), scale (3,))] for each of ``markers``;
     ``mjcf(s)``, (MuJoCo geom type, its sizes); a platform type ``platform_fields(size)``,
     the fields of robot.platform_shape.size (3,) m; a type with a primitive
@@ -78,6 +88,7 @@ class ShapeType:
     (the file keys of such dimensions)."""
 
     type = ""
+    keys = ()
     required = ()
     optional = ()
     platform_extents = 0
@@ -85,6 +96,17 @@ class ShapeType:
     dimensions = 0
     no_primitive = ""
     markers = ()
+
+    def __init_subclass__(cls, **kwargs):
+        super().__init_subclass__(**kwargs)
+        cls.required = tuple(f.key for f in cls.keys if f.default is REQUIRED)
+        cls.optional = tuple(f.key for f in cls.keys if f.default is not REQUIRED)
+
+    @classmethod
+    def fields(cls, d, where, base_dir):
+        """The Shape fields of the mapping ``d`` (its keys checked): each key read by its
+        Field, an absent optional one taking its default."""
+        return {f.key: read(f, d.get(f.key, f.default), f"{where}.{f.key}") for f in cls.keys}
 
     @classmethod
     def bounding_capsule(cls, s):
@@ -103,12 +125,8 @@ class ShapeType:
 class Sphere(ShapeType):
     """A ball of ``radius`` about its position."""
 
-    type, required, platform_extents, markers = "sphere", ("radius",), 3, ("SPHERE",)
+    type, keys, platform_extents, markers = "sphere", (RADIUS,), 3, ("SPHERE",)
     primitive, dimensions = "SPHERE", 1
-
-    @staticmethod
-    def fields(d, where, base_dir):
-        return dict(radius=positive(f"{where}.radius", d["radius"]))
 
     @staticmethod
     def platform_fields(size):
@@ -148,15 +166,10 @@ class Sphere(ShapeType):
 class Box(ShapeType):
     """Full edge lengths ``size`` along its own x, y, z, centred on its position."""
 
-    type, required, platform_extents, markers = "box", ("size",), 1, ("CUBE",)
+    type, platform_extents, markers = "box", 1, ("CUBE",)
+    keys = (Field("size", NUMBERS, count=3, unit="m", sign="positive", limit=MAX_POSITION_M,
+                  description="full edge lengths along x, y, z"),)
     primitive, dimensions = "BOX", 3
-
-    @staticmethod
-    def fields(d, where, base_dir):
-        size = check_numbers(f"{where}.size", d["size"], 3, MAX_POSITION_M)
-        for i, s in enumerate(size):
-            positive(f"{where}.size[{i}]", s)
-        return dict(size=np.array(size))
 
     @staticmethod
     def platform_fields(size):
@@ -194,14 +207,9 @@ class Box(ShapeType):
 
 class Axial(ShapeType):
     """A solid of revolution about its own z, centred: ``radius`` and the length named
-    ``axis`` (a file key and Shape field), sent over ROS as [that length, radius]."""
+    ``axis`` (its second key, a Shape field), sent over ROS as [that length, radius]."""
 
     axis, form, dimensions = "", COAL_FORM, 2
-
-    @classmethod
-    def fields(cls, d, where, base_dir):
-        return dict(radius=positive(f"{where}.radius", d["radius"]),
-                    **{cls.axis: positive(f"{where}.{cls.axis}", d[cls.axis])})
 
     @classmethod
     def kernel_form(cls, s):
@@ -220,7 +228,8 @@ class Axial(ShapeType):
 class Cylinder(Axial):
     """Axis z, ``height`` its full length, centred on its position."""
 
-    type, required, platform_extents, markers = "cylinder", ("radius", "height"), 2, ("CYLINDER",)
+    type, platform_extents, markers = "cylinder", 2, ("CYLINDER",)
+    keys = (RADIUS, length("height", "full length along z"))
     axis, form, primitive = "height", CYLINDER_FORM, "CYLINDER"
 
     @staticmethod
@@ -250,16 +259,18 @@ class Mesh(ShapeType):
     """A mesh file (STL, OBJ, PLY; read by trimesh) relative to the scene file's folder,
     scaled by ``scale``, checked as its convex hull; over ROS a shape_msgs/Mesh."""
 
-    type, required, optional, markers = "mesh", ("file",), ("scale",), ("TRIANGLE_LIST",)
+    type, markers = "mesh", ("TRIANGLE_LIST",)
+    keys = (Field("file", TEXT, description="STL, OBJ or PLY file, relative to the scene file"),
+            Field("scale", NUMBER, 1.0, unit="", sign="positive", limit=MAX_POSITION_M,
+                  description="scale of the file's coordinates to m"))
     no_primitive = "a mesh is sent as shape_msgs/Mesh"
 
-    @staticmethod
-    def fields(d, where, base_dir):
+    @classmethod
+    def fields(cls, d, where, base_dir):
         from pathlib import Path
 
-        scale = positive(f"{where}.scale", d.get("scale", 1.0))
-        name = d["file"]
-        if not isinstance(name, str) or not name or "\x00" in name:
+        name, scale = super().fields(d, where, base_dir).values()
+        if not name or "\x00" in name:
             raise InputError(f"{where}.file", name, "expected a file name (STL, OBJ or PLY)")
         path = Path(base_dir) / name
         vertices = mesh_hull(path, f"{where}.file") * scale
@@ -295,7 +306,8 @@ class Capsule(Axial):
     centred on its position: the points within ``radius`` of the segment z in
     [-length / 2, length / 2]. Over ROS: Obstacle.CAPSULE, dimensions [length, radius]."""
 
-    type, required, markers = "capsule", ("radius", "length"), ("CYLINDER", "SPHERE", "SPHERE")
+    type, markers = "capsule", ("CYLINDER", "SPHERE", "SPHERE")
+    keys = (RADIUS, length("length", "length of its cylinder along z"))
     axis, form, primitive = "length", CAPSULE_FORM, "CAPSULE"
 
     @staticmethod
@@ -320,11 +332,6 @@ class Capsule(Axial):
     @staticmethod
     def mjcf(s):
         return "capsule", [s.radius, 0.5 * s.length]
-
-
-def positive(where, value):
-    """A positive finite length (m) up to MAX_POSITION_M; InputError naming ``where``."""
-    return check_finite(where, value, positive=True, limit=MAX_POSITION_M)
 
 
 def mesh_hull(path, where):

@@ -18,12 +18,13 @@ planner's default cost. A new task is one registered class:
 - ``ImplicitTask`` (library only): the caller's own C(p, tau) = 0.
 """
 
-from dataclasses import MISSING, dataclass, field, fields
+from dataclasses import dataclass, field, replace
 from typing import ClassVar
 
 import numpy as np
 
-from ..errors import MAX_POSITION_M, InputError, check_finite, check_keys, check_numbers
+from ..errors import MAX_POSITION_M, InputError, check_keys
+from ..fields import BOOL, NUMBER, NUMBERS, Field, declared, read, with_key
 from .pose import (on_singular_set, rotation_angle_between, rotation_tt, rotation_tt_derivatives,
                    tau_from_rotation, wrap_angle)
 
@@ -55,27 +56,22 @@ COORDINATES = _coordinates(
     Coordinate("sigma", "rad", True, (-np.pi, np.pi), r"$\sigma$"))
 
 
-@dataclass(frozen=True)
-class TaskField:
-    """Metadata of a task's field: problem-file key and node parameter ``task.<name>``.
-    ``kind`` is "double", "point" (3 numbers) or "bool". ``positive`` numbers must be > 0.
-    Every number (m or rad) lies within +-``errors.MAX_POSITION_M`` (1e3)."""
-
-    unit: str
-    description: str
-    kind: str = "double"
-    positive: bool = False
-
-
-def _field(default, **meta):
+def _field(default, kind=NUMBER, **meta):
+    """A task dataclass field declared by its ``fields.Field`` (problem-file key = the
+    attribute, node parameter ``task.<name>``): NUMBER, NUMBERS (a point: 3 numbers, kept as
+    a tuple) or BOOL; every number (m or rad) lies within +-``errors.MAX_POSITION_M``."""
     factory = {"default_factory": lambda: default} if isinstance(default, (list, dict)) else \
         {"default": default}
-    return field(**factory, metadata={"task": TaskField(**meta)})
+    if kind in (NUMBER, NUMBERS):
+        meta.setdefault("limit", MAX_POSITION_M)
+    if kind == NUMBERS:
+        meta.setdefault("count", 3)
+    return field(**factory, metadata={"task": Field("", kind, **meta)})
 
 
 def _center():
     # one parameter, task.center, for the two tasks that have a point in the base frame
-    return _field((0.0, 0.0, 0.0), kind="point", unit="m, base frame",
+    return _field((0.0, 0.0, 0.0), NUMBERS, unit="m, base frame",
                   description="sphere task: centre of the sphere; pivot task: the point c "
                               "the tool point stays at")
 
@@ -87,18 +83,19 @@ def register(cls):
     """Class decorator: make ``cls`` a task of problem files, node parameters and slice.
 
     Tasks share one ``task.<field>`` namespace of node parameters: a parameter that two
-    tasks declare (task.center) must be declared alike (same TaskField and default), as
+    tasks declare (task.center) must be declared alike (the same Field, default included), as
     must a coordinate two tasks introduce, and a type is registered once; a conflict is
     refused here (ValueError naming the task) rather than giving one task the other's
     parameter or coordinate."""
     if cls.type in TASKS and TASKS[cls.type] is not cls:
         raise ValueError(f"task type {cls.type!r} is already registered ({TASKS[cls.type].__name__})")
     shared = task_parameters()
-    for name, meta, default in cls.parameters():
-        if name in shared and not _same_parameter(shared[name][:2], (meta, default)):
-            raise ValueError(f"task {cls.type!r}: parameter {name} ({meta.kind}, default "
-                             f"{default!r}) is declared otherwise by task {shared[name][2]!r} "
-                             f"({shared[name][0].kind}, default {shared[name][1]!r})")
+    for f in cls.parameters():
+        if f.key in shared and not _same_parameter(shared[f.key][0], f):
+            other, first = shared[f.key]
+            raise ValueError(f"task {cls.type!r}: parameter {f.key} ({f.kind}, default "
+                             f"{f.default!r}) is declared otherwise by task {first!r} "
+                             f"({other.kind}, default {other.default!r})")
     for c in cls.coordinates:
         if c.name in COORDINATES and COORDINATES[c.name] != c:
             raise ValueError(f"task {cls.type!r}: coordinate {c.name} ({c.unit}) is declared "
@@ -109,20 +106,20 @@ def register(cls):
 
 
 def task_parameters():
-    """node parameter -> (TaskField, default, type of the first task declaring it), over
-    every registered task (``register`` keeps them consistent)."""
+    """node parameter -> (its Field, type of the first task declaring it), over every
+    registered task (``register`` keeps them consistent)."""
     out = {}
     for cls in TASKS.values():
-        for name, meta, default in cls.parameters():
-            out.setdefault(name, (meta, default, cls.type))
+        for f in cls.parameters():
+            out.setdefault(f.key, (f, cls.type))
     return out
 
 
 def _same_parameter(a, b):
-    """Two (TaskField, default) declarations alike (NaN defaults equal)."""
-    (meta_a, da), (meta_b, db) = a, b
+    """Two Fields alike (NaN defaults equal)."""
+    da, db = a.default, b.default
     nan = isinstance(da, float) and isinstance(db, float) and np.isnan(da) and np.isnan(db)
-    return meta_a == meta_b and (nan or da == db)
+    return replace(a, default=None) == replace(b, default=None) and (nan or da == db)
 
 
 class Task:
@@ -211,26 +208,25 @@ class Task:
     # ----- problem files and node parameters --------------------------------------------
     @classmethod
     def task_fields(cls):
-        """(name, TaskField, default) of each setting of the task."""
-        return [(f.name, f.metadata["task"], f.default if f.default_factory is MISSING
-                 else f.default_factory()) for f in fields(cls) if "task" in f.metadata]
+        """The Field of each setting of the task (key: its problem-file key)."""
+        return declared(cls, "task")
 
     @classmethod
     def from_dict(cls, d, where):
         """The task of its problem-file mapping (``type`` already checked)."""
-        check_keys(where, d, ["type"] + [name for name, _, _ in cls.task_fields()])
-        return cls(**{name: _check_field(f"{where}.{name}", meta, d.get(name, default))
-                      for name, meta, default in cls.task_fields()})
+        check_keys(where, d, ["type"] + [f.key for f in cls.task_fields()])
+        return cls(**{f.key: _as_declared(read(f, d.get(f.key, f.default), f"{where}.{f.key}"))
+                      for f in cls.task_fields()})
 
     @classmethod
     def parameters(cls):
-        """(node parameter, TaskField, default) of each setting of the task."""
-        return [(f"task.{name}", meta, default) for name, meta, default in cls.task_fields()]
+        """The Field of each setting of the task as a node parameter (key ``task.<name>``)."""
+        return [with_key(f, f"task.{f.key}") for f in cls.task_fields()]
 
     @classmethod
     def dict_of_parameters(cls, values):
         """The problem-file mapping of the node's flat parameter values (name -> value)."""
-        return {"type": cls.type, **{name: values[f"task.{name}"] for name, _, _ in cls.task_fields()}}
+        return {"type": cls.type, **{f.key: values[f"task.{f.key}"] for f in cls.task_fields()}}
 
     @classmethod
     def example(cls):
@@ -241,17 +237,16 @@ class Task:
 
 
 
-def _check_field(where, meta, value):
-    if meta.kind == "bool":
-        if not isinstance(value, bool):
-            raise InputError(where, value, "expected true or false")
-        return value
-    if meta.kind == "point":
-        return tuple(check_numbers(where, value, 3, limit=MAX_POSITION_M))
-    value = check_finite(where, value, limit=MAX_POSITION_M)
-    if meta.positive and value <= 0:
-        raise InputError(where, value, f"must be positive ({meta.unit})")
-    return value
+def _as_declared(value):
+    """A task's value as its dataclass keeps it: a point (array) as a tuple of floats."""
+    return tuple(value.tolist()) if isinstance(value, np.ndarray) else value
+
+
+def _fixed(name):
+    """The Field of the slice's fixed pose coordinate ``name``: node parameter
+    task.fixed.<name>, NaN (free) by default."""
+    return Field(f"task.fixed.{name}", NUMBER, float("nan"), f"slice task: fixed value of "
+                 f"{name}, or NaN for free", unit=COORDINATES[name].unit, limit=MAX_POSITION_M)
 
 
 @register
@@ -337,16 +332,14 @@ class SliceTask(Task):
         for name, value in fixed.items():
             if name not in POSE_NAMES:
                 raise InputError(f"{where}.fixed.{name}", value, f"unknown coordinate (expected {POSE_NAMES})")
-            out[name] = check_finite(f"{where}.fixed.{name}", value, limit=MAX_POSITION_M)
+            out[name] = read(_fixed(name), value, f"{where}.fixed.{name}")
         if len(out) >= 6:
             raise InputError(f"{where}.fixed", fixed, "at least one coordinate must stay free")
         return cls(fixed=out)
 
     @classmethod
     def parameters(cls):
-        return [(f"task.fixed.{n}", TaskField(COORDINATES[n].unit, f"slice task: fixed value of "
-                                              f"{n}, or NaN for free"), float("nan"))
-                for n in POSE_NAMES]
+        return [_fixed(n) for n in POSE_NAMES]
 
     @classmethod
     def dict_of_parameters(cls, values):
@@ -361,8 +354,8 @@ class SphereTask(Task):
     phi = a1 - pi, theta = pi/2 - a2, sigma = 0 (or free). ``center`` m, ``radius`` m."""
 
     center: tuple = _center()
-    radius: float = _field(0.1, unit="m", positive=True, description="sphere task: radius")
-    free_torsion: bool = _field(False, kind="bool", unit="",
+    radius: float = _field(0.1, unit="m", sign="positive", description="sphere task: radius")
+    free_torsion: bool = _field(False, BOOL, unit="",
                                 description="sphere task: the torsion sigma is free as well")
     type: ClassVar[str] = "sphere"
     coordinates: ClassVar[tuple] = (
@@ -459,7 +452,7 @@ class PivotTask(Task):
     p + R(tau) t = c, the orientation free (a camera or a tool tip pivoting about a
     target). y = (phi, theta, sigma), n = 3."""
 
-    tool: tuple = _field((0.0, 0.0, 0.0), kind="point", unit="m, platform frame",
+    tool: tuple = _field((0.0, 0.0, 0.0), NUMBERS, unit="m, platform frame",
                          description="pivot task: the tool point t that stays at task.center")
     center: tuple = _center()
     type: ClassVar[str] = "pivot"

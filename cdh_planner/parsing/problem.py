@@ -27,7 +27,7 @@ from ..settings import SETTINGS, PlannerSettings, check_setting
 from .poses import number_list, pose_from_dict
 
 # the settings schema decides which keys go beside ``planner:`` (strategy, cost) and which in it
-TOP_SETTINGS = tuple(k for k, (_, _, s) in SETTINGS.items() if s.top_level)
+TOP_SETTINGS = tuple(k for k, s in SETTINGS.items() if s.top_level)
 TOP_KEYS = ("robot", "task", *TOP_SETTINGS, "planner", "start", "goal", "description", "scene")
 SETTING_KEYS = tuple(k for k in SETTINGS if k not in TOP_SETTINGS)
 MAX_TEXT_CHARS = 4096  # the robot path and the description

@@ -39,7 +39,8 @@ from pathlib import Path
 import numpy as np
 
 from .. import files
-from ..errors import MAX_POSITION_M, InputError, check_finite, check_keys, check_numbers
+from ..errors import MAX_POSITION_M, InputError, check_keys
+from ..fields import CHOICE, NAME, NUMBER, NUMBERS, Field, read
 from ..model.pose import check_quaternion, rotation_from_quaternion
 from ..model.robot import MAX_CABLE_RADIUS_M
 from ..model.shapes import SHAPES
@@ -49,13 +50,26 @@ MAX_OBSTACLES = 1000  # per scene: every one is checked at every pose
 # refused while parsing, before the file's values add up to the generic bound
 SCENE_FILE_LIMITS = replace(files.YAML_LIMITS, max_items=MAX_OBSTACLES,
                             items_note=f" (a scene has at most {MAX_OBSTACLES} obstacles)")
-MAX_ID_CHARS = 64
 DEFAULT_EXEMPTION_M = 0.01
 SHARED_ANCHOR_M = 1e-6  # two anchors closer than this are one shared anchor point
 IDENTITY = (0.0, 0.0, 0.0, 1.0)
 
-_COMMON = ("type", "position", "quaternion")
+# the scene's numbers (its platform and obstacles are Shapes), each read by its Field
+CABLE_RADIUS = Field("cable_radius", NUMBER, None, "the cables' radius (absent: the robot's)",
+                     unit="m", sign="non-negative", limit=MAX_CABLE_RADIUS_M)
+CLEARANCE = Field("clearance", NUMBER, 0.0, "the least distance kept everywhere", unit="m",
+                  sign="non-negative", limit=MAX_POSITION_M)
+EXEMPTION = Field("shared_anchor_exemption", NUMBER, DEFAULT_EXEMPTION_M,
+                  "rho: cables sharing an anchor are compared beyond it", unit="m",
+                  sign="non-negative", limit=MAX_POSITION_M)
 SCENE_KEYS = ("cable_radius", "clearance", "shared_anchor_exemption", "platform", "obstacles")
+# every shape's keys besides its type's own
+OBSTACLE_ID = Field("id", NAME, description="an obstacle's unique name (not 'platform')")
+POSITION = Field("position", NUMBERS, (0.0, 0.0, 0.0), "its centre", unit="m", count=3,
+                 limit=MAX_POSITION_M)
+QUATERNION = Field("quaternion", NUMBERS, IDENTITY, "its orientation (x, y, z, w), unit",
+                   count=4)
+_COMMON = ("type", POSITION.key, QUATERNION.key)
 
 
 @dataclass(frozen=True, eq=False)
@@ -158,10 +172,9 @@ def scene_from_dict(d, robot=None, base_dir=".", where="scene", source=""):
     radius = d.get("cable_radius")
     if radius is None:
         radius = getattr(robot, "cable_radius", None) or 0.0
-    radius = _non_negative(f"{where}.cable_radius", radius, MAX_CABLE_RADIUS_M)
-    clearance = _non_negative(f"{where}.clearance", d.get("clearance", 0.0), MAX_POSITION_M)
-    rho = _non_negative(f"{where}.shared_anchor_exemption",
-                        d.get("shared_anchor_exemption", DEFAULT_EXEMPTION_M), MAX_POSITION_M)
+    radius = read(CABLE_RADIUS, radius, f"{where}.cable_radius")
+    clearance, rho = (read(f, d.get(f.key, f.default), f"{where}.{f.key}")
+                      for f in (CLEARANCE, EXEMPTION))
     platform = d.get("platform")
     if platform is not None:
         platform = shape_from_dict(platform, f"{where}.platform", "platform", base_dir)
@@ -205,10 +218,7 @@ def _obstacles(items, where, base_dir):
             raise InputError(at, item, "expected a mapping (id, type, ...)")
         if "id" not in item:
             raise InputError(f"{at}.id", None, "required key is missing")
-        oid = item["id"]
-        if not isinstance(oid, str) or not 0 < len(oid) <= MAX_ID_CHARS or oid == "platform":
-            raise InputError(f"{at}.id", oid, f"expected a name of 1 to {MAX_ID_CHARS} "
-                                              "characters, not 'platform'")
+        oid = check_obstacle_id(item["id"], f"{at}.id")
         if oid in seen:
             raise InputError(f"{at}.id", oid, "ids must be unique: given twice")
         seen.add(oid)
@@ -217,26 +227,25 @@ def _obstacles(items, where, base_dir):
     return tuple(out)
 
 
+def check_obstacle_id(oid, where):
+    """An obstacle's id (OBSTACLE_ID), not "platform" (the platform's); InputError naming
+    ``where``."""
+    oid = read(OBSTACLE_ID, oid, where)
+    if oid == "platform":
+        raise InputError(where, oid, "the platform's id: an obstacle needs another")
+    return oid
+
+
 def shape_from_dict(d, where, shape_id, base_dir=".", extra=()):
     """A checked Shape from a mapping {type, <its fields>, position, quaternion}."""
     if not isinstance(d, dict):
         raise InputError(where, d, "expected a mapping (type, ...)")
-    kind = d.get("type")
-    if not isinstance(kind, str) or kind not in SHAPES:  # a list is no type (nor hashable)
-        raise InputError(f"{where}.type", kind, f"expected one of {', '.join(SHAPES)}")
+    kind = read(Field("type", CHOICE, choices=tuple(SHAPES)), d.get("type"), f"{where}.type")
     cls = SHAPES[kind]
     check_keys(where, d, _COMMON + cls.required + cls.optional + tuple(extra),
                required=cls.required)
-    position = np.array(check_numbers(f"{where}.position", d.get("position", [0.0] * 3), 3,
-                                      MAX_POSITION_M))
-    q = check_numbers(f"{where}.quaternion", d.get("quaternion", list(IDENTITY)), 4)
+    position = read(POSITION, d.get(POSITION.key, POSITION.default), f"{where}.position")
+    q = read(QUATERNION, d.get(QUATERNION.key, QUATERNION.default), f"{where}.quaternion")
     quaternion = check_quaternion(q, f"{where}.quaternion")
     return Shape(id=shape_id, kind=kind, position=position, quaternion=quaternion,
                  **cls.fields(d, where, base_dir))
-
-
-def _non_negative(where, value, limit):
-    value = check_finite(where, value, limit=limit)
-    if value < 0:
-        raise InputError(where, value, "must be non-negative")
-    return value

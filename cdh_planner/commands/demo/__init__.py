@@ -11,6 +11,10 @@ with an expected value (the paper's results of Sec. 5) is compared with it. Exit
 when all agree, 1 when one differs (printed as DIFFERS FROM THE EXPECTED), 2 for bad input.
 """
 
+ORDER = 130  # its place in `cdh-planner --help`
+SUMMARY = ("the whole story: the paper's robots, poses and motions checked, then the ROS "
+           "node planning, streaming, recording and replaying Robot 2's sphere task")
+
 import argparse
 import sys
 import time
@@ -29,9 +33,7 @@ STEPS = paper.STEPS + obstacle.STEPS + ros_story.STEPS + more_cables.STEPS
 def add_parser(subparsers):
     """Register ``demo`` on the top-level subparsers."""
     p = subparsers.add_parser(
-        "demo", help="the whole story: the paper's robots, poses and motions checked, then "
-                     "the ROS node planning, streaming, recording and replaying Robot 2's "
-                     "sphere task",
+        "demo", help=SUMMARY,
         description="Load the paper's Robot 1 and Robot 2, check the paper's poses (closed-form "
                     "wrench feasibility) and the straight motions between them (dense "
                     "verification), compare each verdict with the paper's results, and write the "

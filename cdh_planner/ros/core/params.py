@@ -25,19 +25,22 @@ import math
 import os
 import re
 from collections.abc import Mapping
-from dataclasses import dataclass, field
+from dataclasses import dataclass, field, replace
 
 import numpy as np
 
 from ...errors import InputError
+from ...fields import BOOL, CHOICE, INT, NUMBER, NUMBERS, REQUIRED, TEXT, TEXTS, default_text, \
+    range_text, read, with_key
 from ...model import robot_schema as rs
 from ...model.robot import FIELDS as ROBOT_FIELDS, OPTIONAL_GROUPS, robot_from_dict
 from ...model.task import TASKS, task_from_dict, task_parameters
 from ...pipeline.metrics import task_cost
 from ...scene.schema import default_scene, load_scene
-from ...settings import SETTINGS, LiveChoices, PlannerSettings, check_range
+from ...settings import SETTINGS, LiveChoices, PlannerSettings
 from ..execution.command_outlets import OUTLETS, modes_description, outlet_specs, reserve
-from .param_spec import BOOL, DOUBLE, DOUBLES, INT, REQUIRED, STRING, STRINGS, Spec  # noqa: F401
+from ..msgs.scene_msgs import check_sendable
+from .param_spec import ROS_TYPES, Spec
 
 # the groups whose change means a new Planner (the others only affect the node)
 PLANNER_PREFIXES = ("robot.", "task.", "planner.", "trajectory.", "scene_file")
@@ -55,19 +58,12 @@ ROS_NAME = re.compile(r"(~/|/)?[A-Za-z_][A-Za-z0-9_]*(/[A-Za-z_][A-Za-z0-9_]*)*"
 FRAME_ID = re.compile(r"[A-Za-z_][A-Za-z0-9_]*(/[A-Za-z_][A-Za-z0-9_]*)*")
 
 
-_KINDS = {str: STRING, bool: BOOL, int: INT, float: DOUBLE}
-
-
 def _setting_spec(name):
-    """The node parameter of a PlannerSettings field, from its schema (settings.py)."""
-    kind, default, s = SETTINGS[name]
+    """The node parameter of a PlannerSettings field: its Setting (settings.py) under the
+    parameter's name, the unit in the description."""
+    s = SETTINGS[name]
     unit = f" ({s.unit})" if s.unit else ""
-    return Spec(s.parameter, _KINDS[kind], default, s.description + unit, low=s.low, high=s.high,
-                open_low=s.open_low, open_high=s.open_high, choices=s.choices)
-
-
-_ROBOT_KINDS = {rs.NAME: STRING, rs.NAMES: STRINGS, rs.CHOICE: STRING, rs.NUMBER: DOUBLE,
-                rs.NUMBERS: DOUBLES, rs.MATRIX: DOUBLES}
+    return with_key(s, s.parameter, cls=Spec, description=s.description + unit)
 
 
 def _robot_spec(f):
@@ -75,30 +71,24 @@ def _robot_spec(f):
     (model/robot.py, ``Robot``): a required field of an optional group (the contact
     ellipsoid's matrix) is an optional parameter, empty for none."""
     default = f.default
-    if default is None and _ROBOT_KINDS[f.kind] == STRING:
+    if default is None and ROS_TYPES[f.kind] == "string":
         default = ""  # a string parameter is typed: empty is "not set" (_robot_dict)
-    elif default is rs.REQUIRED:
+    elif default is REQUIRED:
         default = None if f.group in OPTIONAL_GROUPS else REQUIRED
     elif isinstance(default, tuple):
         default = list(default)
-    bounds = {}
-    if f.kind == rs.NUMBER:
-        bounds = dict(low=0.0 if f.sign else None, open_low=f.sign == "positive", high=f.limit)
-    return Spec("robot." + f.key, _ROBOT_KINDS[f.kind], default, rs.describe(f),
-                choices=f.choices, **bounds)
+    return with_key(f, "robot." + f.key, cls=Spec, default=default, description=rs.describe(f))
 
 
 def _task_specs():
     """task.type and every registered task's parameters (model/task.py: ``register`` has
     checked that tasks sharing a parameter, task.center, declare it alike)."""
-    kinds = {"double": DOUBLE, "point": DOUBLES, "bool": BOOL}
-    specs = [Spec("task.type", STRING, "free", "task constraint: " + ", ".join(TASKS),
+    specs = [Spec("task.type", CHOICE, "free", "task constraint: " + ", ".join(TASKS),
                   choices=tuple(TASKS))]
-    for name, (meta, default, _) in task_parameters().items():
-        unit = f" ({meta.unit})" if meta.unit else ""
-        specs.append(Spec(name, kinds[meta.kind], list(default) if meta.kind == "point" else default,
-                          meta.description + unit, low=0.0 if meta.positive else None,
-                          open_low=meta.positive))
+    for f, _ in task_parameters().values():
+        unit = f" ({f.unit})" if f.unit else ""
+        specs.append(with_key(f, f.key, cls=Spec, description=f.description + unit,
+                              default=list(f.default) if f.kind == NUMBERS else f.default))
     return specs
 
 
@@ -106,28 +96,28 @@ _HEAD = tuple(
     [Spec("autostart", BOOL, True,
           "configure and activate at start, as nav2's lifecycle_manager autostart; false: "
           "the node waits unconfigured for lifecycle calls (~/change_state)"),
-     Spec("base_frame", STRING, "cdh_base",
+     Spec("base_frame", TEXT, "cdh_base",
           "the paper's frame (z down, gravity +z; m): every output carries it; a request in "
           "another frame is transformed into it through TF"),
-     Spec("fixed_frame", STRING, "world",
+     Spec("fixed_frame", TEXT, "world",
           "the z-up fixed frame (REP 103 / 105); base_frame is its child, turned by pi "
           "about x (a static transform on /tf_static)"),
-     Spec("platform_frame", STRING, "cdh_platform",
+     Spec("platform_frame", TEXT, "cdh_platform",
           "the platform's frame: base_frame -> platform_frame on /tf, from the forward "
           "kinematics of the measured cable lengths"),
-     Spec("live_state_rate_hz", DOUBLE, 20.0,
+     Spec("live_state_rate_hz", NUMBER, 20.0,
           "the live state (platform pose on /tf and ~/platform_pose, ~/cable_state, "
           "~/least_margin) is computed at most this often (Hz), from the newest joint state "
           "only, and not at all while none arrives", low=0.1, high=1000.0),
-     Spec("live_markers_rate_hz", DOUBLE, 10.0,
+     Spec("live_markers_rate_hz", NUMBER, 10.0,
           "~/live_markers is drawn at most this often (Hz; at most live_state_rate_hz)",
           low=0.1, high=1000.0)]
     + [_robot_spec(f) for f in ROBOT_FIELDS]
     + _task_specs()
     + [_setting_spec(name) for name in SETTINGS]
-    + [Spec("stream_rate_hz", DOUBLE, 50.0,
+    + [Spec("stream_rate_hz", NUMBER, 50.0,
             "rate of ~/cable_command while executing (Hz)", low=1.0, high=1000.0),
-       Spec("stream_interpolation", STRING, "quintic",
+       Spec("stream_interpolation", CHOICE, "quintic",
             "between waypoints while streaming: quintic (as a JointTrajectoryController "
             "interpolates the same points: the motion the planner checked) or linear "
             "(straight in cable space at the mean speed; its velocity steps at every point, "
@@ -137,37 +127,37 @@ _TAIL = tuple(
     [Spec("execution.allow_unchecked_start", BOOL, False,
             "~/execute without measured cable lengths to compare with the trajectory's "
             "start: refused when false (the default), executed unchecked when true"),
-       Spec("execution.joint_states_topic", STRING, "/joint_states",
+       Spec("execution.joint_states_topic", TEXT, "/joint_states",
             "sensor_msgs/JointState of the winches (cable lengths, m, by winch name): the "
             "start state of ~/execute and of use_current_start (set at start)",
             start_only=True),
-       Spec("execution.start_tolerance", DOUBLE, 0.005,
+       Spec("execution.start_tolerance", NUMBER, 0.005,
             "~/execute refuses when a measured cable length is farther than this from the "
             "trajectory's first point (m)", low=0.0, open_low=True),
-       Spec("execution.joint_states_max_age_s", DOUBLE, 1.0,
+       Spec("execution.joint_states_max_age_s", NUMBER, 1.0,
             "measured lengths older than this (s) are not used", low=0.0, open_low=True),
-       Spec("execution.joint_states_wait_s", DOUBLE, 5.0,
+       Spec("execution.joint_states_wait_s", NUMBER, 5.0,
             "use_current_start with no measured lengths recent enough waits this long (s) "
             "for a joint state before answering NO_CURRENT_STATE (DDS discovery of a "
             "controller started at the same time can take about 3 s); 0: no wait",
             low=0.0, high=60.0),
-       Spec("scene_file", STRING, "",
+       Spec("scene_file", TEXT, "",
             "scene file (YAML, scene: obstacles in the base frame, cable radius, platform "
             "shape; cdh_planner/scene/schema.py): plans keep clear of it; empty: no scene. "
             "Read when set: edit the file, then set the parameter again"),
-       Spec("log_dir", STRING, "~/.ros/cdh_planner",
+       Spec("log_dir", TEXT, "~/.ros/cdh_planner",
             "directory of the run MCAP files (one file per node run; created when needed); "
             "while log_enabled, one the node cannot create or write is refused"),
        Spec("log_enabled", BOOL, True, "record plan calls, published messages and streamed "
             "commands to MCAP in log_dir"),
-       Spec("log_max_file_mb", DOUBLE, 100.0, "rotation: a run file that has reached this "
+       Spec("log_max_file_mb", NUMBER, 100.0, "rotation: a run file that has reached this "
             "size (MiB) is closed and the next record starts a new one; 0: no limit", low=0.0),
-       Spec("log_max_file_s", DOUBLE, 0.0, "rotation: a run file open this long (s) is "
+       Spec("log_max_file_s", NUMBER, 0.0, "rotation: a run file open this long (s) is "
             "closed and the next record starts a new one; 0: no limit", low=0.0),
        Spec("log_max_files", INT, 100, "pruning: when a run file is opened, only the newest "
             "this many run files (cdh_planner_*.mcap) in log_dir are kept; 0: no limit",
             low=0, high=1_000_000),
-       Spec("log_max_age_days", DOUBLE, 0.0, "pruning: when a run file is opened, run files "
+       Spec("log_max_age_days", NUMBER, 0.0, "pruning: when a run file is opened, run files "
             "in log_dir last written longer ago than this (days) are removed; 0: no limit",
             low=0.0)]
 )
@@ -180,7 +170,7 @@ def _built():
     its Spec), for the outlets registered now."""
     key = tuple(OUTLETS.values())
     if key not in _BUILT:
-        mode = Spec("execution.mode", STRING, "stream", modes_description(),
+        mode = Spec("execution.mode", CHOICE, "stream", modes_description(),
                     choices=EXECUTION_MODES)
         specs = _HEAD + (mode,) + outlet_specs() + _TAIL
         _BUILT.clear()
@@ -228,8 +218,11 @@ class NodeConfig:
 
 
 def check_value(spec, value):
-    """The value of ``spec`` converted (ints to floats for doubles, sequences to lists) and
-    checked against its kind, choices and range; InputError naming the parameter."""
+    """The value of ``spec`` as plain Python (ints to floats for numbers, sequences to
+    lists), a scalar read by its Field (``fields.read``: kind, choices, range) and the
+    node's own rules (frames, ROS names); a list is read by its consumer (the robot, a task,
+    an outlet), whose sizes may depend on other parameters (m). InputError naming the
+    parameter."""
     name = spec.name
     if value is None:
         if spec.default is REQUIRED:
@@ -238,59 +231,55 @@ def check_value(spec, value):
         if spec.default is None:
             return None
         raise InputError(name, None, "must be set")
-    if spec.kind == STRING:
-        if not isinstance(value, str):
-            raise InputError(name, value, "expected a string")
-        if spec.choices and value not in spec.choices:
-            raise InputError(name, value, f"expected one of {', '.join(spec.choices)}")
-        if (name in FRAMES or spec.start_only) and not value:
-            raise InputError(name, value, "must not be empty")
-        if name in FRAMES and not FRAME_ID.fullmatch(value):
-            raise InputError(name, value, "not a TF frame id: letters, digits and _ between "
-                                          "slashes, no leading slash, no token starting with "
-                                          "a digit")
-        if spec.start_only and not ROS_NAME.fullmatch(value):
-            raise InputError(name, value, "not a ROS name: letters, digits and _ between "
-                                          "slashes, no token starting with a digit")
-        return value
-    if spec.kind == BOOL:
-        if not isinstance(value, bool):
-            raise InputError(name, value, "expected true or false")
-        return value
-    if spec.kind == STRINGS:
-        if isinstance(value, str) or not hasattr(value, "__iter__") \
-                or not all(isinstance(v, str) for v in value):
-            raise InputError(name, value, "expected a list of strings")
-        return list(value)
-    if spec.kind == DOUBLES:
-        if isinstance(value, (str, bytes)):
+    if spec.type == "strings":
+        return read(replace(spec, kind=TEXTS), value, name)
+    if spec.type == "doubles":
+        return _numbers(spec, value)
+    if spec.type == "string" and value == "" and spec.default == "":
+        return value  # a typed string parameter left empty: not set
+    if spec.kind == NUMBER and _is_nan(value) and _is_nan(spec.default):
+        return float(value)  # NaN means "not set" where that is the default
+    value = read(spec, value, name)
+    if spec.type == "string":
+        _check_name(spec, value)
+    return value
+
+
+def _is_nan(value):
+    return isinstance(value, (float, np.floating)) and math.isnan(value)
+
+
+def _numbers(spec, value):
+    """A list of floats (a single number as a float: the parsers broadcast it or refuse
+    it; an empty list as None where the default is empty)."""
+    name = spec.name
+    if isinstance(value, (str, bytes)):
+        raise InputError(name, value, "expected a list of numbers")
+    if not hasattr(value, "__len__"):
+        if isinstance(value, bool) or not isinstance(value, (int, float)):
             raise InputError(name, value, "expected a list of numbers")
-        if not hasattr(value, "__len__"):  # one number: the parsers broadcast it or refuse
-            if isinstance(value, bool) or not isinstance(value, (int, float)):
-                raise InputError(name, value, "expected a list of numbers")
-            return float(value)
-        if any(isinstance(v, (bool, str)) for v in value):
-            raise InputError(name, list(value), "expected a list of numbers")
-        try:
-            arr = [float(v) for v in value]
-        except (TypeError, ValueError):
-            raise InputError(name, list(value), "expected a list of numbers") from None
-        return arr if arr or spec.default is not None else None
-    # INT, DOUBLE
-    if isinstance(value, bool) or not isinstance(value, (int, float, np.integer, np.floating)):
-        raise InputError(name, value, "expected a number")
-    if spec.kind == INT:
-        if not math.isfinite(value) or float(value) != int(value):
-            raise InputError(name, value, "expected an integer")
-        value = int(value)
-    else:
-        value = float(value)
-        if math.isnan(value) and math.isnan(spec.default if spec.default is not REQUIRED
-                                             else 0.0):
-            return value  # NaN means "not set" where that is the default
-        if not math.isfinite(value):
-            raise InputError(name, value, "must be a finite number")
-    return check_range(name, value, spec)
+        return float(value)
+    if any(isinstance(v, (bool, str)) for v in value):
+        raise InputError(name, list(value), "expected a list of numbers")
+    try:
+        arr = [float(v) for v in value]
+    except (TypeError, ValueError):
+        raise InputError(name, list(value), "expected a list of numbers") from None
+    return arr if arr or spec.default is not None else None
+
+
+def _check_name(spec, value):
+    """A frame or a start-only topic or action: a non-empty TF frame id or ROS name."""
+    name = spec.name
+    if (name in FRAMES or spec.start_only) and not value:
+        raise InputError(name, value, "must not be empty")
+    if name in FRAMES and not FRAME_ID.fullmatch(value):
+        raise InputError(name, value, "not a TF frame id: letters, digits and _ between "
+                                      "slashes, no leading slash, no token starting with "
+                                      "a digit")
+    if spec.start_only and not ROS_NAME.fullmatch(value):
+        raise InputError(name, value, "not a ROS name: letters, digits and _ between "
+                                      "slashes, no token starting with a digit")
 
 
 def node_config(values, source="ROS parameters"):
@@ -302,7 +291,7 @@ def node_config(values, source="ROS parameters"):
         checked[spec.name] = check_value(spec, raw)
     robot = robot_from_dict(_robot_dict(checked), source=source)
     task = task_from_dict(_task_dict(checked), where="task")
-    settings = PlannerSettings(**{name: checked[s.parameter] for name, (_, _, s) in SETTINGS.items()})
+    settings = PlannerSettings(**{name: checked[s.parameter] for name, s in SETTINGS.items()})
     for outlet in OUTLETS.values():   # every mode's: a switch of mode finds them good
         outlet.check(checked, robot)
     _check_frames(checked)
@@ -310,8 +299,8 @@ def node_config(values, source="ROS parameters"):
         task_cost(robot, task, settings.cost)   # e.g. great_circle needs the sphere task
     except InputError as exc:
         raise InputError("planner.cost", settings.cost, exc.reason) from None
-    scene = load_scene(os.path.expanduser(checked["scene_file"]), robot) \
-        if checked["scene_file"] else default_scene(robot)
+    scene = check_sendable(load_scene(os.path.expanduser(checked["scene_file"]), robot)
+                           if checked["scene_file"] else default_scene(robot))
     log_dir = checked["log_dir"]
     if not log_dir and checked["log_enabled"]:
         raise InputError("log_dir", log_dir, "must name a directory while log_enabled is true")
@@ -356,7 +345,7 @@ def _robot_dict(checked):
     for name, value in checked.items():
         if not name.startswith("robot.") or value is None:
             continue
-        if SPEC[name].kind == STRING and not value:
+        if SPEC[name].type == "string" and not value:
             continue  # not set
         keys = name.split(".")[1:]
         node = out
@@ -364,7 +353,7 @@ def _robot_dict(checked):
             node = node.setdefault(key, {})
         node[keys[-1]] = value
     for f in ROBOT_FIELDS:  # an optional group without its required fields is not given
-        if f.group in OPTIONAL_GROUPS and f.default is rs.REQUIRED and f.name not in out.get(f.group, {}):
+        if f.group in OPTIONAL_GROUPS and f.default is rs.REQUIRED and f.leaf not in out.get(f.group, {}):
             out.pop(f.group, None)
     return out
 
@@ -395,7 +384,7 @@ def _same(a, b):
 
 
 # PlannerSettings field -> the node parameter that sets it (to name it in errors)
-SETTING_PARAMETERS = {name: s.parameter for name, (_, _, s) in SETTINGS.items()}
+SETTING_PARAMETERS = {name: s.parameter for name, s in SETTINGS.items()}
 
 
 def parameter_error(exc):
@@ -422,38 +411,10 @@ def parameters_markdown():
     """docs/parameters.md: a Markdown table of every parameter of ``SPECS``."""
     rows = ["| parameter | type | default | range | description |", "|---|---|---|---|---|"]
     for spec in SPECS:
-        cells = (f"`{spec.name}`", spec.kind, _default_text(spec.default), _range_text(spec),
+        cells = (f"`{spec.name}`", spec.type, default_text(spec.default), range_text(spec),
                  spec.description)
         rows.append("| " + " | ".join(c.replace("|", "\\|") for c in cells) + " |")
     return DOCS_HEADER + "\n" + "\n".join(rows) + "\n"
-
-
-def _default_text(value):
-    if value is REQUIRED:
-        return "required"
-    if value is None:
-        return "empty"
-    if isinstance(value, bool):
-        return str(value).lower()
-    if isinstance(value, (int, float)):
-        return "NaN" if math.isnan(value) else f"{value:g}"
-    if isinstance(value, (list, tuple)):
-        return "[" + ", ".join(str(v) if isinstance(v, str) else _default_text(v) for v in value) + "]"
-    return f"`{value}`" if value != "" else '""'
-
-
-def _range_text(spec):
-    if spec.choices:
-        return ", ".join(spec.choices)
-    lo = None if spec.low is None else f"{spec.low:g}"
-    hi = None if spec.high is None else f"{spec.high:g}"
-    if lo is not None and hi is not None:
-        return f"{'(' if spec.open_low else '['}{lo}, {hi}{')' if spec.open_high else ']'}"
-    if lo is not None:
-        return f"{'>' if spec.open_low else '>='} {lo}"
-    if hi is not None:
-        return f"{'<' if spec.open_high else '<='} {hi}"
-    return ""
 
 
 if __name__ == "__main__":

@@ -24,8 +24,8 @@ from dataclasses import dataclass
 from cdh_planner_interfaces.msg import Obstacle
 
 from ...errors import InputError
-from ...scene.schema import MAX_OBSTACLES, Scene, scene_from_dict
-from ..msgs.scene_msgs import check_id, shape_of_obstacle
+from ...scene.schema import MAX_OBSTACLES, Scene, check_obstacle_id, scene_from_dict
+from ..msgs.scene_msgs import shape_of_obstacle
 
 MAX_ITEMS = MAX_OBSTACLES   # obstacles in one ObstacleArray (more: refused whole)
 
@@ -136,7 +136,7 @@ class SceneState:
 def _apply(obstacles, item, where):
     """One Obstacle message applied to ``obstacles`` (id -> Shape, in order); what it did."""
     if item.operation == Obstacle.REMOVE:
-        oid = check_id(item.id, f"{where}.id")
+        oid = check_obstacle_id(item.id, f"{where}.id")
         if obstacles.pop(oid, None) is None:
             raise InputError(f"{where}.id", oid, "no obstacle of this id to remove")
         return f"remove {oid}"

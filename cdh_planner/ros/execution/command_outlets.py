@@ -27,7 +27,8 @@ from typing import ClassVar
 
 from ...errors import InputError
 from ...model.elastic import is_elastic
-from ..core.param_spec import STRING, STRINGS, Spec
+from ...fields import TEXT, TEXTS
+from ..core.param_spec import Spec
 
 OUTLETS = {}  # execution.mode -> registered CommandOutlet class (``register``)
 NODE_PARAMETERS = set()  # the node's own parameter names, no outlet's (``reserve``)
@@ -215,10 +216,10 @@ class ForwardCommand(StreamedOutlet):
     length_only = True
     description = ("std_msgs/Float64MultiArray cable lengths on execution.forward_command_topic "
                    "at stream_rate_hz, in execution.joint_order: a JointGroupPositionController")
-    specs = (Spec("execution.forward_command_topic", STRING, "/cable_controller/commands",
+    specs = (Spec("execution.forward_command_topic", TEXT, "/cable_controller/commands",
                   "forward_command mode: the JointGroupPositionController's ~/commands "
                   "(std_msgs/Float64MultiArray, set at start)", start_only=True),
-             Spec("execution.joint_order", STRINGS, None,
+             Spec("execution.joint_order", TEXTS, None,
                   "forward_command mode: the controller's joints parameter, the order of the "
                   "command's data; the robot's winch names, each once (empty: "
                   "robot.winch_names)"))
@@ -246,7 +247,7 @@ class FollowJointTrajectory(TrajectoryOutlet):
     length_only = True
     description = ("the cable trajectory, without effort, to a JointTrajectoryController's "
                    "action")
-    specs = (Spec("execution.controller_action", STRING,
+    specs = (Spec("execution.controller_action", TEXT,
                   "/cable_controller/follow_joint_trajectory",
                   "follow_joint_trajectory mode: the controller's "
                   "control_msgs/FollowJointTrajectory action (set at start)", start_only=True),)

@@ -22,7 +22,7 @@ from cdh_planner_interfaces.msg import Obstacle, ObstacleArray, Scene
 from ...errors import MAX_POSITION_M, InputError, check_numbers
 from ...model.pose import check_quaternion
 from ...model.shapes import SHAPES, hull_of_points
-from ...scene.schema import MAX_ID_CHARS, Shape, shape_from_dict
+from ...scene.schema import Shape, check_obstacle_id, shape_from_dict
 
 # {type number: shape type} of the classes with a primitive: SolidPrimitive's constant of
 # that name, else the Obstacle message's own (CAPSULE)
@@ -35,18 +35,10 @@ def _listed(words):
     return f"{', '.join(words[:-1])} or {words[-1]}"
 
 
-def check_id(oid, where):
-    """An obstacle id: 1 to MAX_ID_CHARS characters, not "platform" (the platform's)."""
-    if not 0 < len(oid) <= MAX_ID_CHARS or oid == "platform":
-        raise InputError(where, oid, f"expected a name of 1 to {MAX_ID_CHARS} characters, "
-                                     "not 'platform'")
-    return oid
-
-
 def shape_of_obstacle(msg, where):
     """The Shape (base frame) of an ADD Obstacle message; InputError naming the field
     (``<where>.primitive.dimensions``, ``<where>.pose.orientation``, ...)."""
-    oid = check_id(msg.id, f"{where}.id")
+    oid = check_obstacle_id(msg.id, f"{where}.id")
     pos = msg.pose.position
     position = check_numbers(f"{where}.pose.position", [pos.x, pos.y, pos.z], 3, MAX_POSITION_M)
     o = msg.pose.orientation
@@ -77,6 +69,26 @@ def shape_of_obstacle(msg, where):
                            f"{where}.primitive", oid)
 
 
+def sendable(shape):
+    """Does ``shape`` have an Obstacle message: a primitive, or a mesh's vertices?"""
+    return shape.type.primitive is not None or shape.vertices is not None
+
+
+def check_sendable(scene, where="scene"):
+    """``scene`` (scene.schema.Scene or None) if every shape of it has an Obstacle message;
+    else InputError naming the first shape's type with its class's reason (``no_primitive``):
+    the node refuses such a scene when it loads it, rather than failing to publish ~/scene."""
+    if scene is None:
+        return scene
+    shapes = [("platform", scene.platform)] * (scene.platform is not None) + [
+        (f"obstacles[{i}]", o) for i, o in enumerate(scene.obstacles)]
+    for name, shape in shapes:
+        if not sendable(shape):
+            raise InputError(f"{where}.{name}.type", shape.kind,
+                             f"has no Obstacle message for the node: {shape.type.no_primitive}")
+    return scene
+
+
 def obstacle_msg(shape, operation=Obstacle.ADD):
     """The Obstacle message of a Shape (a mesh: its convex hull's vertices and triangles)."""
     msg = Obstacle(id=shape.id, operation=operation)
@@ -84,14 +96,14 @@ def obstacle_msg(shape, operation=Obstacle.ADD):
     x, y, z, w = (float(v) for v in shape.quaternion)
     msg.pose.orientation.x, msg.pose.orientation.y = x, y
     msg.pose.orientation.z, msg.pose.orientation.w = z, w
-    if shape.type.primitive is None and shape.vertices is not None:
+    if not sendable(shape):
+        raise ValueError(f"a {shape.kind} has no Obstacle message: {shape.type.no_primitive}")
+    if shape.type.primitive is None:
         from scipy.spatial import ConvexHull
         msg.mesh.vertices = [_point(v) for v in shape.vertices]
         msg.mesh.triangles = [MeshTriangle(vertex_indices=[int(i) for i in tri])
                               for tri in ConvexHull(shape.vertices).simplices]
         return msg
-    if shape.type.primitive is None:
-        raise ValueError(f"a {shape.kind} has no Obstacle message: {shape.type.no_primitive}")
     dims = shape.type.primitive_dimensions(shape)
     number = {t: n for n, t in PRIMITIVES.items()}[shape.kind]
     msg.primitive = SolidPrimitive(type=number, dimensions=[float(d) for d in dims])

@@ -9,11 +9,10 @@ from rcl_interfaces.msg import FloatingPointRange, IntegerRange, ParameterDescri
 from rclpy.parameter import Parameter
 
 from ...errors import InputError
-from ..core.params import BOOL, DOUBLE, DOUBLES, INT, PLANNER_PREFIXES, READ_ONLY, REQUIRED, SPECS, \
-    STRING, STRINGS
+from ..core.params import PLANNER_PREFIXES, READ_ONLY, REQUIRED, SPECS
 
-STATIC_TYPES = {STRING: Parameter.Type.STRING, BOOL: Parameter.Type.BOOL,
-                STRINGS: Parameter.Type.STRING_ARRAY}
+STATIC_TYPES = {"string": Parameter.Type.STRING, "bool": Parameter.Type.BOOL,
+                "strings": Parameter.Type.STRING_ARRAY}
 
 
 def declare_parameters(node, overrides):
@@ -33,19 +32,18 @@ def _default_and_descriptor(spec):
                                      read_only=spec.name in READ_ONLY)
     if spec.choices:
         descriptor.additional_constraints = f"one of: {', '.join(spec.choices)}"
-    if spec.kind in STATIC_TYPES:
+    if spec.type in STATIC_TYPES:
         unset = spec.default is REQUIRED or spec.default is None   # typed, no value
-        return (STATIC_TYPES[spec.kind] if unset else spec.default), descriptor
+        return (STATIC_TYPES[spec.type] if unset else spec.default), descriptor
     # numbers: dynamically typed (ints accepted), ranges shown and checked
     descriptor.dynamic_typing = True
-    if spec.kind == DOUBLE and spec.low is not None:
+    low, high, _, _ = spec.bounds()
+    if spec.type == "double" and low is not None:
         descriptor.floating_point_range = [FloatingPointRange(  # ROS ranges are closed
-            from_value=float(spec.low),
-            to_value=float(spec.high) if spec.high is not None else sys.float_info.max)]
-    if spec.kind == INT and spec.low is not None:
-        descriptor.integer_range = [IntegerRange(from_value=int(spec.low),
-                                                 to_value=int(spec.high))]
-    if spec.kind == DOUBLES and spec.default is REQUIRED:
+            from_value=float(low), to_value=float(high) if high is not None else sys.float_info.max)]
+    if spec.type == "int" and low is not None:
+        descriptor.integer_range = [IntegerRange(from_value=int(low), to_value=int(high))]
+    if spec.type == "doubles" and spec.default is REQUIRED:
         descriptor.additional_constraints = "required (robot file)"
     return (None if spec.default in (REQUIRED, None) else spec.default), descriptor
 
