@@ -30,7 +30,7 @@ $(VENV)/bin/python:
 $(STAMP): $(VENV)/bin/python requirements.txt test/requirements-urdf.txt setup.py setup.cfg package.xml cdh_planner/manifold/kernels.py \
           cdh_planner/manifold/layout.py cdh_planner/manifold/aot.py cdh_planner/aot.py \
           cdh_planner/scene/kernels.py cdh_planner/scene/aot.py cdh_planner/model/shape_forms.py \
-          $(wildcard cdh_planner/wrench/*.py)
+          $(addprefix cdh_planner/wrench/,kernel.py centred.py linalg.py compiled.py threaded.py aot.py)
 	$(PY) -m pip install -r requirements.txt
 	$(PY) -m pip install --no-deps -r test/requirements-urdf.txt
 	$(PY) -m pip install -e .
