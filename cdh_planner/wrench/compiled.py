@@ -23,10 +23,11 @@ from .. import aot
 from . import centred, kernel
 from .kernel import PARALLEL_CHUNK, PARALLEL_MIN
 
-# from this many poses the threaded kernels pay for loading numba and themselves in a fresh
-# process (0.4 - 0.5 s of CPU; the serial entries do 8-cable poses at ~25 us each, two
-# threads save half of that; benchmarks/wrench_kernels.py)
-THREADS_PAY_MIN = 100_000
+# from this many poses the threaded kernels repay loading numba and themselves in a fresh
+# process (0.47 s of CPU): CoGiRo's facet test and centred rule take 19 - 25 us a pose
+# serially, so two idle cores repay it from ~43,000 poses, eight from ~24,000; measured on 2
+# loaded cores, from ~72,000 (benchmarks/wrench_kernels.py). verify's 20,000 stay serial.
+THREADS_PAY_MIN = 50_000
 
 _F64_1, _F64_2, _F64_3 = "float64[::1]", "float64[:, ::1]", "float64[:, :, ::1]"
 _ELLIPSOID_AND_LIMITS = f"{_F64_3}, {_F64_2}, {_F64_1}, {_F64_2}, boolean, {_F64_1}, {_F64_1}"
