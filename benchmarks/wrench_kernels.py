@@ -56,7 +56,8 @@ CALLS = {  # name: (untimed preparation, timed first use: the kernel's import an
     "collision kernel": (f"from cdh_planner.scene.collision import CollisionModel\n"
                          f"from cdh_planner.scene.schema import load_scene\n"
                          f"r2 = load_robot({str(ROOT / 'config' / 'robot2.yaml')!r})\n"
-                         f"scene = load_scene({str(ROOT / 'config' / 'scenes' / 'robot2_ball.yaml')!r}, r2)\n",
+                         f"scene = load_scene("
+                         f"{str(ROOT / 'config' / 'scenes' / 'robot2_ball.yaml')!r}, r2)\n",
                          "CollisionModel(r2, scene).clearance(np.array([0, 0, 0.4]), np.eye(3))"),
     "wrench pose geometry": ("", "from cdh_planner.wrench import compiled as k\n"
                                  "k.pose_geometry(p, R, robot.base_anchors, "

@@ -20,14 +20,18 @@ from cdh_planner.model.pose import rotation_tt
 from cdh_planner.model.robot import load_robot
 from cdh_planner.scene import kernels as scene_kernels
 from cdh_planner.wrench import compiled as wrench_kernels
+from cdh_planner.wrench.facets import facet_subsets
+from cdh_planner.wrench.geometry import inverse_factor
 from conftest import CONFIG
 
 AOT_BUILT = importlib.util.find_spec(f"cdh_planner.manifold.{kernels.aot_module_name()}") is not None
 ALL_BUILT = all(importlib.util.find_spec(f"{m.__package__}.{m.aot_module_name()}") is not None
                 for m in (kernels, scene_kernels, wrench_kernels))
-NOT_BUILT = "no ahead-of-time kernels built (make, or python -m cdh_planner.<manifold|scene|wrench>.aot)"
+NOT_BUILT = ("no ahead-of-time kernels built (make, or python -m "
+             "cdh_planner.<manifold|scene|wrench>.aot)")
 
-SOURCES = [(kernels, ("kernels.py", "layout.py")), (scene_kernels, ("kernels.py", "../model/shape_forms.py")),
+SOURCES = [(kernels, ("kernels.py", "layout.py")),
+           (scene_kernels, ("kernels.py", "../model/shape_forms.py")),
            (wrench_kernels, ("compiled.py", "kernel.py", "centred.py", "linalg.py"))]
 MODULES = ["manifold", "scene", "wrench"]
 
@@ -110,8 +114,6 @@ def _wrench_inputs(robot, n, seed):
     centre = np.mean(robot.base_anchors, axis=0) * np.array([1.0, 1.0, 0.5])
     p = centre + np.cumsum(rng.normal(0.0, 0.003, (n, 3)), axis=0)
     R = rotation_tt(np.cumsum(rng.normal(0.0, 0.003, (n, 3)), axis=0) + [0.0, 0.1, 0.0])
-    from cdh_planner.wrench.geometry import inverse_factor
-    from cdh_planner.wrench.facets import facet_subsets
     geometry = (p, R, robot.base_anchors, robot.platform_anchors, robot.load_point)
     ellipsoid = (robot.wrench_center_local, inverse_factor(robot), robot.ellipsoid_frame == "load",
                  robot.tension_min, robot.tension_max)
@@ -125,7 +127,8 @@ def test_aot_and_jit_wrench_kernels_agree_bit_for_bit(name, n):
     robot = load_robot(CONFIG / f"{name}.yaml")
     geometry, ellipsoid, subsets = _wrench_inputs(robot, n, 5)
     outputs = {}
-    for which, entry in (("aot", aot_helper.load(wrench_kernels)), ("jit", wrench_kernels.jit_kernels())):
+    for which, entry in (("aot", aot_helper.load(wrench_kernels)),
+                         ("jit", wrench_kernels.jit_kernels())):
         lengths, u, J, c = out = entry["pose_geometry"](*geometry)
         out += entry["facet_kernel"](J, c, *ellipsoid, subsets, 1e-9)
         ranked, feasible = out[-1], out[-1] & (out[6] > 0)
@@ -170,8 +173,9 @@ def test_the_wrench_entries_take_any_layout_and_type():
         np.testing.assert_array_equal(a, b)
     J, c = expected[2], expected[3]
     Jf, tmin = np.asfortranarray(J), list(ellipsoid[3])
+    strided = (Jf, c, *ellipsoid[:3], tmin, ellipsoid[4], subsets.astype(np.int32), 1e-9)
     for a, b in zip(wrench_kernels.facet_batch(J, c, *ellipsoid, subsets, 1e-9),
-                    wrench_kernels.facet_batch(Jf, c, *ellipsoid[:3], tmin, ellipsoid[4], subsets.astype(np.int32), 1e-9)):
+                    wrench_kernels.facet_batch(*strided)):
         np.testing.assert_array_equal(a, b)
 
 

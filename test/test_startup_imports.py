@@ -72,10 +72,11 @@ def test_an_eight_cable_plan_and_verify_compile_nothing(tmp_path):
     poses = tmp_path / "poses.json"
     poses.write_text(json.dumps([{"position": [0.0, 0.0, 2.5], "tau": [0.0, 0.0, 0.0]},
                                  {"position": [0.5, 0.2, 2.6], "tau": [0.0, 0.1, 0.0]}]))
+    cogiro = REPO / "config" / "cogiro.yaml"
     code = ("import contextlib, io\nfrom cdh_planner import cli\n"
             "with contextlib.redirect_stdout(io.StringIO()) as out:\n"
             f"    assert cli.main(['plan', {str(problem)!r}, '--quiet']) == 0\n"
-            f"    assert cli.main(['verify', {str(REPO / 'config' / 'cogiro.yaml')!r}, {str(poses)!r}]) == 0\n"
+            f"    assert cli.main(['verify', {str(cogiro)!r}, {str(poses)!r}]) == 0\n"
             "assert 'ALL FEASIBLE' in out.getvalue()")
     assert "numba" not in _modules_after(code)
 
