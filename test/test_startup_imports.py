@@ -65,10 +65,10 @@ def _kernels_built():
 
 @pytest.mark.skipif(not _kernels_built(), reason="no ahead-of-time kernels built (make)")
 def test_an_eight_cable_plan_and_verify_compile_nothing(tmp_path):
-    """robot2_8 planned through charts (the manifold's kernel, the facet test and the
-    centred rule), CoGiRo poses verified: with the kernels built ahead of time numba is
-    never imported, so nothing is compiled."""
-    problem = REPO / "config" / "problems" / "robot2_8_q2_q3_free_flight.yaml"
+    """robot2_8 planned over charts (the manifold's kernel, the band test: the centred
+    rule), CoGiRo poses verified (the facet test): with the kernels built ahead of time
+    numba is never imported, so nothing is compiled."""
+    problem = REPO / "config" / "problems" / "robot2_8_pivot.yaml"
     poses = tmp_path / "poses.json"
     poses.write_text(json.dumps([{"position": [0.0, 0.0, 2.5], "tau": [0.0, 0.0, 0.0]},
                                  {"position": [0.5, 0.2, 2.6], "tau": [0.0, 0.1, 0.0]}]))
@@ -77,6 +77,7 @@ def test_an_eight_cable_plan_and_verify_compile_nothing(tmp_path):
             "with contextlib.redirect_stdout(io.StringIO()) as out:\n"
             f"    assert cli.main(['plan', {str(problem)!r}, '--quiet']) == 0\n"
             f"    assert cli.main(['verify', {str(cogiro)!r}, {str(poses)!r}]) == 0\n"
+            "import re\nassert re.search(r'over [1-9][0-9]* charts', out.getvalue())\n"
             "assert 'ALL FEASIBLE' in out.getvalue()")
     assert "numba" not in _modules_after(code)
 
