@@ -8,9 +8,10 @@ of the same source, the first one found is used (``entries``):
 
 - ahead of time (numba.pycc, ``python -m cdh_planner.manifold.aot`` / ``.scene.aot`` /
   ``.wrench.aot``, run by ``make``): an extension module next to the source, named after a
-  digest of it, so an
-  edited kernel never runs stale machine code; importing it and a first call take about
-  10 ms and numba is not imported at all. Built for the generic CPU of the architecture.
+  digest of it, so an edited kernel never runs stale machine code; importing it and a
+  first call take about 10 ms and numba is not imported at all. Built for the generic CPU
+  of the architecture. Its entries check neither the type nor the layout of the arrays
+  they are given: callers pass exactly what AOT_EXPORTS says.
 - numba's JIT with ``cache=True`` (``jit``): importing numba and loading the machine code
   from __pycache__ cost 0.4 - 1 s in a fresh process (a first compilation, seconds).
 

@@ -18,7 +18,7 @@ from .linalg import cholesky_solve, forward_substitute, householder_r, null_basi
 # barrier weight of the centred nominal (normalised tensions): its least band slack is within
 # 2 m CENTRE_MU of the best any null-space shift achieves. Numba freezes these constants into
 # the machine code: the ahead-of-time build is named after this file's digest (rebuilt by
-# make), but numba's JIT cache only sees the file's time stamp (``compiled``).
+# make); numba's JIT cache only sees a file's own time stamp, and make clears it (``aot``).
 CENTRE_MU = 1e-4
 CENTRE_TOL = 1e-9  # Newton decrement^2 / mu at which the centring stops
 CENTRE_ITERATIONS = 50  # Newton steps at most (bounded work)

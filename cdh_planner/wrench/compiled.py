@@ -30,14 +30,15 @@ from .kernel import PARALLEL_CHUNK, PARALLEL_MIN
 THREADS_PAY_MIN = 50_000
 
 _F64_1, _F64_2, _F64_3 = "float64[::1]", "float64[:, ::1]", "float64[:, :, ::1]"
-_ELLIPSOID_AND_LIMITS = f"{_F64_3}, {_F64_2}, {_F64_1}, {_F64_2}, boolean, {_F64_1}, {_F64_1}"
+# J, c, the ellipsoid (w_local, L3, load_frame), tmin, tmax
+_POSES_AND_LIMITS = f"{_F64_3}, {_F64_2}, {_F64_1}, {_F64_2}, boolean, {_F64_1}, {_F64_1}"
 AOT_EXPORTS = {
     "pose_geometry": f"Tuple(({_F64_2}, {_F64_3}, {_F64_3}, {_F64_2}))"
                      f"({_F64_2}, {_F64_3}, {_F64_2}, {_F64_2}, {_F64_1})",
     "facet_kernel": f"Tuple(({_F64_1}, {_F64_1}, {_F64_1}, int64[::1], int64[::1], boolean[::1]))"
-                    f"({_ELLIPSOID_AND_LIMITS}, int64[:, ::1], float64)",
+                    f"({_POSES_AND_LIMITS}, int64[:, ::1], float64)",
     "centred_kernel": f"Tuple(({_F64_2}, {_F64_2}))"
-                      f"({_ELLIPSOID_AND_LIMITS}, boolean[::1], boolean[::1], int64)",
+                      f"({_POSES_AND_LIMITS}, boolean[::1], boolean[::1], int64)",
 }
 AOT_PREFIX = "_kernels_aot_"
 # the functions the entries call, by module: numba functions under the JIT
