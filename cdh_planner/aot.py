@@ -1,15 +1,17 @@
 """Ahead-of-time compilation of the package's numba kernels, one way for all of them
-(manifold/kernels.py, scene/kernels.py).
+(manifold/kernels.py, scene/kernels.py, wrench/compiled.py).
 
-A kernel module holds plain Python functions (no numba import), its one entry's name
-and signature (AOT_EXPORT, AOT_SIGNATURE), the prefix of its builds (AOT_PREFIX),
-``source_digest()`` and ``jit_kernel()``. Two compilations of the same source, the first one found
-is used:
+A kernel module holds plain Python functions (no numba import), its entries' names and
+signatures (AOT_EXPORTS, {name: numba signature}), the prefix of its builds (AOT_PREFIX),
+``source_digest()`` and ``jit_kernels()`` ({name: numba's JIT function}). Two compilations
+of the same source, the first one found is used (``entries``):
 
-- ahead of time (numba.pycc, ``python -m cdh_planner.manifold.aot`` / ``.scene.aot``, run
-  by ``make``): an extension module next to the source, named after a digest of it, so an
-  edited kernel never runs stale machine code; importing it and a first call take about
-  10 ms and numba is not imported at all. Built for the generic CPU of the architecture.
+- ahead of time (numba.pycc, ``python -m cdh_planner.manifold.aot`` / ``.scene.aot`` /
+  ``.wrench.aot``, run by ``make``): an extension module next to the source, named after a
+  digest of it, so an edited kernel never runs stale machine code; importing it and a
+  first call take about 10 ms and numba is not imported at all. Built for the generic CPU
+  of the architecture. Its entries check neither the type nor the layout of the arrays
+  they are given: callers pass exactly what AOT_EXPORTS says.
 - numba's JIT with ``cache=True`` (``jit``): importing numba and loading the machine code
   from __pycache__ cost 0.4 - 1 s in a fresh process (a first compilation, seconds).
 
@@ -41,13 +43,19 @@ def module_name(kernels):
 
 
 def load(kernels):
-    """The ahead-of-time compiled entry (AOT_EXPORT) of the kernel module ``kernels``, or
-    None if it was not built for this source."""
+    """The ahead-of-time compiled entries ({name: function}, AOT_EXPORTS) of the kernel
+    module ``kernels``, or None if they were not built for this source."""
     try:
         module = importlib.import_module(f"{kernels.__package__}.{module_name(kernels)}")
     except (ImportError, OSError):  # not built, or the source not readable as files
         return None
-    return getattr(module, kernels.AOT_EXPORT)
+    return {name: getattr(module, name) for name in kernels.AOT_EXPORTS}
+
+
+def entries(kernels):
+    """The entries ({name: function}) of the kernel module ``kernels``: its ahead-of-time
+    build if there is one for this source, else numba's JIT (``kernels.jit_kernels()``)."""
+    return load(kernels) or kernels.jit_kernels()
 
 
 def jit(namespace, helpers, inline=()):
@@ -64,8 +72,8 @@ def jit(namespace, helpers, inline=()):
 
 
 def build(kernels, output_dir=None):
-    """Compile the entry of the kernel module ``kernels`` (AOT_EXPORT, AOT_SIGNATURE, its
-    ``jit_kernel()``) ahead of time into ``output_dir`` (default: beside its source); older
+    """Compile the entries of the kernel module ``kernels`` (AOT_EXPORTS, its
+    ``jit_kernels()``) ahead of time into ``output_dir`` (default: beside its source); older
     builds (AOT_PREFIX*) are removed. The extension's path."""
     with warnings.catch_warnings():
         warnings.simplefilter("ignore")  # pycc's pending-deprecation notice
@@ -75,8 +83,9 @@ def build(kernels, output_dir=None):
     cc = CC(name)
     cc.output_dir = str(output_dir)
     cc.verbose = False
-    jit = kernels.jit_kernel()  # the helpers as numba functions, which the export calls
-    cc.export(kernels.AOT_EXPORT, kernels.AOT_SIGNATURE)(jit.py_func)
+    jit = kernels.jit_kernels()  # the helpers as numba functions, which the exports call
+    for entry, signature in kernels.AOT_EXPORTS.items():
+        cc.export(entry, signature)(jit[entry].py_func)
     cc.compile()  # object files go to a temporary directory of pycc's own
     built = [p for p in output_dir.glob(f"{name}.*") if p.suffix in (".so", ".pyd")]
     if not built:

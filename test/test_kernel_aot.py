@@ -1,9 +1,12 @@
-"""The ahead-of-time kernels (manifold/aot.py, scene/aot.py through cdh_planner/aot.py) are
-their JIT kernels' twins, and only ever the build of the current source (the collision
-kernel's twin test: test_scene_batch.py)."""
+"""The ahead-of-time kernels (manifold/aot.py, scene/aot.py, wrench/aot.py through
+cdh_planner/aot.py) are their JIT kernels' twins, only ever the build of the current source,
+and a fresh process that uses them compiles nothing (the collision kernel's twin test:
+test_scene_batch.py)."""
 
 import hashlib
 import importlib.util
+import json
+import os
 import subprocess
 import sys
 from pathlib import Path
@@ -11,26 +14,39 @@ from pathlib import Path
 import numpy as np
 import pytest
 
+from cdh_planner import aot as aot_helper
 from cdh_planner.manifold import kernels
+from cdh_planner.model.pose import rotation_tt
+from cdh_planner.model.robot import load_robot
 from cdh_planner.scene import kernels as scene_kernels
+from cdh_planner.wrench import compiled as wrench_kernels
+from cdh_planner.wrench.facets import facet_subsets
+from cdh_planner.wrench.geometry import inverse_factor
+from conftest import CONFIG
 
 AOT_BUILT = importlib.util.find_spec(f"cdh_planner.manifold.{kernels.aot_module_name()}") is not None
+ALL_BUILT = all(importlib.util.find_spec(f"{m.__package__}.{m.aot_module_name()}") is not None
+                for m in (kernels, scene_kernels, wrench_kernels))
+NOT_BUILT = ("no ahead-of-time kernels built (make, or python -m "
+             "cdh_planner.<manifold|scene|wrench>.aot)")
+
+SOURCES = [(kernels, ("kernels.py", "layout.py")),
+           (scene_kernels, ("kernels.py", "../model/shape_forms.py")),
+           (wrench_kernels, ("compiled.py", "kernel.py", "centred.py", "linalg.py"))]
+MODULES = ["manifold", "scene", "wrench"]
 
 
-SOURCES = [(kernels, ("kernels.py", "layout.py")), (scene_kernels, ("kernels.py", "../model/shape_forms.py"))]
-
-
-@pytest.mark.parametrize("module, sources", SOURCES, ids=["manifold", "scene"])
+@pytest.mark.parametrize("module, sources", SOURCES, ids=MODULES)
 def test_the_aot_module_is_named_after_the_digest_of_the_kernel_source(module, sources):
     d = Path(module.__file__).resolve().parent
     h = hashlib.sha256(b"".join((d / name).read_bytes() for name in sources))
     assert module.aot_module_name() == module.AOT_PREFIX + h.hexdigest()[:12]
 
 
-@pytest.mark.parametrize("module", [kernels, scene_kernels], ids=["manifold", "scene"])
+@pytest.mark.parametrize("module", [kernels, scene_kernels, wrench_kernels], ids=MODULES)
 def test_a_build_of_other_source_is_never_loaded(module, monkeypatch):
     monkeypatch.setattr(module, "source_digest", lambda: "000000000000")
-    assert module.aot_kernel() is None
+    assert aot_helper.load(module) is None
 
 
 @pytest.mark.skipif(not AOT_BUILT, reason="no ahead-of-time kernel built (make, or python -m "
@@ -73,8 +89,142 @@ def test_without_a_compiler_the_build_falls_back_to_warming_the_jit(monkeypatch,
     assert warmed == [1] and "no C compiler" in capsys.readouterr().err
 
 
-@pytest.mark.parametrize("name", ["manifold", "scene"])
+def test_with_no_c_compiler_the_build_falls_back_to_warming_the_jit():
+    """CC names no working compiler: pycc refuses before it writes or removes a file, and
+    the build warms the JIT instead (exit code 0)."""
+    code = ("import sys\nfrom cdh_planner import aot\nfrom cdh_planner.wrench import compiled\n"
+            "sys.exit(aot.main('wrench kernels', compiled, lambda: print('warmed')))")
+    out = subprocess.run([sys.executable, "-c", code], capture_output=True, text=True,
+                         env={**os.environ, "CC": "/bin/false"})
+    assert out.returncode == 0, out.stderr
+    assert out.stdout.strip() == "warmed" and "ahead-of-time build failed" in out.stderr
+
+
+@pytest.mark.parametrize("name", MODULES)
 def test_the_jit_warm_up_runs_on_its_own_inputs(name):
     """The fallback's warm-up call compiles and runs (no division by zero in its inputs)."""
     module = importlib.import_module(f"cdh_planner.{name}.aot")
     module.warm_jit()
+
+
+def _wrench_inputs(robot, n, seed):
+    """The wrench entries' arguments at n poses of ``robot`` near its workspace's centre (a
+    slow random walk, so that the centred rule's warm starts matter)."""
+    rng = np.random.default_rng(seed)
+    centre = np.mean(robot.base_anchors, axis=0) * np.array([1.0, 1.0, 0.5])
+    p = centre + np.cumsum(rng.normal(0.0, 0.003, (n, 3)), axis=0)
+    R = rotation_tt(np.cumsum(rng.normal(0.0, 0.003, (n, 3)), axis=0) + [0.0, 0.1, 0.0])
+    geometry = (p, R, robot.base_anchors, robot.platform_anchors, robot.load_point)
+    ellipsoid = (robot.wrench_center_local, inverse_factor(robot), robot.ellipsoid_frame == "load",
+                 robot.tension_min, robot.tension_max)
+    return geometry, ellipsoid, facet_subsets(len(robot.base_anchors))
+
+
+@pytest.mark.skipif(not ALL_BUILT, reason=NOT_BUILT)
+@pytest.mark.parametrize("n", [7, wrench_kernels.PARALLEL_MIN + 700])
+@pytest.mark.parametrize("name", ["robot2_8", "cogiro", "ipanema2"])
+def test_aot_and_jit_wrench_kernels_agree_bit_for_bit(name, n):
+    robot = load_robot(CONFIG / f"{name}.yaml")
+    geometry, ellipsoid, subsets = _wrench_inputs(robot, n, 5)
+    outputs = {}
+    for which, entry in (("aot", aot_helper.load(wrench_kernels)),
+                         ("jit", wrench_kernels.jit_kernels())):
+        lengths, u, J, c = out = entry["pose_geometry"](*geometry)
+        out += entry["facet_kernel"](J, c, *ellipsoid, subsets, 1e-9)
+        ranked, feasible = out[-1], out[-1] & (out[6] > 0)
+        for chunk in (n, wrench_kernels.PARALLEL_CHUNK):
+            out += entry["centred_kernel"](J, c, *ellipsoid, ranked, feasible, chunk)
+        outputs[which] = out
+    assert outputs["aot"][-1].dtype == np.float64 and np.isfinite(outputs["aot"][-1]).any()
+    for a, j in zip(outputs["aot"], outputs["jit"]):
+        np.testing.assert_array_equal(a, j)
+
+
+def test_the_threaded_wrench_kernels_give_the_serial_answers():
+    """The same chunks on numba's threads (loaded here whatever the batch size) as in the
+    serial entries from PARALLEL_MIN poses: the same numbers, the centred rule's warm starts
+    included."""
+    robot = load_robot(CONFIG / "cogiro.yaml")
+    geometry, ellipsoid, subsets = _wrench_inputs(robot, wrench_kernels.PARALLEL_MIN + 300, 6)
+    _, _, J, c = wrench_kernels.pose_geometry(*geometry)
+    serial = wrench_kernels.facet_batch(J, c, *ellipsoid, subsets, 1e-9)
+    threaded = wrench_kernels.threaded_kernels()
+    assert wrench_kernels.threads_pay(len(J))  # from PARALLEL_MIN once they are loaded
+    for a, t in zip(serial, threaded.facet_kernel(J, c, *ellipsoid, subsets, 1e-9)):
+        np.testing.assert_array_equal(a, t)
+    ranked, feasible = serial[-1], serial[-1] & (serial[2] > 0)
+    cold = wrench_kernels.aot.entries(wrench_kernels)["centred_kernel"](
+        J, c, *ellipsoid, ranked, feasible, wrench_kernels.PARALLEL_CHUNK)
+    for a, t in zip(cold, threaded.centred_kernel(J, c, *ellipsoid, ranked, feasible)):
+        np.testing.assert_array_equal(a, t)
+
+
+def test_the_wrench_entries_take_any_layout_and_type():
+    """The ahead-of-time entries read memory as their signatures say: the batch functions
+    pass them C-contiguous float64 whatever they are given."""
+    robot = load_robot(CONFIG / "robot2_8.yaml")
+    geometry, ellipsoid, subsets = _wrench_inputs(robot, 40, 7)
+    p, R = geometry[:2]
+    R32 = R.astype(np.float32)
+    strided = (np.asfortranarray(np.repeat(p, 2, axis=0)[::2]), R32, geometry[2].tolist(),
+               np.asfortranarray(geometry[3]), geometry[4])
+    expected = wrench_kernels.pose_geometry(p, R32.astype(np.float64), *geometry[2:])
+    for a, b in zip(wrench_kernels.pose_geometry(*strided), expected):
+        np.testing.assert_array_equal(a, b)
+    J, c = expected[2], expected[3]
+    Jf, tmin = np.asfortranarray(J), list(ellipsoid[3])
+    strided = (Jf, c, *ellipsoid[:3], tmin, ellipsoid[4], subsets.astype(np.int32), 1e-9)
+    for a, b in zip(wrench_kernels.facet_batch(J, c, *ellipsoid, subsets, 1e-9),
+                    wrench_kernels.facet_batch(*strided)):
+        np.testing.assert_array_equal(a, b)
+
+
+# Each compiled kernel called once in a fresh process: the manifold's F / F_x, the collision
+# kernel, and the wrench entries (the pose geometry, the facet test, the centred rule) of an
+# 8-cable robot through the package's entries. Prints whether numba was imported.
+FRESH_CALLS = f"""
+import sys, json
+import numpy as np
+from cdh_planner.manifold import kernels
+from cdh_planner.model.robot import load_robot
+from cdh_planner.scene.collision import CollisionModel
+from cdh_planner.scene.schema import load_scene
+from cdh_planner import wrench
+X, prm = np.ones(kernels.N_VARS), np.ones(kernels.N_PARAMS)
+prm[kernels.K_KAPPA] = 0.1
+prm[kernels.K_LMAX:kernels.K_FMIN] = 3.0
+prm[kernels.K_FMAX:kernels.K_KAPPA] = 4.0
+kernels.navigation_residual_and_jacobian(X, prm, True)
+robot2 = load_robot({str(CONFIG / "robot2.yaml")!r})
+scene = load_scene({str(CONFIG / "scenes" / "robot2_ball.yaml")!r}, robot2)
+assert CollisionModel(robot2, scene).clearance(np.array([0, 0, 0.4]), np.eye(3)).distance > 0
+robot = load_robot({str(CONFIG / "cogiro.yaml")!r})
+p, R = np.array([[0.0, 0.0, 2.5]]), np.eye(3)[None]
+answers = [float(wrench.wrench_feasibility(robot, p, R=R).margin[0]),
+           float(wrench.band_margin(robot, p, R=R)[0]),
+           float(wrench.rule_tensions(robot, p, R)[0][0, 0])]
+print(json.dumps(["numba" in sys.modules, answers]))
+"""
+
+
+def _fresh(prelude=""):
+    out = subprocess.run([sys.executable, "-c", prelude + FRESH_CALLS], capture_output=True,
+                         text=True, check=True)
+    return json.loads(out.stdout.strip().splitlines()[-1])
+
+
+@pytest.mark.skipif(not ALL_BUILT, reason=NOT_BUILT)
+def test_with_the_aot_kernels_a_fresh_process_compiles_nothing():
+    """Every compiled kernel called once in a fresh process: numba is never imported, so
+    nothing is compiled or loaded from its cache (0.4 - 1 s each with the JIT)."""
+    numba_loaded, answers = _fresh()
+    assert not numba_loaded and np.all(np.isfinite(answers))
+
+
+def test_without_the_aot_kernels_the_jit_gives_the_same_answers():
+    """No build of the current source (as without a C compiler): numba's JIT compiles the
+    same source, with the same answers as in this process (ahead of time, if built)."""
+    numba_loaded, answers = _fresh("import cdh_planner.aot as a\na.load = lambda kernels: None\n")
+    assert numba_loaded
+    _, expected = _fresh()
+    assert answers == expected

@@ -1,6 +1,7 @@
 """Start-up imports only what a command uses: checked in fresh
 interpreters through sys.modules, not by timing."""
 
+import importlib.util
 import json
 import subprocess
 import sys
@@ -51,6 +52,34 @@ def test_a_direct_motion_plan_loads_no_plotting_ros_numba_or_scipy_module():
     loaded = _modules_after(code)
     assert "toppra" in loaded
     assert not loaded & ({"matplotlib", "matplotlib.pyplot", "rclpy", "numba", "numpy.ma"} | SCIPY)
+
+
+def _kernels_built():
+    """Whether every kernel module has its ahead-of-time build (``make``)."""
+    from cdh_planner.manifold import kernels
+    from cdh_planner.scene import kernels as scene_kernels
+    from cdh_planner.wrench import compiled
+    return all(importlib.util.find_spec(f"{m.__package__}.{m.aot_module_name()}") is not None
+               for m in (kernels, scene_kernels, compiled))
+
+
+@pytest.mark.skipif(not _kernels_built(), reason="no ahead-of-time kernels built (make)")
+def test_an_eight_cable_plan_and_verify_compile_nothing(tmp_path):
+    """robot2_8 planned over charts (the manifold's kernel, the band test: the centred
+    rule), CoGiRo poses verified (the facet test): with the kernels built ahead of time
+    numba is never imported, so nothing is compiled."""
+    problem = REPO / "config" / "problems" / "robot2_8_pivot.yaml"
+    poses = tmp_path / "poses.json"
+    poses.write_text(json.dumps([{"position": [0.0, 0.0, 2.5], "tau": [0.0, 0.0, 0.0]},
+                                 {"position": [0.5, 0.2, 2.6], "tau": [0.0, 0.1, 0.0]}]))
+    cogiro = REPO / "config" / "cogiro.yaml"
+    code = ("import contextlib, io\nfrom cdh_planner import cli\n"
+            "with contextlib.redirect_stdout(io.StringIO()) as out:\n"
+            f"    assert cli.main(['plan', {str(problem)!r}, '--quiet']) == 0\n"
+            f"    assert cli.main(['verify', {str(cogiro)!r}, {str(poses)!r}]) == 0\n"
+            "import re\nassert re.search(r'over [1-9][0-9]* charts', out.getvalue())\n"
+            "assert 'ALL FEASIBLE' in out.getvalue()")
+    assert "numba" not in _modules_after(code)
 
 
 def test_toppra_is_imported_without_matplotlib_and_its_plt_still_works():

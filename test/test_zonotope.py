@@ -315,7 +315,8 @@ def test_fewer_than_six_or_degenerate_anchors_are_refused():
 
 
 def test_threaded_kernel_gives_the_serial_answers():
-    """Above PARALLEL_MIN poses evaluate runs the kernel on threads: the same numbers."""
+    """From PARALLEL_MIN poses the kernels work in chunks (on threads where that pays): the
+    same numbers as smaller batches."""
     rng = np.random.default_rng(400)
     robot = robot_from_dict(random_robot(rng, 8))
     p, tau = random_poses(rng, zt.PARALLEL_MIN + 100, spread=0.3)

@@ -9,7 +9,8 @@ from numba import njit
 
 from cdh_planner import wrench
 from cdh_planner.model.pose import rotation_tt
-from cdh_planner.wrench.centred import CENTRE_MU, centred_kernel  # noqa: F401  (re-exported)
+from cdh_planner.wrench.centred import CENTRE_MU  # noqa: F401  (re-exported)
+from cdh_planner.wrench.compiled import centred_batch
 from cdh_planner.wrench.facets import facet_subsets, facet_test as _facet_test
 from cdh_planner.wrench.geometry import inverse_factor, wrench_transform
 from cdh_planner.wrench.kernel import PARALLEL_MIN, RANK_TOL  # noqa: F401  (re-exported)
@@ -27,9 +28,9 @@ def uncentred_rule(robot, J, c):
     """The compiled rule's t0 and v (N, m) N before centring, at poses with J (N, 6, m) and
     load points c (N, 3) m."""
     n = len(J)
-    return centred_kernel(np.ascontiguousarray(J), np.ascontiguousarray(c), robot.wrench_center_local,
-                          inverse_factor(robot), robot.ellipsoid_frame == "load", robot.tension_min,
-                          robot.tension_max, np.ones(n, np.bool_), np.zeros(n, np.bool_))
+    return centred_batch(np.ascontiguousarray(J), np.ascontiguousarray(c), robot.wrench_center_local,
+                         inverse_factor(robot), robot.ellipsoid_frame == "load", robot.tension_min,
+                         robot.tension_max, np.ones(n, np.bool_), np.zeros(n, np.bool_))
 
 
 def tension_rule(robot, J, w0, L):

@@ -335,8 +335,8 @@ def _residual_and_jacobian(X, prm, jacobian):
 
 # ----- compilation -------------------------------------------------------------------------
 HELPERS = ("_mat3", "_matmul3", "_skew", "_rotation_and_derivatives")
-AOT_EXPORT = "navigation_residual_and_jacobian"
-AOT_SIGNATURE = "Tuple((float64[::1], float64[:, ::1]))(float64[::1], float64[::1], boolean)"
+AOT_EXPORTS = {"navigation_residual_and_jacobian":
+               "Tuple((float64[::1], float64[:, ::1]))(float64[::1], float64[::1], boolean)"}
 AOT_PREFIX = "_kernels_aot_"
 
 
@@ -352,12 +352,18 @@ def aot_module_name():
 
 def aot_kernel():
     """The ahead-of-time compiled kernel, or None if it was not built for this source."""
-    return aot.load(sys.modules[__name__])
+    built = aot.load(sys.modules[__name__])
+    return built and built["navigation_residual_and_jacobian"]
 
 
 def jit_kernel():
     """numba's JIT kernel (cache=True); the helpers become numba functions in this module."""
     return aot.jit(globals(), HELPERS)(_residual_and_jacobian)
+
+
+def jit_kernels():
+    """``jit_kernel`` by its entry's name (``cdh_planner.aot``)."""
+    return {"navigation_residual_and_jacobian": jit_kernel()}
 
 
 navigation_residual_and_jacobian = aot_kernel() or jit_kernel()

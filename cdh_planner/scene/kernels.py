@@ -278,10 +278,10 @@ HELPERS = ("_kernel", "_core_distance", "_point_core", "_least", "_own", "_local
            "_sub", "_scale", "_dot", "_norm", "_rot", "_frame", "_cut", "_point_segment",
            "_segment_segment")
 INLINE = ("_v", "_add", "_sub", "_scale", "_dot", "_norm", "_rot")
-AOT_EXPORT = "collision_batch"
-AOT_SIGNATURE = ("void(float64[:, ::1], float64[:, :, ::1], float64[::1], int64[:, ::1], "
-                 "float64[:, :, ::1], float64[:, :, ::1], float64[:, :, ::1], float64[:, ::1], "
-                 "float64[:, ::1], float64[:, ::1])")
+AOT_EXPORTS = {"collision_batch": (
+    "void(float64[:, ::1], float64[:, :, ::1], float64[::1], int64[:, ::1], "
+    "float64[:, :, ::1], float64[:, :, ::1], float64[:, :, ::1], float64[:, ::1], "
+    "float64[:, ::1], float64[:, ::1])")}
 AOT_PREFIX = "_kernels_aot_"
 
 
@@ -298,12 +298,18 @@ def aot_module_name():
 
 def aot_kernel():
     """The ahead-of-time compiled kernel, or None if it was not built for this source."""
-    return aot.load(sys.modules[__name__])
+    built = aot.load(sys.modules[__name__])
+    return built and built["collision_batch"]
 
 
 def jit_kernel():
     """numba's JIT batch kernel (cache=True); the helpers become numba functions here."""
     return aot.jit(globals(), HELPERS, INLINE)(_batch)
+
+
+def jit_kernels():
+    """``jit_kernel`` by its entry's name (``cdh_planner.aot``)."""
+    return {"collision_batch": jit_kernel()}
 
 
 collision_batch = aot_kernel() or jit_kernel()

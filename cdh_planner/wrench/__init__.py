@@ -39,8 +39,9 @@ holds (an affine rule is a stronger demand than Z containing the ellipsoid):
 shares a wrench change: the band is |rows of P_K L|, P_K = K J^T (J K J^T)^-1,
 K = diag(EA / L0) at t0 (``stiffness_band``).
 
-The compiled kernels are imported on first use by an m > 6 robot, so that a six-cable
-command loads no numba (test_startup_imports).
+The compiled kernels (``compiled``: built ahead of time by ``make``, else numba's JIT) are
+imported on first use by an m > 6 robot; built ahead of time, no command loads numba for them
+(test_startup_imports), except batches large enough to repay numba's threads.
 """
 
 import numpy as np

@@ -1,5 +1,7 @@
-"""The centred tension rule compiled by numba (package docstring): per pose its nominal t0
-and band v, t0 centred in the null space of J by ``_centre``'s Newton. Units: m, N, N m.
+"""The centred tension rule (package docstring): per pose its nominal t0 and band v, t0
+centred in the null space of J by ``_centre``'s Newton. Units: m, N, N m. Plain Python
+compiled by numba (``compiled``: ahead of time, else the JIT; ``threaded``: on threads; no
+numba import here).
 
 The rule's map is P = D J^T (J D J^T)^-1 (``rules.weighted_pseudo_inverse``, the one place
 it is written). This kernel applies the same map in an equivalent algebraic form, from the
@@ -9,46 +11,34 @@ it solves with R, whose condition number is J's, not J D J^T's, the square).
 """
 
 import numpy as np
-from numba import njit, prange
 
-from .kernel import PARALLEL_CHUNK, load_wrench
+from .kernel import load_wrench
 from .linalg import cholesky_solve, forward_substitute, householder_r, null_basis
 
 # barrier weight of the centred nominal (normalised tensions): its least band slack is within
 # 2 m CENTRE_MU of the best any null-space shift achieves. Numba freezes these constants into
-# the cached machine code: after changing one, delete cdh_planner/wrench/__pycache__/centred*.nb*.
+# the machine code: the ahead-of-time build is named after this file's digest (rebuilt by
+# make); numba's JIT cache only sees a file's own time stamp, and make clears it (``aot``).
 CENTRE_MU = 1e-4
 CENTRE_TOL = 1e-9  # Newton decrement^2 / mu at which the centring stops
 CENTRE_ITERATIONS = 50  # Newton steps at most (bounded work)
 POLISH = 2  # full Newton steps after CENTRE_TOL is met (start-independent to rounding)
 
 
-@njit(cache=True)
-def centred_kernel(J, c, w_local, L3, load_frame, tmin, tmax, ranked, centre):
+def centred_kernel(J, c, w_local, L3, load_frame, tmin, tmax, ranked, centre, chunk):
     """The centred rule's t0 and v (N, m) N at poses with J (N, 6, m) and load points
     c (N, 3) (ellipsoid as ``kernel.facet_kernel``), where ``ranked`` (N,) (J of rank 6;
     elsewhere nan, inf); t0 centred where ``centre`` (N,) (the facet test holds), else the
-    closed form's tensions toward mid range."""
+    closed form's tensions toward mid range. Poses in chunks of ``chunk`` (>= 1): a chunk's
+    first pose starts Newton cold, the others from their predecessor's answer."""
     n, m = J.shape[0], J.shape[2]
     t0, v = np.full((n, m), np.nan), np.full((n, m), np.inf)
-    _centred_poses(0, n, J, c, w_local, L3, load_frame, tmin, tmax, ranked, centre, t0, v)
+    for k in range((n + chunk - 1) // chunk):
+        _centred_poses(k * chunk, min(n, (k + 1) * chunk), J, c, w_local, L3, load_frame, tmin,
+                       tmax, ranked, centre, t0, v)
     return t0, v
 
 
-@njit(cache=True, parallel=True)
-def centred_kernel_parallel(J, c, w_local, L3, load_frame, tmin, tmax, ranked, centre):
-    """``centred_kernel`` over chunks of PARALLEL_CHUNK poses on numba's threads (the same
-    chunks as ``kernel.facet_kernel_parallel``: a chunk's first pose starts Newton cold)."""
-    n, m = J.shape[0], J.shape[2]
-    t0, v = np.full((n, m), np.nan), np.full((n, m), np.inf)
-    chunks = (n + PARALLEL_CHUNK - 1) // PARALLEL_CHUNK
-    for k in prange(chunks):
-        _centred_poses(k * PARALLEL_CHUNK, min(n, (k + 1) * PARALLEL_CHUNK), J, c, w_local, L3,
-                       load_frame, tmin, tmax, ranked, centre, t0, v)
-    return t0, v
-
-
-@njit(cache=True)
 def _centred_poses(q0, q1, J, c, w_local, L3, load_frame, tmin, tmax, ranked, centre, t0, v):
     """``centred_kernel`` for poses q0 <= q < q1, into t0 and v."""
     m = J.shape[2]
@@ -134,7 +124,6 @@ def _centred_poses(q0, q1, J, c, w_local, L3, load_frame, tmin, tmax, ranked, ce
             centred = q
 
 
-@njit(cache=True)
 def _centre(lo, hi, Q2, z, warm=False):
     """The null-space shift z (k,) of the centred nominal (module doc): the maximiser of
     s + CENTRE_MU sum_j log(r_j) over (z, s), r the 2m slacks lo_i + Q2_i z - s and
@@ -224,7 +213,6 @@ def _centre(lo, hi, Q2, z, warm=False):
     for a in range(k):
         z[a] = x[a]
 
-@njit(cache=True)
 def _log_product(r):
     """sum_j log(r_j) of positive r, by one log per 8 factors (the line search's hot loop);
     the sum of logs itself if a partial product leaves the double range."""
@@ -242,7 +230,6 @@ def _log_product(r):
         total += np.log(r[j])
     return total
 
-@njit(cache=True)
 def _slacks(lo, hi, Q2, x, r):
     """r (2m,): lo_i + Q2_i z - s, then hi_i - Q2_i z - s, at x = (z, s)."""
     m, k = Q2.shape

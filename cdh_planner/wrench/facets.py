@@ -8,7 +8,7 @@ from itertools import combinations
 import numpy as np
 
 from .geometry import inverse_factor
-from .kernel import PARALLEL_MIN, facet_kernel, facet_kernel_parallel, pose_geometry
+from .compiled import facet_batch, pose_geometry
 from .record import (SINGULAR_DET, STATUS_EXCEEDS, STATUS_INFEASIBLE, STATUS_OK,
                      STATUS_SINGULAR, Feasibility, WrenchFeasibility, constraint_names,
                      normalised_margins)
@@ -55,8 +55,7 @@ def _poses(robot, p, R, subsets):
     test holds (every ranked pose without subsets)."""
     lengths, u, J, c = pose_geometry(np.ascontiguousarray(p), np.ascontiguousarray(R),
                                      robot.base_anchors, robot.platform_anchors, robot.load_point)
-    kernel = facet_kernel_parallel if len(p) >= PARALLEL_MIN else facet_kernel
-    scale, mn, mr, arg, hi, ranked = kernel(
+    scale, mn, mr, arg, hi, ranked = facet_batch(
         J, c, robot.wrench_center_local, inverse_factor(robot), robot.ellipsoid_frame == "load",
         robot.tension_min, robot.tension_max, subsets, SINGULAR_DET)
     t0, v = rule_of(robot).tensions(robot, J, c, ranked, ranked & (mr > 0))

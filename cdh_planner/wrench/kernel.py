@@ -1,4 +1,6 @@
-"""The facet test compiled by numba (maths: the package docstring, docs/more-cables.md).
+"""The facet test (maths: the package docstring, docs/more-cables.md), plain Python
+compiled by numba (``compiled``: ahead of time, else the JIT; ``threaded``: on threads; no
+numba import here).
 
 ``facet_kernel`` is the facet test in the coordinates of a basis of 6 columns: with
 E = J_B^-1 (Gauss-Jordan, complete pivoting), N = E J has unit columns on the basis, so a
@@ -11,18 +13,19 @@ per subset from J's columns) is the reference the tests compare it with
 """
 
 import numpy as np
-from numba import njit, prange
 
 from .linalg import gauss_jordan, householder_r, null_vector
 
 # a 5-subset whose last pivot is below this fraction of its first one is rank 4: it spans
 # no facet (every facet hyperplane is spanned by some 5 independent columns)
 RANK_TOL = 1e-12
-PARALLEL_CHUNK = 512  # poses per task of the threaded kernels
-PARALLEL_MIN = 4096  # fewer poses than this: the serial kernels (thread start-up costs more)
+# from PARALLEL_MIN poses the kernels work in chunks of PARALLEL_CHUNK poses (the centred
+# rule's Newton starts cold at a chunk's first pose), which numba's threads may share out
+# (``compiled.threads_pay``): the chunks, not the threads, fix the numbers
+PARALLEL_CHUNK = 512
+PARALLEL_MIN = 4096
 
 
-@njit(cache=True)
 def _subset_normal(T, zrow, xcol, nx, M, y, perm):
     """y (nx + 1,) on the basis rows ``zrow`` off a subset, orthogonal to its off-basis
     columns ``xcol`` of N (T's first columns); closed forms for nx <= 2 (m = 8 needs no
@@ -46,7 +49,6 @@ def _subset_normal(T, zrow, xcol, nx, M, y, perm):
     return null_vector(M, nx, y, perm) > RANK_TOL
 
 
-@njit(cache=True)
 def pose_geometry(p, R, a, b, g):
     """Per pose (p (N, 3) m, R (N, 3, 3)) of a robot with base anchors a (m, 3), platform
     anchors b (m, 3) and load point g (3,): cable lengths (N, m) m, unit vectors u (N, m, 3)
@@ -77,7 +79,6 @@ def pose_geometry(p, R, a, b, g):
     return lengths, u, J, c
 
 
-@njit(cache=True)
 def load_wrench(q, c, w_local, L3, load_frame, w0, L):
     """w0 (6,) and L (6, 6) (L L^T = E^-1) of pose q in the base frame, from the ellipsoid's
     centre w_local (6,) and factor L3 given in the load frame (``load_frame``, which moves
@@ -97,7 +98,6 @@ def load_wrench(q, c, w_local, L3, load_frame, w0, L):
             L[5, j] += c0 * L3[1, j] - c1 * L3[0, j]
 
 
-@njit(cache=True)
 def facet_kernel(J, c, w_local, L3, load_frame, tmin, tmax, subsets, singular_det):
     """Per pose: J (N, 6, m), load point c (N, 3); the ellipsoid's centre w_local (6,) and
     factor L3 (6, 6) in the load frame (``load_frame``) or the base frame; tension bounds
@@ -113,26 +113,12 @@ def facet_kernel(J, c, w_local, L3, load_frame, tmin, tmax, subsets, singular_de
     return out
 
 
-@njit(cache=True, parallel=True)
-def facet_kernel_parallel(J, c, w_local, L3, load_frame, tmin, tmax, subsets, singular_det):
-    """``facet_kernel`` over chunks of PARALLEL_CHUNK poses on numba's threads."""
-    n = J.shape[0]
-    out = _facet_outputs(n)
-    chunks = (n + PARALLEL_CHUNK - 1) // PARALLEL_CHUNK
-    for k in prange(chunks):
-        _facet_poses(k * PARALLEL_CHUNK, min(n, (k + 1) * PARALLEL_CHUNK), J, c, w_local, L3,
-                     load_frame, tmin, tmax, subsets, singular_det, *out)
-    return out
-
-
-@njit(cache=True)
 def _facet_outputs(n):
     """The facet kernel's output arrays, filled as for singular poses."""
     return (np.zeros(n), np.full(n, -np.inf), np.full(n, -np.inf), np.full(n, -1, np.int64),
             np.zeros(n, np.int64), np.zeros(n, np.bool_))
 
 
-@njit(cache=True)
 def _facet_poses(q0, q1, J, c, w_local, L3, load_frame, tmin, tmax, subsets, singular_det,
                  scale, out_n, out_r, arg_r, hi_r, ranked):
     """``facet_kernel`` for poses q0 <= q < q1, into its output arrays."""

@@ -1,12 +1,11 @@
-"""Small dense linear algebra compiled by numba for the wrench kernels (``kernel``,
-``centred``): one pose at a time on 6 x m matrices, in scratch arrays the caller owns, so
-that a pose allocates nothing. Pivoting is complete (Gauss) or by Householder reflections."""
+"""Small dense linear algebra for the wrench kernels (``kernel``, ``centred``): one pose at
+a time on 6 x m matrices, in scratch arrays the caller owns, so that a pose allocates
+nothing. Pivoting is complete (Gauss) or by Householder reflections. Plain Python compiled
+by numba (``compiled``: ahead of time, else the JIT; no numba import here)."""
 
 import numpy as np
-from numba import njit
 
 
-@njit(cache=True)
 def gauss_jordan(T, m, pivcol, rowof):
     """Reduce T (6, ncol) in place to E T, choosing 6 pivot columns among its first m by
     complete pivoting; pivcol[r] is row r's column, rowof[j] column j's row (-1: off the
@@ -38,7 +37,6 @@ def gauss_jordan(T, m, pivcol, rowof):
         pivcol[r], rowof[bj] = bj, r
     return True
 
-@njit(cache=True)
 def null_vector(M, k, y, perm):
     """y (k + 1,) with M[:k, :k + 1] y = 0 (M is overwritten), by Gaussian elimination with
     complete pivoting. Returns the last pivot's magnitude (0: rank < k); 1.0 when k = 0."""
@@ -75,7 +73,6 @@ def null_vector(M, k, y, perm):
         y[perm[step]] = s / M[step, perm[step]]
     return last
 
-@njit(cache=True)
 def householder_r(A, R, hv0, hvv):
     """R (6, 6), upper triangular, of the QR factorisation of A (m, 6); A keeps the
     reflectors below its diagonal, their first entries in hv0 (6,) and |v|^2 in hvv (6,)
@@ -109,7 +106,6 @@ def householder_r(A, R, hv0, hvv):
             R[i, j] = A[i, j] if j >= i else 0.0
     return det
 
-@njit(cache=True)
 def null_basis(A, hv0, hvv, Q2):
     """Q2 (m, m - 6): the last columns of Q = H_0 ... H_5 from ``householder_r``'s
     reflectors: an orthonormal basis of the null space of A^T."""
@@ -127,7 +123,6 @@ def null_basis(A, hv0, hvv, Q2):
             for i in range(j + 1, m):
                 Q2[i, c] -= f * A[i, j]
 
-@njit(cache=True)
 def cholesky_solve(H, g, n, x):
     """x = H^-1 g for the symmetric positive definite H[:n, :n] (H is overwritten)."""
     for j in range(n):
@@ -151,7 +146,6 @@ def cholesky_solve(H, g, n, x):
             s -= H[k, i] * x[k]
         x[i] = s / H[i, i]
 
-@njit(cache=True)
 def forward_substitute(R, b, x):
     """x = R^-T b for upper-triangular R (6, 6)."""
     for i in range(6):

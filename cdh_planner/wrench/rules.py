@@ -89,13 +89,11 @@ class CentredRule(TensionRule):
         return (robot.tension_max - robot.tension_min) ** 2
 
     def tensions(self, robot, J, c, ranked, centre):
-        # the kernels load numba: imported on first use (six-cable commands never need it)
-        from .centred import centred_kernel, centred_kernel_parallel
-        from .kernel import PARALLEL_MIN
-        kernel = centred_kernel_parallel if len(J) >= PARALLEL_MIN else centred_kernel
-        return kernel(J, c, robot.wrench_center_local, inverse_factor(robot),
-                      robot.ellipsoid_frame == "load", robot.tension_min, robot.tension_max,
-                      ranked, centre)
+        # the compiled kernels: imported on first use (six-cable commands never need them)
+        from .compiled import centred_batch
+        return centred_batch(J, c, robot.wrench_center_local, inverse_factor(robot),
+                             robot.ellipsoid_frame == "load", robot.tension_min,
+                             robot.tension_max, ranked, centre)
 
 
 def stiffness_band(robot, J, c, t0, lengths, v):
