@@ -3,6 +3,7 @@ lists are built at import) and fixtures for them."""
 
 import os
 import shutil
+import signal
 import tempfile
 from pathlib import Path
 
@@ -12,6 +13,13 @@ REPO = Path(__file__).resolve().parents[1]
 CONFIG = REPO / "config"
 PROBLEMS = CONFIG / "problems"
 PACKAGE = REPO / "cdh_planner"
+
+
+def default_sigint():
+    """``preexec_fn`` of a child a test interrupts with SIGINT: the signal's default action,
+    as a shell in a terminal gives it. A suite started in the background (``&``, nohup) has
+    SIGINT ignored, children inherit that, and Python then installs no KeyboardInterrupt."""
+    signal.signal(signal.SIGINT, signal.SIG_DFL)
 
 
 def pytest_configure(config):

@@ -30,7 +30,7 @@ from cdh_planner.recording.mcap_log import (  # noqa: E402
     MAGIC, REQUEST_RECEIVED, RESPONSE_SENT, RunRecorder, read_run, recover_run)
 from cdh_planner.recording.ros_schemas import full_definition  # noqa: E402
 
-from conftest import REPO
+from conftest import REPO, default_sigint
 T0 = 1_700_000_000_000_000_000
 GID = bytes(range(200, 216))            # bytes > 127: ROS 'char' is unsigned
 
@@ -324,11 +324,11 @@ def _record_and_signal(path, sig):
         "PYTHONPATH", "")]))
     child = subprocess.Popen([sys.executable, "-c", CHILD, str(path), str(N_KILL)],
                              stdout=subprocess.PIPE, stderr=subprocess.DEVNULL, env=env,
-                             text=True)
+                             text=True, preexec_fn=default_sigint)
     try:
         assert child.stdout.readline().strip() == "ready"
         child.send_signal(sig)
-        assert child.wait(timeout=10) == -sig
+        assert child.wait(timeout=120) == -sig   # a bound for a hang
     finally:
         child.kill()
         child.stdout.close()

@@ -17,7 +17,7 @@ import pytest
 from cdh_planner import cli
 from cdh_planner.model.robot import GRAVITY
 from cdh_planner.studies import sweep as sw
-from conftest import CONFIG, REPO
+from conftest import CONFIG, REPO, default_sigint
 
 ROBOT2 = CONFIG / "robot2.yaml"
 LOW, HIGH = [4.0] * 6, [6.58] * 6
@@ -92,7 +92,8 @@ def test_sigint_then_resume_runs_every_design_once(tmp_path):
     cmd = [sys.executable, "-m", "cdh_planner.cli", "sweep", str(path), "--out", str(out),
            "--no-ray", "--quiet"]
     env = {**os.environ, "PYTHONPATH": os.pathsep.join([str(REPO), os.environ.get("PYTHONPATH", "")])}
-    proc = subprocess.Popen(cmd, env=env, stdout=subprocess.PIPE, stderr=subprocess.PIPE, text=True)
+    proc = subprocess.Popen(cmd, env=env, stdout=subprocess.PIPE, stderr=subprocess.PIPE, text=True,
+                            preexec_fn=default_sigint)
     deadline = time.monotonic() + 120
     while not (out / "design_0000.json").exists() and time.monotonic() < deadline:
         time.sleep(0.05)

@@ -18,7 +18,7 @@ from cdh_planner import cli
 from cdh_planner.model.robot import load_robot
 from cdh_planner.studies import workspace as ws
 from cdh_planner.studies.executors import RayExecutor, SerialExecutor
-from conftest import CONFIG
+from conftest import CONFIG, default_sigint
 
 pytest.importorskip("ray")
 ROBOT2 = CONFIG / "robot2.yaml"
@@ -188,7 +188,7 @@ def test_ctrl_c_while_ray_workers_plan_leaves_stdout_clean(tmp_path):
         [sys.executable, "-m", "cdh_planner.cli", "workspace", str(ROBOT2), "--samples", "4000",
          "--seed", "3", "--workers", "2", "--reach", "--timeout", "600"],
         stdout=subprocess.PIPE, stderr=subprocess.PIPE, cwd=tmp_path, env=dict(os.environ),
-        preexec_fn=lambda: signal.signal(signal.SIGINT, signal.SIG_DFL))
+        preexec_fn=default_sigint)
     try:
         seen = []
         for raw in proc.stderr:   # the event: the reach stage under way, not finished
