@@ -10,6 +10,7 @@
 # HOG_S (s each hog lives at most, default 3600), PYTHON (default .venv/bin/python),
 # LOGS (folder of each run's output, default a new one in /tmp).
 # Each run's outcome and wall time are printed; the exit code is the number of failed runs.
+# SIGINT or SIGTERM stops the run in progress and the hogs, and ends the script.
 set -u
 cd "$(dirname "$0")/.."
 RUNS=${RUNS:-3}
@@ -19,13 +20,20 @@ PYTHON=${PYTHON:-.venv/bin/python}
 LOGS=${LOGS:-$(mktemp -d /tmp/loaded_suite.XXXXXX)}   # each run's pytest output
 mkdir -p "$LOGS"
 hogs=()
+suite=""
 
 stop_hogs() {
     for pid in "${hogs[@]}"; do kill "$pid" 2>/dev/null; done
     for pid in "${hogs[@]}"; do wait "$pid" 2>/dev/null; done
     hogs=()
 }
-trap stop_hogs EXIT INT TERM
+stop_all() {   # SIGINT / SIGTERM: the run in progress (pytest stops its workers) and the hogs
+    [ -n "$suite" ] && kill -TERM "$suite" 2>/dev/null && wait "$suite" 2>/dev/null
+    stop_hogs
+}
+trap stop_hogs EXIT
+trap 'stop_all; exit 130' INT
+trap 'stop_all; exit 143' TERM
 
 failed=0
 for run in $(seq 1 "$RUNS"); do
@@ -34,8 +42,12 @@ for run in $(seq 1 "$RUNS"); do
         hogs+=($!)
     done
     start=$(date +%s)
-    "$PYTHON" -m pytest -p no:cacheprovider "$@" > "$LOGS/run$run.log" 2>&1
+    # in the background and waited for, so that a signal to this script is handled at once
+    "$PYTHON" -m pytest -p no:cacheprovider "$@" > "$LOGS/run$run.log" 2>&1 &
+    suite=$!
+    wait "$suite"
     rc=$?
+    suite=""
     end=$(date +%s)
     stop_hogs
     summary=$(grep -E "passed|failed|error" "$LOGS/run$run.log" | tail -1)
