@@ -39,6 +39,7 @@ import json
 import math
 
 import numpy as np
+import orjson
 
 from ..accuracy import has_accuracy, pose_accuracy
 from ..errors import InputError
@@ -190,30 +191,43 @@ def _row_template(columns):
 
 def _column_texts(col):
     """(whether each text still needs its list brackets, the JSON text of each entry of
-    ``col``): numbers and booleans by one encoder call split at the entries (their texts
-    hold no ", " or "], ["), strings (binding names) one by one."""
+    ``col``): numbers and booleans by one ``number_text`` of the whole array split at the
+    entries (their texts hold no ", " or "], ["), strings (binding names) one by one."""
     if isinstance(col, _Texts):
         return False, col
     arr = np.asarray(col)
     if arr.dtype.kind not in "biuf":
         return False, [_encode(v) for v in arr.tolist()]
-    text = _ENCODER.encode(_finite_list(arr))
+    text = number_text(arr)
     if arr.ndim == 1:
         return False, text[1:-1].split(", ")
     return True, text[2:-2].split("], [")
 
 
+def number_text(arr):
+    """The JSON text of a numeric or boolean array as ``json.dumps(arr.tolist())`` writes it
+    (Python's float repr, ", " between entries), non-finite numbers as null: written by
+    orjson (10x faster than the json module's encoder), whose shortest round-trip digits
+    are Python's, laid out as Python does for 1e-4 <= |x| < 1e16; the entries outside that
+    range (orjson: ``1e-8``, ``0.00005``; Python: ``1e-08``, ``5e-05``) are Python's repr."""
+    arr = np.ascontiguousarray(arr, dtype=np.float64 if arr.dtype.kind == "f" else None)
+    text = orjson.dumps(arr, option=orjson.OPT_SERIALIZE_NUMPY).decode()
+    if arr.dtype.kind == "f":
+        flat = arr.ravel()
+        mag = np.abs(flat)
+        odd = np.flatnonzero(((mag > 0) & (mag < 1e-4)) | ((mag >= 1e16) & (mag < np.inf)))
+        if odd.size:  # entry k is the k-th piece between commas, with its brackets
+            pieces = text.split(",")
+            for k, value in zip(odd.tolist(), flat[odd].tolist()):
+                piece = pieces[k]
+                pieces[k] = piece.replace(piece.strip("[]"), repr(value))
+            text = ",".join(pieces)
+    return text.replace(",", ", ")
+
+
 def _point_dict(pt):
     return {"s": pt.s, "margin": pt.margin, "binding": pt.binding,
             "position": pt.position.tolist(), "quaternion": pt.quaternion.tolist()}
-
-
-def _finite_list(values):
-    """``values`` (an array) as nested lists, non-finite floats as None."""
-    arr = np.asarray(values)
-    if arr.dtype.kind == "f" and not np.all(np.isfinite(arr)):
-        arr = np.where(np.isfinite(arr), arr, None)
-    return arr.tolist()
 
 
 def dump_rows(doc):
@@ -230,7 +244,7 @@ def layout_rows(texts):
     parts = []
     for key, text in texts.items():
         if isinstance(text, list):
-            text = "[\n" + ",\n".join("    " + row for row in text) + "\n  ]" if text else "[]"
+            text = "[\n    " + ",\n    ".join(text) + "\n  ]" if text else "[]"
         parts.append(f"  {_encode(key)}: {text}")
     return "{\n" + ",\n".join(parts) + "\n}\n"
 
