@@ -203,6 +203,16 @@ def _refuse(where, label, event, reason):
 
 def read_json(path, where, limits=JSON_LIMITS):
     """The parsed JSON file at ``path`` (depth and sizes bounded)."""
+    doc = parse_json_file(path, where, limits)
+    check_structure(doc, where, str(path), limits)
+    return doc
+
+
+def parse_json_file(path, where, limits=JSON_LIMITS):
+    """The parsed JSON file at ``path``, its size bounded (``limits.max_bytes``) but its
+    depth and list lengths not yet checked: the caller runs ``check_structure`` unless its
+    own checks of the document's shape keep it within ``limits`` (pose files, read in
+    bulk: a Python walk over their 10^6 values would cost more than the parse)."""
     text = read_text(path, where, limits.max_bytes)
     label = str(path)
     try:
@@ -216,7 +226,6 @@ def read_json(path, where, limits=JSON_LIMITS):
         raise InputError(where, label, f"nested deeper than {limits.max_depth} levels") from None
     except ValueError as exc:  # an integer of over 4300 digits
         raise InputError(where, label, f"not valid JSON: {exc}") from None
-    check_structure(doc, where, label, limits)
     return doc
 
 

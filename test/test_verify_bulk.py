@@ -10,6 +10,7 @@ import pytest
 from cdh_planner import cli
 from cdh_planner.commands import verify
 from cdh_planner.errors import InputError
+from cdh_planner.files import JSON_LIMITS, check_structure
 from cdh_planner.parsing import poses as poses_mod
 from cdh_planner.parsing.poses import poses_from_obj
 
@@ -162,3 +163,15 @@ def test_number_text_is_the_json_modules_text_of_every_float():
         assert verify.number_text(arr) == json.dumps(np.where(np.isfinite(arr), arr, None).tolist())
     for arr in (np.array([True, False]), np.arange(5), np.array([[1, 2], [3, 4]]), np.float32([0.1, 1e-5])):
         assert verify.number_text(arr) == json.dumps(arr.tolist())
+
+
+def test_the_largest_document_the_bulk_parse_accepts_is_within_the_json_limits(tmp_path):
+    """load_poses skips files.check_structure when _bulk_poses accepts a file: the largest
+    such document (MAX_POSES quaternion poses in the {"poses": ...} wrapper) must pass it."""
+    pose = {"position": [0.0, 0.0, 0.3], "quaternion": [0.0, 0.0, 0.0, 1.0]}
+    doc = {"poses": [dict(pose) for _ in range(poses_mod.MAX_POSES)]}
+    assert poses_mod._bulk_poses(doc["poses"]) is not None
+    check_structure(doc, "poses", "x.json", JSON_LIMITS)  # no InputError
+    path = tmp_path / "poses.json"
+    path.write_text(json.dumps(doc))
+    assert len(poses_mod.load_poses(path)) == poses_mod.MAX_POSES

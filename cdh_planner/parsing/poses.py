@@ -22,7 +22,7 @@ from dataclasses import dataclass
 import numpy as np
 
 from ..errors import MAX_POSITION_M, InputError, check_keys, check_numbers
-from ..files import read_json
+from ..files import JSON_LIMITS, check_structure, parse_json_file
 from ..model.pose import check_quaternion, quaternion_from_tau, rotation_from_quaternion, \
     tau_from_quaternion
 
@@ -50,7 +50,14 @@ class PoseList:
 def load_poses(path, where="poses"):
     """Read and validate a poses JSON file; InputError on any bad content (the file's size,
     depth and list lengths bounded by ``files.JSON_LIMITS``, at most MAX_POSES poses)."""
-    return poses_from_obj(read_json(path, where), where)
+    doc = parse_json_file(path, where)
+    rows = doc["poses"] if isinstance(doc, dict) and doc.keys() == {"poses"} else doc
+    if isinstance(rows, list) and 0 < len(rows) <= MAX_POSES:
+        bulk = _bulk_poses(rows)  # accepted: within JSON_LIMITS (see _Q_KEYS)
+        if bulk is not None:
+            return bulk
+    check_structure(doc, where, str(path), JSON_LIMITS)
+    return poses_from_obj(doc, where)
 
 
 def poses_from_obj(doc, where="poses"):
@@ -115,6 +122,9 @@ def _bulk_poses(doc):
 
 
 _Q_KEYS, _TAU_KEYS = frozenset(("position", "quaternion")), frozenset(("position", "tau"))
+# A pose document that _bulk_poses accepts is within JSON_LIMITS (test_verify_bulk): at most
+# MAX_POSES poses of 10 values (a mapping, two lists, 7 numbers), 4 levels deep with the
+# {"poses": ...} wrapper; load_poses skips the check_structure walk for it.
 QUATERNION_TOL = 1e-3  # check_quaternion's default tolerance on |q| - 1
 
 
