@@ -159,8 +159,8 @@ def segment_columns(segments):
                       "binding": [p.binding for p in worst],
                       "position": np.array([p.position for p in worst]),
                       "quaternion": np.array([p.quaternion for p in worst])},
-            "first_unsafe": _Texts(_encode(None if s.first_unsafe is None else
-                                           _point_dict(s.first_unsafe)) for s in segments)}
+            "first_unsafe": _Texts("null" if s.first_unsafe is None else
+                                   _encode(_point_dict(s.first_unsafe)) for s in segments)}
 
 
 class _Texts(list):
@@ -192,12 +192,15 @@ def _row_template(columns):
 def _column_texts(col):
     """(whether each text still needs its list brackets, the JSON text of each entry of
     ``col``): numbers and booleans by one ``number_text`` of the whole array split at the
-    entries (their texts hold no ", " or "], ["), strings (binding names) one by one."""
+    entries (their texts hold no ", " or "], ["), strings (binding names, few distinct)
+    each distinct one once."""
     if isinstance(col, _Texts):
         return False, col
     arr = np.asarray(col)
     if arr.dtype.kind not in "biuf":
-        return False, [_encode(v) for v in arr.tolist()]
+        values = arr.tolist()
+        texts = {v: _encode(v) for v in set(values)}
+        return False, list(map(texts.__getitem__, values))
     text = number_text(arr)
     if arr.ndim == 1:
         return False, text[1:-1].split(", ")
