@@ -243,13 +243,19 @@ def dump_rows(doc):
 
 def layout_rows(texts):
     """The JSON text of a mapping ``texts`` (key -> the JSON text of its value, or a list of
-    the JSON texts of its entries): a key a line, a list entry a line."""
-    parts = []
+    the JSON texts of its entries): a key a line, a list entry a line. One join of all the
+    pieces: the text is copied once (30 MB for 20,000 eight-cable poses)."""
+    pieces = []
     for key, text in texts.items():
-        if isinstance(text, list):
-            text = "[\n    " + ",\n    ".join(text) + "\n  ]" if text else "[]"
-        parts.append(f"  {_encode(key)}: {text}")
-    return "{\n" + ",\n".join(parts) + "\n}\n"
+        pieces += [",\n  " if pieces else "{\n  ", _encode(key), ": "]
+        if isinstance(text, list) and text:
+            rows = [",\n    "] * (2 * len(text) - 1)
+            rows[::2] = text
+            pieces += ["[\n    ", *rows, "\n  ]"]
+        else:
+            pieces.append("[]" if isinstance(text, list) else text)
+    pieces.append("\n}\n")
+    return "".join(pieces)
 
 
 _ENCODER = json.JSONEncoder(allow_nan=False)
