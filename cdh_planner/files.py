@@ -203,18 +203,15 @@ def _refuse(where, label, event, reason):
 
 def read_json(path, where, limits=JSON_LIMITS):
     """The parsed JSON file at ``path`` (depth and sizes bounded)."""
-    doc = parse_json_file(path, where, limits)
+    doc = parse_json_text(read_text(path, where, limits.max_bytes), where, str(path), limits)
     check_structure(doc, where, str(path), limits)
     return doc
 
 
-def parse_json_file(path, where, limits=JSON_LIMITS):
-    """The parsed JSON file at ``path``, its size bounded (``limits.max_bytes``) but its
-    depth and list lengths not yet checked: the caller runs ``check_structure`` unless its
-    own checks of the document's shape keep it within ``limits`` (pose files, read in
-    bulk: a Python walk over their 10^6 values would cost more than the parse)."""
-    text = read_text(path, where, limits.max_bytes)
-    label = str(path)
+def parse_json_text(text, where, label, limits=JSON_LIMITS):
+    """The parsed JSON ``text`` (of the file ``label``), a key given twice refused, but its
+    depth and list lengths not yet checked: the caller runs ``check_structure`` (pose files
+    read in bulk skip it, their shape checked instead: parsing/poses.py)."""
     try:
         doc = json.loads(text, object_pairs_hook=_unique_keys)
     except _DuplicateKey as exc:

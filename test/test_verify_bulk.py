@@ -175,3 +175,46 @@ def test_the_largest_document_the_bulk_parse_accepts_is_within_the_json_limits(t
     path = tmp_path / "poses.json"
     path.write_text(json.dumps(doc))
     assert len(poses_mod.load_poses(path)) == poses_mod.MAX_POSES
+
+
+@pytest.mark.parametrize("case", BAD)
+def test_a_bad_pose_file_is_refused_as_the_pose_by_pose_check_refuses_it(case, tmp_path):
+    """load_poses parses with orjson first (NaN and huge integers are not JSON to it: the
+    json module's parse then reads them, as before)."""
+    doc = _good()
+    doc[17] = BAD[case]
+    path = tmp_path / "poses.json"
+    path.write_text(json.dumps(doc))
+    with pytest.raises(InputError) as slow:
+        _slow(json.loads(path.read_text()))
+    with pytest.raises(InputError) as read:
+        poses_mod.load_poses(path)
+    assert str(read.value) == str(slow.value)
+
+
+@pytest.mark.parametrize("text, key", [
+    ('[{"position": [0, 0, 0.3], "tau": [0, 0.1, 0]}, '
+     '{"position": [0, 0, 0.3], "tau": [0, 0.1, 0], "tau": [0, 0.2, 0]}]', "tau"),
+    ('{"poses": [{"position": [0, 0, 0.3], "tau": [0, 0.1, 0]}], '
+     '"poses": [{"position": [0, 0, 0.3], "tau": [0, 0.1, 0]}]}', "poses"),
+])
+def test_a_key_given_twice_is_refused_where_orjson_would_keep_the_last(tmp_path, text, key):
+    """orjson keeps the last of two equal keys: the documents it reads into poses that the
+    bulk check accepts are refused all the same (the quotes counted)."""
+    path = tmp_path / "poses.json"
+    path.write_text(text)
+    with pytest.raises(InputError, match=f"duplicate key '{key}'"):
+        poses_mod.load_poses(path)
+    path.write_text(text.replace('"position"', '"\\u0070osition"', 1))  # an escaped key: read
+    with pytest.raises(InputError, match=f"duplicate key '{key}'"):
+        poses_mod.load_poses(path)
+
+
+def test_the_orjson_and_json_module_reads_are_the_same_poses(tmp_path):
+    doc = _good(200, seed=8)
+    path = tmp_path / "poses.json"
+    path.write_text(json.dumps({"poses": doc}).replace('"tau"', '"t\\u0061u"', 3))
+    fast, slow = poses_mod.load_poses(path), _slow(doc)
+    assert poses_mod._bulk_text(path.read_text()) is not None
+    for field in ("positions", "quaternions", "rotations", "tau"):
+        assert np.array_equal(getattr(fast, field), getattr(slow, field)), field
