@@ -13,7 +13,9 @@ returns plain Python data or raises an InputError naming the file and what is wr
 - YAML anchors and aliases are refused (a 300-byte "billion laughs" file would expand to
   billions of nodes), and so is a document nested deeper than ``max_depth`` levels, a list
   or mapping of more than ``max_items`` entries or more than ``max_nodes`` values in all.
-  These are checked on the parser's events, before any Python object is built.
+  These are checked on the parser's events, before any Python object is built (YAML), or
+  on the parsed document (JSON, ``check_structure``; a pose file whose shape
+  ``parsing.poses`` checks in bulk is within the limits by that shape and is not walked).
 
 The limits are far above what the files of this project need (a robot file has about 150
 values in 4 levels).
