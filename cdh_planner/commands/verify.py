@@ -214,18 +214,32 @@ def number_text(arr):
     are Python's, laid out as Python does for 1e-4 <= |x| < 1e16; the entries outside that
     range (orjson: ``1e-8``, ``0.00005``; Python: ``1e-08``, ``5e-05``) are Python's repr."""
     arr = np.ascontiguousarray(arr, dtype=np.float64 if arr.dtype.kind == "f" else None)
-    text = orjson.dumps(arr, option=orjson.OPT_SERIALIZE_NUMPY).decode()
+    raw = orjson.dumps(arr, option=orjson.OPT_SERIALIZE_NUMPY)
     if arr.dtype.kind == "f":
         flat = arr.ravel()
         mag = np.abs(flat)
         odd = np.flatnonzero(((mag > 0) & (mag < 1e-4)) | ((mag >= 1e16) & (mag < np.inf)))
-        if odd.size:  # entry k is the k-th piece between commas, with its brackets
-            pieces = text.split(",")
-            for k, value in zip(odd.tolist(), flat[odd].tolist()):
-                piece = pieces[k]
-                pieces[k] = piece.replace(piece.strip("[]"), repr(value))
-            text = ",".join(pieces)
-    return text.replace(",", ", ")
+        if odd.size:
+            raw = _with_python_repr(raw, odd, flat[odd])
+    return raw.decode().replace(",", ", ")
+
+
+def _with_python_repr(raw, entries, values):
+    """orjson's text ``raw`` (bytes) of an array with its entries ``entries`` (flat indices,
+    ascending) written as Python's repr of ``values``: entry k lies between the k-th comma
+    and the next, within its brackets (found for all entries at once, then one join)."""
+    commas = np.flatnonzero(np.frombuffer(raw, dtype=np.uint8) == ord(","))
+    starts = np.r_[0, commas + 1][entries].tolist()
+    ends = np.r_[commas, len(raw)][entries].tolist()
+    parts, done = [], 0
+    for a, b, value in zip(starts, ends, values.tolist()):
+        token = raw[a:b]
+        a += len(token) - len(token.lstrip(b"["))
+        b -= len(token) - len(token.rstrip(b"]"))
+        parts += [raw[done:a], repr(value).encode()]
+        done = b
+    parts.append(raw[done:])
+    return b"".join(parts)
 
 
 def _point_dict(pt):
