@@ -212,8 +212,9 @@ def _zonotope_max(g):
         return norms.sum(axis=1)
     i, j = np.array(list(combinations(range(m), 2))).T  # pairs (P,)
     gi, gj = g[:, :, i], g[:, :, j]  # (N, 3, P)
-    c = np.cross(gi, gj, axis=1)  # (N, 3, P)
-    cn = np.linalg.norm(c, axis=1)  # (N, P)
+    c = np.stack([gi[:, (k + 1) % 3] * gj[:, (k + 2) % 3] - gi[:, (k + 2) % 3] * gj[:, (k + 1) % 3]
+                  for k in range(3)], axis=1)  # (N, 3, P): np.cross's products, contiguous
+    cn = np.sqrt(c[:, 0] * c[:, 0] + c[:, 1] * c[:, 1] + c[:, 2] * c[:, 2])  # (N, P): the norm's sum
     live = ~(tiny[:, i] | tiny[:, j])  # pairs of two real generators
     with np.errstate(invalid="ignore", divide="ignore"):
         sin = cn / (norms[:, i] * norms[:, j])
