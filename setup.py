@@ -31,7 +31,7 @@ setup(
         ('share/' + package_name + '/config/sweeps', sorted(glob('config/sweeps/*.yaml'))),
         ('share/' + package_name + '/launch', sorted(glob('launch/*.launch.py'))),
     ],
-    install_requires=['setuptools', 'numpy', 'scipy', 'pyyaml', 'matplotlib', 'tqdm', 'threadpoolctl', 'numba', 'toppra',
+    install_requires=['setuptools', 'numpy', 'scipy', 'pyyaml', 'matplotlib', 'tqdm', 'threadpoolctl', 'numba', 'orjson', 'toppra',
                       'coal', 'trimesh', 'mujoco',
                       'mcap', 'mcap-ros2-support', 'rosbags', 'ray'],
     zip_safe=True,

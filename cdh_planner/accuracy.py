@@ -212,8 +212,9 @@ def _zonotope_max(g):
         return norms.sum(axis=1)
     i, j = np.array(list(combinations(range(m), 2))).T  # pairs (P,)
     gi, gj = g[:, :, i], g[:, :, j]  # (N, 3, P)
-    c = np.cross(gi, gj, axis=1)  # (N, 3, P)
-    cn = np.linalg.norm(c, axis=1)  # (N, P)
+    c = np.stack([gi[:, (k + 1) % 3] * gj[:, (k + 2) % 3] - gi[:, (k + 2) % 3] * gj[:, (k + 1) % 3]
+                  for k in range(3)], axis=1)  # (N, 3, P): np.cross's products, contiguous
+    cn = np.sqrt(c[:, 0] * c[:, 0] + c[:, 1] * c[:, 1] + c[:, 2] * c[:, 2])  # (N, P): the norm's sum
     live = ~(tiny[:, i] | tiny[:, j])  # pairs of two real generators
     with np.errstate(invalid="ignore", divide="ignore"):
         sin = cn / (norms[:, i] * norms[:, j])
@@ -228,17 +229,28 @@ def _zonotope_max(g):
     use = live & ~parallel
     signs = np.where(pair_cols | tiny[:, None, :] | ~use[:, :, None], 0.0, np.sign(D))
     base = np.nan_to_num(signs) @ np.swapaxes(g, 1, 2)  # (N, P, 3)
-    best = np.zeros(n)
-    for a in (1.0, -1.0):
-        for b in (1.0, -1.0):
-            v = np.linalg.norm(base + a * np.swapaxes(gi, 1, 2) + b * np.swapaxes(gj, 1, 2), axis=2)
-            best = np.maximum(best, np.where(use, v, 0.0).max(axis=1))
+    best = np.sqrt(_vertex_max_sq(np.moveaxis(base, 2, 0), np.moveaxis(gi, 1, 0),
+                                  np.moveaxis(gj, 1, 0), use))
     single = ~use.any(axis=1) & ~degenerate  # at most one real generator: its length
     best = np.where(single, norms.sum(axis=1), best)
     for r in np.flatnonzero(degenerate):
         best[r] = (brute_force_max(g[r:r + 1])[0] if m <= BRUTE_FORCE_MAX_CABLES
                    else norms[r].sum())
     return best + extra
+
+
+def _vertex_max_sq(base, gi, gj, use):
+    """max over the pairs in ``use`` (N, P) and the signs a, b of ||base + a g_i + b g_j||^2
+    (N,), 0 where no pair is used; base, gi, gj (3, N, P) by component. Component arrays
+    rather than a norm over a last axis of 3 (4x faster), summed in the norm's order, so
+    that the sqrt of this is bit for bit the largest norm."""
+    best = np.zeros(use.shape)
+    for a in (1.0, -1.0):
+        partial = [base[k] + a * gi[k] for k in range(3)]
+        for b in (1.0, -1.0):
+            x = [partial[k] + b * gj[k] for k in range(3)]
+            np.maximum(best, x[0] * x[0] + x[1] * x[1] + x[2] * x[2], out=best)
+    return np.where(use, best, 0.0).max(axis=1)
 
 
 def brute_force_max(g):

@@ -13,7 +13,9 @@ returns plain Python data or raises an InputError naming the file and what is wr
 - YAML anchors and aliases are refused (a 300-byte "billion laughs" file would expand to
   billions of nodes), and so is a document nested deeper than ``max_depth`` levels, a list
   or mapping of more than ``max_items`` entries or more than ``max_nodes`` values in all.
-  These are checked on the parser's events, before any Python object is built.
+  These are checked on the parser's events, before any Python object is built (YAML), or
+  on the parsed document (JSON, ``check_structure``; a pose file whose shape
+  ``parsing.poses`` checks in bulk is within the limits by that shape and is not walked).
 
 The limits are far above what the files of this project need (a robot file has about 150
 values in 4 levels).
@@ -203,8 +205,15 @@ def _refuse(where, label, event, reason):
 
 def read_json(path, where, limits=JSON_LIMITS):
     """The parsed JSON file at ``path`` (depth and sizes bounded)."""
-    text = read_text(path, where, limits.max_bytes)
-    label = str(path)
+    doc = parse_json_text(read_text(path, where, limits.max_bytes), where, str(path), limits)
+    check_structure(doc, where, str(path), limits)
+    return doc
+
+
+def parse_json_text(text, where, label, limits=JSON_LIMITS):
+    """The parsed JSON ``text`` (of the file ``label``), a key given twice refused, but its
+    depth and list lengths not yet checked: the caller runs ``check_structure`` (pose files
+    read in bulk skip it, their shape checked instead: parsing/poses.py)."""
     try:
         doc = json.loads(text, object_pairs_hook=_unique_keys)
     except _DuplicateKey as exc:
@@ -216,7 +225,6 @@ def read_json(path, where, limits=JSON_LIMITS):
         raise InputError(where, label, f"nested deeper than {limits.max_depth} levels") from None
     except ValueError as exc:  # an integer of over 4300 digits
         raise InputError(where, label, f"not valid JSON: {exc}") from None
-    check_structure(doc, where, label, limits)
     return doc
 
 

@@ -32,6 +32,7 @@ THIRD_PARTY = {
     "trimesh": ("python3-trimesh-pip", "trimesh"),
     "ray": ("python3-ray-pip", "ray"),
     "mujoco": ("python3-mujoco", "mujoco"),
+    "orjson": ("python3-orjson", "orjson"),
 }
 ROS = {"rclpy", "ament_index_python", "builtin_interfaces", "rcl_interfaces", "action_msgs",
        "std_msgs", "std_srvs", "geometry_msgs", "nav_msgs", "trajectory_msgs", "sensor_msgs",
@@ -85,7 +86,7 @@ def test_every_import_is_a_known_dependency():
 # no rosdep key exists for these (ros/rosdistro rosdep/python.yaml, checked 2026-12):
 # package.xml names them in a comment as pip-only, with the reason, instead of a key that
 # would make `rosdep install` fail
-PIP_ONLY = {"threadpoolctl", "ray", "mujoco"}
+PIP_ONLY = {"threadpoolctl", "ray", "mujoco", "orjson"}
 # the non-ROS keys package.xml uses, each checked in ros/rosdistro's rosdep/python.yaml
 # (2026-12): a new one must be checked there and added here
 ROSDEP_KEYS = {"python3-numpy", "python3-scipy", "python3-yaml", "python3-matplotlib",

@@ -8,7 +8,9 @@ import numpy as np
 import pytest
 
 from cdh_planner import cli
+from cdh_planner.commands import verify
 from cdh_planner.errors import InputError
+from cdh_planner.files import JSON_LIMITS, check_structure
 from cdh_planner.parsing import poses as poses_mod
 from cdh_planner.parsing.poses import poses_from_obj
 
@@ -144,3 +146,75 @@ def test_at_most_ten_not_feasible_poses_are_listed(tmp_path, capsys):
     listed = [int(line.split()[1][:-1]) for line in out.splitlines() if line.startswith("pose ")]
     assert listed == list(range(5, 25, 2))
     assert "summary: 25/40 poses" in out
+
+
+def test_number_text_is_the_json_modules_text_of_every_float():
+    """orjson's digits with Python's layout: every magnitude (subnormals to the largest,
+    the [1e-5, 1e-4) range orjson writes positionally, one-digit exponents), signed zeros,
+    non-finite numbers as null, integers and booleans; 1-D and 2-D."""
+    rng = np.random.default_rng(5)
+    n = 20_000
+    with np.errstate(over="ignore"):
+        wide = rng.uniform(1, 10, n) * 10.0 ** rng.integers(-330, 309, n) * rng.choice([-1, 1], n)
+    values = np.concatenate([wide, rng.uniform(0, 1e6, n), rng.uniform(1e-5, 1e-4, n),
+                             2.0 ** np.arange(-1074, 1024), [0.0, -0.0, np.nan, -np.inf, 47740.00003585525],
+                             [1e-4, np.nextafter(1e-4, 0), 1e16, np.nextafter(1e16, 0), -1e-5]])
+    for arr in (values, values[: len(values) // 6 * 6].reshape(-1, 6)):
+        assert verify.number_text(arr) == json.dumps(np.where(np.isfinite(arr), arr, None).tolist())
+    for arr in (np.array([True, False]), np.arange(5), np.array([[1, 2], [3, 4]]), np.float32([0.1, 1e-5])):
+        assert verify.number_text(arr) == json.dumps(arr.tolist())
+
+
+def test_the_largest_document_the_bulk_parse_accepts_is_within_the_json_limits(tmp_path):
+    """load_poses skips files.check_structure when _bulk_poses accepts a file: the largest
+    such document (MAX_POSES quaternion poses in the {"poses": ...} wrapper) must pass it."""
+    pose = {"position": [0.0, 0.0, 0.3], "quaternion": [0.0, 0.0, 0.0, 1.0]}
+    doc = {"poses": [dict(pose) for _ in range(poses_mod.MAX_POSES)]}
+    assert poses_mod._bulk_poses(doc["poses"]) is not None
+    check_structure(doc, "poses", "x.json", JSON_LIMITS)  # no InputError
+    path = tmp_path / "poses.json"
+    path.write_text(json.dumps(doc))
+    assert len(poses_mod.load_poses(path)) == poses_mod.MAX_POSES
+
+
+@pytest.mark.parametrize("case", BAD)
+def test_a_bad_pose_file_is_refused_as_the_pose_by_pose_check_refuses_it(case, tmp_path):
+    """load_poses parses with orjson first (NaN and huge integers are not JSON to it: the
+    json module's parse then reads them, as before)."""
+    doc = _good()
+    doc[17] = BAD[case]
+    path = tmp_path / "poses.json"
+    path.write_text(json.dumps(doc))
+    with pytest.raises(InputError) as slow:
+        _slow(json.loads(path.read_text()))
+    with pytest.raises(InputError) as read:
+        poses_mod.load_poses(path)
+    assert str(read.value) == str(slow.value)
+
+
+@pytest.mark.parametrize("text, key", [
+    ('[{"position": [0, 0, 0.3], "tau": [0, 0.1, 0]}, '
+     '{"position": [0, 0, 0.3], "tau": [0, 0.1, 0], "tau": [0, 0.2, 0]}]', "tau"),
+    ('{"poses": [{"position": [0, 0, 0.3], "tau": [0, 0.1, 0]}], '
+     '"poses": [{"position": [0, 0, 0.3], "tau": [0, 0.1, 0]}]}', "poses"),
+])
+def test_a_key_given_twice_is_refused_where_orjson_would_keep_the_last(tmp_path, text, key):
+    """orjson keeps the last of two equal keys: the documents it reads into poses that the
+    bulk check accepts are refused all the same (the quotes counted)."""
+    path = tmp_path / "poses.json"
+    path.write_text(text)
+    with pytest.raises(InputError, match=f"duplicate key '{key}'"):
+        poses_mod.load_poses(path)
+    path.write_text(text.replace('"position"', '"\\u0070osition"', 1))  # an escaped key: read
+    with pytest.raises(InputError, match=f"duplicate key '{key}'"):
+        poses_mod.load_poses(path)
+
+
+def test_the_orjson_and_json_module_reads_are_the_same_poses(tmp_path):
+    doc = _good(200, seed=8)
+    path = tmp_path / "poses.json"
+    path.write_text(json.dumps({"poses": doc}).replace('"tau"', '"t\\u0061u"', 3))
+    fast, slow = poses_mod.load_poses(path), _slow(doc)
+    assert poses_mod._bulk_text(path.read_text()) is not None
+    for field in ("positions", "quaternions", "rotations", "tau"):
+        assert np.array_equal(getattr(fast, field), getattr(slow, field)), field

@@ -39,6 +39,7 @@ import json
 import math
 
 import numpy as np
+import orjson
 
 from ..accuracy import has_accuracy, pose_accuracy
 from ..errors import InputError
@@ -158,8 +159,8 @@ def segment_columns(segments):
                       "binding": [p.binding for p in worst],
                       "position": np.array([p.position for p in worst]),
                       "quaternion": np.array([p.quaternion for p in worst])},
-            "first_unsafe": _Texts(_encode(None if s.first_unsafe is None else
-                                           _point_dict(s.first_unsafe)) for s in segments)}
+            "first_unsafe": _Texts("null" if s.first_unsafe is None else
+                                   _encode(_point_dict(s.first_unsafe)) for s in segments)}
 
 
 class _Texts(list):
@@ -190,30 +191,60 @@ def _row_template(columns):
 
 def _column_texts(col):
     """(whether each text still needs its list brackets, the JSON text of each entry of
-    ``col``): numbers and booleans by one encoder call split at the entries (their texts
-    hold no ", " or "], ["), strings (binding names) one by one."""
+    ``col``): numbers and booleans by one ``number_text`` of the whole array split at the
+    entries (their texts hold no ", " or "], ["), strings (binding names, few distinct)
+    each distinct one once."""
     if isinstance(col, _Texts):
         return False, col
     arr = np.asarray(col)
     if arr.dtype.kind not in "biuf":
-        return False, [_encode(v) for v in arr.tolist()]
-    text = _ENCODER.encode(_finite_list(arr))
+        values = arr.tolist()
+        texts = {v: _encode(v) for v in set(values)}
+        return False, list(map(texts.__getitem__, values))
+    text = number_text(arr)
     if arr.ndim == 1:
         return False, text[1:-1].split(", ")
     return True, text[2:-2].split("], [")
 
 
+def number_text(arr):
+    """The JSON text of a numeric or boolean array as ``json.dumps(arr.tolist())`` writes it
+    (Python's float repr, ", " between entries), non-finite numbers as null: written by
+    orjson (10x faster than the json module's encoder), whose shortest round-trip digits
+    are Python's, laid out as Python does for 1e-4 <= |x| < 1e16; the entries outside that
+    range (orjson: ``1e-8``, ``0.00005``; Python: ``1e-08``, ``5e-05``) are Python's repr."""
+    arr = np.ascontiguousarray(arr, dtype=np.float64 if arr.dtype.kind == "f" else None)
+    raw = orjson.dumps(arr, option=orjson.OPT_SERIALIZE_NUMPY)
+    if arr.dtype.kind == "f":
+        flat = arr.ravel()
+        mag = np.abs(flat)
+        odd = np.flatnonzero(((mag > 0) & (mag < 1e-4)) | ((mag >= 1e16) & (mag < np.inf)))
+        if odd.size:
+            raw = _with_python_repr(raw, odd, flat[odd])
+    return raw.decode().replace(",", ", ")
+
+
+def _with_python_repr(raw, entries, values):
+    """orjson's text ``raw`` (bytes) of an array with its entries ``entries`` (flat indices,
+    ascending) written as Python's repr of ``values``: entry k lies between the k-th comma
+    and the next, within its brackets (found for all entries at once, then one join)."""
+    commas = np.flatnonzero(np.frombuffer(raw, dtype=np.uint8) == ord(","))
+    starts = np.r_[0, commas + 1][entries].tolist()
+    ends = np.r_[commas, len(raw)][entries].tolist()
+    parts, done = [], 0
+    for a, b, value in zip(starts, ends, values.tolist()):
+        token = raw[a:b]
+        a += len(token) - len(token.lstrip(b"["))
+        b -= len(token) - len(token.rstrip(b"]"))
+        parts += [raw[done:a], repr(value).encode()]
+        done = b
+    parts.append(raw[done:])
+    return b"".join(parts)
+
+
 def _point_dict(pt):
     return {"s": pt.s, "margin": pt.margin, "binding": pt.binding,
             "position": pt.position.tolist(), "quaternion": pt.quaternion.tolist()}
-
-
-def _finite_list(values):
-    """``values`` (an array) as nested lists, non-finite floats as None."""
-    arr = np.asarray(values)
-    if arr.dtype.kind == "f" and not np.all(np.isfinite(arr)):
-        arr = np.where(np.isfinite(arr), arr, None)
-    return arr.tolist()
 
 
 def dump_rows(doc):
@@ -226,13 +257,19 @@ def dump_rows(doc):
 
 def layout_rows(texts):
     """The JSON text of a mapping ``texts`` (key -> the JSON text of its value, or a list of
-    the JSON texts of its entries): a key a line, a list entry a line."""
-    parts = []
+    the JSON texts of its entries): a key a line, a list entry a line. One join of all the
+    pieces: the text is copied once (30 MB for 20,000 eight-cable poses)."""
+    pieces = []
     for key, text in texts.items():
-        if isinstance(text, list):
-            text = "[\n" + ",\n".join("    " + row for row in text) + "\n  ]" if text else "[]"
-        parts.append(f"  {_encode(key)}: {text}")
-    return "{\n" + ",\n".join(parts) + "\n}\n"
+        pieces += [",\n  " if pieces else "{\n  ", _encode(key), ": "]
+        if isinstance(text, list) and text:
+            rows = [",\n    "] * (2 * len(text) - 1)
+            rows[::2] = text
+            pieces += ["[\n    ", *rows, "\n  ]"]
+        else:
+            pieces.append("[]" if isinstance(text, list) else text)
+    pieces.append("\n}\n")
+    return "".join(pieces)
 
 
 _ENCODER = json.JSONEncoder(allow_nan=False)

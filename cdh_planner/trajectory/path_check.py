@@ -319,9 +319,10 @@ def _segment_results(samples, first, unresolved):
     segs = sorted(first)
     unsafe = dict(zip(segs, _points(samples, np.array(segs, dtype=int),
                                     *(np.array([first[k][j] for k in segs]) for j in range(3)))))
-    return [SegmentCheck(index_from=k, index_to=k + 1, feasible=k not in first, worst=worst[k],
-                         first_unsafe=unsafe.get(k), samples=int(bounds[k + 1] - bounds[k]),
-                         unresolved=int(unresolved[k])) for k in range(n)]
+    counts = zip(np.diff(bounds).tolist(), np.asarray(unresolved).tolist())  # Python ints
+    return [SegmentCheck(index_from=k, index_to=k + 1, feasible=k not in first, worst=w,
+                         first_unsafe=unsafe.get(k), samples=c, unresolved=u)
+            for k, (w, (c, u)) in enumerate(zip(worst, counts))]
 
 
 def _points(samples, segs, s, margin, binding):
@@ -331,8 +332,9 @@ def _points(samples, segs, s, margin, binding):
     s = np.asarray(s, dtype=float)
     p, R = samples.path(segs, s)
     q = _quaternions(R)
-    return [PointCheck(s=float(s[j]), margin=float(margin[j]), binding=str(binding[j]),
-                       position=p[j], quaternion=q[j]) for j in range(len(segs))]
+    values = zip(s.tolist(), np.asarray(margin, dtype=float).tolist(), binding, p, q)
+    return [PointCheck(s=sj, margin=mj, binding=str(bj), position=pj, quaternion=qj)
+            for sj, mj, bj, pj, qj in values]  # whole columns to Python floats at once
 
 
 def _quaternions(R):
