@@ -98,13 +98,11 @@ def _cases(name, n, seed, spread=1e-3):
     rng = np.random.default_rng(seed)
     centre = np.mean(robot.base_anchors, axis=0) * np.array([1.0, 1.0, 0.0])
     centre[2] = 0.306 if robot.tension_max.max() < 100 else np.mean(robot.base_anchors[:, 2]) * 0.6
-    p, R = [], []
-    while len(p) < n:
-        q = centre + rng.normal(scale=0.05, size=3)
-        Q = Rotation.from_rotvec(rng.normal(scale=0.1, size=3)).as_matrix()
-        if band_feasibility(robot, q[None], R=Q[None]).margin[0] > 0:
-            p.append(q), R.append(Q)
-    p, R = np.array(p), np.array(R)
+    p = centre + rng.normal(scale=0.05, size=(20 * n, 3))       # candidates, one batch
+    R = Rotation.from_rotvec(rng.normal(scale=0.1, size=(20 * n, 3))).as_matrix()
+    keep = np.flatnonzero(band_feasibility(robot, p, R=R).margin > 0)[:n]
+    assert keep.size == n
+    p, R = p[keep], R[keep]
     f = band_feasibility(robot, p, R=R)
     L0 = E.unstretched_lengths(robot, f.lengths, f.tension_nominal)
     L0[: n // 4, 0] *= 1.02                              # a slack cable in a quarter
