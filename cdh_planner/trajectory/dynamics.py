@@ -24,7 +24,7 @@ spread v = sqrt(diag(J^-1 E^-1 J^-T)) does not depend on them, so every constrai
     fmin + v <= f <= fmax - v,   |L_s u + L_ss x| <= a_max,   L_s^2 x <= v_max^2
 
 is linear in (u, x) at each gridpoint: exactly TOPP-RA's setting. With elastic cables
-the winch limits bound the commanded, unstretched lengths (what a controller is sent,
+(m > 6) the winch limits bound the commanded, unstretched lengths (what a controller is sent,
 ``PlannedPath.commanded``): L_s and L_ss are then theirs (``_command_rates``). toppra
 solves it on a grid of the path (collocation) and gives the largest x(s), time-optimal at
 the grid.
@@ -109,7 +109,9 @@ class _Geometry:
         self.R = RotationSpline(knots, rot[keep])
         # the static tensions the commands average along the path (``_command_rates``)
         self.arc = cable_arc_length(path.lengths)
-        self.f0_wp = rule_tensions(robot, path.p, rot.as_matrix())[0] if is_elastic(robot) else None
+        self.f0_wp = None  # six cables: the stretch of t0 = J^-1 w0 is left to ``executable``
+        if is_elastic(robot) and len(robot.base_anchors) > 6:
+            self.f0_wp = rule_tensions(robot, path.p, rot.as_matrix())[0]
 
     def at(self, s):
         """p, R, c_s-ready pieces at s (M,): p, p_s, p_ss (M,3), R (M,3,3), w, w_s (M,3) body."""
@@ -160,7 +162,9 @@ def _command_rates(robot, geo, s, L, L_s, L_ss):
     values). The centred rule of m > 6 cables turns its nominal by hundreds of newtons
     over millimetres of motion; the stretch's rates then outrun the geometric ones
     (test_elastic_commands.py), and only a timing that bounds them keeps the winches
-    within their limits. Rigid cables: L_s, L_ss themselves."""
+    within their limits. Rigid cables and six cables (t0 = J^-1 w0 turns no faster than the
+    pose; its stretch's rates are left to ``executable``, as in the command's average):
+    L_s, L_ss themselves."""
     if geo.f0_wp is None:
         return L_s, L_ss
     k = np.clip(np.searchsorted(geo.s_wp, s, side="right") - 1, 0, len(geo.s_wp) - 2)

@@ -43,9 +43,9 @@ class PlannedPath:
         """(lengths m, velocities m/s, accelerations m/s^2), each (N, m): the points a
         length controller receives. Elastic cables: the unstretched lengths L0 = L / (1 + t
         / EA) that are the planned lengths L under the tensions t, so that the cables carry
-        them at the planned pose; t is the nominal tension averaged along the path over
-        COMMAND_PATH_WINDOW_M of cable-space arc length either side (the centred rule of
-        m > 6 cables turns its nominal by hundreds of newtons within millimetres of motion:
+        them at the planned pose; t is the nominal tension, for m > 6 cables averaged along
+        the path over COMMAND_PATH_WINDOW_M of cable-space arc length either side (their
+        centred rule turns its nominal by hundreds of newtons within millimetres of motion:
         the average spreads that turn over a length the dynamic timing can bound the
         stretch's rates on, ``dynamics._command_rates``), then over ``window_s`` s
         either side, both with a tent weight (``command_tensions``): a dynamic timing's tension
@@ -57,8 +57,10 @@ class PlannedPath:
         lengths and rates themselves (the same arrays)."""
         if self.cable_stiffness is None:
             return self.lengths, self.velocities, self.accelerations
-        along = command_tensions(cable_arc_length(self.lengths), self.tension_nominal,
-                                 COMMAND_PATH_WINDOW_M)[0]
+        along = self.tension_nominal
+        if along.shape[1] > 6:  # six cables: t0 = J^-1 w0 turns no faster than the pose
+            along = command_tensions(cable_arc_length(self.lengths), along,
+                                     COMMAND_PATH_WINDOW_M)[0]
         f, df, ddf = command_tensions(self.t, along, window_s)
         EA = self.cable_stiffness
         q = f / (EA + f)                          # the stretch per length, t / (EA + t)
