@@ -1,13 +1,13 @@
-"""Elastic cables (numpy only): a cable of unstretched length L0 (m) under tension t (N) is
-L0 (1 + t / EA) long, EA its axial stiffness (N, ``robot.cable_stiffness``). A robot
-without a stiffness has rigid cables: every function here then gives the rigid answer.
+"""Elastic cables (numpy; the equilibrium's Newton compiled in ``elastic_kernel``): a cable
+of unstretched length L0 (m) under tension t (N) is L0 (1 + t / EA) long, EA its axial
+stiffness (N, ``robot.cable_stiffness``). A robot without a stiffness has rigid cables:
+every function here then gives the rigid answer.
 """
 
 from dataclasses import dataclass
 
 import numpy as np
 
-from ..ports import Rotation
 from .pose import cross
 
 
@@ -118,81 +118,26 @@ def equilibrium_poses(robot, L0, p0, R0, force, moment, arm,
     the load wrench [force; moment + c x arm] (``wrench_balance``), by Newton with the exact
     Jacobian from the poses (p0 (M, 3) m, R0 (M, 3, 3)): first with cables that could push
     (smooth: no cable slackens on the way), then tension-only from there, which changes
-    nothing where every tension is positive. Converged when the residual is below
+    nothing where every tension is positive. Each step is halved (up to
+    LINE_SEARCH_HALVINGS times) while the largest residual does not fall: far from the
+    equilibrium a stiff cable's slack or the geometric stiffness can make the full step
+    overshoot; a pose no step improves is stuck. Converged when the residual is below
     EQUILIBRIUM_TOL times the largest of the force's norm and 1 N; a slack cable is allowed
-    (its tension is zero), a singular Jacobian is not converged."""
-    p, R = np.array(p0, dtype=float), np.array(R0, dtype=float)
-    load = (force, moment, arm)
-    _newton(robot, L0, p, R, load, True, max_iterations)
-    ok = _newton(robot, L0, p, R, load, False, max_iterations)
-    res, _, t = wrench_balance(robot, L0, p, R, *load, jacobian=False)
-    return Equilibria(p=p, R=R, tensions=t, residual=np.max(np.abs(res), axis=1), ok=ok)
-
-
-def _newton(robot, L0, p, R, load, bilateral, max_iterations):
-    """Newton with line search on ``wrench_balance`` (in place on p, R); converged (M,).
-    The residual at the poses a line search accepts is the one it computed there."""
-    scale = EQUILIBRIUM_TOL * np.maximum(1.0, np.linalg.norm(load[0], axis=1))
-    ok = np.zeros(len(p), dtype=bool)
-    todo = np.arange(len(p))
-    res, _, _ = wrench_balance(robot, L0, p, R, *load, bilateral, jacobian=False)
-    for _ in range(max_iterations):
-        done = np.max(np.abs(res), axis=1) <= scale[todo]
-        ok[todo[done]] = True
-        todo, res = todo[~done], res[~done]
-        if todo.size == 0:
-            break
-        _, jac, _ = wrench_balance(robot, L0[todo], p[todo], R[todo],
-                                   *(x[todo] for x in load), bilateral)
-        step = _newton_step(jac, res)
-        keep = np.all(np.isfinite(step), axis=1)  # a singular Jacobian: not converged
-        todo, res, step = todo[keep], res[keep], step[keep]
-        if todo.size == 0:
-            break
-        p[todo], R[todo], moved, res = _line_search(robot, L0[todo], p[todo], R[todo], step, res,
-                                                    tuple(x[todo] for x in load), bilateral)
-        todo, res = todo[moved], res[moved]  # no step lowers the residual: stuck, not converged
-    return ok
-
-
-def _newton_step(jac, res):
-    """-jac^-1 res (K, 6) for Jacobians (K, 6, 6); a row of nan where jac is singular (one
-    LU solve for all; the rank, an SVD per pose, only when LAPACK finds a singular one)."""
-    try:
-        return -np.linalg.solve(jac, res[..., None])[..., 0]
-    except np.linalg.LinAlgError:
-        step = np.full(res.shape, np.nan)
-        regular = np.linalg.matrix_rank(jac) == 6
-        step[regular] = -np.linalg.solve(jac[regular], res[regular][..., None])[..., 0]
-        return step
-
-
-def _line_search(robot, L0, p, R, step, res, load, bilateral, halvings=LINE_SEARCH_HALVINGS):
-    """The poses moved by the Newton ``step`` (K, 6), halved while the largest residual
-    does not fall below that at (p, R) (``res``): far from the equilibrium a stiff
-    cable's slack or the geometric stiffness can make the full step overshoot. Also which
-    poses moved (K,) (the others found no lower residual) and the residual (K, 6) at the
-    returned poses (``res`` where none moved)."""
-    before = np.max(np.abs(res), axis=1)
-    p_new, R_new, res_new = p.copy(), R.copy(), res.copy()
-    scale = np.ones(len(p))
-    todo = np.arange(len(p))
-    for _ in range(halvings):
-        s = step[todo] * scale[todo, None]
-        p_try = p[todo] + s[:, :3]
-        R_try = Rotation.from_rotvec(s[:, 3:]).as_matrix() @ R[todo]
-        after, _, _ = wrench_balance(robot, L0[todo], p_try, R_try,
-                                     *(x[todo] for x in load), bilateral, jacobian=False)
-        better = np.max(np.abs(after), axis=1) < before[todo]
-        p_new[todo[better]], R_new[todo[better]] = p_try[better], R_try[better]
-        res_new[todo[better]] = after[better]
-        todo = todo[~better]
-        if todo.size == 0:
-            break
-        scale[todo] *= 0.5
-    moved = np.ones(len(p), dtype=bool)
-    moved[todo] = False
-    return p_new, R_new, moved, res_new
+    (its tension is zero), a singular Jacobian is not converged. Compiled, one pose at a
+    time (``elastic_kernel``, the same algebra as ``wrench_balance``)."""
+    from .elastic_kernel import equilibrium_kernel  # numba: loaded only for elastic robots
+    m = len(robot.base_anchors)
+    force, moment, arm = (np.ascontiguousarray(x, dtype=float) for x in (force, moment, arm))
+    tol = EQUILIBRIUM_TOL * np.maximum(1.0, np.linalg.norm(force, axis=1))
+    p, R, t, residual, ok = equilibrium_kernel(
+        np.ascontiguousarray(robot.base_anchors, dtype=float),
+        np.ascontiguousarray(robot.platform_anchors, dtype=float),
+        np.asarray(robot.load_point, dtype=float),
+        np.broadcast_to(np.asarray(robot.cable_stiffness, dtype=float), (m,)).copy(),
+        np.ascontiguousarray(L0, dtype=float), np.ascontiguousarray(p0, dtype=float),
+        np.ascontiguousarray(R0, dtype=float), force, moment, arm, tol, max_iterations,
+        LINE_SEARCH_HALVINGS)
+    return Equilibria(p=p, R=R, tensions=t, residual=residual, ok=ok)
 
 
 def _skew(v):

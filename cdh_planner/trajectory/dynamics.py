@@ -23,8 +23,11 @@ spread v = sqrt(diag(J^-1 E^-1 J^-T)) does not depend on them, so every constrai
 
     fmin + v <= f <= fmax - v,   |L_s u + L_ss x| <= a_max,   L_s^2 x <= v_max^2
 
-is linear in (u, x) at each gridpoint: exactly TOPP-RA's setting. toppra solves it on a
-grid of the path (collocation) and gives the largest x(s), time-optimal at the grid.
+is linear in (u, x) at each gridpoint: exactly TOPP-RA's setting. With elastic cables
+(m > 6) the winch limits bound the commanded, unstretched lengths (what a controller is sent,
+``PlannedPath.commanded``): L_s and L_ss are then theirs (``_command_rates``). toppra
+solves it on a grid of the path (collocation) and gives the largest x(s), time-optimal at
+the grid.
 ``toppra`` is used rather than our own pass because it is the maintained reference
 implementation of TOPP-RA (Pham & Pham 2018), with its LP-based reachability.
 
@@ -46,7 +49,8 @@ from ..wrench import band_feasibility, cable_vectors, rule_tensions, screw_jacob
 from ..model.elastic import is_elastic
 from ..model.pose import tau_from_rotation
 from .executed import executable, spline_rates, unique_sorted
-from .path import PlannedPath, with_commands
+from .path import (COMMAND_PATH_WINDOW_M, PlannedPath, cable_arc_length, command_tensions,
+                   with_commands)
 from ..ports import CubicSpline, Rotation, RotationSpline, import_toppra
 
 GRID_POINTS = 400       # toppra gridpoints along the path (at least one per waypoint)
@@ -103,6 +107,11 @@ class _Geometry:
         self.length = float(knots[-1])
         self.p = CubicSpline(knots, path.p[keep], bc_type="natural")
         self.R = RotationSpline(knots, rot[keep])
+        # the static tensions the commands average along the path (``_command_rates``)
+        self.arc = cable_arc_length(path.lengths)
+        self.f0_wp = None  # six cables: the stretch of t0 = J^-1 w0 is left to ``executable``
+        if is_elastic(robot) and len(robot.base_anchors) > 6:
+            self.f0_wp = rule_tensions(robot, path.p, rot.as_matrix())[0]
 
     def at(self, s):
         """p, R, c_s-ready pieces at s (M,): p, p_s, p_ss (M,3), R (M,3,3), w, w_s (M,3) body."""
@@ -143,6 +152,32 @@ def _terms(robot, geo, s, mass, inertia):
     L_s = np.einsum("nki,nki->nk", u, q_s)
     L_ss = (np.einsum("nki,nki->nk", q_s, q_s) - L_s ** 2) / L + np.einsum("nki,nki->nk", u, q_ss)
     return L, L_s, L_ss, f0, v, -np.einsum("nij,nj->ni", J_inv, A), -np.einsum("nij,nj->ni", J_inv, B)
+
+
+def _command_rates(robot, geo, s, L, L_s, L_ss):
+    """The s-derivatives (M, m) of the lengths the winches are commanded at s (M,), what the
+    winch limits bound: for elastic cables the unstretched lengths L0 = L EA / (EA + f) with
+    f the static tensions averaged along the path as ``PlannedPath.commanded`` averages
+    them (over +- COMMAND_PATH_WINDOW_M of cable-space arc length, through the waypoints'
+    values). The centred rule of m > 6 cables turns its nominal by hundreds of newtons
+    over millimetres of motion; the stretch's rates then outrun the geometric ones
+    (test_elastic_commands.py), and only a timing that bounds them keeps the winches
+    within their limits. Rigid cables and six cables (t0 = J^-1 w0 turns no faster than the
+    pose; its stretch's rates are left to ``executable``, as in the command's average):
+    L_s, L_ss themselves."""
+    if geo.f0_wp is None:
+        return L_s, L_ss
+    k = np.clip(np.searchsorted(geo.s_wp, s, side="right") - 1, 0, len(geo.s_wp) - 2)
+    ds = geo.s_wp[k + 1] - geo.s_wp[k]
+    slope = np.where(ds > 0, (geo.arc[k + 1] - geo.arc[k]) / np.where(ds > 0, ds, 1.0), 0.0)
+    arc = geo.arc[k] + slope * (np.clip(s, geo.s_wp[k], geo.s_wp[k + 1]) - geo.s_wp[k])
+    f, f_a, f_aa = command_tensions(geo.arc, geo.f0_wp, COMMAND_PATH_WINDOW_M, at=arc)
+    f_s, f_ss = f_a * slope[:, None], f_aa * (slope ** 2)[:, None]
+    EA = robot.cable_stiffness
+    c = EA / (EA + f)                                    # L0 = c L
+    c_s = -EA * f_s / (EA + f) ** 2
+    c_ss = -EA * f_ss / (EA + f) ** 2 + 2 * EA * f_s ** 2 / (EA + f) ** 3
+    return c * L_s + c_s * L, c * L_ss + 2 * c_s * L_s + c_ss * L
 
 
 class _WrenchConstraint(toppra.constraint.LinearConstraint):
@@ -198,7 +233,8 @@ def dynamic_timing(robot, path, mass, inertia, max_cable_speed, max_cable_accel,
     amax = np.broadcast_to(np.asarray(max_cable_accel, dtype=float), (m,))
     geo = _Geometry(robot, path)
     grid = _grid(geo, grid_points)
-    terms = _terms(robot, geo, grid, mass, inertia)
+    L, L_s, L_ss, f0, v, a_f, b_f = _terms(robot, geo, grid, mass, inertia)
+    terms = (L, *_command_rates(robot, geo, grid, L, L_s, L_ss), f0, v, a_f, b_f)
     # the winch limits (and tension ranges) derated by DERATE: between gridpoints a profile
     # at the limit overshoots it by about 1e-4 (measured), which the dense check would refuse
     instance = toppra.algorithm.TOPPRA([_WrenchConstraint(terms, robot, vmax * (1 - DERATE),
@@ -238,15 +274,16 @@ def tensions_over_time(robot, timing, mass, inertia, dt=CHECK_DT):
 
 @dataclass
 class _Sample:
-    """The timed motion every dt: times t, s' and s'' (M,), lengths L and their s-derivatives
-    L_s, L_ss, dynamic tensions f, static f0 and the ellipsoid's spread v (M, m)."""
+    """The timed motion every dt: times t, s' and s'' (M,), lengths L, the s-derivatives
+    C_s, C_ss of the commanded lengths (``_command_rates``), dynamic tensions f, static f0
+    and the ellipsoid's spread v (M, m)."""
 
     t: np.ndarray
     sdot: np.ndarray
     sddot: np.ndarray
     L: np.ndarray
-    L_s: np.ndarray
-    L_ss: np.ndarray
+    C_s: np.ndarray
+    C_ss: np.ndarray
     f: np.ndarray
     f0: np.ndarray
     v: np.ndarray
@@ -262,7 +299,8 @@ def _sampled(robot, geo, s, sd, mass, inertia, dt, pick=None):
     _, sdot, sddot = state = _state_at(t, s, sd, t_grid)
     L, L_s, L_ss, f0, v, a_f, b_f = _terms(robot, geo, state[0], mass, inertia)
     f = f0 + a_f * sddot[:, None] + b_f * (sdot ** 2)[:, None]
-    return _Sample(t, sdot, sddot, L, L_s, L_ss, f, f0, v)
+    return _Sample(t, sdot, sddot, L, *_command_rates(robot, geo, state[0], L, L_s, L_ss),
+                   f, f0, v)
 
 
 def _grid(geo, n):
@@ -301,8 +339,8 @@ def _limits(robot, m, vmax, amax):
     """Per sample of a _Sample: tension margins (M, m) N, winch speeds and accelerations
     (M, m) m/s, m/s^2, and which samples break a limit (M,) bool (beyond TOL)."""
     margin = np.minimum(m.f - m.v - robot.tension_min, robot.tension_max - m.f - m.v)
-    speed = np.abs(m.L_s * m.sdot[:, None])
-    accel = np.abs(m.L_s * m.sddot[:, None] + m.L_ss * (m.sdot ** 2)[:, None])
+    speed = np.abs(m.C_s * m.sdot[:, None])
+    accel = np.abs(m.C_s * m.sddot[:, None] + m.C_ss * (m.sdot ** 2)[:, None])
     broken = (np.any(margin < -TOL, axis=1) | np.any(m.L < robot.length_min - TOL, axis=1)
               | np.any(m.L > robot.length_max + TOL, axis=1) | np.any(speed > vmax + TOL, axis=1)
               | np.any(accel > amax + TOL, axis=1))

@@ -58,6 +58,8 @@ WINCH_ROUNDS = 3       # of which for the winch limits alone: near an accelerati
                        # however dense the points), which only slowing down removes
 SLOWDOWNS = 8          # uniform slow-downs tried when adding points is not enough
 SLOWDOWN = 1.05        # time scale per slow-down
+TENSION_SLOWDOWN = 1.25  # ... when tensions or poses fail: the motion's own wrench, what
+                         # slowing removes, falls as 1 / scale^2 (8 of them: x 6)
 SEED_TOL_M = 1e-2      # m: a forward kinematics solution this far from its seed is a twin
 
 
@@ -428,7 +430,8 @@ def executable(robot, path, motion=None, mass=None, inertia=None, max_cable_spee
             path = _merged(path, motion(t, scale), k + 1)
             rounds += 1
         elif slowed < SLOWDOWNS:
-            c = max(SLOWDOWN, check.speed_ratio, np.sqrt(check.accel_ratio)) * (1 + 1e-6)
+            step = SLOWDOWN if winch_only else TENSION_SLOWDOWN
+            c = max(step, check.speed_ratio, np.sqrt(check.accel_ratio)) * (1 + 1e-6)
             path, scale, slowed, within = slow_down(robot, path, c), scale * c, slowed + 1, None
             whole, changed = None, []  # every sample changes
             winch_rounds = 0

@@ -9,6 +9,8 @@ from dataclasses import dataclass, replace
 import numpy as np
 
 COMMAND_WINDOW_S = 0.05  # s: the commanded tension is the nominal one averaged over +- this
+COMMAND_PATH_WINDOW_M = 5e-3  # m of cable-space arc length (``cable_arc_length``): the
+                              # nominal tension is first averaged over +- this along the path
 
 
 @dataclass
@@ -41,8 +43,12 @@ class PlannedPath:
         """(lengths m, velocities m/s, accelerations m/s^2), each (N, m): the points a
         length controller receives. Elastic cables: the unstretched lengths L0 = L / (1 + t
         / EA) that are the planned lengths L under the tensions t, so that the cables carry
-        them at the planned pose; t is the nominal tension averaged over ``window_s`` s
-        either side with a tent weight (``command_tensions``): a dynamic timing's tension
+        them at the planned pose; t is the nominal tension, for m > 6 cables averaged along
+        the path over COMMAND_PATH_WINDOW_M of cable-space arc length either side (their
+        centred rule turns its nominal by hundreds of newtons within millimetres of motion:
+        the average spreads that turn over a length the dynamic timing can bound the
+        stretch's rates on, ``dynamics._command_rates``), then over ``window_s`` s
+        either side, both with a tent weight (``command_tensions``): a dynamic timing's tension
         jumps where its acceleration switches, and a step in L0 there would make a
         controller's quintic (and a damped cable) jerk and the winch exceed its limits;
         the average spreads a jump J over the window, its second rate at most J /
@@ -51,7 +57,11 @@ class PlannedPath:
         lengths and rates themselves (the same arrays)."""
         if self.cable_stiffness is None:
             return self.lengths, self.velocities, self.accelerations
-        f, df, ddf = command_tensions(self.t, self.tension_nominal, window_s)
+        along = self.tension_nominal
+        if along.shape[1] > 6:  # six cables: t0 = J^-1 w0 turns no faster than the pose
+            along = command_tensions(cable_arc_length(self.lengths), along,
+                                     COMMAND_PATH_WINDOW_M)[0]
+        f, df, ddf = command_tensions(self.t, along, window_s)
         EA = self.cable_stiffness
         q = f / (EA + f)                          # the stretch per length, t / (EA + t)
         dq = EA * df / (EA + f) ** 2
@@ -73,6 +83,14 @@ def with_commands(robot, path):
     """``path`` (PlannedPath) carrying ``robot``'s cable stiffness, which ``commanded``
     turns into the commands of elastic cables (None: rigid)."""
     return replace(path, cable_stiffness=robot.cable_stiffness)
+
+
+def cable_arc_length(L):
+    """(N,) m: the cable-space arc length at the rows of lengths L (N, m) m, the cumulative
+    Euclidean norm of their steps plus 1e-9 m per step (strictly increasing: a repeated row
+    is a step)."""
+    step = np.linalg.norm(np.diff(np.asarray(L, dtype=float), axis=0), axis=1) + 1e-9
+    return np.concatenate([[0.0], np.cumsum(step)])
 
 
 def command_tensions(t, f, window_s, at=None):
