@@ -8,6 +8,7 @@ import numpy as np
 import pytest
 
 from conftest import REPO
+from cdh_planner import aot
 from cdh_planner.model import elastic as E
 from cdh_planner.model import elastic_kernel as K
 from cdh_planner.model.kinematics import cable_lengths
@@ -172,6 +173,19 @@ def test_the_compiled_newton_is_the_numpy_newton(name, spread):
                                atol=1e-9 * robot.tension_max.max())
     tol = E.EQUILIBRIUM_TOL * np.maximum(1.0, np.linalg.norm(force, axis=1))
     assert np.all(got.residual[ok] <= tol[ok])
+
+
+@pytest.mark.skipif(aot.load(K) is None, reason="no ahead-of-time kernel built (make, or "
+                                                "python -m cdh_planner.model.elastic_aot)")
+@pytest.mark.parametrize("name", ["cogiro", "ipanema2"])
+def test_the_aot_and_jit_kernels_agree_bit_for_bit(name, monkeypatch):
+    robot, L0, p, R, force, moment, arm = _cases(name, 24, 7, 3e-2)
+    monkeypatch.setattr(K, "equilibrium_kernel", aot.load(K)["equilibrium_kernel"])
+    built = E.equilibrium_poses(robot, L0, p, R, force, moment, arm)
+    monkeypatch.setattr(K, "equilibrium_kernel", K.jit_kernels()["equilibrium_kernel"])
+    jit = E.equilibrium_poses(robot, L0, p, R, force, moment, arm)
+    for field in ("p", "R", "tensions", "residual", "ok"):
+        np.testing.assert_array_equal(getattr(built, field), getattr(jit, field))
 
 
 def test_a_pose_the_cables_cannot_hold_is_not_converged():

@@ -16,6 +16,7 @@ import pytest
 
 from cdh_planner import aot as aot_helper
 from cdh_planner.manifold import kernels
+from cdh_planner.model import elastic_kernel
 from cdh_planner.model.pose import rotation_tt
 from cdh_planner.model.robot import load_robot
 from cdh_planner.scene import kernels as scene_kernels
@@ -26,14 +27,17 @@ from conftest import CONFIG
 
 AOT_BUILT = importlib.util.find_spec(f"cdh_planner.manifold.{kernels.aot_module_name()}") is not None
 ALL_BUILT = all(importlib.util.find_spec(f"{m.__package__}.{m.aot_module_name()}") is not None
-                for m in (kernels, scene_kernels, wrench_kernels))
+                for m in (kernels, scene_kernels, wrench_kernels, elastic_kernel))
 NOT_BUILT = ("no ahead-of-time kernels built (make, or python -m "
-             "cdh_planner.<manifold|scene|wrench>.aot)")
+             "cdh_planner.<manifold|scene|wrench>.aot, cdh_planner.model.elastic_aot)")
 
 SOURCES = [(kernels, ("kernels.py", "layout.py")),
            (scene_kernels, ("kernels.py", "../model/shape_forms.py")),
-           (wrench_kernels, ("compiled.py", "kernel.py", "centred.py", "linalg.py"))]
-MODULES = ["manifold", "scene", "wrench"]
+           (wrench_kernels, ("compiled.py", "kernel.py", "centred.py", "linalg.py")),
+           (elastic_kernel, ("elastic_kernel.py",))]
+MODULES = ["manifold", "scene", "wrench", "elastic"]
+BUILDERS = {"manifold": "cdh_planner.manifold.aot", "scene": "cdh_planner.scene.aot",
+            "wrench": "cdh_planner.wrench.aot", "elastic": "cdh_planner.model.elastic_aot"}
 
 
 @pytest.mark.parametrize("module, sources", SOURCES, ids=MODULES)
@@ -43,7 +47,8 @@ def test_the_aot_module_is_named_after_the_digest_of_the_kernel_source(module, s
     assert module.aot_module_name() == module.AOT_PREFIX + h.hexdigest()[:12]
 
 
-@pytest.mark.parametrize("module", [kernels, scene_kernels, wrench_kernels], ids=MODULES)
+@pytest.mark.parametrize("module", [kernels, scene_kernels, wrench_kernels, elastic_kernel],
+                         ids=MODULES)
 def test_a_build_of_other_source_is_never_loaded(module, monkeypatch):
     monkeypatch.setattr(module, "source_digest", lambda: "000000000000")
     assert aot_helper.load(module) is None
@@ -103,7 +108,7 @@ def test_with_no_c_compiler_the_build_falls_back_to_warming_the_jit():
 @pytest.mark.parametrize("name", MODULES)
 def test_the_jit_warm_up_runs_on_its_own_inputs(name):
     """The fallback's warm-up call compiles and runs (no division by zero in its inputs)."""
-    module = importlib.import_module(f"cdh_planner.{name}.aot")
+    module = importlib.import_module(BUILDERS[name])
     module.warm_jit()
 
 
@@ -180,8 +185,9 @@ def test_the_wrench_entries_take_any_layout_and_type():
 
 
 # Each compiled kernel called once in a fresh process: the manifold's F / F_x, the collision
-# kernel, and the wrench entries (the pose geometry, the facet test, the centred rule) of an
-# 8-cable robot through the package's entries. Prints whether numba was imported.
+# kernel, the wrench entries (the pose geometry, the facet test, the centred rule) of an
+# 8-cable robot through the package's entries, and its elastic equilibrium. Prints whether
+# numba was imported.
 FRESH_CALLS = f"""
 import sys, json
 import numpy as np
@@ -203,6 +209,12 @@ p, R = np.array([[0.0, 0.0, 2.5]]), np.eye(3)[None]
 answers = [float(wrench.wrench_feasibility(robot, p, R=R).margin[0]),
            float(wrench.band_margin(robot, p, R=R)[0]),
            float(wrench.rule_tensions(robot, p, R)[0][0, 0])]
+from cdh_planner.model import elastic
+f = wrench.band_feasibility(robot, p, R=R)
+L0 = elastic.unstretched_lengths(robot, f.lengths, f.tension_nominal)
+w = robot.wrench_center_local
+eq = elastic.equilibrium_poses(robot, L0, p, R, w[None, :3], w[None, 3:], np.zeros((1, 3)))
+answers.append(float(eq.p[0, 2]))
 print(json.dumps(["numba" in sys.modules, answers]))
 """
 

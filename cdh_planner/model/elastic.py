@@ -125,14 +125,14 @@ def equilibrium_poses(robot, L0, p0, R0, force, moment, arm,
     EQUILIBRIUM_TOL times the largest of the force's norm and 1 N; a slack cable is allowed
     (its tension is zero), a singular Jacobian is not converged. Compiled, one pose at a
     time (``elastic_kernel``, the same algebra as ``wrench_balance``)."""
-    from .elastic_kernel import equilibrium_kernel  # numba: loaded only for elastic robots
+    from .elastic_kernel import equilibrium_kernel  # machine code: loaded only for elastic robots
     m = len(robot.base_anchors)
     force, moment, arm = (np.ascontiguousarray(x, dtype=float) for x in (force, moment, arm))
     tol = EQUILIBRIUM_TOL * np.maximum(1.0, np.linalg.norm(force, axis=1))
     p, R, t, residual, ok = equilibrium_kernel(
         np.ascontiguousarray(robot.base_anchors, dtype=float),
         np.ascontiguousarray(robot.platform_anchors, dtype=float),
-        np.asarray(robot.load_point, dtype=float),
+        np.ascontiguousarray(robot.load_point, dtype=float),
         np.broadcast_to(np.asarray(robot.cable_stiffness, dtype=float), (m,)).copy(),
         np.ascontiguousarray(L0, dtype=float), np.ascontiguousarray(p0, dtype=float),
         np.ascontiguousarray(R0, dtype=float), force, moment, arm, tol, max_iterations,

@@ -3,15 +3,20 @@ maths: ``wrench_balance`` is the residual and Jacobian written once in numpy, th
 the same algebra per pose, checked against it to 1e-9 in test_elastic_kernel.py). The
 executed check solves it at every sample of a trajectory (some 10^5 poses for a slowed
 eight-cable plan), where numpy's batched version spent most of its time allocating
-(M, m, 6) temporaries. Plain ``njit(cache=True)``: compiled at the first call of a process
-whose cache is cold, then loaded from cdh_planner/model/__pycache__. Units: m, N, N m.
+(M, m, 6) temporaries. Plain Python here (no numba import): ``equilibrium_kernel`` is the
+build ahead of time (``python -m cdh_planner.model.elastic_aot``, run by ``make``), else
+numba's JIT with ``cache=True`` (``cdh_planner.aot``). Its arguments are C-contiguous
+float64 arrays and two ints, as AOT_EXPORTS says, unchecked. Units: m, N, N m.
 """
 
+import sys
+from pathlib import Path
+
 import numpy as np
-from numba import njit
+
+from .. import aot
 
 
-@njit(cache=True)
 def _balance(a, b, g, EA, L0, p, R, force, moment, arm, bilateral, res, jac, t, want_jac):
     """``elastic.wrench_balance`` at one pose into res (6,), t (m,) and, when ``want_jac``,
     jac (6, 6): the same residual, tensions and Jacobian (scalars only: no allocation)."""
@@ -131,7 +136,6 @@ def _balance(a, b, g, EA, L0, p, R, force, moment, arm, bilateral, res, jac, t, 
     jac[5, 5] -= w22 - wr_dot_a + e2 * m2 - ae
 
 
-@njit(cache=True)
 def _solve6(A, x, work):
     """x <- A^-1 x for A (6, 6) (copied into work), Gaussian elimination with partial
     pivoting; False where A is singular (a zero pivot)."""
@@ -163,7 +167,6 @@ def _solve6(A, x, work):
     return True
 
 
-@njit(cache=True)
 def _rotvec_matrix(v, out):
     """exp([v]x) (3x3) into out, Rodrigues' formula (a series near 0)."""
     th2 = v[0] * v[0] + v[1] * v[1] + v[2] * v[2]
@@ -184,7 +187,6 @@ def _rotvec_matrix(v, out):
     out[2, 1] = s * x + c * y * z
 
 
-@njit(cache=True)
 def _max_abs(v):
     best = 0.0
     for x in v:
@@ -193,7 +195,6 @@ def _max_abs(v):
     return best
 
 
-@njit(cache=True)
 def _newton_pose(a, b, g, EA, L0, p, R, force, moment, arm, bilateral, tol, iterations,
                  halvings):
     """``elastic._newton`` at one pose, in place on p (3,) and R (3, 3): converged?"""
@@ -245,8 +246,7 @@ def _newton_pose(a, b, g, EA, L0, p, R, force, moment, arm, bilateral, tol, iter
     return False  # as elastic's numpy Newton: convergence is seen before a step, not after the last
 
 
-@njit(cache=True)
-def equilibrium_kernel(a, b, g, EA, L0, p, R, force, moment, arm, tol, iterations, halvings):
+def _equilibrium_poses(a, b, g, EA, L0, p, R, force, moment, arm, tol, iterations, halvings):
     """``elastic.equilibrium_poses`` for poses p (M, 3), R (M, 3, 3) (copied), cables of
     unstretched lengths L0 (M, m), anchors a, b (m, 3), load point g (3,), stiffness EA (m,),
     load rows force, moment, arm (M, 3), convergence tolerances tol (M,) N: (p, R, tensions
@@ -267,3 +267,31 @@ def equilibrium_kernel(a, b, g, EA, L0, p, R, force, moment, arm, tol, iteration
                  tensions[q], False)
         residual[q] = _max_abs(res)
     return p, R, tensions, residual, ok
+
+
+# ----- compilation -------------------------------------------------------------------------
+HELPERS = ("_balance", "_solve6", "_rotvec_matrix", "_max_abs", "_newton_pose")
+_F1, _F2, _F3 = "float64[::1]", "float64[:, ::1]", "float64[:, :, ::1]"
+AOT_EXPORTS = {"equilibrium_kernel": (
+    f"Tuple(({_F2}, {_F3}, {_F2}, {_F1}, boolean[::1]))"
+    f"({_F2}, {_F2}, {_F1}, {_F1}, {_F2}, {_F2}, {_F3}, {_F2}, {_F2}, {_F2}, {_F1}, int64, int64)")}
+AOT_PREFIX = "_elastic_aot_"
+
+
+def source_digest():
+    """12 hex digits of sha256 over this file: what the machine code is of."""
+    return aot.source_digest(Path(__file__).resolve().parent, ("elastic_kernel.py",))
+
+
+def aot_module_name():
+    """The ahead-of-time module built from this very source."""
+    return aot.module_name(sys.modules[__name__])
+
+
+def jit_kernels():
+    """numba's JIT entry (cache=True) by name (``cdh_planner.aot``); the helpers become
+    numba functions here."""
+    return {"equilibrium_kernel": aot.jit(globals(), HELPERS)(_equilibrium_poses)}
+
+
+equilibrium_kernel = aot.entries(sys.modules[__name__])["equilibrium_kernel"]
