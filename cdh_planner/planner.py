@@ -169,8 +169,16 @@ class Planner:
             return answer(False, Status.NO_PATH, "the path could not be made dense-feasible "
                                                  "(a bug: please report the problem file)")
         cost = self._path_cost(path)
-        timed = time_stage(self.robot, path, s, self.collision)
+        # a cancel or the deadline during the executed check stops it; one that ended the
+        # complete growth before it does not: the path found is checked to the end
+        expired = stop.expired if stop.expired() is None else None
+        timed = time_stage(self.robot, path, s, self.collision, expired)
         if not timed.executed.ok:  # bounded: never hand out a trajectory that was not checked
+            expired = expired and expired()
+            if expired:  # the check stopped between its rounds
+                limit = "a cancel" if expired == Status.CANCELED else f"{s.timeout_s:g} s"
+                return answer(False, expired, f"a path, but its executed check was stopped by "
+                                              f"{limit} before it passed: {timed.executed.reason}")
             return answer(False, Status.NOT_EXECUTABLE, "no trajectory a JointTrajectory"
                           f"Controller executes within the limits: {timed.executed.reason}")
         how = "the direct motion" if direct else f"{charts} charts"

@@ -222,6 +222,39 @@ def test_beyond_its_bounds_the_plan_is_refused_with_a_reason(problem, monkeypatc
     assert result.path is None
 
 
+def test_a_cancel_or_the_time_limit_stops_the_executed_check_between_its_rounds(
+        problem, monkeypatch):
+    """The executed check is part of the call's time: a cancel that comes while it runs (or
+    the deadline passing) ends it after the round in progress, as CANCELED (TIMEOUT) with
+    the check's reason, and no path; at the fast limits its first check fails (points are
+    added), so there is a second round to skip."""
+    class CancelOnceChecking:
+        checking = False
+
+        def is_set(self):
+            return self.checking
+
+    cancel = CancelOnceChecking()
+    check_path = E.check_path
+
+    def checking(*args, **kwargs):
+        cancel.checking = True
+        return check_path(*args, **kwargs)
+    monkeypatch.setattr(E, "check_path", checking)
+    s = replace(problem.settings, max_cable_speed=FAST[0], max_cable_accel=FAST[1])
+    result = Planner(problem.robot, problem.task, s).plan(problem.start, problem.goal,
+                                                          cancel=cancel)
+    assert not result.success and result.reason == Status.CANCELED, result.message
+    assert "executed check was stopped by a cancel" in result.message
+    assert "after 0 rounds of added points" in result.message and result.path is None
+
+
+def test_the_stop_reports_the_deadline_without_an_atlas():
+    from cdh_planner.search.strategies import Stop
+    assert Stop(deadline=0.0).expired() == Status.TIMEOUT
+    assert Stop(deadline=None).expired() is None
+
+
 # ----------------------------------------------------------------------------- JSON and stream
 
 def test_the_plan_and_its_json_carry_what_was_checked(problem):

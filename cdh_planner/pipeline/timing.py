@@ -29,14 +29,15 @@ class Timed:
     scene_clearance: dict
 
 
-def time_stage(robot, path, settings, collision=None):
+def time_stage(robot, path, settings, collision=None, expired=None):
     """Timed of the PlannedPath ``path`` under ``settings`` (PlannerSettings: dynamics,
     max_cable_speed m/s, max_cable_accel m/s^2); ``collision``: the scene's
-    CollisionModel or None."""
+    CollisionModel or None; ``expired()``: true when the call must end (the executed
+    check then stops between its rounds, not passed)."""
     least = clearance.path_margins(robot, path.p, path.quaternion)
     extra = least_clearance(collision, path)
     path, timing, executed = timed_path(robot, path, settings.dynamics, settings.max_cable_speed,
-                                        settings.max_cable_accel, collision)
+                                        settings.max_cable_accel, collision, expired)
     return Timed(path, timing, executed, least, extra)
 
 

@@ -72,12 +72,20 @@ class Stop:
     max_bytes: int = 1024 * MB
     cancel: object = None
 
-    def status(self, atlas):
-        """The limit reached now, or None."""
+    def expired(self):
+        """CANCELED or TIMEOUT when the call must end now, else None (no atlas needed: the
+        stages after the search ask it too)."""
         if self.cancel is not None and self.cancel.is_set():
             return Status.CANCELED
         if self.deadline is not None and time.perf_counter() > self.deadline:
             return Status.TIMEOUT
+        return None
+
+    def status(self, atlas):
+        """The limit reached now, or None."""
+        expired = self.expired()
+        if expired is not None:
+            return expired
         if len(atlas.charts) >= self.max_charts:
             return Status.CHART_LIMIT
         if atlas.nbytes >= self.max_bytes:

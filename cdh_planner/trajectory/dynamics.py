@@ -444,7 +444,8 @@ def check_dynamics(robot, dynamics):
         raise InputError("dynamics", dynamics, "needs the load's mass (robot.load.mass)")
 
 
-def timed_path(robot, path, dynamics, max_cable_speed, max_cable_accel, collision=None):
+def timed_path(robot, path, dynamics, max_cable_speed, max_cable_accel, collision=None,
+               expired=None):
     """(PlannedPath, note, ExecutionCheck): ``path`` (quasi-statically timed) re-timed by
     ``dynamics`` ("auto": dynamic when the robot has a load mass; "dynamic";
     "quasi_static"), then given the points a JointTrajectoryController needs to execute
@@ -454,7 +455,8 @@ def timed_path(robot, path, dynamics, max_cable_speed, max_cable_accel, collisio
     one is kept and the note says so. The check's ``ok`` False: no executable trajectory
     within the bounds (its ``reason`` says why). ``collision``: the scene's CollisionModel
     (or None), which the executed motion keeps clear of too. The path carries the robot's
-    cable stiffness: its commands (``PlannedPath.commanded``) are what was checked."""
+    cable stiffness: its commands (``PlannedPath.commanded``) are what was checked.
+    ``expired()``: true when the caller's time is up (``executable`` stops then)."""
     check_dynamics(robot, dynamics)
     note, motion, load = "", None, (None, None)
     if not (dynamics == "quasi_static" or (dynamics == "auto" and robot.mass is None)):
@@ -474,5 +476,5 @@ def timed_path(robot, path, dynamics, max_cable_speed, max_cable_accel, collisio
     if motion is None:  # the quasi-static timing: hand out the C2 spline through its points
         path = spline_rates(path)
     path, check = executable(robot, path, motion, *load, max_cable_speed, max_cable_accel,
-                             collision=collision)
+                             collision=collision, expired=expired)
     return with_commands(robot, path), note, check

@@ -387,10 +387,11 @@ def check_path(robot, path, mass=None, inertia=None, max_cable_speed=np.inf,
 # ----------------------------------------------------------------------------- making it pass
 
 def executable(robot, path, motion=None, mass=None, inertia=None, max_cable_speed=np.inf,
-               max_cable_accel=np.inf, max_points=MAX_POINTS, collision=None):
+               max_cable_accel=np.inf, max_points=MAX_POINTS, collision=None, expired=None):
     """(path, ExecutionCheck): the timed PlannedPath ``path`` with points added until a JTC
     executing it passes ``check_path``, or the last check (``ok`` False) if it does not
-    within ``max_points`` points and the rounds allowed.
+    within ``max_points`` points and the rounds allowed, or once ``expired()`` (a
+    zero-argument callable: the caller's time limit or cancel) is true after a check.
 
     ``motion(t, scale)`` -> PlannedPath: the motion that was checked (e.g. the dynamic
     timing's, ``trajectory.dynamics.motion_rows``), slowed ``scale`` times, at times t
@@ -417,6 +418,9 @@ def executable(robot, path, motion=None, mass=None, inertia=None, max_cable_spee
         if check.ok:
             within = None  # the whole trajectory once more: the answer's own check
             continue
+        if expired is not None and expired():
+            return path, replace(check, reason=f"{check.reason} when stopped after {rounds} "
+                                               f"rounds of added points and {slowed} slow-downs")
         k = check.bad_segments
         winch_only = not np.isfinite(check.least_tension_margin_n)  # tensions not reached
         winch_rounds += winch_only
