@@ -115,7 +115,7 @@ def test_the_dynamic_timing_keeps_the_commanded_winch_rates(robot):
 
 
 @pytest.mark.xfail(strict=True, reason="open: the elastic platform's soft mode at the turn "
-                   "(issue 32, item 3)")
+                   "(docs/elastic-cables.md, 'Not yet')")
 def test_the_timed_motion_executes_without_slowing_it_down_many_times(robot):
     """The dynamic timing's motion through the turn, made executable, is at most twice as
     slow as the timing: what the planner timed is what executes."""

@@ -17,8 +17,9 @@ from cdh_planner.model.shapes import SHAPES
 from cdh_planner.scene.schema import scene_from_dict, shape_from_dict
 
 from conftest import CONFIG
-from test_scene_distances import (R_CABLE, ROBOT2, model, near_cable_point, platform_anchors,
-                                  random_pose, random_quaternion, segment_segment)
+from test_scene_distances import (R_CABLE, ROBOT2, lower_bounds, model, near_cable_point,
+                                  platform_anchors, random_pose, random_quaternion,
+                                  segment_segment)
 
 DOCS = CONFIG.parent / "docs" / "scenes.md"
 TOL_M = 1e-6
@@ -86,7 +87,7 @@ def test_cables_against_a_capsule_obstacle_match_segment_segment_less_both_radii
         s = cm.obstacles[0]
         q0, q1 = capsule_axis(s)
         Bw = platform_anchors(ROBOT2, p, R)
-        lb = cm.lower_bounds(p, R)
+        lb = lower_bounds(cm, p, R)
         for kind, _, cables, d in cm.distances(p, R):
             if kind != "cable-obstacle":
                 continue

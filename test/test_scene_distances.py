@@ -309,6 +309,15 @@ def test_cables_against_a_box_cylinder_or_mesh_platform_match_sampled_distances(
     assert hits > 0   # anchors inside the body's outline: some cables pass through it
 
 
+def lower_bounds(cm, p, R):
+    """The kernel's lower bounds (m + 1, K + 1), m, of the cable-obstacle (rows 0..m-1,
+    columns 0..K-1), platform-obstacle (row m) and cable-platform (column K) distances at
+    pose (p, R), from bounding spheres (inf: not checked): the model's buffers after the
+    kernel's pass over one pose, before coal consumes them."""
+    cm._pose(p, R)
+    return cm.lb.copy()
+
+
 def test_lower_bounds_never_exceed_the_exact_distance():
     rng = np.random.default_rng(8)
     for _ in range(10):
@@ -317,7 +326,7 @@ def test_lower_bounds_never_exceed_the_exact_distance():
                       "quaternion": random_quaternion(rng),
                       "position": near_cable_point(rng, ROBOT2, p, R, 0.05)} for k in range(6)]
         cm = model(obstacles, platform={"type": "box", "size": [0.14, 0.14, 0.01]})
-        lb = cm.lower_bounds(p, R)
+        lb = lower_bounds(cm, p, R)
         assert lb.shape == (7, 7) and lb[6, 6] == math.inf
         for kind, oid, cables, d in cm.distances(p, R):
             row = cables[0] if kind in ("cable-obstacle", "cable-platform") else 6

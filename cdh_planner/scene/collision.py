@@ -267,13 +267,6 @@ class CollisionModel:
             binding[n] = f"collision {self._answer(best[n], what).binding}"
         return best - self.scene.clearance, binding
 
-    def lower_bounds(self, p, R):
-        """Lower bounds (m + 1, K + 1), m, of the cable-obstacle (rows 0..m-1, columns
-        0..K-1), platform-obstacle (row m) and cable-platform (column K) distances at pose
-        (p, R), from bounding spheres (inf: not checked)."""
-        self._pose(p, R)
-        return self.lb.copy()
-
 
 def _platform_form(shape):
     """The kernel's description of a platform shape (13 numbers): its form code and three
