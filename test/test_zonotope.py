@@ -215,6 +215,20 @@ def _best_shift(robot, J, t0, v):
     return res.x[-1]
 
 
+def test_a_rule_without_its_weights_or_name_is_refused_when_it_registers():
+    class Nameless(fz.TensionRule):
+        def weights(self, robot):
+            return robot.tension_max
+
+    class Weightless(fz.TensionRule):
+        name = "weightless"
+
+    for cls, what in ((Nameless, "name"), (Weightless, "weights")):
+        with pytest.raises(TypeError, match=f"{cls.__name__} lacks {what}"):
+            fz.register(cls)
+    assert "weightless" not in fz.RULES
+
+
 @pytest.mark.parametrize("rule", sorted(fz.RULES))
 def test_every_registered_rule_holds_the_wrench_and_its_band_is_exact(rule):
     """Each rule of wrench.RULES (chosen by robot.tension_rule) on robot2_8, rigid cables:

@@ -25,7 +25,13 @@ DEFAULT_RULE = "centred"
 
 
 def register(cls):
-    """Class decorator: add a rule (an instance of ``cls``) to RULES under ``cls.name``."""
+    """Class decorator: add a rule (an instance of ``cls``) to RULES under ``cls.name``; a
+    rule owes a name and ``weights`` (TypeError naming what is missing)."""
+    missing = [what for what, ok in (("name", bool(cls.name)),
+                                     ("weights", callable(getattr(cls, "weights", None))))
+               if not ok]
+    if missing:
+        raise TypeError(f"tension rule {cls.__name__} lacks {', '.join(missing)}")
     RULES[cls.name] = cls()
     return cls
 
@@ -47,14 +53,11 @@ def weighted_pseudo_inverse(J, W):
 
 class TensionRule:
     """A tension rule (module docstring). Subclasses set ``name``, ``description`` and
-    ``weights``; they may override ``tensions``."""
+    ``weights(robot)``: W (m,) of the map P = W J^T (J W J^T)^-1 (``register`` checks
+    them); they may override ``tensions``."""
 
     name = ""
     description = ""
-
-    def weights(self, robot):
-        """W (m,) of the map P = W J^T (J W J^T)^-1."""
-        raise NotImplementedError
 
     def map(self, robot, J):
         """P (N, m, 6) at N poses with J (N, 6, m)."""
