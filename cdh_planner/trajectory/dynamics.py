@@ -49,8 +49,8 @@ from ..wrench import band_feasibility, cable_vectors, rule_tensions, screw_jacob
 from ..model.elastic import is_elastic
 from ..model.pose import tau_from_rotation
 from .executed import executable, spline_rates, unique_sorted
-from .path import (COMMAND_PATH_WINDOW_M, PlannedPath, cable_arc_length, command_tensions,
-                   with_commands)
+from .path import (COMMAND_PATH_WINDOW_M, PlannedPath, averaged_along_path, cable_arc_length,
+                   command_tensions, with_commands)
 from ..ports import CubicSpline, Rotation, RotationSpline, import_toppra
 
 GRID_POINTS = 400       # toppra gridpoints along the path (at least one per waypoint)
@@ -110,7 +110,7 @@ class _Geometry:
         # the static tensions the commands average along the path (``_command_rates``)
         self.arc = cable_arc_length(path.lengths)
         self.f0_wp = None  # six cables: the stretch of t0 = J^-1 w0 is left to ``executable``
-        if is_elastic(robot) and len(robot.base_anchors) > 6:
+        if is_elastic(robot) and averaged_along_path(len(robot.base_anchors)):
             self.f0_wp = rule_tensions(robot, path.p, rot.as_matrix())[0]
 
     def at(self, s):

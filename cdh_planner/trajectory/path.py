@@ -58,7 +58,7 @@ class PlannedPath:
         if self.cable_stiffness is None:
             return self.lengths, self.velocities, self.accelerations
         along = self.tension_nominal
-        if along.shape[1] > 6:  # six cables: t0 = J^-1 w0 turns no faster than the pose
+        if averaged_along_path(along.shape[1]):
             along = command_tensions(cable_arc_length(self.lengths), along,
                                      COMMAND_PATH_WINDOW_M)[0]
         f, df, ddf = command_tensions(self.t, along, window_s)
@@ -83,6 +83,15 @@ def with_commands(robot, path):
     """``path`` (PlannedPath) carrying ``robot``'s cable stiffness, which ``commanded``
     turns into the commands of elastic cables (None: rigid)."""
     return replace(path, cable_stiffness=robot.cable_stiffness)
+
+
+def averaged_along_path(m):
+    """Are the nominal tensions of m cables averaged along the path before they make the
+    commands (``PlannedPath.commanded``), and the timing bounds their stretch's rates
+    (``dynamics._command_rates``)? For m > 6: a tension rule turns its nominal fast; six
+    cables' t0 = J^-1 w0 turns no faster than the pose. One answer for both, so that the
+    timing bounds the commands that are sent."""
+    return m > 6
 
 
 def cable_arc_length(L):
