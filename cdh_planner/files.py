@@ -205,15 +205,13 @@ def _refuse(where, label, event, reason):
 
 def read_json(path, where, limits=JSON_LIMITS):
     """The parsed JSON file at ``path`` (depth and sizes bounded)."""
-    doc = parse_json_text(read_text(path, where, limits.max_bytes), where, str(path), limits)
-    check_structure(doc, where, str(path), limits)
-    return doc
+    return parse_json_text(read_text(path, where, limits.max_bytes), where, str(path), limits)
 
 
 def parse_json_text(text, where, label, limits=JSON_LIMITS):
-    """The parsed JSON ``text`` (of the file ``label``), a key given twice refused, but its
-    depth and list lengths not yet checked: the caller runs ``check_structure`` (pose files
-    read in bulk skip it, their shape checked instead: parsing/poses.py)."""
+    """The parsed JSON ``text`` of the file ``label`` (depth and sizes bounded, a key given
+    twice refused): ``read_json`` once the file is read (pose files read in bulk are parsed
+    otherwise first: parsing/poses.py)."""
     try:
         doc = json.loads(text, object_pairs_hook=_unique_keys)
     except _DuplicateKey as exc:
@@ -225,6 +223,7 @@ def parse_json_text(text, where, label, limits=JSON_LIMITS):
         raise InputError(where, label, f"nested deeper than {limits.max_depth} levels") from None
     except ValueError as exc:  # an integer of over 4300 digits
         raise InputError(where, label, f"not valid JSON: {exc}") from None
+    check_structure(doc, where, label, limits)
     return doc
 
 

@@ -23,7 +23,7 @@ import numpy as np
 import orjson
 
 from ..errors import MAX_POSITION_M, InputError, check_keys, check_numbers
-from ..files import JSON_LIMITS, check_structure, parse_json_text, read_text
+from ..files import JSON_LIMITS, parse_json_text, read_text
 from ..model.pose import check_quaternion, quaternion_from_tau, rotation_from_quaternion, \
     tau_from_quaternion
 
@@ -55,9 +55,7 @@ def load_poses(path, where="poses"):
     bulk = _bulk_text(text)
     if bulk is not None:
         return bulk
-    doc = parse_json_text(text, where, str(path))
-    check_structure(doc, where, str(path), JSON_LIMITS)
-    return poses_from_obj(doc, where)
+    return poses_from_obj(parse_json_text(text, where, str(path)), where)
 
 
 def _bulk_text(text):
