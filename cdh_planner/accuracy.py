@@ -42,7 +42,7 @@ import numpy as np
 from .errors import InputError
 from .wrench import cable_vectors, rule_tensions, screw_jacobian
 from .model import elastic
-from .model.pose import rotation_tt
+from .model.pose import cross, rotation_tt
 
 PARALLEL_TOL = 1e-6   # sin of the angle between two generators below which they count as parallel
 ORTHO_TOL = 1e-9      # |g_k . c| / (|g_k| |c|) below which g_k counts as in the plane of a pair
@@ -212,8 +212,7 @@ def _zonotope_max(g):
         return norms.sum(axis=1)
     i, j = np.array(list(combinations(range(m), 2))).T  # pairs (P,)
     gi, gj = g[:, :, i], g[:, :, j]  # (N, 3, P)
-    c = np.stack([gi[:, (k + 1) % 3] * gj[:, (k + 2) % 3] - gi[:, (k + 2) % 3] * gj[:, (k + 1) % 3]
-                  for k in range(3)], axis=1)  # (N, 3, P): np.cross's products, contiguous
+    c = cross(gi, gj, axis=1)  # (N, 3, P): np.cross's products, components contiguous
     cn = np.sqrt(c[:, 0] * c[:, 0] + c[:, 1] * c[:, 1] + c[:, 2] * c[:, 2])  # (N, P): the norm's sum
     live = ~(tiny[:, i] | tiny[:, j])  # pairs of two real generators
     with np.errstate(invalid="ignore", divide="ignore"):

@@ -133,3 +133,6 @@ def test_cross_is_numpys_cross_to_the_bit():
     a, b = rng.normal(size=(5, 3)), rng.normal(size=(7, 5, 3))
     assert np.array_equal(cross(a, b), np.cross(a, b))
     assert np.array_equal(cross(b[0], a), np.cross(b[0], a))
+    g, h = rng.normal(size=(4, 3, 6)), rng.normal(size=(4, 3, 6))   # over a middle axis
+    for axis in (1, -2):
+        assert np.array_equal(cross(g, h, axis=axis), np.cross(g, h, axis=1))

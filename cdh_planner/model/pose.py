@@ -22,13 +22,16 @@ def wrap_angle(a):
     return (np.asarray(a, dtype=float) + np.pi) % TWO_PI - np.pi
 
 
-def cross(a, b):
-    """a x b over the last axis of broadcasting arrays (..., 3): the same numbers as
+def cross(a, b, axis=-1):
+    """a x b over ``axis`` (of length 3) of broadcasting arrays: the same numbers as
     np.cross (the same products and differences) at a fifth of its cost on (N, m, 3) arrays
     (np.cross moves axes and copies; the elastic equilibria take millions of these)."""
-    a0, a1, a2 = a[..., 0], a[..., 1], a[..., 2]
-    b0, b1, b2 = b[..., 0], b[..., 1], b[..., 2]
-    return np.stack([a1 * b2 - a2 * b1, a2 * b0 - a0 * b2, a0 * b1 - a1 * b0], axis=-1)
+    def part(x, k):
+        return x[(Ellipsis, k) + (slice(None),) * (-axis - 1)] if axis < 0 else \
+            x[(slice(None),) * axis + (k,)]
+    a0, a1, a2 = (part(a, k) for k in range(3))
+    b0, b1, b2 = (part(b, k) for k in range(3))
+    return np.stack([a1 * b2 - a2 * b1, a2 * b0 - a0 * b2, a0 * b1 - a1 * b0], axis=axis)
 
 
 def rotation_tt(tau):
