@@ -15,6 +15,13 @@ PROBLEMS = CONFIG / "problems"
 PACKAGE = REPO / "cdh_planner"
 
 
+def aot_built(*kernels):
+    """Whether each kernel module (manifold.kernels, scene.kernels, wrench.compiled,
+    model.elastic_kernel) has its ahead-of-time build of its current source (``make``)."""
+    from cdh_planner import aot
+    return all(aot.load(k) is not None for k in kernels)
+
+
 def default_sigint():
     """``preexec_fn`` of a child a test interrupts with SIGINT: the signal's default action,
     as a shell in a terminal gives it. A suite started in the background (``&``, nohup) has

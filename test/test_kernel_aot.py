@@ -4,7 +4,7 @@ and a fresh process that uses them compiles nothing (the collision kernel's twin
 test_scene_batch.py)."""
 
 import hashlib
-import importlib.util
+import importlib
 import json
 import os
 import subprocess
@@ -23,11 +23,10 @@ from cdh_planner.scene import kernels as scene_kernels
 from cdh_planner.wrench import compiled as wrench_kernels
 from cdh_planner.wrench.facets import facet_subsets
 from cdh_planner.wrench.geometry import inverse_factor
-from conftest import CONFIG
+from conftest import CONFIG, aot_built
 
-AOT_BUILT = importlib.util.find_spec(f"cdh_planner.manifold.{kernels.aot_module_name()}") is not None
-ALL_BUILT = all(importlib.util.find_spec(f"{m.__package__}.{m.aot_module_name()}") is not None
-                for m in (kernels, scene_kernels, wrench_kernels, elastic_kernel))
+AOT_BUILT = aot_built(kernels)
+ALL_BUILT = aot_built(kernels, scene_kernels, wrench_kernels, elastic_kernel)
 NOT_BUILT = ("no ahead-of-time kernels built (make, or python -m "
              "cdh_planner.<manifold|scene|wrench>.aot, cdh_planner.model.elastic_aot)")
 
@@ -44,7 +43,7 @@ BUILDERS = {"manifold": "cdh_planner.manifold.aot", "scene": "cdh_planner.scene.
 def test_the_aot_module_is_named_after_the_digest_of_the_kernel_source(module, sources):
     d = Path(module.__file__).resolve().parent
     h = hashlib.sha256(b"".join((d / name).read_bytes() for name in sources))
-    assert module.aot_module_name() == module.AOT_PREFIX + h.hexdigest()[:12]
+    assert aot_helper.module_name(module) == module.AOT_PREFIX + h.hexdigest()[:12]
 
 
 @pytest.mark.parametrize("module", [kernels, scene_kernels, wrench_kernels, elastic_kernel],

@@ -3,7 +3,6 @@ call for the batch, coal only near obstacles) equals ``clearance`` pose by pose;
 ahead-of-time kernel (scene/aot.py) is the JIT kernel's twin and a fresh process with it
 compiles nothing (numba is never imported; its naming: test_kernel_aot.py)."""
 
-import importlib.util
 import subprocess
 import sys
 
@@ -15,10 +14,10 @@ from cdh_planner.scene import kernels
 from cdh_planner.scene.collision import CollisionModel
 from cdh_planner.scene.schema import scene_from_dict
 
-from conftest import CONFIG
+from conftest import CONFIG, aot_built
 from test_scene_distances import ROBOT2, model, near_cable_point, random_quaternion
 
-AOT_BUILT = importlib.util.find_spec(f"cdh_planner.scene.{kernels.aot_module_name()}") is not None
+AOT_BUILT = aot_built(kernels)
 PLATFORMS = [None, {"type": "box", "size": [0.14, 0.14, 0.01]},
              {"type": "cylinder", "radius": 0.09, "height": 0.01},
              {"type": "sphere", "radius": 0.05, "position": [0.0, 0.0, 0.02]},

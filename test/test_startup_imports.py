@@ -1,7 +1,6 @@
 """Start-up imports only what a command uses: checked in fresh
 interpreters through sys.modules, not by timing."""
 
-import importlib.util
 import json
 import subprocess
 import sys
@@ -9,7 +8,7 @@ import sys
 import pytest
 
 from cdh_planner import cli
-from conftest import REPO
+from conftest import REPO, aot_built
 
 HEAVY = ("toppra", "matplotlib", "matplotlib.pyplot", "rclpy", "scipy.spatial", "numba", "numpy",
          "scipy", "scipy.interpolate", "scipy.sparse", "scipy.linalg", "scipy.optimize", "numpy.ma")
@@ -58,9 +57,9 @@ def _kernels_built():
     """Whether every kernel module has its ahead-of-time build (``make``)."""
     from cdh_planner.manifold import kernels
     from cdh_planner.scene import kernels as scene_kernels
+    from cdh_planner.model import elastic_kernel
     from cdh_planner.wrench import compiled
-    return all(importlib.util.find_spec(f"{m.__package__}.{m.aot_module_name()}") is not None
-               for m in (kernels, scene_kernels, compiled))
+    return aot_built(kernels, scene_kernels, compiled, elastic_kernel)
 
 
 @pytest.mark.skipif(not _kernels_built(), reason="no ahead-of-time kernels built (make)")

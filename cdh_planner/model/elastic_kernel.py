@@ -283,11 +283,6 @@ def source_digest():
     return aot.source_digest(Path(__file__).resolve().parent, ("elastic_kernel.py",))
 
 
-def aot_module_name():
-    """The ahead-of-time module built from this very source."""
-    return aot.module_name(sys.modules[__name__])
-
-
 def jit_kernels():
     """numba's JIT entry (cache=True) by name (``cdh_planner.aot``); the helpers become
     numba functions here."""

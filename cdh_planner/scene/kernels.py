@@ -291,11 +291,6 @@ def source_digest():
                              ("kernels.py", "../model/shape_forms.py"))
 
 
-def aot_module_name():
-    """The ahead-of-time module built from this very source."""
-    return aot.module_name(sys.modules[__name__])
-
-
 def aot_kernel():
     """The ahead-of-time compiled kernel, or None if it was not built for this source."""
     built = aot.load(sys.modules[__name__])

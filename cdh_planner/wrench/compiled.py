@@ -55,11 +55,6 @@ def source_digest():
                              ("compiled.py", "kernel.py", "centred.py", "linalg.py"))
 
 
-def aot_module_name():
-    """The ahead-of-time module built from this very source."""
-    return aot.module_name(sys.modules[__name__])
-
-
 def jit_helpers():
     """The entries' helpers as numba functions (cache=True) in kernel.py's and centred.py's
     namespaces, once; ``njit(cache=True)``, to compile the entries that call them."""
