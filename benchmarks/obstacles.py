@@ -2,7 +2,7 @@
 RRTConnect on the same queries.
 
     .venv/bin/python benchmarks/obstacles.py [--cases 9] [--seed 0] [--repeats 3]
-        [--timeout 30] [--only 0 3 ...] [--no-ompl] [--checkout DIR]
+        [--timeout 30] [--only 0 3 ...] [--no-ompl] [--checkout DIR] [--keep DIR]
 
 Queries (fixed seed): two random wrench-feasible Robot 2 poses (benchmarks/random_queries.py's
 ``feasible_poses``, within 30 deg of q2's orientation) whose straight motion (position linear, orientation slerp) is
@@ -14,6 +14,7 @@ needs a planner). Cable radius 1 mm.
 
 - ours: ``cdh-planner plan PROBLEM --json OUT --quiet`` (the problem and scene written to a
   temporary folder), each in a fresh process; seconds = the process's wall clock.
+  ``--keep DIR`` also writes each case's problem file as DIR/case_K.yaml (to profile a case).
 - ompl: OMPL RRTConnect in SE(3) (benchmarks/vs_ompl.py's SE3Adapter and bounds) with this
   project's validity as the point-wise checker: a state is valid iff
   ``pipeline.validity.Validity.pose_margins`` (the wrench margin joined with the
@@ -214,12 +215,17 @@ def main():
     ap.add_argument("--no-ompl", action="store_true")
     ap.add_argument("--checkout", type=Path, default=ROOT,
                     help="plan with this checkout's cdh_planner (e.g. main's, for a before/after)")
+    ap.add_argument("--keep", type=Path, help="write each case's problem file into this folder")
     ap.add_argument("--child", help=argparse.SUPPRESS)
     args = ap.parse_args()
     if args.child:
         return child(args.child)
     robot = load_robot(ROBOT)
     all_cases = cases(robot, args.cases, args.seed)
+    if args.keep:
+        args.keep.mkdir(parents=True, exist_ok=True)
+        for k, case in enumerate(all_cases):
+            problem_file(args.keep, *case, args.timeout).rename(args.keep / f"case_{k}.yaml")
     try:
         import ompl  # noqa: F401
         use_ompl = not args.no_ompl
