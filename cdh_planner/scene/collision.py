@@ -303,6 +303,21 @@ class CollisionModel:
             binding[n] = f"collision {self._answer(best[n], what).binding}"
         return best - self.scene.clearance, binding
 
+    def binding_cables(self, p, R):
+        """(distance (N,) m, cable (N,) int) at poses p (N, 3) m, R (N, 3, 3): where a cable
+        against a primitive obstacle is the kernel's least distance, that distance and the
+        cable's index (the distance is the kernel's exact one, and moves no more than the
+        cable's platform anchor does: each point of the cable moves less); elsewhere
+        (inf, -1). One compiled call, no coal."""
+        p = np.ascontiguousarray(p, dtype=float).reshape(-1, 3)
+        R = np.ascontiguousarray(R, dtype=float).reshape(-1, 3, 3)
+        buffers = self._buffers(len(p))
+        self._run(p, R, buffers)
+        least = buffers[-1]
+        hit = least[:, 1] == 2.0
+        cable = np.where(hit, least[:, 2].astype(int) // (self.K + 1), -1)
+        return np.where(hit, least[:, 0], np.inf), cable
+
 
 def _kernel_form(shape):
     """The kernel's description of a shape (13 numbers): its form code and three numbers
