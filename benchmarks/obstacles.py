@@ -167,16 +167,17 @@ def run_ours(robot, case, timeout, checkout=ROOT):
         return "path", seconds, cpu, d["time_s"], safe(robot, scene, p, q)
 
 
-def run_ompl(case, timeout):
+def run_ompl(case, timeout, checkout=ROOT):
     """(status, seconds of setup + solve + simplify, process wall s, process CPU s, safe)
-    in a fresh process."""
+    in a fresh process (``checkout``'s cdh_planner first on PYTHONPATH: its validity)."""
     start, goal, scene = case
     job = json.dumps({"start": [start.p.tolist(), start.tau.tolist()],
                       "goal": [goal.p.tolist(), goal.tau.tolist()], "scene": scene, "timeout": timeout})
     t, cpu = time.perf_counter(), children_cpu()
     try:
         res = subprocess.run([sys.executable, __file__, "--child", job], capture_output=True, text=True,
-                             timeout=timeout + 60, cwd=ROOT)
+                             timeout=timeout + 60, cwd=ROOT,
+                             env=dict(os.environ, PYTHONPATH=str(checkout)))
     except subprocess.TimeoutExpired:
         return "timeout", timeout, timeout, timeout, None
     wall, cpu = time.perf_counter() - t, children_cpu() - cpu
@@ -226,7 +227,8 @@ def main():
     ap.add_argument("--only", type=int, nargs="*", help="case indices to run")
     ap.add_argument("--no-ompl", action="store_true")
     ap.add_argument("--checkout", type=Path, default=ROOT,
-                    help="plan with this checkout's cdh_planner (e.g. main's, for a before/after)")
+                    help="plan with this checkout's cdh_planner, and give OMPL its validity (e.g. "
+                         "main's, for a before/after)")
     ap.add_argument("--keep", type=Path, help="write each case's problem file into this folder")
     ap.add_argument("--child", help=argparse.SUPPRESS)
     args = ap.parse_args()
@@ -258,7 +260,7 @@ def main():
         for _ in range(args.repeats):
             runs_ours.append(run_ours(robot, case, args.timeout, args.checkout.resolve()))
             if use_ompl:
-                runs_ompl.append(run_ompl(case, args.timeout))
+                runs_ompl.append(run_ompl(case, args.timeout, args.checkout.resolve()))
         for name, runs in (("ours", runs_ours), ("ompl", runs_ompl)):
             unsafe[name] += sum(r[-1] is False for r in runs)
             solved[name] += any(r[0] == "path" for r in runs)

@@ -97,6 +97,23 @@ def test_aot_and_jit_kernels_agree_bit_for_bit(platform):
         np.testing.assert_array_equal(a, j)
 
 
+@pytest.mark.skipif(not AOT_BUILT, reason="no ahead-of-time collision kernel built (make, or "
+                                          "python -m cdh_planner.scene.aot)")
+def test_aot_and_jit_cable_obstacle_distances_agree_bit_for_bit():
+    """The unpruned cable-obstacle entry (``CollisionModel.cable_obstacle_distances``) on
+    a sphere, a box and a cylinder near the cables: hits and misses."""
+    rng = np.random.default_rng(9)
+    cm = crowded_model(rng, None)
+    p, R = poses(rng, 40)
+    aot_entry = kernels.aot.load(kernels)["cable_obstacle_batch"]
+    jit_entry = kernels.jit_kernels()["cable_obstacle_batch"]
+    out = [np.zeros((len(p), cm.m, cm.K)) for _ in range(2)]
+    for entry, o in zip((aot_entry, jit_entry), out):
+        entry(p, R, cm.static, cm.pairs, o)
+    np.testing.assert_array_equal(out[0], out[1])
+    assert np.isfinite(out[0]).all() and (out[0] < 0).any() and (out[0] > 0).any()
+
+
 @pytest.mark.skipif(not AOT_BUILT, reason="no ahead-of-time collision kernel built")
 def test_with_the_aot_kernel_a_fresh_process_compiles_nothing():
     """A scene loaded and a pose checked in a fresh process: numba is never imported, so

@@ -34,8 +34,7 @@ from dataclasses import dataclass
 import numpy as np
 
 from ..model.shape_forms import COAL_FORM
-from . import kernels
-from .kernels import collision_batch
+from .kernels import cable_obstacle_batch, collision_batch
 from .margin import COLLISION_UNIT_M, combine  # noqa: F401  (their home; re-exported)
 from .schema import SHARED_ANCHOR_M
 
@@ -223,15 +222,8 @@ class CollisionModel:
 
     def _cable_obstacle(self, i, k, frames):
         """Signed distance (m) of cable i's capsule (its frame ``frames[i]``, from the
-        kernel) to obstacle k: the kernel's own formula for a primitive (the same numbers),
-        else coal's."""
+        kernel) to obstacle k, by coal (a mesh: the kernel has the primitives')."""
         f = frames[i]
-        if self.exact[k]:
-            o = self.obstacles[k]
-            M, c = np.asarray(o.rotation, float).ravel(), np.asarray(o.position, float)
-            a, b = self.static[3 * i:3 * i + 3], f[13:16]
-            return float(kernels._segment_sdf(kernels._local(M, c, a), kernels._local(M, c, b),
-                                              _kernel_form(o)[:4]) - self.scene.cable_radius)
         self._coal()
         self.capsules[i].halfLength = f[12]
         T = self.cable_T[i]
@@ -270,11 +262,12 @@ class CollisionModel:
         """Every checked pair at pose (p, R): a list of (kind, obstacle id or None, cable
         indices, signed distance m), unpruned (for tests and markers)."""
         p, R = self._pose(p, R)
+        exact = self.cable_obstacle_distances(p[None], R[None])[0]
         out = [("cable-cable", None, tuple(map(int, pair)), float(d))
                for pair, d in zip(self.pairs, self.cc)]
         for k, o in enumerate(self.obstacles):
-            out += [("cable-obstacle", o.id, (i,), self._cable_obstacle(i, k, self.frames))
-                    for i in range(len(self.names))]
+            out += [("cable-obstacle", o.id, (i,), float(exact[i, k]) if self.exact[k]
+                     else self._cable_obstacle(i, k, self.frames)) for i in range(len(self.names))]
             if self.platform is not None:
                 out.append(("platform-obstacle", o.id, (), self._platform_obstacle(k, p, R)))
         K = len(self.obstacles)
@@ -302,6 +295,15 @@ class CollisionModel:
             best[n], what = self._resolve(p[n], R[n], lb[n], least[n], frames[n], frames_p[n])
             binding[n] = f"collision {self._answer(best[n], what).binding}"
         return best - self.scene.clearance, binding
+
+    def cable_obstacle_distances(self, p, R):
+        """Every cable's signed distance (m) to every primitive obstacle, unpruned: (N, m, K)
+        at poses p (N, 3) m, R (N, 3, 3), the kernel's numbers (nan for a mesh: coal's)."""
+        p = np.ascontiguousarray(p, dtype=float).reshape(-1, 3)
+        R = np.ascontiguousarray(R, dtype=float).reshape(-1, 3, 3)
+        out = np.empty((len(p), self.m, self.K))
+        cable_obstacle_batch(p, R, self.static, self.pairs, out)
+        return out
 
     def binding_cables(self, p, R):
         """(distance (N,) m, cable (N,) int) at poses p (N, 3) m, R (N, 3, 3): where a cable

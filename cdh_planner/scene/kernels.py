@@ -38,20 +38,41 @@ def _obstacles(static, n_pairs, lb, frames, least):
     every primitive pair is then inf (nothing left for coal: an exact distance not below
     the least found is never the least). A mesh (COAL_FORM) keeps its bound for coal."""
     m, K = lb.shape[0] - 1, lb.shape[1] - 1
-    oC, oF = 6 * m, 6 * m + 7 * K
-    r = static[oF + 13 * K + 2 * n_pairs]
     for i in range(m):
         a, b = _v(static, 3 * i), _v(frames[i], 13)
         for k in range(K):
-            f = oF + 13 * k
-            if static[f] == COAL_FORM:
+            if static[6 * m + 7 * K + 13 * k] == COAL_FORM:
                 continue
             if lb[i, k] < least[0]:
-                c, M = _v(static, oC + 3 * k), static[f + 4:f + 13]
-                d = _segment_sdf(_local(M, c, a), _local(M, c, b), static[f:f + 4]) - r
+                d = _cable_obstacle(static, m, K, n_pairs, k, a, b)
                 if d < least[0]:
                     least[0], least[1], least[2] = d, 2.0, i * (K + 1) + k
             lb[i, k] = np.inf
+
+
+def _cable_obstacle(static, m, K, n_pairs, k, a, b):
+    """Signed distance (m) of the cable a..b (its axis; less the cable radius) to the
+    primitive obstacle k (its form at 6 m + 7 K + 13 k of static: code, three numbers,
+    rotation row-major; its centre at 6 m + 3 k)."""
+    f = 6 * m + 7 * K + 13 * k
+    c, M = _v(static, 6 * m + 3 * k), static[f + 4:f + 13]
+    r = static[6 * m + 20 * K + 2 * n_pairs]
+    return _segment_sdf(_local(M, c, a), _local(M, c, b), static[f:f + 4]) - r
+
+
+def _cable_obstacle_batch(P, Rs, static, pairs, out):
+    """out[n, i, k] = ``_cable_obstacle`` of cable i and obstacle k at pose n (P[n] (3,)
+    m, Rs[n] (3, 3)), every pair unpruned; nan for a mesh (COAL_FORM: coal's)."""
+    m, K = out.shape[1], out.shape[2]
+    for n in range(P.shape[0]):
+        for i in range(m):
+            a = _v(static, 3 * i)
+            b = _add(_rot(Rs[n], _v(static, 3 * m + 3 * i)), _v(P[n], 0))
+            for k in range(K):
+                if static[6 * m + 7 * K + 13 * k] == COAL_FORM:
+                    out[n, i, k] = np.nan
+                else:
+                    out[n, i, k] = _cable_obstacle(static, m, K, pairs.shape[0], k, a, b)
 
 
 def _kernel(p, R, static, pairs, lb, frames, frames_p, cc, cp):
@@ -300,14 +321,16 @@ def _segment_segment(p0, p1, q0, q1):
 
 
 # ----- compilation -------------------------------------------------------------------------
-HELPERS = ("_kernel", "_obstacles", "_core_distance", "_point_core", "_least", "_own", "_local", "_axes", "_sdf", "_segment_sdf", "_v", "_add",
+HELPERS = ("_kernel", "_obstacles", "_cable_obstacle", "_core_distance", "_point_core", "_least", "_own", "_local", "_axes", "_sdf", "_segment_sdf", "_v", "_add",
            "_sub", "_scale", "_dot", "_norm", "_rot", "_frame", "_cut", "_point_segment",
            "_segment_segment")
 INLINE = ("_v", "_add", "_sub", "_scale", "_dot", "_norm", "_rot")
 AOT_EXPORTS = {"collision_batch": (
     "void(float64[:, ::1], float64[:, :, ::1], float64[::1], int64[:, ::1], "
     "float64[:, :, ::1], float64[:, :, ::1], float64[:, :, ::1], float64[:, ::1], "
-    "float64[:, ::1], float64[:, ::1])")}
+    "float64[:, ::1], float64[:, ::1])"),
+    "cable_obstacle_batch": (
+    "void(float64[:, ::1], float64[:, :, ::1], float64[::1], int64[:, ::1], float64[:, :, ::1])")}
 AOT_PREFIX = "_kernels_aot_"
 
 
@@ -329,8 +352,11 @@ def jit_kernel():
 
 
 def jit_kernels():
-    """``jit_kernel`` by its entry's name (``cdh_planner.aot``)."""
-    return {"collision_batch": jit_kernel()}
+    """The JIT entries by name (``cdh_planner.aot``): ``jit_kernel`` and the unpruned
+    cable-obstacle distances."""
+    return {"collision_batch": jit_kernel(),
+            "cable_obstacle_batch": aot.jit(globals(), HELPERS, INLINE)(_cable_obstacle_batch)}
 
 
-collision_batch = aot_kernel() or jit_kernel()
+_ENTRIES = aot.entries(sys.modules[__name__])
+collision_batch, cable_obstacle_batch = (_ENTRIES[k] for k in AOT_EXPORTS)
