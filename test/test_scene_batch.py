@@ -129,3 +129,26 @@ def test_with_the_aot_kernel_a_fresh_process_compiles_nothing():
             "print('numba' in sys.modules)")
     out = subprocess.run([sys.executable, "-c", code], capture_output=True, text=True, check=True)
     assert out.stdout.strip() == "False"
+
+
+def test_coal_is_imported_only_when_a_pair_needs_it():
+    """Primitive obstacles and no platform shape: clearance, batches and every pair's
+    distances come from the compiled kernel and coal is never imported; a box platform's
+    pairs against an obstacle are coal's, so the first distances() imports it."""
+    code = ("import sys\nimport numpy as np\n"
+            "from cdh_planner.model.robot import load_robot\n"
+            "from cdh_planner.scene.collision import CollisionModel\n"
+            "from cdh_planner.scene.schema import scene_from_dict\n"
+            f"robot = load_robot({str(CONFIG / 'robot2.yaml')!r})\n"
+            "obstacles = [{'id': 'ball', 'type': 'sphere', 'radius': 0.01, 'position': [0, 0.05, 0.2]},\n"
+            "             {'id': 'block', 'type': 'box', 'size': [0.02, 0.03, 0.01], 'position': [0.05, 0, 0.2]}]\n"
+            "cm = CollisionModel(robot, scene_from_dict({'obstacles': obstacles}))\n"
+            "p, R = np.array([[0, 0, 0.4]] * 3), np.tile(np.eye(3), (3, 1, 1))\n"
+            "cm.clearance(p[0], R[0]), cm.margins(p, R), cm.distances(p[0], R[0])\n"
+            "before = 'coal' in sys.modules\n"
+            "box = {'type': 'box', 'size': [0.14, 0.14, 0.01]}\n"
+            "cm = CollisionModel(robot, scene_from_dict({'obstacles': obstacles, 'platform': box}))\n"
+            "cm.distances(p[0], R[0])\n"
+            "print(before, 'coal' in sys.modules)")
+    out = subprocess.run([sys.executable, "-c", code], capture_output=True, text=True, check=True)
+    assert out.stdout.strip() == "False True"
