@@ -278,6 +278,10 @@ def main():
     if use_ompl:
         print(f"ompl RRTConnect: {_summary(ompl_med, ('in-process', 'process wall', 'process CPU'))}; "
               f"{solved['ompl']} of {len(ompl_med)} solved, {unsafe['ompl']} unsafe paths")
+        if ours_med:  # like with like: whole processes
+            ratio = [median([r[c] for r in ours_med]) / median([r[c + 1] for r in ompl_med])
+                     for c in (0, 1)]
+            print(f"ours / ompl, whole processes (medians): wall {ratio[0]:.2f}x, CPU {ratio[1]:.2f}x")
     return 0
 
 
