@@ -28,7 +28,9 @@ needs a planner). Cable radius 1 mm.
 Both run on a case before the next case starts (interleaved). Every path is checked
 densely with the scene (``trajectory.path_check.check_motion`` with the collision model,
 1 mm / 0.2 deg steps): "unsafe" counts paths that fail it. Medians over ``--repeats`` runs
-per case, then the median over the cases (a timeout counts as --timeout). Needs ompl
+per case, then the median over the cases (a timeout counts as --timeout); the last line
+compares the whole processes (ours / OMPL's median wall and CPU). ``--checkout DIR``: both
+sides run DIR's cdh_planner (OMPL's validity too), for a before/after. Needs ompl
 (benchmarks/requirements.txt) for the OMPL column; ``--no-ompl`` runs ours only.
 """
 
