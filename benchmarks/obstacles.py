@@ -2,7 +2,7 @@
 RRTConnect on the same queries.
 
     .venv/bin/python benchmarks/obstacles.py [--cases 9] [--seed 0] [--repeats 3]
-        [--timeout 30] [--only 0 3 ...] [--no-ompl] [--checkout DIR]
+        [--timeout 30] [--only 0 3 ...] [--no-ompl] [--checkout DIR] [--keep DIR]
 
 Queries (fixed seed): two random wrench-feasible Robot 2 poses (benchmarks/random_queries.py's
 ``feasible_poses``, within 30 deg of q2's orientation) whose straight motion (position linear, orientation slerp) is
@@ -13,24 +13,32 @@ both ends are at least 5 mm clear of it and the straight motion hits it (so ever
 needs a planner). Cable radius 1 mm.
 
 - ours: ``cdh-planner plan PROBLEM --json OUT --quiet`` (the problem and scene written to a
-  temporary folder), each in a fresh process; seconds = the process's wall clock.
+  temporary folder), each in a fresh process; seconds = the process's wall clock, and its
+  CPU seconds (user + system: a loaded machine inflates them less), and in-process the plan
+  call's own time (the JSON's ``time_s``: lift to the executed check).
+  ``--keep DIR`` also writes each case's problem file as DIR/case_K.yaml (to profile a case).
 - ompl: OMPL RRTConnect in SE(3) (benchmarks/vs_ompl.py's SE3Adapter and bounds) with this
   project's validity as the point-wise checker: a state is valid iff
   ``pipeline.validity.Validity.pose_margins`` (the wrench margin joined with the
   collision margin) is > 0; motions at OMPL's default resolution; in a fresh process
   (this script with ``--child``); seconds = setup + solve + simplifySolution, as in
-  vs_ompl.py, and the process's wall clock.
+  vs_ompl.py, and the process's wall clock and CPU seconds (which include the child's own
+  dense check of the path for the "unsafe" count, a few ms).
 
 Both run on a case before the next case starts (interleaved). Every path is checked
 densely with the scene (``trajectory.path_check.check_motion`` with the collision model,
 1 mm / 0.2 deg steps): "unsafe" counts paths that fail it. Medians over ``--repeats`` runs
-per case, then the median over the cases (a timeout counts as --timeout). Needs ompl
+per case, then the median over the cases (a timeout counts as --timeout); the last line
+compares the whole processes (ours / OMPL's median wall and CPU). ``--checkout DIR``: both
+sides run DIR's cdh_planner (OMPL's validity too), for a before/after. Needs ompl
 (benchmarks/requirements.txt) for the OMPL column; ``--no-ompl`` runs ours only.
 """
 
 import argparse
 import json
+import math
 import os
+import resource
 import statistics
 import subprocess
 import sys
@@ -130,48 +138,56 @@ def safe(robot, scene, p, quat):
     return all(s.feasible for s in check_motion(robot, p, quat, collision=cm))
 
 
+def children_cpu():
+    """CPU seconds (user + system) of this process's finished children."""
+    r = resource.getrusage(resource.RUSAGE_CHILDREN)
+    return r.ru_utime + r.ru_stime
+
+
 def run_ours(robot, case, timeout, checkout=ROOT):
-    """(status, seconds, safe) of one whole ``cdh-planner plan`` call (``checkout``'s
-    cdh_planner first on PYTHONPATH)."""
+    """(status, process wall s, process CPU s, in-process plan s, safe) of one whole
+    ``cdh-planner plan`` call (``checkout``'s cdh_planner first on PYTHONPATH)."""
     start, goal, scene = case
     with tempfile.TemporaryDirectory() as tmp:
         problem, out = problem_file(tmp, start, goal, scene, timeout), Path(tmp) / "plan.json"
-        t = time.perf_counter()
+        t, cpu = time.perf_counter(), children_cpu()
         try:
             subprocess.run([sys.executable, "-m", "cdh_planner.cli", "plan", str(problem), "--json",
                             str(out), "--quiet"], cwd=checkout, timeout=timeout + 30,
                            env=dict(os.environ, PYTHONPATH=str(checkout)),
                            stdout=subprocess.DEVNULL, stderr=subprocess.DEVNULL)
         except subprocess.TimeoutExpired:
-            return "timeout", timeout, None
-        seconds = time.perf_counter() - t
+            return "timeout", timeout, timeout, timeout, None
+        seconds, cpu = time.perf_counter() - t, children_cpu() - cpu
         if not out.exists():
-            return "error", seconds, None
+            return "error", seconds, cpu, seconds, None
         d = json.loads(out.read_text())
         if not d["success"]:
-            return d["reason"], seconds, None
+            return d["reason"], seconds, cpu, d["time_s"], None
         p = np.array([w["p"] for w in d["path"]])
         q = np.array([w["quaternion"] for w in d["path"]])
-        return "path", seconds, safe(robot, scene, p, q)
+        return "path", seconds, cpu, d["time_s"], safe(robot, scene, p, q)
 
 
-def run_ompl(case, timeout):
-    """(status, seconds of setup + solve + simplify, process seconds, safe) in a fresh process."""
+def run_ompl(case, timeout, checkout=ROOT):
+    """(status, seconds of setup + solve + simplify, process wall s, process CPU s, safe)
+    in a fresh process (``checkout``'s cdh_planner first on PYTHONPATH: its validity)."""
     start, goal, scene = case
     job = json.dumps({"start": [start.p.tolist(), start.tau.tolist()],
                       "goal": [goal.p.tolist(), goal.tau.tolist()], "scene": scene, "timeout": timeout})
-    t = time.perf_counter()
+    t, cpu = time.perf_counter(), children_cpu()
     try:
         res = subprocess.run([sys.executable, __file__, "--child", job], capture_output=True, text=True,
-                             timeout=timeout + 60, cwd=ROOT)
+                             timeout=timeout + 60, cwd=ROOT,
+                             env=dict(os.environ, PYTHONPATH=str(checkout)))
     except subprocess.TimeoutExpired:
-        return "timeout", timeout, timeout, None
-    wall = time.perf_counter() - t
+        return "timeout", timeout, timeout, timeout, None
+    wall, cpu = time.perf_counter() - t, children_cpu() - cpu
     try:
         d = json.loads(res.stdout.strip().splitlines()[-1])
     except (IndexError, json.JSONDecodeError):
-        return "error", wall, wall, None
-    return d["status"], d["seconds"], wall, d["safe"]
+        return "error", wall, wall, cpu, None
+    return d["status"], d["seconds"], wall, cpu, d["safe"]
 
 
 def child(job):
@@ -213,22 +229,32 @@ def main():
     ap.add_argument("--only", type=int, nargs="*", help="case indices to run")
     ap.add_argument("--no-ompl", action="store_true")
     ap.add_argument("--checkout", type=Path, default=ROOT,
-                    help="plan with this checkout's cdh_planner (e.g. main's, for a before/after)")
+                    help="plan with this checkout's cdh_planner, and give OMPL its validity (e.g. "
+                         "main's, for a before/after)")
+    ap.add_argument("--keep", type=Path, help="write each case's problem file into this folder")
     ap.add_argument("--child", help=argparse.SUPPRESS)
     args = ap.parse_args()
     if args.child:
         return child(args.child)
     robot = load_robot(ROBOT)
     all_cases = cases(robot, args.cases, args.seed)
+    if args.keep:
+        args.keep.mkdir(parents=True, exist_ok=True)
+        for k, case in enumerate(all_cases):
+            problem_file(args.keep, *case, args.timeout).rename(args.keep / f"case_{k}.yaml")
     try:
         import ompl  # noqa: F401
         use_ompl = not args.no_ompl
     except ImportError:
         use_ompl = False
         print("ompl not installed (pip install -r benchmarks/requirements.txt): ours only")
+    # per case, the median over the repeats of: ours (process wall, process CPU, in-process)
+    # and OMPL's (in-process, process wall, process CPU)
     ours_med, ompl_med, unsafe, solved = [], [], {"ours": 0, "ompl": 0}, {"ours": 0, "ompl": 0}
-    print(f"{'case':>4} {'obstacle':>8} | {'ours s (median)':>16} {'status':>8} | "
-          f"{'ompl s (median)':>16} {'process s':>9} {'status':>8}")
+    print("seconds, medians over the repeats; ours: whole process wall / CPU and the plan call "
+          "in-process; ompl: setup + solve + simplify in-process, whole process wall / CPU")
+    print(f"{'case':>4} {'obstacle':>8} | {'ours wall':>9} {'cpu':>5} {'in-proc':>7} {'status':>8} | "
+          f"{'ompl in-proc':>12} {'wall':>5} {'cpu':>5} {'status':>8}")
     for k, case in enumerate(all_cases):
         if args.only and k not in args.only:
             continue
@@ -236,25 +262,36 @@ def main():
         for _ in range(args.repeats):
             runs_ours.append(run_ours(robot, case, args.timeout, args.checkout.resolve()))
             if use_ompl:
-                runs_ompl.append(run_ompl(case, args.timeout))
+                runs_ompl.append(run_ompl(case, args.timeout, args.checkout.resolve()))
         for name, runs in (("ours", runs_ours), ("ompl", runs_ompl)):
             unsafe[name] += sum(r[-1] is False for r in runs)
             solved[name] += any(r[0] == "path" for r in runs)
-        mo = median([r[1] for r in runs_ours])
+        mo = [median([r[c] for r in runs_ours]) for c in (1, 2, 3)]
         ours_med.append(mo)
-        line = f"{k:>4} {case[2]['obstacles'][0]['id']:>8} | {mo:>16.2f} {runs_ours[0][0]:>8} |"
+        line = (f"{k:>4} {case[2]['obstacles'][0]['id']:>8} | {mo[0]:>9.2f} {mo[1]:>5.2f} "
+                f"{mo[2]:>7.2f} {runs_ours[0][0]:>8} |")
         if use_ompl:
-            mp = median([r[1] for r in runs_ompl])
+            mp = [median([r[c] for r in runs_ompl]) for c in (1, 2, 3)]
             ompl_med.append(mp)
-            line += f" {mp:>16.2f} {median([r[2] for r in runs_ompl]):>9.2f} {runs_ompl[0][0]:>8}"
+            line += f" {mp[0]:>12.2f} {mp[1]:>5.2f} {mp[2]:>5.2f} {runs_ompl[0][0]:>8}"
         print(line, flush=True)
-    print(f"ours: median {median(ours_med):.2f} s ({min(ours_med):.2f} - {max(ours_med):.2f}), "
+    print(f"ours: {_summary(ours_med, ('process wall', 'process CPU', 'in-process'))}; "
           f"{solved['ours']} of {len(ours_med)} solved, {unsafe['ours']} unsafe paths")
     if use_ompl:
-        print(f"ompl RRTConnect: median {median(ompl_med):.2f} s ({min(ompl_med):.2f} - "
-              f"{max(ompl_med):.2f}), {solved['ompl']} of {len(ompl_med)} solved, "
-              f"{unsafe['ompl']} unsafe paths")
+        print(f"ompl RRTConnect: {_summary(ompl_med, ('in-process', 'process wall', 'process CPU'))}; "
+              f"{solved['ompl']} of {len(ompl_med)} solved, {unsafe['ompl']} unsafe paths")
+        if ours_med:  # like with like: whole processes
+            ratio = [median([r[c] for r in ours_med]) / median([r[c + 1] for r in ompl_med])
+                     for c in (0, 1)]
+            print(f"ours / ompl, whole processes (medians): wall {ratio[0]:.2f}x, CPU {ratio[1]:.2f}x")
     return 0
+
+
+def _summary(rows, names):
+    """"name median s (least - most)" of each column of the per-case medians ``rows``."""
+    cols = list(zip(*rows)) or [()] * len(names)
+    return ", ".join(f"{n} median {median(c):.2f} s ({min(c, default=math.nan):.2f} - "
+                     f"{max(c, default=math.nan):.2f})" for n, c in zip(names, cols))
 
 
 if __name__ == "__main__":

@@ -97,6 +97,23 @@ def test_aot_and_jit_kernels_agree_bit_for_bit(platform):
         np.testing.assert_array_equal(a, j)
 
 
+@pytest.mark.skipif(not AOT_BUILT, reason="no ahead-of-time collision kernel built (make, or "
+                                          "python -m cdh_planner.scene.aot)")
+def test_aot_and_jit_cable_obstacle_distances_agree_bit_for_bit():
+    """The unpruned cable-obstacle entry (``CollisionModel.cable_obstacle_distances``) on
+    a sphere, a box and a cylinder near the cables: hits and misses."""
+    rng = np.random.default_rng(9)
+    cm = crowded_model(rng, None)
+    p, R = poses(rng, 40)
+    aot_entry = kernels.aot.load(kernels)["cable_obstacle_batch"]
+    jit_entry = kernels.jit_kernels()["cable_obstacle_batch"]
+    out = [np.zeros((len(p), cm.m, cm.K)) for _ in range(2)]
+    for entry, o in zip((aot_entry, jit_entry), out):
+        entry(p, R, cm.static, cm.pairs, o)
+    np.testing.assert_array_equal(out[0], out[1])
+    assert np.isfinite(out[0]).all() and (out[0] < 0).any() and (out[0] > 0).any()
+
+
 @pytest.mark.skipif(not AOT_BUILT, reason="no ahead-of-time collision kernel built")
 def test_with_the_aot_kernel_a_fresh_process_compiles_nothing():
     """A scene loaded and a pose checked in a fresh process: numba is never imported, so
@@ -112,3 +129,26 @@ def test_with_the_aot_kernel_a_fresh_process_compiles_nothing():
             "print('numba' in sys.modules)")
     out = subprocess.run([sys.executable, "-c", code], capture_output=True, text=True, check=True)
     assert out.stdout.strip() == "False"
+
+
+def test_coal_is_imported_only_when_a_pair_needs_it():
+    """Primitive obstacles and no platform shape: clearance, batches and every pair's
+    distances come from the compiled kernel and coal is never imported; a box platform's
+    pairs against an obstacle are coal's, so the first distances() imports it."""
+    code = ("import sys\nimport numpy as np\n"
+            "from cdh_planner.model.robot import load_robot\n"
+            "from cdh_planner.scene.collision import CollisionModel\n"
+            "from cdh_planner.scene.schema import scene_from_dict\n"
+            f"robot = load_robot({str(CONFIG / 'robot2.yaml')!r})\n"
+            "obstacles = [{'id': 'ball', 'type': 'sphere', 'radius': 0.01, 'position': [0, 0.05, 0.2]},\n"
+            "             {'id': 'block', 'type': 'box', 'size': [0.02, 0.03, 0.01], 'position': [0.05, 0, 0.2]}]\n"
+            "cm = CollisionModel(robot, scene_from_dict({'obstacles': obstacles}))\n"
+            "p, R = np.array([[0, 0, 0.4]] * 3), np.tile(np.eye(3), (3, 1, 1))\n"
+            "cm.clearance(p[0], R[0]), cm.margins(p, R), cm.distances(p[0], R[0])\n"
+            "before = 'coal' in sys.modules\n"
+            "box = {'type': 'box', 'size': [0.14, 0.14, 0.01]}\n"
+            "cm = CollisionModel(robot, scene_from_dict({'obstacles': obstacles, 'platform': box}))\n"
+            "cm.distances(p[0], R[0])\n"
+            "print(before, 'coal' in sys.modules)")
+    out = subprocess.run([sys.executable, "-c", code], capture_output=True, text=True, check=True)
+    assert out.stdout.strip() == "False True"

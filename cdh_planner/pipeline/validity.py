@@ -22,6 +22,7 @@ from ..scene.margin import COLLISION_UNIT_M, combine
 from ..trajectory.path_check import SlerpPath, TaskLinePath, check_motion, check_path
 
 COARSE_SAMPLES = 17  # a direct motion is first checked at these few points (a cheap "no")
+KNOWN_COLLISIONS = 512  # poses in collision remembered (``KnownCollisions``; the deepest kept)
 
 
 class Validity:
@@ -42,6 +43,8 @@ class Validity:
         self.periodic = np.array(task.periodic, dtype=bool)
         self.scene = scene
         self.collision = _collision_model(robot, scene)
+        self.known = None if self.collision is None else KnownCollisions(
+            robot, self.collision, scene.clearance + margin_floor * COLLISION_UNIT_M)
 
     def pose_margins(self, p, tau=None, R=None):
         """Margins (N,) and bindings of poses (p (N, 3) m, tau (N, 3) rad or R (N, 3, 3)):
@@ -108,16 +111,20 @@ class Validity:
         """Are n evenly spaced poses of every direct motion between the rows of y valid?
         (one vectorised closed-form call; ``motion``: ``direct_motion(y)`` if already built)"""
         motion = self.direct_motion(y) if motion is None else motion
-        seg = np.repeat(np.arange(motion.n_segments), n)
-        s = np.tile(np.linspace(0.0, 1.0, n), motion.n_segments)
-        p, R = motion(seg, s)
-        return bool(np.all(self.pose_margins(p, R=R)[0] >= self.margin_floor))
+        p, R = _samples(motion, n)
+        bad = ~(self.pose_margins(p, R=R)[0] >= self.margin_floor)
+        if self.known is not None and bad.any():
+            self.known.add(p[bad], R[bad])
+        return not bad.any()
 
     def motion(self, ya, yb):
-        """Is the direct motion ya -> yb dense-valid? A few points first (most unsafe
-        motions fail there), then the dense check."""
+        """Is the direct motion ya -> yb dense-valid? Not if it passes a pose known to be
+        in collision (``KnownCollisions``: a probe hit the obstacle there before); else a
+        few points first (most unsafe motions fail there), then the dense check."""
         y = np.array([ya, yb])
-        motion = self.direct_motion(y)  # built once for the three looks
+        motion = self.direct_motion(y)  # built once for the looks
+        if self.known is not None and self.known.crossed(*_samples(motion, COARSE_SAMPLES)):
+            return False
         if not (self.probe(y, COARSE_SAMPLES, motion) and self.probe(y, 8 * COARSE_SAMPLES, motion)):
             return False
         seg = check_path(self.robot, motion, collision=self.collision,
@@ -130,6 +137,63 @@ class Validity:
         ``trajectory.path_check`` segment report per pair."""
         return check_motion(self.robot, p, q, collision=self.collision,
                             feasibility=self.feasibility)
+
+
+def _samples(motion, n):
+    """Poses (p (M, 3) m, R (M, 3, 3)) at n evenly spaced points of each segment of a
+    direct motion."""
+    seg = np.repeat(np.arange(motion.n_segments), n)
+    s = np.tile(np.linspace(0.0, 1.0, n), motion.n_segments)
+    return motion(seg, s)
+
+
+class KnownCollisions:
+    """Poses that probes found in collision, each with the poses around it that must be
+    too, so that a direct motion through them is refused without a probe (the search
+    probes a direct motion to the same goal from chart after chart; behind an obstacle
+    each would hit it again).
+
+    At a pose where cable i against a primitive obstacle is at distance d (m, below
+    d_min: the scene's clearance plus the margin floor, in metres), every pose whose
+    platform anchor of cable i, p + R b_i, is within d_min - d of where it was is in
+    collision too: each point of the cable moves no more than its platform anchor (the
+    base anchor is fixed), and the distance moves no more than the cable's points
+    (``CollisionModel.binding_cables``). So a motion with a sample there is invalid,
+    whatever the probe's spacing. Holds the KNOWN_COLLISIONS deepest."""
+
+    def __init__(self, robot, collision, d_min):
+        """``d_min`` (m): the least valid distance (clearance + margin floor x
+        COLLISION_UNIT_M)."""
+        self.collision, self.d_min = collision, d_min
+        self.anchors = np.asarray(robot.platform_anchors, dtype=float)
+        self.cable = np.zeros(0, dtype=int)   # (K,) the binding cable
+        self.centre = np.zeros((0, 3))        # (K, 3) m: its platform anchor there
+        self.radius = np.zeros(0)             # (K,) m: d_min - d
+
+    def add(self, p, R):
+        """Remember the deepest of the poses (p (N, 3) m, R (N, 3, 3)) that a cable
+        against an obstacle makes invalid (the others: wrench, cable pairs, meshes, are
+        left out)."""
+        d, cable = self.collision.binding_cables(p, R)
+        if not np.any((cable >= 0) & (d < self.d_min)):
+            return
+        keep = np.array([np.argmin(np.where(cable >= 0, d, np.inf))])
+        i = cable[keep]
+        centre = p[keep] + np.einsum("nij,nj->ni", R[keep], self.anchors[i])
+        self.cable = np.concatenate([self.cable, i])
+        self.centre = np.concatenate([self.centre, centre])
+        self.radius = np.concatenate([self.radius, self.d_min - d[keep]])
+        if len(self.radius) > KNOWN_COLLISIONS:
+            deepest = np.argsort(-self.radius, kind="stable")[:KNOWN_COLLISIONS]
+            self.cable, self.centre, self.radius = \
+                self.cable[deepest], self.centre[deepest], self.radius[deepest]
+
+    def crossed(self, p, R):
+        """Is any of the poses (p (M, 3) m, R (M, 3, 3)) within a known collision?"""
+        if not len(self.radius):
+            return False
+        anchor = p[:, None, :] + np.einsum("mij,kj->mki", R, self.anchors[self.cable])
+        return bool(np.any(np.linalg.norm(anchor - self.centre, axis=2) < self.radius))
 
 
 class CollisionFreeDomain:

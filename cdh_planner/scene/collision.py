@@ -6,32 +6,35 @@ the platform's shape against every obstacle, every cable against the platform's 
 (beyond ``scene.shared_anchor_exemption`` of its platform anchor, where it is fixed to the
 body), and every pair of cables (those sharing an anchor point compared only beyond
 ``scene.shared_anchor_exemption`` of it: see ``schema``). Distances are signed (m, negative: penetration depth) and computed by the
-coal library (GJK / EPA and closed forms), except cable against cable: two capsules of
-one radius are the distance of two segments less 2 r, computed for all pairs at once in
-the compiled kernel below.
+coal library (GJK / EPA and closed forms) for a mesh, and for the platform against an
+obstacle; the rest in the compiled kernel below: cable against cable (two capsules of one
+radius are the distance of two segments less 2 r, all pairs at once), and cable against a
+primitive obstacle or platform.
 
-Cable against a sphere, box, cylinder or capsule platform: the kernel minimises the shape's signed
-distance (convex) along the cable by golden-section search (a capsule: segment against
-segment, closed form), exactly; in contact that is
-the deepest point of the cable's axis less its radius, where coal (a mesh platform, the
-obstacles) gives the penetration depth: the same sign, a smaller magnitude.
+Cable against a sphere, box, cylinder or capsule, platform or obstacle: the kernel
+minimises the shape's signed distance (convex) along the cable by golden-section search (a
+sphere: point against segment; a capsule: segment against segment, closed form), exactly;
+in contact that is the deepest point of the cable's axis less its radius, where coal (a
+mesh) gives the penetration depth: the same sign, a smaller magnitude.
 
 Speed: a compiled kernel computes all cable pairs and a lower bound for every
 cable-obstacle and platform-obstacle pair (bounding capsules of the obstacles: a sphere,
-or for a capsule the capsule itself, whose bound is then its exact distance); coal is
-then called in the order of those bounds only while a bound is below the least distance
-found, so the result is the exact least distance with a few library calls.
-benchmarks/collision.py measures it.
+or for a capsule the capsule itself, whose bound is then its exact distance), and the
+exact distance of a cable to a primitive obstacle only where that bound is below the least
+distance found so far; coal is then called (meshes, the platform against obstacles) in
+the order of the remaining bounds only while a bound is below the least distance found,
+so the result is the exact least distance with few or no library calls. coal is imported
+only when a pair needs it (a scene of primitive obstacles and no platform never loads
+it). benchmarks/collision.py measures it.
 """
 
 import math
 from dataclasses import dataclass
 
-import coal
 import numpy as np
 
 from ..model.shape_forms import COAL_FORM
-from .kernels import collision_batch
+from .kernels import cable_obstacle_batch, collision_batch
 from .margin import COLLISION_UNIT_M, combine  # noqa: F401  (their home; re-exported)
 from .schema import SHARED_ANCHOR_M
 
@@ -89,13 +92,16 @@ class CollisionModel:
         cores = [o.type.bounding_capsule(o) for o in self.obstacles]  # (half axis, radius)
         axes = np.array([h for h, _ in cores], dtype=float).reshape(-1, 3)
         radii = np.array([rad for _, rad in cores], dtype=float)
+        forms = [_kernel_form(o) for o in self.obstacles]  # exact in the kernel unless COAL_FORM
+        self.exact = [f[0] != COAL_FORM for f in forms]
         plat = self.platform
         self.static = np.concatenate([  # the kernel's constants (offsets: kernels._kernel)
-            A.ravel(), B.ravel(), centres.ravel(), axes.ravel(), radii, trims.ravel(),
+            A.ravel(), B.ravel(), centres.ravel(), axes.ravel(), radii,
+            np.reshape(forms, -1), trims.ravel(),
             [scene.cable_radius, scene.shared_anchor_exemption],
             plat.position if plat else np.zeros(3),
             [plat.bounding_radius() if plat else -1.0],  # < 0: no platform
-            _platform_form(plat)])  # its kind code, 3 dimensions, rotation (platform frame)
+            _kernel_form(plat)])  # its kind code, 3 dimensions, rotation (platform frame)
         self.m, self.K = m, K
         self.buffers = self._buffers(1)  # one pose's (clearance, distances, lower_bounds)
         self.lb, self.frames, self.frames_p, self.cc, self.cp, self.least = \
@@ -105,7 +111,10 @@ class CollisionModel:
                                       for i, j in self.pairs] + ["collision "], dtype=object)
         self.own_binding = np.array([f"collision {n} / platform" for n in self.names],
                                     dtype=object)
-        self._coal(m)
+        self.obstacle_binding = np.array([f"collision {n} / {o}" for n in self.names
+                                          for o in [*(o.id for o in self.obstacles), "platform"]],
+                                         dtype=object)  # index i (K + 1) + k (kernel: least)
+        self.coal_ready = False  # coal's objects: made when a pair first needs them
 
     def _buffers(self, n):
         """The kernel's work buffers for n poses: lower bounds (rows: cables, then the
@@ -123,9 +132,14 @@ class CollisionModel:
         collision_batch(np.ascontiguousarray(p, dtype=float), np.ascontiguousarray(R, dtype=float),
                         self.static, self.pairs, *buffers)
 
-    def _coal(self, m):
-        """coal's shapes, placements and distance functors (cables, platform, obstacles)."""
-        scene, plat = self.scene, self.platform
+    def _coal(self):
+        """coal's shapes, placements and distance functors (cables, platform, obstacles),
+        made on the first call that needs one (a scene of primitive obstacles and no
+        platform never imports coal)."""
+        if self.coal_ready:
+            return
+        import coal
+        scene, plat, m = self.scene, self.platform, self.m
         self.capsules = [coal.Capsule(float(scene.cable_radius), 1.0) for _ in range(m)]
         self.cable_T = [coal.Transform3s() for _ in range(m)]
         self.capsules_p = [coal.Capsule(float(scene.cable_radius), 1.0) for _ in range(m)]
@@ -142,6 +156,7 @@ class CollisionModel:
         self.request = coal.DistanceRequest()
         self.request.gjk_tolerance = GJK_TOLERANCE
         self.result = coal.DistanceResult()
+        self.coal_ready = True
 
     # ------------------------------------------------------------------ least distance
 
@@ -155,11 +170,7 @@ class CollisionModel:
         """(least distance m, what binds: (kind, obstacle index, cables) or None) of pose
         (p, R) from its kernel buffers, calling coal in the order of the lower bounds ``lb``
         while one is below the least distance found (``lb`` is consumed)."""
-        best, kind, n = least   # the kernel's least cable-cable / cable-platform distance
-        what = None if kind < 0 else \
-            ("cable-cable", None, tuple(map(int, self.pairs[int(n)]))) if kind == 0 else \
-            ("cable-platform", self.K, (int(n),))
-        best = float(best)
+        best, what = float(least[0]), self._kernel_least(least)
         flat = lb.ravel()  # consumed: each pair tried is set to inf
         m, K = self.m, self.K
         while True:  # in increasing order of the bounds, while one is below the best
@@ -177,6 +188,19 @@ class CollisionModel:
             if d < best:
                 best, what = d, w
         return best, what
+
+    def _kernel_least(self, least):
+        """What binds the kernel's least distance (value, kind, index): (kind, obstacle
+        index (K: the platform), cables) or None."""
+        kind, n = int(least[1]), int(least[2])
+        if kind == 0:
+            return "cable-cable", None, tuple(map(int, self.pairs[n]))
+        if kind == 1:
+            return "cable-platform", self.K, (n,)
+        if kind == 2:
+            i, k = divmod(n, self.K + 1)
+            return "cable-obstacle", k, (i,)
+        return None
 
     def _pose(self, p, R):
         """Fill the one-pose buffers for pose (p, R): lower bounds, pair distances, frames."""
@@ -198,8 +222,9 @@ class CollisionModel:
 
     def _cable_obstacle(self, i, k, frames):
         """Signed distance (m) of cable i's capsule (its frame ``frames[i]``, from the
-        kernel) to obstacle k, by coal."""
+        kernel) to obstacle k, by coal (a mesh: the kernel has the primitives')."""
         f = frames[i]
+        self._coal()
         self.capsules[i].halfLength = f[12]
         T = self.cable_T[i]
         T.setTransform(f[:9].reshape(3, 3), f[9:12])
@@ -208,6 +233,7 @@ class CollisionModel:
 
     def _platform_obstacle(self, k, p, R):
         """Signed distance (m) of the platform's shape at (p, R) to obstacle k, by coal."""
+        self._coal()
         self._place_platform(p, R)
         self.result.clear()
         return float(self.platform_fn[k](self.platform_T, self.placement[k], self.request,
@@ -217,6 +243,7 @@ class CollisionModel:
         """Signed distance (m) of cable i's capsule, short of its platform anchor by the
         exemption (its frame ``frames_p[i]``, from the kernel), to the platform's own shape
         at (p, R)."""
+        self._coal()
         f = frames_p[i]
         self.capsules_p[i].halfLength = f[12]
         T = self.cable_T[i]
@@ -235,11 +262,12 @@ class CollisionModel:
         """Every checked pair at pose (p, R): a list of (kind, obstacle id or None, cable
         indices, signed distance m), unpruned (for tests and markers)."""
         p, R = self._pose(p, R)
+        exact = self.cable_obstacle_distances(p[None], R[None])[0]
         out = [("cable-cable", None, tuple(map(int, pair)), float(d))
                for pair, d in zip(self.pairs, self.cc)]
         for k, o in enumerate(self.obstacles):
-            out += [("cable-obstacle", o.id, (i,), self._cable_obstacle(i, k, self.frames))
-                    for i in range(len(self.names))]
+            out += [("cable-obstacle", o.id, (i,), float(exact[i, k]) if self.exact[k]
+                     else self._cable_obstacle(i, k, self.frames)) for i in range(len(self.names))]
             if self.platform is not None:
                 out.append(("platform-obstacle", o.id, (), self._platform_obstacle(k, p, R)))
         K = len(self.obstacles)
@@ -260,18 +288,43 @@ class CollisionModel:
         best = least[:, 0].copy()
         kind, index = least[:, 1].astype(int), least[:, 2].astype(int)
         binding = np.where(kind == 1, self.own_binding[np.where(kind == 1, index, 0)],
-                           self.pair_binding[np.where(kind == 0, index, -1)])
+                           np.where(kind == 2, self.obstacle_binding[np.where(kind == 2, index, 0)],
+                                    self.pair_binding[np.where(kind == 0, index, -1)]))
         near = np.flatnonzero(lb.reshape(len(p), -1).min(axis=1) < best) if len(p) else ()
         for n in near:
             best[n], what = self._resolve(p[n], R[n], lb[n], least[n], frames[n], frames_p[n])
             binding[n] = f"collision {self._answer(best[n], what).binding}"
         return best - self.scene.clearance, binding
 
+    def cable_obstacle_distances(self, p, R):
+        """Every cable's signed distance (m) to every primitive obstacle, unpruned: (N, m, K)
+        at poses p (N, 3) m, R (N, 3, 3), the kernel's numbers (nan for a mesh: coal's)."""
+        p = np.ascontiguousarray(p, dtype=float).reshape(-1, 3)
+        R = np.ascontiguousarray(R, dtype=float).reshape(-1, 3, 3)
+        out = np.empty((len(p), self.m, self.K))
+        cable_obstacle_batch(p, R, self.static, self.pairs, out)
+        return out
 
-def _platform_form(shape):
-    """The kernel's description of a platform shape (13 numbers): its form code and three
-    numbers (model.shapes: ``kernel_form``; COAL_FORM without a platform), its rotation in
-    the platform frame (row-major)."""
+    def binding_cables(self, p, R):
+        """(distance (N,) m, cable (N,) int) at poses p (N, 3) m, R (N, 3, 3): where a cable
+        against a primitive obstacle is the kernel's least distance, that distance and the
+        cable's index (the distance is the kernel's exact one, and moves no more than the
+        cable's platform anchor does: each point of the cable moves less); elsewhere
+        (inf, -1). One compiled call, no coal."""
+        p = np.ascontiguousarray(p, dtype=float).reshape(-1, 3)
+        R = np.ascontiguousarray(R, dtype=float).reshape(-1, 3, 3)
+        buffers = self._buffers(len(p))
+        self._run(p, R, buffers)
+        least = buffers[-1]
+        hit = least[:, 1] == 2.0
+        cable = np.where(hit, least[:, 2].astype(int) // (self.K + 1), -1)
+        return np.where(hit, least[:, 0], np.inf), cable
+
+
+def _kernel_form(shape):
+    """The kernel's description of a shape (13 numbers): its form code and three numbers
+    (model.shapes: ``kernel_form``; COAL_FORM without a platform), its rotation (row-major;
+    a platform's in the platform frame, an obstacle's in the base frame)."""
     if shape is None:
         return np.r_[COAL_FORM, 0.0, 0.0, 0.0, np.eye(3).ravel()]
     return np.r_[shape.type.kernel_form(shape), np.asarray(shape.rotation, float).ravel()]

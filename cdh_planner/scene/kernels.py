@@ -1,7 +1,8 @@
 """The compiled kernel of the collision checks (collision.py): for a batch of poses, the
 lower bounds of every cable-obstacle and platform-obstacle distance (bounding spheres),
-the exact cable-cable and cable-platform (primitive platform) distances and the cables'
-capsule frames for coal. Plain Python functions compiled by numba (no numba import here):
+the exact cable-cable, cable-platform (primitive platform) and cable-obstacle (primitive
+obstacle, where its bound does not rule it out) distances and the cables' capsule frames
+for coal. Plain Python functions compiled by numba (no numba import here):
 ahead of time by ``python -m cdh_planner.scene.aot`` (``make``), else by the JIT
 (``cdh_planner.aot``: one way for every kernel of the package).
 """
@@ -26,6 +27,52 @@ def _batch(P, Rs, static, pairs, lb, frames, frames_p, cc, cp, least):
     for n in range(P.shape[0]):
         _kernel(P[n], Rs[n], static, pairs, lb[n], frames[n], frames_p[n], cc[n], cp[n])
         _least(cc[n], cp[n], least[n])
+        _obstacles(static, pairs.shape[0], lb[n], frames[n], least[n])
+
+
+def _obstacles(static, n_pairs, lb, frames, least):
+    """Cable against primitive obstacle (sphere, box, cylinder, capsule; form codes in
+    static, after the bounding radii), exactly (``_segment_sdf``: the signed distance of
+    the cable's axis, less its radius) for each pair whose lower bound lb[i, k] is below the
+    least distance so far, which it lowers (least: value, 2, i (K + 1) + k); lb[i, k] of
+    every primitive pair is then inf (nothing left for coal: an exact distance not below
+    the least found is never the least). A mesh (COAL_FORM) keeps its bound for coal."""
+    m, K = lb.shape[0] - 1, lb.shape[1] - 1
+    for i in range(m):
+        a, b = _v(static, 3 * i), _v(frames[i], 13)
+        for k in range(K):
+            if static[6 * m + 7 * K + 13 * k] == COAL_FORM:
+                continue
+            if lb[i, k] < least[0]:
+                d = _cable_obstacle(static, m, K, n_pairs, k, a, b)
+                if d < least[0]:
+                    least[0], least[1], least[2] = d, 2.0, i * (K + 1) + k
+            lb[i, k] = np.inf
+
+
+def _cable_obstacle(static, m, K, n_pairs, k, a, b):
+    """Signed distance (m) of the cable a..b (its axis; less the cable radius) to the
+    primitive obstacle k (its form at 6 m + 7 K + 13 k of static: code, three numbers,
+    rotation row-major; its centre at 6 m + 3 k)."""
+    f = 6 * m + 7 * K + 13 * k
+    c, M = _v(static, 6 * m + 3 * k), static[f + 4:f + 13]
+    r = static[6 * m + 20 * K + 2 * n_pairs]
+    return _segment_sdf(_local(M, c, a), _local(M, c, b), static[f:f + 4]) - r
+
+
+def _cable_obstacle_batch(P, Rs, static, pairs, out):
+    """out[n, i, k] = ``_cable_obstacle`` of cable i and obstacle k at pose n (P[n] (3,)
+    m, Rs[n] (3, 3)), every pair unpruned; nan for a mesh (COAL_FORM: coal's)."""
+    m, K = out.shape[1], out.shape[2]
+    for n in range(P.shape[0]):
+        for i in range(m):
+            a = _v(static, 3 * i)
+            b = _add(_rot(Rs[n], _v(static, 3 * m + 3 * i)), _v(P[n], 0))
+            for k in range(K):
+                if static[6 * m + 7 * K + 13 * k] == COAL_FORM:
+                    out[n, i, k] = np.nan
+                else:
+                    out[n, i, k] = _cable_obstacle(static, m, K, pairs.shape[0], k, a, b)
 
 
 def _kernel(p, R, static, pairs, lb, frames, frames_p, cc, cp):
@@ -44,7 +91,7 @@ def _kernel(p, R, static, pairs, lb, frames, frames_p, cc, cp):
     oB, oC = 3 * m, 6 * m
     oH = oC + 3 * K   # the obstacles' bounding capsules: half axes, then radii
     oR = oH + 3 * K
-    oT = oR + K
+    oT = oR + K + 13 * K   # after the obstacles' forms (``_obstacles``)
     o = oT + 2 * P
     r, rho = static[o], static[o + 1]
     pc = _add(_rot(R, _v(static, o + 2)), _v(p, 0))
@@ -89,7 +136,7 @@ def _point_core(c, h, x):
 
 def _least(cc, cp, out):
     """out = (least of cc and cp, 0 if it is cc's / 1 if cp's / -1 if both are empty or
-    inf, its index)."""
+    inf, its index); ``_obstacles`` may lower it after."""
     out[0], out[1], out[2] = np.inf, -1.0, -1.0
     for n in range(cc.shape[0]):
         if cc[n] < out[0]:
@@ -274,14 +321,16 @@ def _segment_segment(p0, p1, q0, q1):
 
 
 # ----- compilation -------------------------------------------------------------------------
-HELPERS = ("_kernel", "_core_distance", "_point_core", "_least", "_own", "_local", "_axes", "_sdf", "_segment_sdf", "_v", "_add",
+HELPERS = ("_kernel", "_obstacles", "_cable_obstacle", "_core_distance", "_point_core", "_least", "_own", "_local", "_axes", "_sdf", "_segment_sdf", "_v", "_add",
            "_sub", "_scale", "_dot", "_norm", "_rot", "_frame", "_cut", "_point_segment",
            "_segment_segment")
 INLINE = ("_v", "_add", "_sub", "_scale", "_dot", "_norm", "_rot")
 AOT_EXPORTS = {"collision_batch": (
     "void(float64[:, ::1], float64[:, :, ::1], float64[::1], int64[:, ::1], "
     "float64[:, :, ::1], float64[:, :, ::1], float64[:, :, ::1], float64[:, ::1], "
-    "float64[:, ::1], float64[:, ::1])")}
+    "float64[:, ::1], float64[:, ::1])"),
+    "cable_obstacle_batch": (
+    "void(float64[:, ::1], float64[:, :, ::1], float64[::1], int64[:, ::1], float64[:, :, ::1])")}
 AOT_PREFIX = "_kernels_aot_"
 
 
@@ -303,8 +352,11 @@ def jit_kernel():
 
 
 def jit_kernels():
-    """``jit_kernel`` by its entry's name (``cdh_planner.aot``)."""
-    return {"collision_batch": jit_kernel()}
+    """The JIT entries by name (``cdh_planner.aot``): ``jit_kernel`` and the unpruned
+    cable-obstacle distances."""
+    return {"collision_batch": jit_kernel(),
+            "cable_obstacle_batch": aot.jit(globals(), HELPERS, INLINE)(_cable_obstacle_batch)}
 
 
-collision_batch = aot_kernel() or jit_kernel()
+_ENTRIES = aot.entries(sys.modules[__name__])
+collision_batch, cable_obstacle_batch = (_ENTRIES[k] for k in AOT_EXPORTS)
