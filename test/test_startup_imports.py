@@ -59,13 +59,14 @@ def _kernels_built():
     from cdh_planner.scene import kernels as scene_kernels
     from cdh_planner.model import elastic_kernel
     from cdh_planner.wrench import compiled
-    return aot_built(kernels, scene_kernels, compiled, elastic_kernel)
+    from cdh_planner import accuracy_kernel
+    return aot_built(kernels, scene_kernels, compiled, elastic_kernel, accuracy_kernel)
 
 
 @pytest.mark.skipif(not _kernels_built(), reason="no ahead-of-time kernels built (make)")
 def test_an_eight_cable_plan_and_verify_compile_nothing(tmp_path):
     """robot2_8 planned over charts (the manifold's kernel, the band test: the centred
-    rule), CoGiRo poses verified (the facet test): with the kernels built ahead of time
+    rule), CoGiRo poses verified (the facet test, the accuracy's zonotope): with the kernels built ahead of time
     numba is never imported, so nothing is compiled."""
     problem = REPO / "config" / "problems" / "robot2_8_pivot.yaml"
     poses = tmp_path / "poses.json"

@@ -99,7 +99,7 @@ def run(args):
         feas = dataclasses.replace(feas, margin=margin, binding=binding)
     segments = check_motion(robot, poses.positions, poses.quaternions, step_m, step_rad,
                             collision)
-    ok = bool(np.all(feas.feasible)) and all(s.feasible for s in segments)
+    ok = bool(np.all(feas.feasible)) and bool(np.all(segments.feasible))
 
     acc = (pose_accuracy(robot, poses.positions, R=poses.rotations,  # the tensions: once
                          tensions=feas.tension_nominal) if has_accuracy(robot) else None)
@@ -146,21 +146,18 @@ def pose_columns(poses, feas, accuracy=None):
 
 
 def segment_columns(segments):
-    """The segments' JSON fields, name -> array or a nested mapping of them (``worst``), or a
-    list of ready texts (``first_unsafe``: null for most segments)."""
-    worst = [s.worst for s in segments]
-    return {"from": np.array([s.index_from for s in segments]),
-            "to": np.array([s.index_to for s in segments]),
-            "feasible": np.array([bool(s.feasible) for s in segments]),
-            "samples": np.array([s.samples for s in segments]),
-            "unresolved": np.array([s.unresolved for s in segments]),
-            "worst": {"s": np.array([p.s for p in worst]),
-                      "margin": np.array([p.margin for p in worst]),
-                      "binding": [p.binding for p in worst],
-                      "position": np.array([p.position for p in worst]),
-                      "quaternion": np.array([p.quaternion for p in worst])},
-            "first_unsafe": _Texts("null" if s.first_unsafe is None else
-                                   _encode(_point_dict(s.first_unsafe)) for s in segments)}
+    """The segments' JSON fields (``segments``: a path_check.SegmentChecks), name -> array or
+    a nested mapping of them (``worst``), or a list of ready texts (``first_unsafe``: null
+    for most segments)."""
+    worst, n = segments.worst, len(segments)
+    first_unsafe = _Texts(["null"] * n)
+    for k, point in zip(segments.unsafe_index.tolist(), segments.unsafe):
+        first_unsafe[k] = _encode(_point_dict(point))
+    return {"from": np.arange(n), "to": np.arange(1, n + 1), "feasible": segments.feasible,
+            "samples": segments.samples, "unresolved": segments.unresolved,
+            "worst": {"s": worst.s, "margin": worst.margin, "binding": worst.binding,
+                      "position": worst.position, "quaternion": worst.quaternion},
+            "first_unsafe": first_unsafe}
 
 
 class _Texts(list):
@@ -310,9 +307,10 @@ def print_report(robot, poses, feas, segments, ok, accuracy=None, every=True):
               f"{_vec(1e3 * robot.length_error, '.3g')} mm")
     print()
     n_pose_ok = int(np.sum(feas.feasible))
-    n_seg_ok = sum(s.feasible for s in segments)
+    n_seg_ok = int(np.sum(segments.feasible))
     listed = np.arange(len(poses)) if every else np.flatnonzero(~feas.feasible)[:LISTED_NOT_FEASIBLE]
-    seg_listed = segments if every else [s for s in segments if not s.feasible][:LISTED_NOT_FEASIBLE]
+    seg_listed = (segments if every else
+                  [segments[k] for k in np.flatnonzero(~segments.feasible)[:LISTED_NOT_FEASIBLE]])
     if not every:
         print(f"listing only poses and segments that are not feasible, at most "
               f"{LISTED_NOT_FEASIBLE} of each (--all lists every one, --json OUT writes all)")
@@ -380,7 +378,7 @@ def _print_least_margin(feas, segments):
     i = int(np.argmin(feas.margin))
     print(f"least margin: pose {i} {_num(float(feas.margin[i]), '+.4f')} ({feas.binding[i]})")
     if segments:
-        s = min(segments, key=lambda s: s.worst.margin)
+        s = segments[int(np.argmin(segments.worst.margin))]
         print(f"  segment {s.index_from} -> {s.index_to} {_point_text(s.worst)}")
     print()
 
