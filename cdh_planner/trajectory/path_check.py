@@ -35,7 +35,7 @@ import numpy as np
 from ..ports import Rotation
 
 from ..errors import InputError
-from ..wrench import wrench_feasibility
+from ..wrench import wrench_margin
 from ..model.pose import rotation_angle_between, rotation_tt
 from ..scene.margin import combine
 
@@ -163,10 +163,11 @@ def check_path(robot, path, max_step_m=DEFAULT_STEP_M, max_step_rad=DEFAULT_STEP
                collision=None, feasibility=None):
     """Dense check of every segment of ``path`` (SlerpPath, TaskLinePath or alike:
     ``path(seg, s) -> (p, R)``, ``path.speeds()``, ``path.n_segments``); ``collision``: a
-    scene's CollisionModel or None; ``feasibility(robot, p, R=R)``: the margin checked
-    (default ``wrench_feasibility``; the planner's is ``band_feasibility``). Returns the
+    scene's CollisionModel or None; ``feasibility(robot, p, R=R)``: the margin checked, a
+    record with ``margin`` and ``binding`` (default ``wrench_margin``, the exact test's; the
+    planner's is ``band_feasibility``). Returns the
     SegmentChecks of the segments."""
-    samples = _Samples(robot, path, collision, feasibility or wrench_feasibility)
+    samples = _Samples(robot, path, collision, feasibility or wrench_margin)
     if path.n_segments < 1:
         return _segment_results(samples, {}, np.zeros(0, dtype=int))
     samples.add(*_initial_grid(path, max_step_m, max_step_rad))
@@ -203,7 +204,7 @@ def _initial_grid(path, max_step_m, max_step_rad):
 class _Samples:
     """Evaluated samples of all segments, kept sorted by (segment, s)."""
 
-    def __init__(self, robot, path, collision=None, feasibility=wrench_feasibility):
+    def __init__(self, robot, path, collision=None, feasibility=wrench_margin):
         self.robot, self.path, self.collision = robot, path, collision
         self.feasibility = feasibility
         self.seg = np.empty(0, dtype=int)
