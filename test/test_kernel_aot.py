@@ -15,6 +15,7 @@ import numpy as np
 import pytest
 
 from cdh_planner import accuracy_kernel, aot as aot_helper
+from cdh_planner.commands import json_rows
 from cdh_planner.manifold import kernels
 from cdh_planner.model import elastic_kernel
 from cdh_planner.accuracy import error_map
@@ -27,20 +28,22 @@ from cdh_planner.wrench.geometry import inverse_factor
 from conftest import CONFIG, aot_built
 
 AOT_BUILT = aot_built(kernels)
-ALL_BUILT = aot_built(kernels, scene_kernels, wrench_kernels, elastic_kernel, accuracy_kernel)
+ALL_BUILT = aot_built(kernels, scene_kernels, wrench_kernels, elastic_kernel, accuracy_kernel,
+                      json_rows)
 NOT_BUILT = ("no ahead-of-time kernels built (make, or python -m "
              "cdh_planner.<manifold|scene|wrench>.aot, cdh_planner.model.elastic_aot, "
-             "cdh_planner.accuracy_aot)")
+             "cdh_planner.accuracy_aot, cdh_planner.commands.json_rows_aot)")
 
 SOURCES = [(kernels, ("kernels.py", "layout.py")),
            (scene_kernels, ("kernels.py", "../model/shape_forms.py")),
            (wrench_kernels, ("compiled.py", "kernel.py", "centred.py", "linalg.py")),
            (elastic_kernel, ("elastic_kernel.py",)),
-           (accuracy_kernel, ("accuracy_kernel.py",))]
-MODULES = ["manifold", "scene", "wrench", "elastic", "accuracy"]
+           (accuracy_kernel, ("accuracy_kernel.py",)), (json_rows, ("json_rows.py",))]
+MODULES = ["manifold", "scene", "wrench", "elastic", "accuracy", "json_rows"]
 BUILDERS = {"manifold": "cdh_planner.manifold.aot", "scene": "cdh_planner.scene.aot",
             "wrench": "cdh_planner.wrench.aot", "elastic": "cdh_planner.model.elastic_aot",
-            "accuracy": "cdh_planner.accuracy_aot"}
+            "accuracy": "cdh_planner.accuracy_aot",
+            "json_rows": "cdh_planner.commands.json_rows_aot"}
 
 
 @pytest.mark.parametrize("module, sources", SOURCES, ids=MODULES)
@@ -51,7 +54,7 @@ def test_the_aot_module_is_named_after_the_digest_of_the_kernel_source(module, s
 
 
 @pytest.mark.parametrize("module", [kernels, scene_kernels, wrench_kernels, elastic_kernel,
-                                    accuracy_kernel], ids=MODULES)
+                                    accuracy_kernel, json_rows], ids=MODULES)
 def test_a_build_of_other_source_is_never_loaded(module, monkeypatch):
     monkeypatch.setattr(module, "source_digest", lambda: "000000000000")
     assert aot_helper.load(module) is None
@@ -172,6 +175,27 @@ def test_aot_and_jit_accuracy_kernels_agree_bit_for_bit(name):
         assert flags is plain or (aot[1][:100].all() and aot[2].all())  # degenerate ones seen
         for a, j in zip(aot, jit):
             np.testing.assert_array_equal(a, j)
+
+
+@pytest.mark.skipif(not ALL_BUILT, reason=NOT_BUILT)
+def test_aot_and_jit_json_rows_kernels_agree_byte_for_byte():
+    """verify's rows of a small document put together by both builds, and the rows are
+    those written by hand."""
+    from cdh_planner.commands.verify import ROW_SEPARATOR, _rows_text
+    columns = {"p": np.array([[1.5, -2e-5], [np.nan, 3.0]]), "ok": np.array([True, False]),
+               "worst": {"binding": ["tension_min[2,5]", "singular"], "n": np.array([7, 8])}}
+    expected = ('{"p": [1.5, -2e-05], "ok": true, "worst": {"binding": "tension_min[2,5]", "n": 7}}'
+                + ROW_SEPARATOR +
+                '{"p": [null, 3.0], "ok": false, "worst": {"binding": "singular", "n": 8}}')
+    assert _rows_text(columns) == [expected]
+    src = np.frombuffer(b"[1.5,2],[3,4]abc", dtype=np.uint8).copy()
+    args = (src, np.array([[0, 13], [8, 15]]), np.array([[7, 15], [13, 16]]),
+            np.array([True, False]), np.frombuffer(b"{a: , b: }", dtype=np.uint8).copy(),
+            np.array([0, 4, 9, 10]), np.frombuffer(ROW_SEPARATOR.encode(), dtype=np.uint8).copy())
+    aot = aot_helper.load(json_rows)["assemble_rows"](*args)
+    jit = json_rows.jit_kernels()["assemble_rows"](*args)
+    assert aot.tobytes() == jit.tobytes() == (b"{a: [1.5, 2], b: ab}" + ROW_SEPARATOR.encode()
+                                              + b"{a: [3, 4], b: c}")
 
 
 def test_the_threaded_wrench_kernels_give_the_serial_answers():

@@ -60,14 +60,15 @@ def _kernels_built():
     from cdh_planner.model import elastic_kernel
     from cdh_planner.wrench import compiled
     from cdh_planner import accuracy_kernel
-    return aot_built(kernels, scene_kernels, compiled, elastic_kernel, accuracy_kernel)
+    from cdh_planner.commands import json_rows
+    return aot_built(kernels, scene_kernels, compiled, elastic_kernel, accuracy_kernel, json_rows)
 
 
 @pytest.mark.skipif(not _kernels_built(), reason="no ahead-of-time kernels built (make)")
 def test_an_eight_cable_plan_and_verify_compile_nothing(tmp_path):
     """robot2_8 planned over charts (the manifold's kernel, the band test: the centred
-    rule), CoGiRo poses verified (the facet test, the accuracy's zonotope): with the kernels built ahead of time
-    numba is never imported, so nothing is compiled."""
+    rule), CoGiRo poses verified (the facet test, the accuracy's zonotope, the JSON rows):
+    with the kernels built ahead of time numba is never imported, so nothing is compiled."""
     problem = REPO / "config" / "problems" / "robot2_8_pivot.yaml"
     poses = tmp_path / "poses.json"
     poses.write_text(json.dumps([{"position": [0.0, 0.0, 2.5], "tau": [0.0, 0.0, 0.0]},
@@ -76,7 +77,8 @@ def test_an_eight_cable_plan_and_verify_compile_nothing(tmp_path):
     code = ("import contextlib, io\nfrom cdh_planner import cli\n"
             "with contextlib.redirect_stdout(io.StringIO()) as out:\n"
             f"    assert cli.main(['plan', {str(problem)!r}, '--quiet']) == 0\n"
-            f"    assert cli.main(['verify', {str(cogiro)!r}, {str(poses)!r}]) == 0\n"
+            f"    assert cli.main(['verify', {str(cogiro)!r}, {str(poses)!r}, '--json', "
+            f"{str(tmp_path / 'out.json')!r}]) == 0\n"
             "import re\nassert re.search(r'over [1-9][0-9]* charts', out.getvalue())\n"
             "assert 'ALL FEASIBLE' in out.getvalue()")
     assert "numba" not in _modules_after(code)
