@@ -349,7 +349,7 @@ def test_verify_report_is_linear_in_the_poses():
                 verify_cmd.print_report(robot, poses, feas, segments, True)
             finally:
                 sys.stdout = stdout
-        verify_cmd.result_text(robot, poses, feas, segments, True, 1e-3, 1e-3)
+        verify_cmd.result_json(robot, poses, feas, segments, True, 1e-3, 1e-3)
         return feas.reads
 
     small, large = array_reads(500), array_reads(2000)

@@ -107,7 +107,7 @@ def run(args):
                  every=args.all_poses or len(poses) <= FULL_REPORT_POSES)
     if json_out:
         write_text("--json", json_out,
-                   result_text(robot, poses, feas, segments, ok, step_m, step_rad, acc))
+                   result_json(robot, poses, feas, segments, ok, step_m, step_rad, acc))
         print(f"wrote {json_out}")
     return EXIT_OK if ok else EXIT_INFEASIBLE
 
@@ -118,18 +118,20 @@ def _positive(value, option, text):
     return value
 
 
-def result_text(robot, poses, feas, segments, ok, step_m, step_rad, accuracy=None):
-    """The JSON document as ``dump_rows`` lays it out (a pose or a segment a line), built
-    column by column: each array goes through the C encoder once, then the rows are
-    assembled by the compiled ``json_rows`` (the encoder per row costs 3x more for 10^4
-    poses, a template per row 2x);
-    ``accuracy``: the poses' ``accuracy.Accuracy`` (robots with length_error), or None."""
-    return layout_rows({
+def result_json(robot, poses, feas, segments, ok, step_m, step_rad, accuracy=None):
+    """The JSON document (ASCII bytes) as ``dump_rows`` lays it out (a pose or a segment a
+    line), built column by column: each array goes through the C encoder once, then the rows
+    are assembled by the compiled ``json_rows`` (the encoder per row costs 3x more for 10^4
+    poses, a template per row 2x), then one join of bytes (no str of the 27 MB to encode
+    again); ``accuracy``: the poses' ``accuracy.Accuracy`` (robots with length_error), or
+    None."""
+    return b"".join(piece.encode("ascii") if isinstance(piece, str) else piece
+                    for piece in _layout_pieces({
         "robot": _encode(robot.name), "robot_file": _encode(robot.source),
         "max_step_m": _encode(step_m), "max_step_rad": _encode(step_rad),
         "poses": _rows_text(pose_columns(poses, feas, accuracy)),
         "segments": _rows_text(segment_columns(segments)) if segments else [],
-        "all_feasible": _encode(bool(ok))})
+        "all_feasible": _encode(bool(ok))}))
 
 
 def pose_columns(poses, feas, accuracy=None):
@@ -169,7 +171,8 @@ def _rows_text(columns):
     """The JSON object texts of the rows of ``columns`` (name -> array, list of strings,
     nested mapping of them, or a ``_Texts`` of ready texts), joined as ``layout_rows`` joins
     list entries: a list of that one text. Each column's texts lie in one buffer (numbers by
-    one orjson call a column); the compiled ``json_rows`` puts the rows together."""
+    one orjson call a column); the compiled ``json_rows`` puts the rows together (the text
+    as its uint8 array of ASCII)."""
     from .json_rows import assemble_rows  # machine code: loaded only for a --json
     literals, cols = _row_literals(columns)
     buffers, starts, ends, spaced, base = [], [], [], [], 0
@@ -184,7 +187,7 @@ def _rows_text(columns):
     out = assemble_rows(np.concatenate(buffers), np.column_stack(starts), np.column_stack(ends),
                         np.array(spaced), _ascii("".join(literals)), bounds,
                         _ascii(ROW_SEPARATOR))
-    return [str(out, "ascii")]  # decoded from its buffer: no copy of the bytes first
+    return [out]
 
 
 def _ascii(text):
@@ -294,6 +297,12 @@ def layout_rows(texts):
     """The JSON text of a mapping ``texts`` (key -> the JSON text of its value, or a list of
     the JSON texts of its entries): a key a line, a list entry a line. One join of all the
     pieces: the text is copied once (30 MB for 20,000 eight-cable poses)."""
+    return "".join(_layout_pieces(texts))
+
+
+def _layout_pieces(texts):
+    """The pieces of ``layout_rows``'s text in order (the texts given, and the keys, brackets
+    and separators around them)."""
     pieces = []
     for key, text in texts.items():
         pieces += [",\n  " if pieces else "{\n  ", _encode(key), ": "]
@@ -304,7 +313,7 @@ def layout_rows(texts):
         else:
             pieces.append("[]" if isinstance(text, list) else text)
     pieces.append("\n}\n")
-    return "".join(pieces)
+    return pieces
 
 
 _ENCODER = json.JSONEncoder(allow_nan=False)
