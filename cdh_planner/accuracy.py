@@ -35,6 +35,7 @@ exact value by at most that sum (1e-13 of it).
 """
 
 from dataclasses import dataclass
+
 import numpy as np
 
 from .errors import InputError
@@ -199,7 +200,7 @@ def _zonotope_max(g):
     """max ||sum_i s_i g_i|| over signs s, g (N, 3, m) finite generators (module docstring):
     the vertices around the pairs' corners by the compiled ``accuracy_kernel``, the poses
     without a usable pair here."""
-    n, _, m = g.shape
+    m = g.shape[-1]
     norms = np.linalg.norm(g, axis=1)  # (N, m)
     if m < 2:
         return norms.sum(axis=1)

@@ -191,6 +191,7 @@ def _rows_text(columns):
 
 
 def _ascii(text):
+    """``text`` as a (writable) uint8 array of its ASCII bytes, as the kernel takes it."""
     return np.frombuffer(text.encode("ascii"), dtype=np.uint8).copy()
 
 
@@ -199,7 +200,7 @@ def _row_literals(columns):
     fields' columns in order): a row is literals[0] field 0 literals[1] ... literals[F]."""
     literals, cols = ["{"], []
     for i, (key, col) in enumerate(columns.items()):
-        literals[-1] += ("" if i == 0 else ", ") + _encode(key) + ": "  # keys hold no "%"
+        literals[-1] += ("" if i == 0 else ", ") + _encode(key) + ": "
         if isinstance(col, dict):
             inner, inner_cols = _row_literals(col)
             literals[-1] += inner[0]

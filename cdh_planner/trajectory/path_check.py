@@ -165,8 +165,7 @@ def check_path(robot, path, max_step_m=DEFAULT_STEP_M, max_step_rad=DEFAULT_STEP
     ``path(seg, s) -> (p, R)``, ``path.speeds()``, ``path.n_segments``); ``collision``: a
     scene's CollisionModel or None; ``feasibility(robot, p, R=R)``: the margin checked, a
     record with ``margin`` and ``binding`` (default ``wrench_margin``, the exact test's; the
-    planner's is ``band_feasibility``). Returns the
-    SegmentChecks of the segments."""
+    planner's is ``band_feasibility``). Returns the SegmentChecks of the segments."""
     samples = _Samples(robot, path, collision, feasibility or wrench_margin)
     if path.n_segments < 1:
         return _segment_results(samples, {}, np.zeros(0, dtype=int))

@@ -55,11 +55,12 @@ from .record import (CONSTRAINTS, SINGULAR_DET, STATUS_EXCEEDS, STATUS_INFEASIBL
                      STATUS_SINGULAR, Feasibility, Margin, WrenchFeasibility)
 from .rules import DEFAULT_RULE, RULES, TensionRule, register, rule_of, stiffness_band
 
-__all__ = ["wrench_feasibility", "wrench_margin", "band_feasibility", "band_margin", "rule_tensions",
-           "tension_map", "stiffness_band", "RULES", "DEFAULT_RULE", "TensionRule", "register",
-           "Feasibility", "WrenchFeasibility", "Margin", "CONSTRAINTS", "SINGULAR_DET", "STATUS_OK",
-           "STATUS_EXCEEDS", "STATUS_INFEASIBLE", "STATUS_SINGULAR", "cable_vectors",
-           "screw_jacobian", "load_point", "nominal_wrench", "inverse_ellipsoid_factor", "skew"]
+__all__ = ["wrench_feasibility", "wrench_margin", "band_feasibility", "band_margin",
+           "rule_tensions", "tension_map", "stiffness_band", "RULES", "DEFAULT_RULE",
+           "TensionRule", "register", "Feasibility", "WrenchFeasibility", "Margin", "CONSTRAINTS",
+           "SINGULAR_DET", "STATUS_OK", "STATUS_EXCEEDS", "STATUS_INFEASIBLE", "STATUS_SINGULAR",
+           "cable_vectors", "screw_jacobian", "load_point", "nominal_wrench",
+           "inverse_ellipsoid_factor", "skew"]
 
 
 def _six_cables(robot):
