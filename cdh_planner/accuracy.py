@@ -35,21 +35,19 @@ exact value by at most that sum (1e-13 of it).
 """
 
 from dataclasses import dataclass
-from itertools import combinations
 
 import numpy as np
 
 from .errors import InputError
 from .wrench import cable_vectors, rule_tensions, screw_jacobian
 from .model import elastic
-from .model.pose import cross, rotation_tt
+from .model.pose import rotation_tt
 
 PARALLEL_TOL = 1e-6   # sin of the angle between two generators below which they count as parallel
 ORTHO_TOL = 1e-9      # |g_k . c| / (|g_k| |c|) below which g_k counts as in the plane of a pair
 TINY = 1e-13          # generators shorter than this times the largest are left out (added)
 BRUTE_FORCE_MAX_CABLES = 16  # degenerate poses: all 2^m vertices up to here, else the bound
 SINGULAR_SCALE = 1e-12  # sqrt(det A A^T) below this: A singular, the accuracy is inf
-CHUNK = 256           # poses per vectorised block (memory ~ CHUNK m^3 floats)
 
 
 @dataclass(frozen=True)
@@ -194,62 +192,30 @@ def box_max_norm(M, e):
     g = M * np.broadcast_to(np.asarray(e, dtype=float), M.shape[-1:])
     out = np.full(len(g), np.inf)
     ok = np.all(np.isfinite(g), axis=(1, 2))
-    idx = np.flatnonzero(ok)
-    for s in range(0, len(idx), CHUNK):
-        rows = idx[s:s + CHUNK]
-        out[rows] = _zonotope_max(g[rows])
+    out[ok] = _zonotope_max(g[ok])
     return out
 
 
 def _zonotope_max(g):
-    """max ||sum_i s_i g_i|| over signs s, g (N, 3, m) finite generators (module docstring)."""
-    n, _, m = g.shape
+    """max ||sum_i s_i g_i|| over signs s, g (N, 3, m) finite generators (module docstring):
+    the vertices around the pairs' corners by the compiled ``accuracy_kernel``, the poses
+    without a usable pair here."""
+    m = g.shape[-1]
     norms = np.linalg.norm(g, axis=1)  # (N, m)
-    tiny = norms <= TINY * norms.max(axis=1, keepdims=True)
-    g = np.where(tiny[:, None, :], 0.0, g)
-    extra = np.where(tiny, norms, 0.0).sum(axis=1)
     if m < 2:
         return norms.sum(axis=1)
-    i, j = np.array(list(combinations(range(m), 2))).T  # pairs (P,)
-    gi, gj = g[:, :, i], g[:, :, j]  # (N, 3, P)
-    c = cross(gi, gj, axis=1)  # (N, 3, P): np.cross's products, components contiguous
-    cn = np.sqrt(c[:, 0] * c[:, 0] + c[:, 1] * c[:, 1] + c[:, 2] * c[:, 2])  # (N, P): the norm's sum
-    live = ~(tiny[:, i] | tiny[:, j])  # pairs of two real generators
-    with np.errstate(invalid="ignore", divide="ignore"):
-        sin = cn / (norms[:, i] * norms[:, j])
-        chat = c / cn[:, None, :]
-        D = np.swapaxes(chat, 1, 2) @ g  # (N, P, m): c . g_k
-        rel = np.abs(D) / norms[:, None, :]
-    parallel = live & ~(sin > PARALLEL_TOL)
-    pair_cols = np.zeros((len(i), m), dtype=bool)
-    pair_cols[np.arange(len(i)), i] = pair_cols[np.arange(len(i)), j] = True
-    in_plane = live[:, :, None] & ~pair_cols & ~tiny[:, None, :] & ~(rel > ORTHO_TOL)
-    degenerate = parallel.any(axis=1) | in_plane.any(axis=(1, 2))
-    use = live & ~parallel
-    signs = np.where(pair_cols | tiny[:, None, :] | ~use[:, :, None], 0.0, np.sign(D))
-    base = np.nan_to_num(signs) @ np.swapaxes(g, 1, 2)  # (N, P, 3)
-    best = np.sqrt(_vertex_max_sq(np.moveaxis(base, 2, 0), np.moveaxis(gi, 1, 0),
-                                  np.moveaxis(gj, 1, 0), use))
-    single = ~use.any(axis=1) & ~degenerate  # at most one real generator: its length
+    tiny = norms <= TINY * norms.max(axis=1, keepdims=True)
+    g = np.ascontiguousarray(np.where(tiny[:, None, :], 0.0, g))
+    extra = np.where(tiny, norms, 0.0).sum(axis=1)
+    from .accuracy_kernel import vertex_max_kernel  # machine code: loaded only when needed
+    best, degenerate, used = vertex_max_kernel(g, np.ascontiguousarray(norms), tiny,
+                                               PARALLEL_TOL, ORTHO_TOL)
+    single = ~used & ~degenerate  # at most one real generator: its length
     best = np.where(single, norms.sum(axis=1), best)
     for r in np.flatnonzero(degenerate):
         best[r] = (brute_force_max(g[r:r + 1])[0] if m <= BRUTE_FORCE_MAX_CABLES
                    else norms[r].sum())
     return best + extra
-
-
-def _vertex_max_sq(base, gi, gj, use):
-    """max over the pairs in ``use`` (N, P) and the signs a, b of ||base + a g_i + b g_j||^2
-    (N,), 0 where no pair is used; base, gi, gj (3, N, P) by component. Component arrays
-    rather than a norm over a last axis of 3 (4x faster), summed in the norm's order, so
-    that the sqrt of this is bit for bit the largest norm."""
-    best = np.zeros(use.shape)
-    for a in (1.0, -1.0):
-        partial = [base[k] + a * gi[k] for k in range(3)]
-        for b in (1.0, -1.0):
-            x = [partial[k] + b * gj[k] for k in range(3)]
-            np.maximum(best, x[0] * x[0] + x[1] * x[1] + x[2] * x[2], out=best)
-    return np.where(use, best, 0.0).max(axis=1)
 
 
 def brute_force_max(g):

@@ -282,6 +282,7 @@ def test_a_write_error_at_the_end_is_one_line(tmp_path, capsys, poses, monkeypat
         raise OSError(errno.ENOSPC, os.strerror(errno.ENOSPC), str(self))
 
     monkeypatch.setattr("pathlib.Path.write_text", full)
+    monkeypatch.setattr("pathlib.Path.write_bytes", full)  # verify's JSON: ASCII bytes
     line = run_cli(capsys, ["verify", ROBOT2, poses, "--json", tmp_path / "out.json"])
     assert "--json" in line and "No space left" in line
 
@@ -349,7 +350,7 @@ def test_verify_report_is_linear_in_the_poses():
                 verify_cmd.print_report(robot, poses, feas, segments, True)
             finally:
                 sys.stdout = stdout
-        verify_cmd.result_text(robot, poses, feas, segments, True, 1e-3, 1e-3)
+        verify_cmd.result_json(robot, poses, feas, segments, True, 1e-3, 1e-3)
         return feas.reads
 
     small, large = array_reads(500), array_reads(2000)

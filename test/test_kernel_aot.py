@@ -14,9 +14,11 @@ from pathlib import Path
 import numpy as np
 import pytest
 
-from cdh_planner import aot as aot_helper
+from cdh_planner import accuracy_kernel, aot as aot_helper
+from cdh_planner.commands import json_rows
 from cdh_planner.manifold import kernels
 from cdh_planner.model import elastic_kernel
+from cdh_planner.accuracy import error_map
 from cdh_planner.model.pose import rotation_tt
 from cdh_planner.model.robot import load_robot
 from cdh_planner.scene import kernels as scene_kernels
@@ -26,17 +28,22 @@ from cdh_planner.wrench.geometry import inverse_factor
 from conftest import CONFIG, aot_built
 
 AOT_BUILT = aot_built(kernels)
-ALL_BUILT = aot_built(kernels, scene_kernels, wrench_kernels, elastic_kernel)
+ALL_BUILT = aot_built(kernels, scene_kernels, wrench_kernels, elastic_kernel, accuracy_kernel,
+                      json_rows)
 NOT_BUILT = ("no ahead-of-time kernels built (make, or python -m "
-             "cdh_planner.<manifold|scene|wrench>.aot, cdh_planner.model.elastic_aot)")
+             "cdh_planner.<manifold|scene|wrench>.aot, cdh_planner.model.elastic_aot, "
+             "cdh_planner.accuracy_aot, cdh_planner.commands.json_rows_aot)")
 
 SOURCES = [(kernels, ("kernels.py", "layout.py")),
            (scene_kernels, ("kernels.py", "../model/shape_forms.py")),
            (wrench_kernels, ("compiled.py", "kernel.py", "centred.py", "linalg.py")),
-           (elastic_kernel, ("elastic_kernel.py",))]
-MODULES = ["manifold", "scene", "wrench", "elastic"]
+           (elastic_kernel, ("elastic_kernel.py",)),
+           (accuracy_kernel, ("accuracy_kernel.py",)), (json_rows, ("json_rows.py",))]
+MODULES = ["manifold", "scene", "wrench", "elastic", "accuracy", "json_rows"]
 BUILDERS = {"manifold": "cdh_planner.manifold.aot", "scene": "cdh_planner.scene.aot",
-            "wrench": "cdh_planner.wrench.aot", "elastic": "cdh_planner.model.elastic_aot"}
+            "wrench": "cdh_planner.wrench.aot", "elastic": "cdh_planner.model.elastic_aot",
+            "accuracy": "cdh_planner.accuracy_aot",
+            "json_rows": "cdh_planner.commands.json_rows_aot"}
 
 
 @pytest.mark.parametrize("module, sources", SOURCES, ids=MODULES)
@@ -46,8 +53,8 @@ def test_the_aot_module_is_named_after_the_digest_of_the_kernel_source(module, s
     assert aot_helper.module_name(module) == module.AOT_PREFIX + h.hexdigest()[:12]
 
 
-@pytest.mark.parametrize("module", [kernels, scene_kernels, wrench_kernels, elastic_kernel],
-                         ids=MODULES)
+@pytest.mark.parametrize("module", [kernels, scene_kernels, wrench_kernels, elastic_kernel,
+                                    accuracy_kernel, json_rows], ids=MODULES)
 def test_a_build_of_other_source_is_never_loaded(module, monkeypatch):
     monkeypatch.setattr(module, "source_digest", lambda: "000000000000")
     assert aot_helper.load(module) is None
@@ -144,6 +151,54 @@ def test_aot_and_jit_wrench_kernels_agree_bit_for_bit(name, n):
         np.testing.assert_array_equal(a, j)
 
 
+@pytest.mark.skipif(not ALL_BUILT, reason=NOT_BUILT)
+@pytest.mark.parametrize("name", ["robot2", "cogiro", "robot2_8"])
+def test_aot_and_jit_accuracy_kernels_agree_bit_for_bit(name):
+    """The zonotope kernel on the position and rotation rows of the error maps of a walk,
+    and on generators made degenerate (parallel, in a pair's plane, tiny), both builds."""
+    robot = load_robot(CONFIG / f"{name}.yaml")
+    p, R = _wrench_inputs(robot, 300, 8)[0][:2]
+    G = error_map(robot, p, R)
+    rng = np.random.default_rng(9)
+    g = rng.normal(size=(300, 3, G.shape[-1]))
+    g[:50, :, 1] = 2.0 * g[:50, :, 0]
+    g[50:100, :, 3] = g[50:100, :, 0] - g[50:100, :, 2]
+    tiny = np.zeros(g.shape[::2], dtype=bool)
+    tiny[100:150, 2] = True
+    g[tiny[:, None, :].repeat(3, axis=1)] = 0.0
+    plain = np.zeros_like(tiny)
+    for gen, flags in ((G[:, :3], plain), (G[:, 3:], plain), (g, tiny)):
+        gen = np.ascontiguousarray(np.nan_to_num(gen))
+        args = (gen, np.linalg.norm(gen, axis=1), flags, 1e-6, 1e-9)
+        aot = aot_helper.load(accuracy_kernel)["vertex_max_kernel"](*args)
+        jit = accuracy_kernel.jit_kernels()["vertex_max_kernel"](*args)
+        assert flags is plain or (aot[1][:100].all() and aot[2].all())  # degenerate ones seen
+        for a, j in zip(aot, jit):
+            np.testing.assert_array_equal(a, j)
+
+
+@pytest.mark.skipif(not ALL_BUILT, reason=NOT_BUILT)
+def test_aot_and_jit_json_rows_kernels_agree_byte_for_byte():
+    """verify's rows of a small document put together by both builds, and the rows are
+    those written by hand."""
+    from cdh_planner.commands.verify import ROW_SEPARATOR, _rows_text
+    columns = {"p": np.array([[1.5, -2e-5], [np.nan, 3.0]]), "ok": np.array([True, False]),
+               "worst": {"binding": ["tension_min[2,5]", "singular"], "n": np.array([7, 8])}}
+    expected = ('{"p": [1.5, -2e-05], "ok": true, "worst": {"binding": "tension_min[2,5]", "n": 7}}'
+                + ROW_SEPARATOR +
+                '{"p": [null, 3.0], "ok": false, "worst": {"binding": "singular", "n": 8}}')
+    (rows,) = _rows_text(columns)
+    assert rows.tobytes().decode() == expected
+    src = np.frombuffer(b"[1.5,2],[3,4]abc", dtype=np.uint8).copy()
+    args = (src, np.array([[0, 13], [8, 15]]), np.array([[7, 15], [13, 16]]),
+            np.array([True, False]), np.frombuffer(b"{a: , b: }", dtype=np.uint8).copy(),
+            np.array([0, 4, 9, 10]), np.frombuffer(ROW_SEPARATOR.encode(), dtype=np.uint8).copy())
+    aot = aot_helper.load(json_rows)["assemble_rows"](*args)
+    jit = json_rows.jit_kernels()["assemble_rows"](*args)
+    assert aot.tobytes() == jit.tobytes() == (b"{a: [1.5, 2], b: ab}" + ROW_SEPARATOR.encode()
+                                              + b"{a: [3, 4], b: c}")
+
+
 def test_the_threaded_wrench_kernels_give_the_serial_answers():
     """The same chunks on numba's threads (loaded here whatever the batch size) as in the
     serial entries from PARALLEL_MIN poses: the same numbers, the centred rule's warm starts
@@ -185,7 +240,8 @@ def test_the_wrench_entries_take_any_layout_and_type():
 
 # Each compiled kernel called once in a fresh process: the manifold's F / F_x, the collision
 # kernel, the wrench entries (the pose geometry, the facet test, the centred rule) of an
-# 8-cable robot through the package's entries, and its elastic equilibrium. Prints whether
+# 8-cable robot through the package's entries, its elastic equilibrium and its accuracy
+# (the zonotope kernel). Prints whether
 # numba was imported.
 FRESH_CALLS = f"""
 import sys, json
@@ -214,6 +270,8 @@ L0 = elastic.unstretched_lengths(robot, f.lengths, f.tension_nominal)
 w = robot.wrench_center_local
 eq = elastic.equilibrium_poses(robot, L0, p, R, w[None, :3], w[None, 3:], np.zeros((1, 3)))
 answers.append(float(eq.p[0, 2]))
+from cdh_planner.accuracy import pose_accuracy
+answers.append(float(pose_accuracy(robot, p, R=R).position_m[0]))
 print(json.dumps(["numba" in sys.modules, answers]))
 """
 

@@ -314,3 +314,20 @@ def test_elastic_fields_are_optional_per_cable_or_one_number(tmp_path):
     r = load_robot(path)
     assert r.cable_stiffness.tolist() == [2500.0] * 6
     assert r.length_error[1] == 2e-4
+
+
+def test_the_degeneracy_probes_are_the_generators_draws():
+    """The probes written out in model/jacobian_probes.py are default_rng(0)'s first draws in
+    the check's order (positions, axes, angles), so the check is the one it was with the
+    generator; loading a robot then imports no numpy.random."""
+    from cdh_planner.model import jacobian_probes as J
+    rng = np.random.default_rng(0)
+    n = J.PROBES
+    np.testing.assert_array_equal(np.reshape(J.OFFSETS, (n, 3)), rng.uniform(-0.5, 0.5, (n, 3)))
+    np.testing.assert_array_equal(np.reshape(J.AXES, (n, 3)), rng.normal(size=(n, 3)))
+    np.testing.assert_array_equal(J.ANGLES, rng.uniform(0.0, 0.5, n))
+    code = (f"import sys\nfrom cdh_planner.model.robot import load_robot\n"
+            f"load_robot({str(ROOT / 'config' / 'cogiro.yaml')!r})\n"
+            "print('numpy.random' in sys.modules)")
+    out = subprocess.run([sys.executable, "-c", code], capture_output=True, text=True, check=True)
+    assert out.stdout.strip() == "False"

@@ -11,7 +11,8 @@ from cdh_planner import cli
 from conftest import REPO, aot_built
 
 HEAVY = ("toppra", "matplotlib", "matplotlib.pyplot", "rclpy", "scipy.spatial", "numba", "numpy",
-         "scipy", "scipy.interpolate", "scipy.sparse", "scipy.linalg", "scipy.optimize", "numpy.ma")
+         "scipy", "scipy.interpolate", "scipy.sparse", "scipy.linalg", "scipy.optimize", "numpy.ma",
+         "coal", "numpy.random", "yaml")
 SCIPY = {"scipy", "scipy.spatial", "scipy.interpolate", "scipy.sparse", "scipy.linalg", "scipy.optimize"}
 
 
@@ -59,14 +60,16 @@ def _kernels_built():
     from cdh_planner.scene import kernels as scene_kernels
     from cdh_planner.model import elastic_kernel
     from cdh_planner.wrench import compiled
-    return aot_built(kernels, scene_kernels, compiled, elastic_kernel)
+    from cdh_planner import accuracy_kernel
+    from cdh_planner.commands import json_rows
+    return aot_built(kernels, scene_kernels, compiled, elastic_kernel, accuracy_kernel, json_rows)
 
 
 @pytest.mark.skipif(not _kernels_built(), reason="no ahead-of-time kernels built (make)")
 def test_an_eight_cable_plan_and_verify_compile_nothing(tmp_path):
     """robot2_8 planned over charts (the manifold's kernel, the band test: the centred
-    rule), CoGiRo poses verified (the facet test): with the kernels built ahead of time
-    numba is never imported, so nothing is compiled."""
+    rule), CoGiRo poses verified (the facet test, the accuracy's zonotope, the JSON rows):
+    with the kernels built ahead of time numba is never imported, so nothing is compiled."""
     problem = REPO / "config" / "problems" / "robot2_8_pivot.yaml"
     poses = tmp_path / "poses.json"
     poses.write_text(json.dumps([{"position": [0.0, 0.0, 2.5], "tau": [0.0, 0.0, 0.0]},
@@ -75,10 +78,27 @@ def test_an_eight_cable_plan_and_verify_compile_nothing(tmp_path):
     code = ("import contextlib, io\nfrom cdh_planner import cli\n"
             "with contextlib.redirect_stdout(io.StringIO()) as out:\n"
             f"    assert cli.main(['plan', {str(problem)!r}, '--quiet']) == 0\n"
-            f"    assert cli.main(['verify', {str(cogiro)!r}, {str(poses)!r}]) == 0\n"
+            f"    assert cli.main(['verify', {str(cogiro)!r}, {str(poses)!r}, '--json', "
+            f"{str(tmp_path / 'out.json')!r}]) == 0\n"
             "import re\nassert re.search(r'over [1-9][0-9]* charts', out.getvalue())\n"
             "assert 'ALL FEASIBLE' in out.getvalue()")
     assert "numba" not in _modules_after(code)
+
+
+@pytest.mark.skipif(not _kernels_built(), reason="no ahead-of-time kernels built (make)")
+def test_verify_with_a_scene_clear_of_the_bounds_loads_no_coal_numba_or_scipy(tmp_path):
+    """Robot 2 poses next to the ball of config/scenes/robot2_ball.yaml, written to --json:
+    the compiled kernel's lower bounds settle every pose, so coal (30 - 60 ms to import) is
+    never loaded; nor numba, scipy or numpy.random (the robot file's probes)."""
+    poses = tmp_path / "poses.json"
+    poses.write_text(json.dumps([{"position": [0.0, 0.0, 0.3], "tau": [0.0, 0.1, 0.0]},
+                                 {"position": [0.001, 0.0, 0.3], "tau": [0.0, 0.1, 0.0]}]))
+    code = ("import contextlib, io\nfrom cdh_planner import cli\n"
+            "with contextlib.redirect_stdout(io.StringIO()) as out:\n"
+            f"    assert cli.main(['verify', {str(REPO / 'config' / 'robot2.yaml')!r}, "
+            f"{str(poses)!r}, '--scene', {str(REPO / 'config' / 'scenes' / 'robot2_ball.yaml')!r}, "
+            f"'--json', {str(tmp_path / 'out.json')!r}]) == 0\n")
+    assert _modules_after(code) == {"numpy", "yaml"}
 
 
 def test_toppra_is_imported_without_matplotlib_and_its_plt_still_works():

@@ -165,7 +165,7 @@ def fake_evaluate(margin_of_s):
 def test_refinement_catches_a_dip_between_coarse_samples(monkeypatch):
     # V-shaped margin dipping below zero on [0.5025, 0.5035]: samples every 0.1 all see
     # positive margins, but the steep secants around s = 0.5 trigger refinement.
-    monkeypatch.setattr(tv, "wrench_feasibility", fake_evaluate(lambda s: 2 * np.abs(s - 0.503) - 0.001))
+    monkeypatch.setattr(tv, "wrench_margin", fake_evaluate(lambda s: 2 * np.abs(s - 0.503) - 0.001))
     (check,) = tv.check_path(None, LinePath(), max_step_m=0.1)
     assert not check.feasible
     assert check.first_unsafe.s == pytest.approx(0.5025, abs=1e-9)
@@ -173,14 +173,14 @@ def test_refinement_catches_a_dip_between_coarse_samples(monkeypatch):
 
 
 def test_no_refinement_where_the_margin_is_comfortable(monkeypatch):
-    monkeypatch.setattr(tv, "wrench_feasibility", fake_evaluate(lambda s: 0.5 + 0.1 * np.sin(3 * s)))
+    monkeypatch.setattr(tv, "wrench_margin", fake_evaluate(lambda s: 0.5 + 0.1 * np.sin(3 * s)))
     (check,) = tv.check_path(None, LinePath(), max_step_m=0.1)
     assert check.feasible and check.first_unsafe is None
     assert check.samples == 11
 
 
 def test_first_unsafe_at_the_start(monkeypatch):
-    monkeypatch.setattr(tv, "wrench_feasibility", fake_evaluate(lambda s: s - 0.5))
+    monkeypatch.setattr(tv, "wrench_margin", fake_evaluate(lambda s: s - 0.5))
     (check,) = tv.check_path(None, LinePath(), max_step_m=0.1)
     assert check.first_unsafe.s == 0.0 and check.worst.s == 0.0
 
@@ -188,7 +188,7 @@ def test_first_unsafe_at_the_start(monkeypatch):
 def test_margin_grazing_zero_is_reported_unresolved(monkeypatch):
     # Tangent to zero at s = 0.5037 (between samples): sampling cannot decide; refinement
     # stops at its limits and says so in ``unresolved`` instead of looping.
-    monkeypatch.setattr(tv, "wrench_feasibility", fake_evaluate(lambda s: (s - 0.5037) ** 2))
+    monkeypatch.setattr(tv, "wrench_margin", fake_evaluate(lambda s: (s - 0.5037) ** 2))
     monkeypatch.setattr(tv, "MAX_SAMPLES", 5000)
     (check,) = tv.check_path(None, LinePath(), max_step_m=0.01)
     assert check.unresolved > 0
@@ -197,7 +197,7 @@ def test_margin_grazing_zero_is_reported_unresolved(monkeypatch):
 
 
 def test_margin_close_to_zero_is_resolved_by_refinement(monkeypatch):
-    monkeypatch.setattr(tv, "wrench_feasibility", fake_evaluate(lambda s: (s - 0.5037) ** 2 + 1e-10))
+    monkeypatch.setattr(tv, "wrench_margin", fake_evaluate(lambda s: (s - 0.5037) ** 2 + 1e-10))
     (check,) = tv.check_path(None, LinePath(), max_step_m=0.01)
     assert check.feasible and check.unresolved == 0
     assert check.worst.margin == pytest.approx(1e-10, rel=0.5)

@@ -338,3 +338,26 @@ def test_threaded_kernel_gives_the_serial_answers():
     parts = [zt.facet_test(robot, p[k:k + 1000], tau[k:k + 1000]) for k in range(0, len(p), 1000)]
     for name in ("margin", "margin_newtons", "tension_nominal", "tension_spread", "binding"):
         np.testing.assert_array_equal(getattr(whole, name), np.concatenate([getattr(f, name) for f in parts]))
+
+
+@pytest.mark.parametrize("name, centre, half", [
+    ("robot2", (0.0, 0.0, 0.3), 0.2), ("robot2_8", (0.0, 0.0, 0.3), 0.2),
+    ("cogiro", (0.0, 0.0, 2.5), 5.0), ("ipanema2", (0.0, 0.0, 3.0), 3.0)])
+def test_wrench_margin_is_the_exact_tests_margin_and_binding(name, centre, half):
+    """``wrench_margin`` (the dense motion check's test: for m > 6 the facet test without the
+    tension rule) gives ``wrench_feasibility``'s margin and binding bit for bit: feasible,
+    infeasible (lengths, facets) and singular poses (a platform anchor on its base anchor)."""
+    robot = load_robot(CONFIG / f"{name}.yaml")
+    rng = np.random.default_rng(11)
+    scale = np.repeat([0.05, 0.2, 1.0], 200)[:, None]  # near the centre, then farther
+    p = centre + scale * rng.uniform(-1.0, 1.0, (600, 3)) * half
+    tau = np.column_stack([rng.uniform(-np.pi, np.pi, 600), rng.uniform(0.0, 0.3, 600),
+                           rng.uniform(-0.3, 0.3, 600)]) * scale
+    R = rotation_tt(tau)
+    R[0] = np.eye(3)
+    p[0] = robot.base_anchors[0] - robot.platform_anchors[0]  # cable 1 of length 0: singular
+    full, alone = fz.wrench_feasibility(robot, p, R=R), fz.wrench_margin(robot, p, R=R)
+    np.testing.assert_array_equal(alone.margin, full.margin)
+    np.testing.assert_array_equal(alone.binding, full.binding)
+    assert full.binding[0] == "singular" and 0 < np.sum(full.margin > 0) < len(p) - 100
+    assert len(set(full.binding)) > 4

@@ -69,9 +69,13 @@ def writing(option, path):
 
 
 def write_text(option, path, text):
-    """Write ``text`` to ``path``; an OSError becomes an InputError naming ``option``."""
+    """Write ``text`` (a str, or bytes written as they are) to ``path``; an OSError becomes
+    an InputError naming ``option``."""
     with writing(option, path):
-        Path(path).write_text(text)
+        if isinstance(text, bytes):
+            Path(path).write_bytes(text)
+        else:
+            Path(path).write_text(text)
 
 
 def print_or_write(option, path, text):

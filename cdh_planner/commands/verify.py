@@ -99,7 +99,7 @@ def run(args):
         feas = dataclasses.replace(feas, margin=margin, binding=binding)
     segments = check_motion(robot, poses.positions, poses.quaternions, step_m, step_rad,
                             collision)
-    ok = bool(np.all(feas.feasible)) and all(s.feasible for s in segments)
+    ok = bool(np.all(feas.feasible)) and bool(np.all(segments.feasible))
 
     acc = (pose_accuracy(robot, poses.positions, R=poses.rotations,  # the tensions: once
                          tensions=feas.tension_nominal) if has_accuracy(robot) else None)
@@ -107,7 +107,7 @@ def run(args):
                  every=args.all_poses or len(poses) <= FULL_REPORT_POSES)
     if json_out:
         write_text("--json", json_out,
-                   result_text(robot, poses, feas, segments, ok, step_m, step_rad, acc))
+                   result_json(robot, poses, feas, segments, ok, step_m, step_rad, acc))
         print(f"wrote {json_out}")
     return EXIT_OK if ok else EXIT_INFEASIBLE
 
@@ -118,17 +118,20 @@ def _positive(value, option, text):
     return value
 
 
-def result_text(robot, poses, feas, segments, ok, step_m, step_rad, accuracy=None):
-    """The JSON document as ``dump_rows`` lays it out (a pose or a segment a line), built
-    column by column: each array goes through the C encoder once, then the rows are
-    assembled by one template (the encoder per row costs 3x more for 10^4 poses);
-    ``accuracy``: the poses' ``accuracy.Accuracy`` (robots with length_error), or None."""
-    return layout_rows({
+def result_json(robot, poses, feas, segments, ok, step_m, step_rad, accuracy=None):
+    """The JSON document (ASCII bytes) as ``dump_rows`` lays it out (a pose or a segment a
+    line), built column by column: each array goes through the C encoder once, then the rows
+    are assembled by the compiled ``json_rows`` (the encoder per row costs 3x more for 10^4
+    poses, a template per row 2x), then one join of bytes (no str of the 27 MB to encode
+    again); ``accuracy``: the poses' ``accuracy.Accuracy`` (robots with length_error), or
+    None."""
+    return b"".join(piece.encode("ascii") if isinstance(piece, str) else piece
+                    for piece in _layout_pieces({
         "robot": _encode(robot.name), "robot_file": _encode(robot.source),
         "max_step_m": _encode(step_m), "max_step_rad": _encode(step_rad),
         "poses": _rows_text(pose_columns(poses, feas, accuracy)),
         "segments": _rows_text(segment_columns(segments)) if segments else [],
-        "all_feasible": _encode(bool(ok))})
+        "all_feasible": _encode(bool(ok))}))
 
 
 def pose_columns(poses, feas, accuracy=None):
@@ -146,21 +149,18 @@ def pose_columns(poses, feas, accuracy=None):
 
 
 def segment_columns(segments):
-    """The segments' JSON fields, name -> array or a nested mapping of them (``worst``), or a
-    list of ready texts (``first_unsafe``: null for most segments)."""
-    worst = [s.worst for s in segments]
-    return {"from": np.array([s.index_from for s in segments]),
-            "to": np.array([s.index_to for s in segments]),
-            "feasible": np.array([bool(s.feasible) for s in segments]),
-            "samples": np.array([s.samples for s in segments]),
-            "unresolved": np.array([s.unresolved for s in segments]),
-            "worst": {"s": np.array([p.s for p in worst]),
-                      "margin": np.array([p.margin for p in worst]),
-                      "binding": [p.binding for p in worst],
-                      "position": np.array([p.position for p in worst]),
-                      "quaternion": np.array([p.quaternion for p in worst])},
-            "first_unsafe": _Texts("null" if s.first_unsafe is None else
-                                   _encode(_point_dict(s.first_unsafe)) for s in segments)}
+    """The segments' JSON fields (``segments``: a path_check.SegmentChecks), name -> array or
+    a nested mapping of them (``worst``), or a list of ready texts (``first_unsafe``: null
+    for most segments)."""
+    worst, n = segments.worst, len(segments)
+    first_unsafe = _Texts(["null"] * n)
+    for k, point in zip(segments.unsafe_index.tolist(), segments.unsafe):
+        first_unsafe[k] = _encode(_point_dict(point))
+    return {"from": np.arange(n), "to": np.arange(1, n + 1), "feasible": segments.feasible,
+            "samples": segments.samples, "unresolved": segments.unresolved,
+            "worst": {"s": worst.s, "margin": worst.margin, "binding": worst.binding,
+                      "position": worst.position, "quaternion": worst.quaternion},
+            "first_unsafe": first_unsafe}
 
 
 class _Texts(list):
@@ -168,51 +168,87 @@ class _Texts(list):
 
 
 def _rows_text(columns):
-    """One JSON object text a row from ``columns`` (name -> array, list of strings, nested
-    mapping of them, or a ``_Texts`` of ready texts)."""
-    template, texts = _row_template(columns)
-    return [template % row for row in zip(*texts)]
+    """The JSON object texts of the rows of ``columns`` (name -> array, list of strings,
+    nested mapping of them, or a ``_Texts`` of ready texts), joined as ``layout_rows`` joins
+    list entries: a list of that one text. Each column's texts lie in one buffer (numbers by
+    one orjson call a column); the compiled ``json_rows`` puts the rows together (the text
+    as its uint8 array of ASCII)."""
+    from .json_rows import assemble_rows  # machine code: loaded only for a --json
+    literals, cols = _row_literals(columns)
+    buffers, starts, ends, spaced, base = [], [], [], [], 0
+    for col in cols:
+        data, a, b, space = _column_bytes(col)
+        buffers.append(np.frombuffer(data, dtype=np.uint8))
+        starts.append(a + base)
+        ends.append(b + base)
+        spaced.append(space)
+        base += len(data)
+    bounds = np.cumsum([0] + [len(t) for t in literals])
+    out = assemble_rows(np.concatenate(buffers), np.column_stack(starts), np.column_stack(ends),
+                        np.array(spaced), _ascii("".join(literals)), bounds,
+                        _ascii(ROW_SEPARATOR))
+    return [out]
 
 
-def _row_template(columns):
-    """(a %-template of one row's object, the per-row texts of its fields in order)."""
-    fields, texts = [], []
-    for key, col in columns.items():
+def _ascii(text):
+    """``text`` as a (writable) uint8 array of its ASCII bytes, as the kernel takes it."""
+    return np.frombuffer(text.encode("ascii"), dtype=np.uint8).copy()
+
+
+def _row_literals(columns):
+    """(the fixed texts of a row's object around its fields, one more than them; the
+    fields' columns in order): a row is literals[0] field 0 literals[1] ... literals[F]."""
+    literals, cols = ["{"], []
+    for i, (key, col) in enumerate(columns.items()):
+        literals[-1] += ("" if i == 0 else ", ") + _encode(key) + ": "
         if isinstance(col, dict):
-            inner, inner_texts = _row_template(col)
-            fields.append(f"{_encode(key)}: {inner}")
-            texts.extend(inner_texts)
-            continue
-        brackets, col_texts = _column_texts(col)
-        fields.append(f"{_encode(key)}: " + ("[%s]" if brackets else "%s"))
-        texts.append(col_texts)
-    return "{" + ", ".join(fields) + "}", texts  # the keys are this module's, without "%"
+            inner, inner_cols = _row_literals(col)
+            literals[-1] += inner[0]
+            literals += inner[1:]
+            cols += inner_cols
+        else:
+            literals.append("")
+            cols.append(col)
+    literals[-1] += "}"
+    return literals, cols
 
 
-def _column_texts(col):
-    """(whether each text still needs its list brackets, the JSON text of each entry of
-    ``col``): numbers and booleans by one ``number_text`` of the whole array split at the
-    entries (their texts hold no ", " or "], ["), strings (binding names, few distinct)
-    each distinct one once."""
-    if isinstance(col, _Texts):
-        return False, col
-    arr = np.asarray(col)
-    if arr.dtype.kind not in "biuf":
+def _column_bytes(col):
+    """(the JSON texts of ``col``'s entries in one ASCII buffer, where each entry starts (N,),
+    where it ends (N,), whether its commas need a space after them): numbers and booleans
+    by one ``number_bytes`` of the whole array, split at the entries (a row of a 2-D column
+    with its brackets; their texts hold no "[" or "," of their own), strings (binding
+    names, few distinct) each distinct one encoded once, a ``_Texts`` as given."""
+    if not isinstance(col, _Texts):
+        arr = np.asarray(col)
+        if arr.dtype.kind in "biuf":
+            data = number_bytes(arr)
+            buf = np.frombuffer(data, dtype=np.uint8)
+            if arr.ndim == 1:
+                commas = np.flatnonzero(buf == ord(","))
+                return data, np.r_[1, commas + 1], np.r_[commas, len(data) - 1], True
+            return (data, np.flatnonzero(buf == ord("["))[1:],
+                    np.flatnonzero(buf == ord("]"))[:-1] + 1, True)
         values = arr.tolist()
         texts = {v: _encode(v) for v in set(values)}
-        return False, list(map(texts.__getitem__, values))
-    text = number_text(arr)
-    if arr.ndim == 1:
-        return False, text[1:-1].split(", ")
-    return True, text[2:-2].split("], [")
+        col = list(map(texts.__getitem__, values))
+    lengths = np.fromiter(map(len, col), dtype=np.int64, count=len(col))
+    ends = np.cumsum(lengths)
+    return "".join(col).encode("ascii"), ends - lengths, ends, False
 
 
 def number_text(arr):
     """The JSON text of a numeric or boolean array as ``json.dumps(arr.tolist())`` writes it
-    (Python's float repr, ", " between entries), non-finite numbers as null: written by
-    orjson (10x faster than the json module's encoder), whose shortest round-trip digits
-    are Python's, laid out as Python does for 1e-4 <= |x| < 1e16; the entries outside that
-    range (orjson: ``1e-8``, ``0.00005``; Python: ``1e-08``, ``5e-05``) are Python's repr."""
+    (Python's float repr, ", " between entries), non-finite numbers as null: ``number_bytes``
+    with the spaces."""
+    return number_bytes(arr).decode().replace(",", ", ")
+
+
+def number_bytes(arr):
+    """``number_text`` without the spaces after its commas, as bytes: written by orjson (10x
+    faster than the json module's encoder), whose shortest round-trip digits are Python's,
+    laid out as Python does for 1e-4 <= |x| < 1e16; the entries outside that range
+    (orjson: ``1e-8``, ``0.00005``; Python: ``1e-08``, ``5e-05``) are Python's repr."""
     arr = np.ascontiguousarray(arr, dtype=np.float64 if arr.dtype.kind == "f" else None)
     raw = orjson.dumps(arr, option=orjson.OPT_SERIALIZE_NUMPY)
     if arr.dtype.kind == "f":
@@ -221,7 +257,7 @@ def number_text(arr):
         odd = np.flatnonzero(((mag > 0) & (mag < 1e-4)) | ((mag >= 1e16) & (mag < np.inf)))
         if odd.size:
             raw = _with_python_repr(raw, odd, flat[odd])
-    return raw.decode().replace(",", ", ")
+    return raw
 
 
 def _with_python_repr(raw, entries, values):
@@ -255,21 +291,30 @@ def dump_rows(doc):
                         for key, value in doc.items()})
 
 
+ROW_SEPARATOR = ",\n    "  # between the entries of a list, each on a line of its own
+
+
 def layout_rows(texts):
     """The JSON text of a mapping ``texts`` (key -> the JSON text of its value, or a list of
     the JSON texts of its entries): a key a line, a list entry a line. One join of all the
     pieces: the text is copied once (30 MB for 20,000 eight-cable poses)."""
+    return "".join(_layout_pieces(texts))
+
+
+def _layout_pieces(texts):
+    """The pieces of ``layout_rows``'s text in order (the texts given, and the keys, brackets
+    and separators around them)."""
     pieces = []
     for key, text in texts.items():
         pieces += [",\n  " if pieces else "{\n  ", _encode(key), ": "]
         if isinstance(text, list) and text:
-            rows = [",\n    "] * (2 * len(text) - 1)
+            rows = [ROW_SEPARATOR] * (2 * len(text) - 1)
             rows[::2] = text
             pieces += ["[\n    ", *rows, "\n  ]"]
         else:
             pieces.append("[]" if isinstance(text, list) else text)
     pieces.append("\n}\n")
-    return "".join(pieces)
+    return pieces
 
 
 _ENCODER = json.JSONEncoder(allow_nan=False)
@@ -310,9 +355,10 @@ def print_report(robot, poses, feas, segments, ok, accuracy=None, every=True):
               f"{_vec(1e3 * robot.length_error, '.3g')} mm")
     print()
     n_pose_ok = int(np.sum(feas.feasible))
-    n_seg_ok = sum(s.feasible for s in segments)
+    n_seg_ok = int(np.sum(segments.feasible))
     listed = np.arange(len(poses)) if every else np.flatnonzero(~feas.feasible)[:LISTED_NOT_FEASIBLE]
-    seg_listed = segments if every else [s for s in segments if not s.feasible][:LISTED_NOT_FEASIBLE]
+    seg_listed = (segments if every else
+                  [segments[k] for k in np.flatnonzero(~segments.feasible)[:LISTED_NOT_FEASIBLE]])
     if not every:
         print(f"listing only poses and segments that are not feasible, at most "
               f"{LISTED_NOT_FEASIBLE} of each (--all lists every one, --json OUT writes all)")
@@ -380,7 +426,7 @@ def _print_least_margin(feas, segments):
     i = int(np.argmin(feas.margin))
     print(f"least margin: pose {i} {_num(float(feas.margin[i]), '+.4f')} ({feas.binding[i]})")
     if segments:
-        s = min(segments, key=lambda s: s.worst.margin)
+        s = segments[int(np.argmin(segments.worst.margin))]
         print(f"  segment {s.index_from} -> {s.index_to} {_point_text(s.worst)}")
     print()
 

@@ -21,6 +21,7 @@ import numpy as np
 
 from ..errors import MAX_FORCE_N, MAX_POSITION_M, InputError
 from .. import files
+from . import jacobian_probes
 from .shapes import SHAPES, platform_types
 from ..fields import CHOICE, MATRIX, NAME, NAMES, NUMBER, NUMBERS
 from .robot_schema import N_CABLES, check_groups, read_fields, robot_field, schema_of
@@ -30,7 +31,7 @@ MAX_STIFFNESS_N = 1e10  # N: EA of a 100 mm steel rope is about 1e9 N; more is a
 MAX_ELLIPSOID = 1e18  # largest |entry| of an ellipsoid matrix (1/N^2, 1/(N m)^2)
 MIN_SPREAD_M = 1e-6  # anchors closer than this to one line are collinear
 SINGULAR_RCOND = 1e-9  # J with smallest / largest singular value below this is singular
-JACOBIAN_PROBES = 16  # poses at which a robot's J must be regular at least once
+JACOBIAN_PROBES = jacobian_probes.PROBES  # poses at which a robot's J must be regular at least once
 GRAVITY = 9.80665  # m/s^2: |force| of a load with a mass is its weight (within 2 %)
 OPTIONAL_GROUPS = ("contact_ellipsoid",)
 # robot.platform_shape.type: none, or a shape class that can be a platform (model.shapes)
@@ -291,11 +292,11 @@ def check_not_degenerate(A, B, length_min, length_max):
             kind = "coincident" if np.ptp(P, axis=0).max() < MIN_SPREAD_M else "collinear"
             raise InputError(where, P.ravel().tolist(), f"the {len(P)} anchors are {kind}: J is singular "
                              "at every pose (need 3 anchors not on one line)")
-    rng = np.random.default_rng(0)
     centre = A.mean(axis=0)
     reach = 0.5 * (float(np.min(length_min)) + float(np.min(length_max)))
-    p = centre + reach * rng.uniform(-0.5, 0.5, size=(JACOBIAN_PROBES, 3))
-    R = _random_rotations(rng, JACOBIAN_PROBES, max_angle=0.5)
+    p = centre + reach * np.reshape(jacobian_probes.OFFSETS, (JACOBIAN_PROBES, 3))
+    R = _probe_rotations(np.reshape(jacobian_probes.AXES, (JACOBIAN_PROBES, 3)),
+                         np.array(jacobian_probes.ANGLES))
     b = np.einsum("nij,kj->nki", R, B)  # R B_k, (n, 6, 3)
     d = A[None] - p[:, None] - b  # cable vectors
     u = d / np.maximum(np.linalg.norm(d, axis=-1, keepdims=True), 1e-300)
@@ -317,11 +318,11 @@ def _distance_from_best_line(P):
     return float(np.max(np.linalg.norm(Q - along[:, None] * vt[0], axis=1)))
 
 
-def _random_rotations(rng, n, max_angle):
-    """n rotation matrices about random axes by angles up to ``max_angle`` rad (Rodrigues)."""
-    axis = rng.normal(size=(n, 3))
-    axis /= np.linalg.norm(axis, axis=1, keepdims=True)
-    angle = rng.uniform(0.0, max_angle, size=n)
+def _probe_rotations(axis, angle):
+    """Rotation matrices (n, 3, 3) about ``axis`` (n, 3), not normalised, by ``angle`` (n,)
+    rad (Rodrigues)."""
+    n = len(angle)
+    axis = axis / np.linalg.norm(axis, axis=1, keepdims=True)
     K = np.zeros((n, 3, 3))
     K[:, 0, 1], K[:, 0, 2], K[:, 1, 2] = -axis[:, 2], axis[:, 1], -axis[:, 0]
     K -= K.transpose(0, 2, 1)

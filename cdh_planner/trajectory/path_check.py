@@ -27,6 +27,7 @@ with a scene's collision model (``collision``), the least of it and the collisio
 (``scene.collision.combine``: positive iff also clear of obstacles and other cables).
 """
 
+from collections.abc import Sequence
 from dataclasses import dataclass
 from typing import Optional
 
@@ -34,7 +35,7 @@ import numpy as np
 from ..ports import Rotation
 
 from ..errors import InputError
-from ..wrench import wrench_feasibility
+from ..wrench import wrench_margin
 from ..model.pose import rotation_angle_between, rotation_tt
 from ..scene.margin import combine
 
@@ -146,7 +147,8 @@ class TaskLinePath:
 def check_motion(robot, positions, quaternions, max_step_m=DEFAULT_STEP_M,
                  max_step_rad=DEFAULT_STEP_RAD, collision=None, feasibility=None):
     """Check the motion through waypoints (positions (N, 3) m, quaternions (N, 4)) with
-    position linear and orientation slerp between consecutive ones: N - 1 SegmentChecks."""
+    position linear and orientation slerp between consecutive ones: the SegmentChecks of
+    the N - 1 segments (a sequence of SegmentCheck, also by column)."""
     path = SlerpPath(np.asarray(positions, dtype=float), np.asarray(quaternions, dtype=float))
     return check_path(robot, path, max_step_m, max_step_rad, collision, feasibility)
 
@@ -161,11 +163,12 @@ def check_path(robot, path, max_step_m=DEFAULT_STEP_M, max_step_rad=DEFAULT_STEP
                collision=None, feasibility=None):
     """Dense check of every segment of ``path`` (SlerpPath, TaskLinePath or alike:
     ``path(seg, s) -> (p, R)``, ``path.speeds()``, ``path.n_segments``); ``collision``: a
-    scene's CollisionModel or None; ``feasibility(robot, p, R=R)``: the margin checked
-    (default ``wrench_feasibility``; the planner's is ``band_feasibility``)."""
+    scene's CollisionModel or None; ``feasibility(robot, p, R=R)``: the margin checked, a
+    record with ``margin`` and ``binding`` (default ``wrench_margin``, the exact test's; the
+    planner's is ``band_feasibility``). Returns the SegmentChecks of the segments."""
+    samples = _Samples(robot, path, collision, feasibility or wrench_margin)
     if path.n_segments < 1:
-        return []
-    samples = _Samples(robot, path, collision, feasibility or wrench_feasibility)
+        return _segment_results(samples, {}, np.zeros(0, dtype=int))
     samples.add(*_initial_grid(path, max_step_m, max_step_rad))
     unresolved = _refine(samples)
     first = _first_unsafe(samples)
@@ -200,7 +203,7 @@ def _initial_grid(path, max_step_m, max_step_rad):
 class _Samples:
     """Evaluated samples of all segments, kept sorted by (segment, s)."""
 
-    def __init__(self, robot, path, collision=None, feasibility=wrench_feasibility):
+    def __init__(self, robot, path, collision=None, feasibility=wrench_margin):
         self.robot, self.path, self.collision = robot, path, collision
         self.feasibility = feasibility
         self.seg = np.empty(0, dtype=int)
@@ -308,7 +311,7 @@ def _first_unsafe(samples):
 
 
 def _segment_results(samples, first, unresolved):
-    """The SegmentCheck of every segment; the worst and first unsafe points of all
+    """The SegmentChecks of every segment; the worst and first unsafe points of all
     segments are evaluated in one call each (linear in the number of segments)."""
     n = samples.path.n_segments
     bounds = np.searchsorted(samples.seg, np.arange(n + 1))
@@ -316,25 +319,70 @@ def _segment_results(samples, first, unresolved):
     order = np.lexsort((np.arange(samples.s.size), samples.margin, samples.seg))
     i = order[bounds[:-1]]
     worst = _points(samples, np.arange(n), samples.s[i], samples.margin[i], samples.binding[i])
-    segs = sorted(first)
-    unsafe = dict(zip(segs, _points(samples, np.array(segs, dtype=int),
-                                    *(np.array([first[k][j] for k in segs]) for j in range(3)))))
-    counts = zip(np.diff(bounds).tolist(), np.asarray(unresolved).tolist())  # Python ints
-    return [SegmentCheck(index_from=k, index_to=k + 1, feasible=k not in first, worst=w,
-                         first_unsafe=unsafe.get(k), samples=c, unresolved=u)
-            for k, (w, (c, u)) in enumerate(zip(worst, counts))]
+    segs = np.array(sorted(first), dtype=int)
+    unsafe = _points(samples, segs, *(np.array([first[k][j] for k in segs.tolist()])
+                                      for j in range(3)))
+    feasible = np.ones(n, dtype=bool)
+    feasible[segs] = False
+    return SegmentChecks(feasible=feasible, worst=worst, unsafe_index=segs, unsafe=unsafe,
+                         samples=np.diff(bounds), unresolved=np.asarray(unresolved))
+
+
+@dataclass(frozen=True)
+class PointChecks:
+    """Points of several segments by column: ``s`` (M,), ``margin`` (M,), ``binding`` (M,)
+    str, ``position`` (M, 3) m, ``quaternion`` (M, 4) (x, y, z, w); ``[k]`` is a PointCheck."""
+
+    s: np.ndarray
+    margin: np.ndarray
+    binding: list
+    position: np.ndarray
+    quaternion: np.ndarray
+
+    def __len__(self):
+        return len(self.s)
+
+    def __getitem__(self, k):
+        return PointCheck(s=float(self.s[k]), margin=float(self.margin[k]),
+                          binding=self.binding[k], position=self.position[k],
+                          quaternion=self.quaternion[k])
+
+
+class SegmentChecks(Sequence):
+    """The checks of segments 0 -> 1, 1 -> 2, ... by column (what a bulk report reads
+    without a Python object per segment); ``[k]`` is segment k's SegmentCheck.
+    ``feasible`` (n,) bool, ``worst`` PointChecks (n), ``unsafe`` PointChecks of the
+    first unsafe points of the segments ``unsafe_index`` (ascending), ``samples`` and
+    ``unresolved`` (n,) int."""
+
+    def __init__(self, feasible, worst, unsafe_index, unsafe, samples, unresolved):
+        self.feasible, self.worst, self.samples, self.unresolved = (feasible, worst, samples,
+                                                                    unresolved)
+        self.unsafe_index, self.unsafe = unsafe_index, unsafe
+
+    def __len__(self):
+        return len(self.feasible)
+
+    def __getitem__(self, k):
+        if isinstance(k, slice):
+            return [self[j] for j in range(*k.indices(len(self)))]
+        k = range(len(self))[k]  # negative indices; IndexError past the end
+        at = int(np.searchsorted(self.unsafe_index, k))
+        unsafe = (self.unsafe[at] if at < len(self.unsafe_index) and self.unsafe_index[at] == k
+                  else None)
+        return SegmentCheck(index_from=k, index_to=k + 1, feasible=bool(self.feasible[k]),
+                            worst=self.worst[k], first_unsafe=unsafe,
+                            samples=int(self.samples[k]), unresolved=int(self.unresolved[k]))
 
 
 def _points(samples, segs, s, margin, binding):
     """PointChecks at s (M,) of segments ``segs`` (M,)."""
+    s = np.asarray(s, dtype=float).reshape(-1)
+    margin = np.asarray(margin, dtype=float).reshape(-1)
     if not len(segs):
-        return []
-    s = np.asarray(s, dtype=float)
+        return PointChecks(s, margin, [], np.empty((0, 3)), np.empty((0, 4)))
     p, R = samples.path(segs, s)
-    q = _quaternions(R)
-    values = zip(s.tolist(), np.asarray(margin, dtype=float).tolist(), binding, p, q)
-    return [PointCheck(s=sj, margin=mj, binding=str(bj), position=pj, quaternion=qj)
-            for sj, mj, bj, pj, qj in values]  # whole columns to Python floats at once
+    return PointChecks(s, margin, [str(b) for b in binding], p, _quaternions(R))
 
 
 def _quaternions(R):

@@ -7,7 +7,8 @@ Entries, one test each:
 - ``wrench_feasibility``: the exact test, the wrench ellipsoid inside the zonotope of the
   wrenches the cables can hold. Six cables: the paper's closed form (``closed_form``); more:
   the facet test (``facets``, compiled), a ``WrenchFeasibility``. What ``verify``, the
-  slices, the workspace study and the live state report.
+  slices, the workspace study and the live state report. ``wrench_margin``: its margin and
+  binding alone (for more than six cables without the tension rule: the dense motion check).
 - ``band_feasibility``: what the planner asks. Six cables: the closed form; more: the
   robot's tension rule's band t0 +- v within the limits (which implies the facet test, so
   that is not run). ``band_margin``: its margin alone (the atlas's domain test).
@@ -51,14 +52,15 @@ from .closed_form import closed_form, closed_form_tensions
 from .geometry import (cable_vectors, inverse_ellipsoid_factor, load_point, nominal_wrench,
                        screw_jacobian, skew)
 from .record import (CONSTRAINTS, SINGULAR_DET, STATUS_EXCEEDS, STATUS_INFEASIBLE, STATUS_OK,
-                     STATUS_SINGULAR, Feasibility, WrenchFeasibility)
+                     STATUS_SINGULAR, Feasibility, Margin, WrenchFeasibility)
 from .rules import DEFAULT_RULE, RULES, TensionRule, register, rule_of, stiffness_band
 
-__all__ = ["wrench_feasibility", "band_feasibility", "band_margin", "rule_tensions",
-           "tension_map", "stiffness_band", "RULES", "DEFAULT_RULE", "TensionRule", "register",
-           "Feasibility", "WrenchFeasibility", "CONSTRAINTS", "SINGULAR_DET", "STATUS_OK",
-           "STATUS_EXCEEDS", "STATUS_INFEASIBLE", "STATUS_SINGULAR", "cable_vectors",
-           "screw_jacobian", "load_point", "nominal_wrench", "inverse_ellipsoid_factor", "skew"]
+__all__ = ["wrench_feasibility", "wrench_margin", "band_feasibility", "band_margin",
+           "rule_tensions", "tension_map", "stiffness_band", "RULES", "DEFAULT_RULE",
+           "TensionRule", "register", "Feasibility", "WrenchFeasibility", "Margin", "CONSTRAINTS",
+           "SINGULAR_DET", "STATUS_OK", "STATUS_EXCEEDS", "STATUS_INFEASIBLE", "STATUS_SINGULAR",
+           "cable_vectors", "screw_jacobian", "load_point", "nominal_wrench",
+           "inverse_ellipsoid_factor", "skew"]
 
 
 def _six_cables(robot):
@@ -83,6 +85,17 @@ def wrench_feasibility(robot, p, tau=None, R=None):
         return closed_form(robot, p, R)
     from .facets import facet_test  # compiled kernels: m > 6 only
     return facet_test(robot, p, R)
+
+
+def wrench_margin(robot, p, tau=None, R=None):
+    """``wrench_feasibility``'s ``margin`` and ``binding`` of poses, the same numbers: six
+    cables the closed form's record; more a ``Margin``, without the tension rule's band
+    (the facet test alone; the rule cost as much again)."""
+    p, R = _poses(p, tau, R)
+    if _six_cables(robot):
+        return closed_form(robot, p, R)
+    from .facets import facet_margin  # compiled kernels: m > 6 only
+    return facet_margin(robot, p, R)
 
 
 def band_feasibility(robot, p, tau=None, R=None):

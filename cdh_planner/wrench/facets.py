@@ -10,8 +10,8 @@ import numpy as np
 from .geometry import inverse_factor
 from .compiled import facet_batch, pose_geometry
 from .record import (SINGULAR_DET, STATUS_EXCEEDS, STATUS_INFEASIBLE, STATUS_OK,
-                     STATUS_SINGULAR, Feasibility, WrenchFeasibility, constraint_names,
-                     normalised_margins)
+                     STATUS_SINGULAR, Feasibility, Margin, WrenchFeasibility, constraint_names,
+                     length_margins, normalised_margins)
 from .rules import rule_of, stiffness_band
 
 NO_SUBSETS = np.empty((0, 5), dtype=np.int64)  # the kernel without the facet test
@@ -48,18 +48,46 @@ def _binding_names(ml, kl, mr, arg, hi, m):
     return binding
 
 
-def _poses(robot, p, R, subsets):
+def _facets(robot, p, R, subsets):
     """The kernels at poses (p (N, 3) m, R (N, 3, 3)) with the facet test over ``subsets``:
-    lengths, u, sqrt(det J J^T), the facet kernel's margins, facet and mask, and the rule's
-    t0 and v (v of elastic cables: ``stiffness_band``). The rule centres where the facet
-    test holds (every ranked pose without subsets)."""
+    lengths, u, J, c, and the facet kernel's sqrt(det J J^T), margins, facet, mask and
+    ranked."""
     lengths, u, J, c = pose_geometry(np.ascontiguousarray(p), np.ascontiguousarray(R),
                                      robot.base_anchors, robot.platform_anchors, robot.load_point)
-    scale, mn, mr, arg, hi, ranked = facet_batch(
+    return (lengths, u, J, c) + facet_batch(
         J, c, robot.wrench_center_local, inverse_factor(robot), robot.ellipsoid_frame == "load",
         robot.tension_min, robot.tension_max, subsets, SINGULAR_DET)
+
+
+def _poses(robot, p, R, subsets):
+    """``_facets`` and the rule: lengths, u, sqrt(det J J^T), the facet kernel's margins,
+    facet and mask, and the rule's t0 and v (v of elastic cables: ``stiffness_band``). The
+    rule centres where the facet test holds (every ranked pose without subsets)."""
+    lengths, u, J, c, scale, mn, mr, arg, hi, ranked = _facets(robot, p, R, subsets)
     t0, v = rule_of(robot).tensions(robot, J, c, ranked, ranked & (mr > 0))
     return lengths, u, scale, mn, mr, arg, hi, t0, stiffness_band(robot, J, c, t0, lengths, v)
+
+
+def _facet_margin(robot, lengths, scale, mr, arg, hi):
+    """The facet test's margin (N,) (-inf where singular), binding (N,) str and singular
+    (N,) bool: the least of the length margins and the wrench margin ``mr``."""
+    n, m = lengths.shape
+    singular = ~(scale > SINGULAR_DET) | (lengths.min(axis=1) <= 0)
+    length_flat = np.concatenate(length_margins(robot, lengths), axis=1)
+    kl = np.argmin(length_flat, axis=1)
+    ml = length_flat[np.arange(n), kl]
+    margin = np.where(singular, -np.inf, np.minimum(ml, mr))
+    binding = np.where(singular, "singular", _binding_names(ml, kl, mr, arg, hi, m)).astype(str)
+    return margin, binding, singular
+
+
+def facet_margin(robot, p, R):
+    """``facet_test``'s margin and binding alone (a ``Margin``), without the tension rule
+    (which costs as much as the facet test): what the dense check of a motion reads."""
+    lengths, _, _, _, scale, _, mr, arg, hi, _ = _facets(robot, p, R,
+                                                         facet_subsets(len(robot.base_anchors)))
+    margin, binding, _ = _facet_margin(robot, lengths, scale, mr, arg, hi)
+    return Margin(margin=margin, binding=binding)
 
 
 def facet_test(robot, p, R):
@@ -67,18 +95,11 @@ def facet_test(robot, p, R):
     R (N, 3, 3)."""
     n, m = p.shape[0], len(robot.base_anchors)
     lengths, u, scale, mn, mr, arg, hi, t0, v = _poses(robot, p, R, facet_subsets(m))
-    singular = ~(scale > SINGULAR_DET) | (lengths.min(axis=1) <= 0)
+    margin, binding, singular = _facet_margin(robot, lengths, scale, mr, arg, hi)
     margins = normalised_margins(robot, lengths, t0, v)
-    length_flat = margins[:, :2, :].reshape(n, -1)
-    kl = np.argmin(length_flat, axis=1)
-    ml = length_flat[np.arange(n), kl]
-    margin = np.minimum(ml, mr)
-    binding = _binding_names(ml, kl, mr, arg, hi, m)
     status = np.where(mr > 0, np.where(margins[:, 2:, :].reshape(n, -1).min(axis=1) > 0,
                                        STATUS_OK, STATUS_EXCEEDS), STATUS_INFEASIBLE)
     status = np.where(singular, STATUS_SINGULAR, status).astype(object)
-    margin = np.where(singular, -np.inf, margin)
-    binding = np.where(singular, "singular", binding).astype(str)
     mn, mr = np.where(singular, -np.inf, mn), np.where(singular, -np.inf, mr)
     t0 = np.where(singular[:, None], np.nan, t0)
     v = np.where(singular[:, None], np.inf, v)

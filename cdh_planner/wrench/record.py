@@ -90,10 +90,23 @@ def constraint_names(m):
     return np.array([f"{CONSTRAINTS[j // m]}[{j % m + 1}]" for j in range(4 * m)])
 
 
+@dataclass(frozen=True)
+class Margin:
+    """A wrench test's ``margin`` (N,) and ``binding`` (N,) alone, as in its Feasibility."""
+
+    margin: np.ndarray
+    binding: np.ndarray
+
+
+def length_margins(robot, lengths):
+    """The length_min and length_max rows of ``normalised_margins``, each (N, m)."""
+    span_l = robot.length_max - robot.length_min
+    return (lengths - robot.length_min) / span_l, (robot.length_max - lengths) / span_l
+
+
 def normalised_margins(robot, lengths, t0, v):
     """``Feasibility.margins`` (N, 4, m) of cable lengths (N, m) m and a band t0 +- v (N, m) N."""
-    span_l = robot.length_max - robot.length_min
     span_t = robot.tension_max - robot.tension_min
-    return np.stack([(lengths - robot.length_min) / span_l, (robot.length_max - lengths) / span_l,
+    return np.stack([*length_margins(robot, lengths),
                      (t0 - v - robot.tension_min) / span_t, (robot.tension_max - t0 - v) / span_t],
                     axis=1)
