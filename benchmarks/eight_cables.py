@@ -12,11 +12,13 @@ band within the limits, stronger than the facet test) with a margin >= 0.01, wit
 of the robot's home orientation (CoGiRo) or any orientation (IPAnema 2), the straight motion
 (position linear, orientation slerp) leaving that domain (the dense check
 ``trajectory.path_check.check_path`` with ``band_feasibility``): the planner cannot take
-it. IPAnema 2's pairs whose ends turn the platform's long axis (body x) to opposite sides
-(R[0, 0] of opposite signs) are left out: no feasible pose has R[0, 0] = 0
-(benchmarks/orientation_cut.py), so they have no path, which a search in 6-D cannot prove
-in time (two of the first version's four timed out at 1,400 - 2,000 charts). 5 + 4 = 9
-queries by default.
+it. IPAnema 2's pairs that no path joins are left out (``ipanema_connected``): ends whose
+platform's long axis (body x) points to opposite sides (R[0, 0] of opposite signs; no
+feasible pose has R[0, 0] = 0) and, where R[0, 0] < 0, ends on opposite sides of R[2, 2] =
+0 (upright and upside down; no feasible pose with R[0, 0] < 0 has R[2, 2] = 0), measured by
+benchmarks/orientation_cut.py. A search in 6-D cannot prove "no path" in time: three of
+the first version's four such queries timed out at 670 - 3,400 charts. 5 + 4 = 9 queries by
+default.
 
 Each query is a problem file (free flight; radius 0.5, winch limits 1 m/s and 2 m/s^2 as
 config/problems/cogiro_turn_at_edge.yaml) planned by ``cdh-planner plan PROBLEM --json OUT
@@ -52,22 +54,21 @@ from cdh_planner.trajectory.path_check import check_motion
 ROOT = Path(__file__).resolve().parents[1]
 
 
-def long_axis_side(tau):
-    """Sign of R[0, 0] of the orientation tau (rad): where the platform's long axis points
-    along the frame's x. IPAnema 2's domain holds no pose with R[0, 0] = 0 (module doc)."""
-    return np.sign(rotation_tt(np.asarray(tau, dtype=float)[None])[0, 0, 0])
-
-
-def same_side(tau_a, tau_b):
-    """Are both ends on one side of IPAnema 2's cut (``long_axis_side``)?"""
-    return long_axis_side(tau_a) == long_axis_side(tau_b)
+def ipanema_connected(tau_a, tau_b):
+    """Can a path join IPAnema 2 orientations tau_a and tau_b (rad)? Not when R[0, 0] (the
+    platform's long axis along the frame's x) differs in sign, nor, where it is negative,
+    R[2, 2] (upright or upside down): no feasible pose lies on those cuts (module doc)."""
+    Ra, Rb = rotation_tt(np.array([tau_a, tau_b], dtype=float))
+    if np.sign(Ra[0, 0]) != np.sign(Rb[0, 0]):
+        return False
+    return Ra[0, 0] > 0 or np.sign(Ra[2, 2]) == np.sign(Rb[2, 2])
 
 
 # robot file, largest tilt from home (rad), which pairs can have a path (None: all).
 # IPAnema 2's cables pull from above and below; within pi/2 of home 1 % of its straight
 # motions leave the domain (CoGiRo: 14 % within pi/3)
 ROBOTS = ((ROOT / "config" / "cogiro.yaml", np.pi / 3, None),
-          (ROOT / "config" / "ipanema2.yaml", np.pi, same_side))
+          (ROOT / "config" / "ipanema2.yaml", np.pi, ipanema_connected))
 PLANNER = {"radius": 0.5, "max_cable_speed": 1.0, "max_cable_accel": 2.0}
 TARGET_S, TARGET_SOLVED = 2.0, 8
 
