@@ -134,24 +134,6 @@ def test_the_banded_solve_is_scipys_below_and_above_the_dense_limit(monkeypatch)
     np.testing.assert_allclose(splines.solve_banded((5, 5), ab, b), expected, atol=1e-13)
 
 
-@pytest.mark.parametrize("dominant", [True, False])
-def test_above_the_dense_limit_the_banded_solve_is_scipys_to_the_last_bit(dominant, monkeypatch):
-    """Beyond DENSE_MAX both call LAPACK's dgbsv through scipy's wrapper (ours loaded from
-    its file, without scipy.linalg's import): the same numbers, row swaps (a weak diagonal)
-    included."""
-    gbsv = splines.gbsv_from_file()
-    assert gbsv is not None
-    monkeypatch.setattr(splines, "_GBSV", [gbsv])
-    rng = np.random.default_rng(8)
-    n = splines.DENSE_MAX + 37
-    ab = rng.normal(size=(11, n))
-    if dominant:
-        ab[5] += 20.0
-    for b in (rng.normal(size=n), rng.normal(size=(n, 3))):
-        np.testing.assert_array_equal(splines.solve_banded((5, 5), ab, b),
-                                      scipy_solve_banded((5, 5), ab, b))
-
-
 def test_a_singular_banded_system_above_the_dense_limit_is_refused():
     ab = np.zeros((11, splines.DENSE_MAX + 1))
     with pytest.raises(np.linalg.LinAlgError):
@@ -170,18 +152,25 @@ def test_a_large_banded_solve_does_not_import_scipy_linalg():
     assert out.stdout.split() == ["0.5", "0.5", "False"], out.stdout + out.stderr
 
 
+@pytest.mark.parametrize("bands, n, boost, seed", [(1, 60, 5.0, 7),
+                                                   (5, splines.DENSE_MAX + 37, 20.0, 8)])
 @pytest.mark.parametrize("dominant", [True, False])
-def test_the_tridiagonal_solve_is_lapacks_to_the_last_bit(dominant):
+def test_the_banded_solve_is_lapacks_to_the_last_bit(bands, n, boost, seed, dominant,
+                                                      monkeypatch):
     """scipy's solve_banded((1, 1), ...) calls LAPACK's dgtsv; ours repeats its operations,
-    row swaps included (a sub-diagonal larger than the diagonal), so the same numbers."""
-    rng = np.random.default_rng(7)
-    n = 60
-    ab = rng.normal(size=(3, n))
+    row swaps included (a sub-diagonal larger than the diagonal), so the same numbers.
+    Wider bands beyond DENSE_MAX: both call LAPACK's dgbsv through scipy's wrapper (ours
+    loaded from its file, without scipy.linalg's import), the same numbers again."""
+    gbsv = splines.gbsv_from_file()
+    assert gbsv is not None
+    monkeypatch.setattr(splines, "_GBSV", [gbsv])
+    rng = np.random.default_rng(seed)
+    ab = rng.normal(size=(2 * bands + 1, n))
     if dominant:
-        ab[1] += 5.0
+        ab[bands] += boost
     for b in (rng.normal(size=n), rng.normal(size=(n, 3))):
-        np.testing.assert_array_equal(splines.solve_banded((1, 1), ab, b),
-                                      scipy_solve_banded((1, 1), ab, b))
+        np.testing.assert_array_equal(splines.solve_banded((bands, bands), ab, b),
+                                      scipy_solve_banded((bands, bands), ab, b))
 
 
 def test_a_singular_tridiagonal_system_is_refused():
