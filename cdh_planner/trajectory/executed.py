@@ -489,8 +489,8 @@ def _merged(path, rows, at):
     each new row's tau continues its left neighbour's azimuth (phi at a pole)."""
     fields = {}
     for name in path.__dataclass_fields__:
-        if name == "cable_stiffness":  # per cable, not per waypoint
-            fields[name] = path.cable_stiffness
+        if name in ("cable_stiffness", "command_window_s"):  # not per waypoint
+            fields[name] = getattr(path, name)
             continue
         new = np.asarray(getattr(rows, name))
         if name == "tau":
