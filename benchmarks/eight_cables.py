@@ -16,9 +16,9 @@ it. IPAnema 2's pairs that no path joins are left out (``ipanema_connected``): e
 platform's long axis (body x) points to opposite sides (R[0, 0] of opposite signs; no
 feasible pose has R[0, 0] = 0) and, where R[0, 0] < 0, ends on opposite sides of R[2, 2] =
 0 (upright and upside down; no feasible pose with R[0, 0] < 0 has R[2, 2] = 0), measured by
-benchmarks/orientation_cut.py. A search in 6-D cannot prove "no path" in time: three of
-the first version's four such queries timed out at 670 - 3,400 charts. 5 + 4 = 9 queries by
-default.
+benchmarks/orientation_cut.py ("no feasible pose": none in 1 - 2 million samples on the
+cut and local maximisations from the best). A search in 6-D cannot prove "no path" in
+time: three such queries timed out at 670 - 3,400 charts. 5 + 4 = 9 queries by default.
 
 Each query is a problem file (free flight; radius 0.5, winch limits 1 m/s and 2 m/s^2 as
 config/problems/cogiro_turn_at_edge.yaml) planned by ``cdh-planner plan PROBLEM --json OUT
