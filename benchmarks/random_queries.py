@@ -71,9 +71,11 @@ def feasible_poses(robot, count, rng, min_margin=0.01, max_tilt=np.pi / 3, home=
 
 
 def random_free_queries(robot, count, seed=0, min_margin=0.01, max_tilt=np.pi / 3,
-                        feasibility=wrench_feasibility):
+                        feasibility=wrench_feasibility, connected=None):
     """``count`` FreeQuery, reproducible from ``seed``; ``feasibility``: the test of the
-    ends (as in ``feasible_poses``) and of the straight motion."""
+    ends (as in ``feasible_poses``) and of the straight motion. ``connected(tau_a, tau_b)``
+    (tilt-and-torsion, rad; optional): False for a pair known to have no path (ends on
+    opposite sides of an orientation cut no feasible pose lies on), which is left out."""
     rng = np.random.default_rng(seed)
     home = home_orientation(robot)
     out = []
@@ -82,6 +84,8 @@ def random_free_queries(robot, count, seed=0, min_margin=0.01, max_tilt=np.pi / 
         margins = feasibility(robot, p, tau).margin
         for a in range(0, len(p) - 1, 2):
             b = a + 1
+            if connected is not None and not connected(tau[a], tau[b]):
+                continue
             motion = SlerpPath(p[[a, b]], quaternion_from_tau(tau[[a, b]]))
             s = np.linspace(0.0, 1.0, PROBE_SAMPLES)
             pp, RR = motion(np.zeros(s.size, dtype=int), s)

@@ -21,9 +21,10 @@ from cdh_planner.ports import Rotation, Slerp
 from cdh_planner.model.kinematics import cable_lengths
 from cdh_planner.trajectory import dynamics as D
 from cdh_planner.trajectory.dynamics import timed_path
-from cdh_planner.trajectory.executed import check_path
-from cdh_planner.trajectory.path import (COMMAND_PATH_WINDOW_M, PlannedPath, command_tensions,
-                                         with_commands)
+from cdh_planner.trajectory.executed import _merged, check_path, slow_down
+from cdh_planner.trajectory.path import (COMMAND_ACCEL_SHARE, COMMAND_PATH_WINDOW_M,
+                                         COMMAND_WINDOW_S, PlannedPath, command_tensions,
+                                         command_window, with_commands)
 from cdh_planner.trajectory.timing import time_path
 from cdh_planner.wrench import band_feasibility, rule_tensions
 
@@ -122,3 +123,46 @@ def test_the_timed_motion_executes_without_slowing_it_down_many_times(robot):
     path, note, check = timed_path(robot, straight(robot, 17), "auto", *LIMITS)
     assert "dynamic timing" in note, note
     assert check.ok and check.slowdown <= 2.0, (check.reason, check.slowdown)
+
+
+# ----------------------------------------------------------------------------- the window
+
+@pytest.mark.parametrize("jump", [5.0, 100.0, 400.0])
+def test_the_command_window_keeps_a_jumps_stretch_within_its_share_of_the_limit(jump):
+    """A jump J of the dynamic tensions (where the timing's acceleration switches), tent-
+    averaged over the window w: its second rate is J / w^2 at most (reached), so its
+    stretch's L J / (EA w^2) is within COMMAND_ACCEL_SHARE of the winch acceleration limit,
+    and at the window command_window gives, equal to it (or below it at the least
+    window)."""
+    t = np.linspace(0.0, 2.0, 2001)
+    L = np.full((len(t), 2), [10.0, 6.0])                           # m
+    dynamic = np.where(t[:, None] < 1.0, 0.0, [jump, 0.5 * jump])   # N: a step at 1 s
+    EA, amax = np.array([2e5, 1e5]), 2.0
+    w = command_window(L, dynamic, EA, amax)
+    ddf = command_tensions(t, dynamic, w)[2]
+    stretch = np.max(np.abs(L * ddf / EA))                          # m/s^2
+    assert stretch <= COMMAND_ACCEL_SHARE * amax * (1 + 1e-6)
+    bound = np.max(L[0] * np.abs(dynamic[-1]) / EA) / w ** 2        # L J / (EA w^2)
+    assert stretch == pytest.approx(bound, rel=2e-3)
+    if w > COMMAND_WINDOW_S:
+        assert stretch == pytest.approx(COMMAND_ACCEL_SHARE * amax, rel=2e-3)
+
+
+def test_the_command_window_is_the_least_one_for_rigid_cables_and_small_jumps():
+    L = np.ones((3, 8))
+    assert command_window(L, np.zeros((3, 8)), None, 2.0) == COMMAND_WINDOW_S
+    assert command_window(L, np.zeros((3, 8)), np.full(8, 1e3), 2.0) == COMMAND_WINDOW_S
+    assert command_window(L[:1], np.zeros((1, 8)), np.full(8, 1e3), 2.0) == COMMAND_WINDOW_S
+
+
+def test_the_timed_path_carries_its_command_window_into_its_commands(robot):
+    """The dynamic timing sets the window from its own tension jumps; the commands (and
+    a slowed or merged path's) use it."""
+    timing = D.dynamic_timing(robot, straight(robot, 17), robot.mass, robot.inertia, *LIMITS)
+    path = with_commands(robot, timing.path)
+    assert path.command_window_s >= COMMAND_WINDOW_S
+    for a, b in zip(path.commanded(), path.commanded(window_s=path.command_window_s)):
+        np.testing.assert_array_equal(a, b)
+    slowed = slow_down(robot, path, 1.5)
+    merged = _merged(path, path, np.arange(len(path)))
+    assert slowed.command_window_s == merged.command_window_s == path.command_window_s

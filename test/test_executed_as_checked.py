@@ -393,3 +393,62 @@ def test_the_executed_poses_keep_the_scenes_clearance():
     hit = E.check_path(robot, path, robot.mass, robot.inertia, collision=CollisionModel(robot, bead))
     assert not hit.ok and "clearance" in hit.reason and hit.bad_segments.size
     assert E.check_path(robot, path, robot.mass, robot.inertia).ok   # the tensions alone pass
+
+
+# ----------------------------------------------------------------------------- futile rounds
+
+def _stub_check(path0, fails):
+    """check_path stand-in: the segments of the path that ``fails(path, scale)`` marks
+    (bool per segment; scale = the path's slow-down from path0) fail with a tension margin
+    of -1 N, the rest pass."""
+    def check(robot, path, *args, **kwargs):
+        bad = np.flatnonzero(fails(path, path.t[-1] / path0.t[-1]))
+        return E.ExecutionCheck(ok=bad.size == 0, reason="tension margin -1 N" if bad.size else "",
+                                least_tension_margin_n=-1.0 if bad.size else 1.0,
+                                least_margin=0.0, worst_t=0.0, speed_ratio=0.5, accel_ratio=0.5,
+                                bad_segments=bad, samples=len(path))
+    return check
+
+
+def _window(path, lo=0.3, hi=0.4):
+    """Segments overlapping the fraction [lo, hi] of the path's duration."""
+    T = path.t[-1]
+    return (path.t[1:] > lo * T) & (path.t[:-1] < hi * T)
+
+
+def _motion(path0, calls):
+    """motion(t, scale): rows of path0 at the waypoints before times t (a stand-in: the
+    stubbed check reads only their times); appends t to ``calls`` (one per round)."""
+    def motion(t, scale):
+        calls.append(t)
+        k = np.clip(np.searchsorted(path0.t * scale, t, side="right") - 1, 0, len(path0) - 1)
+        fields = {name: getattr(path0, name)[k] for name in ("p", "quaternion", "tau", "lengths",
+                  "tension_min", "tension_nominal", "tension_max", "margin", "velocities",
+                  "accelerations")}
+        return type(path0)(**fields, t=np.asarray(t, dtype=float))
+    return motion
+
+
+def test_points_stop_being_added_where_the_motion_itself_fails(problem, outputs, monkeypatch):
+    """A failure that points do not shrink (the same stretch of time fails however dense:
+    the motion's own, until it is slowed 1.5 x) is given two rounds of points before each
+    slow-down (two: 1.25^2), each doubling the window's segments: not MAX_ROUNDS of them
+    (2^12 times the segments)."""
+    path0 = outputs[FAST][0]
+    monkeypatch.setattr(E, "check_path", _stub_check(path0, lambda p, s: _window(p) & (s < 1.5)))
+    rounds = []
+    path, check = E.executable(problem.robot, path0, _motion(path0, rounds), None, None, *FAST)
+    assert check.ok and check.slowdown == pytest.approx(E.TENSION_SLOWDOWN ** 2, rel=1e-5)
+    assert len(rounds) == 2 + 2 and len(path) - len(path0) == sum(map(len, rounds))
+
+
+def test_points_are_added_while_they_shrink_the_failure(problem, outputs, monkeypatch):
+    """A failure of long segments (the quintic between sparse points) shrinks with every
+    round: points are added until it passes, and nothing is slowed."""
+    path0 = outputs[FAST][0]
+    h = 0.3 * float(np.max(np.diff(path0.t)[_window(path0)]))  # two rounds for the longest
+    monkeypatch.setattr(E, "check_path",
+                        _stub_check(path0, lambda p, s: _window(p) & (np.diff(p.t) > h)))
+    rounds = []
+    path, check = E.executable(problem.robot, path0, _motion(path0, rounds), None, None, *FAST)
+    assert check.ok and check.slowdown == 1.0 and len(rounds) >= 2

@@ -1,6 +1,9 @@
 """The numpy rotations and splines (ports/rotation.py, ports/splines.py) give scipy's
 answers to rounding: the planner's outputs must not change with the import it saves."""
 
+import subprocess
+import sys
+
 import numpy as np
 import pytest
 from scipy.interpolate import CubicSpline as ScipyCubicSpline
@@ -131,18 +134,43 @@ def test_the_banded_solve_is_scipys_below_and_above_the_dense_limit(monkeypatch)
     np.testing.assert_allclose(splines.solve_banded((5, 5), ab, b), expected, atol=1e-13)
 
 
+def test_a_singular_banded_system_above_the_dense_limit_is_refused():
+    ab = np.zeros((11, splines.DENSE_MAX + 1))
+    with pytest.raises(np.linalg.LinAlgError):
+        splines.solve_banded((5, 5), ab, np.ones(splines.DENSE_MAX + 1))
+
+
+def test_a_large_banded_solve_does_not_import_scipy_linalg():
+    """The wrapper alone is loaded (7 ms), not scipy.linalg (0.15 s of a plan's CPU)."""
+    code = ("import sys, numpy as np\n"
+            "from cdh_planner.ports.splines import DENSE_MAX, solve_banded\n"
+            "n = DENSE_MAX + 5\n"
+            "ab = np.zeros((11, n)); ab[5] = 2.0\n"
+            "x = solve_banded((5, 5), ab, np.ones(n))\n"
+            "print(float(x.max()), float(x.min()), 'scipy.linalg' in sys.modules)")
+    out = subprocess.run([sys.executable, "-c", code], capture_output=True, text=True, check=True)
+    assert out.stdout.split() == ["0.5", "0.5", "False"], out.stdout + out.stderr
+
+
+@pytest.mark.parametrize("bands, n, boost, seed", [(1, 60, 5.0, 7),
+                                                   (5, splines.DENSE_MAX + 37, 20.0, 8)])
 @pytest.mark.parametrize("dominant", [True, False])
-def test_the_tridiagonal_solve_is_lapacks_to_the_last_bit(dominant):
+def test_the_banded_solve_is_lapacks_to_the_last_bit(bands, n, boost, seed, dominant,
+                                                      monkeypatch):
     """scipy's solve_banded((1, 1), ...) calls LAPACK's dgtsv; ours repeats its operations,
-    row swaps included (a sub-diagonal larger than the diagonal), so the same numbers."""
-    rng = np.random.default_rng(7)
-    n = 60
-    ab = rng.normal(size=(3, n))
+    row swaps included (a sub-diagonal larger than the diagonal), so the same numbers.
+    Wider bands beyond DENSE_MAX: both call LAPACK's dgbsv through scipy's wrapper (ours
+    loaded from its file, without scipy.linalg's import), the same numbers again."""
+    gbsv = splines.gbsv_from_file()
+    assert gbsv is not None
+    monkeypatch.setattr(splines, "_GBSV", [gbsv])
+    rng = np.random.default_rng(seed)
+    ab = rng.normal(size=(2 * bands + 1, n))
     if dominant:
-        ab[1] += 5.0
+        ab[bands] += boost
     for b in (rng.normal(size=n), rng.normal(size=(n, 3))):
-        np.testing.assert_array_equal(splines.solve_banded((1, 1), ab, b),
-                                      scipy_solve_banded((1, 1), ab, b))
+        np.testing.assert_array_equal(splines.solve_banded((bands, bands), ab, b),
+                                      scipy_solve_banded((bands, bands), ab, b))
 
 
 def test_a_singular_tridiagonal_system_is_refused():

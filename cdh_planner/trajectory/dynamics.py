@@ -50,7 +50,7 @@ from ..model.elastic import is_elastic
 from ..model.pose import tau_from_rotation
 from .executed import executable, spline_rates, unique_sorted
 from .path import (COMMAND_PATH_WINDOW_M, PlannedPath, averaged_along_path, cable_arc_length,
-                   command_tensions, with_commands)
+                   command_tensions, command_window, with_commands)
 from ..ports import CubicSpline, Rotation, RotationSpline, import_toppra
 
 GRID_POINTS = 400       # toppra gridpoints along the path (at least one per waypoint)
@@ -257,7 +257,7 @@ def dynamic_timing(robot, path, mass, inertia, max_cable_speed, max_cable_accel,
         check = _dense_check(robot, geo, grid, sd / scale, mass, inertia, vmax, amax, check_dt)
         suspects = check[4]
         if check[0]:
-            timed = _retimed(robot, path, geo, grid, sd / scale, t_grid, mass, inertia)
+            timed = _retimed(robot, path, geo, grid, sd / scale, t_grid, mass, inertia, amax)
             return DynamicTiming(path=timed, feasible=True, reason="", duration=float(t_grid[-1]),
                                  slowdown=scale, least_tension_margin_n=check[1], samples=check[2],
                                  s=grid, sd=sd / scale, geometry=geo, limit=limit)
@@ -392,8 +392,10 @@ def _dense_check(robot, geo, s, sd, mass, inertia, vmax, amax, dt):
                                                              _grid_times(s, sd))[0]
 
 
-def _retimed(robot, path, geo, s, sd, t_grid, mass, inertia):
-    """The PlannedPath with t, cable rates and dynamic tensions at its waypoints. A waypoint
+def _retimed(robot, path, geo, s, sd, t_grid, mass, inertia, amax):
+    """The PlannedPath with t, cable rates and dynamic tensions at its waypoints, and the
+    commands' time average that keeps their jumps' stretch within the winch acceleration
+    limits amax (m/s^2, ``path.command_window``). A waypoint
     is a gridpoint, where s'' may switch: it gets the mean of its two intervals' s'' (a
     controller's quintic through it then overshoots either side by half as much as with
     one side's value; the tensions there are a mean of two feasible ones)."""
@@ -408,7 +410,8 @@ def _retimed(robot, path, geo, s, sd, t_grid, mass, inertia):
         f[[0, -1]] = f0[[0, -1]]
     return replace(path, t=t_wp, velocities=L_s * sdot[:, None],
                    accelerations=L_s * sddot[:, None] + L_ss * (sdot ** 2)[:, None],
-                   tension_nominal=f, tension_min=f - v, tension_max=f + v)
+                   tension_nominal=f, tension_min=f - v, tension_max=f + v,
+                   command_window_s=command_window(L, f - f0, robot.cable_stiffness, amax))
 
 
 def motion_rows(robot, timing, t, mass, inertia, scale=1.0):

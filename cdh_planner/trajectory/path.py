@@ -9,6 +9,9 @@ from dataclasses import dataclass, replace
 import numpy as np
 
 COMMAND_WINDOW_S = 0.05  # s: the commanded tension is the nominal one averaged over +- this
+                         # at least (``command_window``)
+COMMAND_ACCEL_SHARE = 0.25  # of the winch acceleration limit: what the stretch of a jump of
+                            # the dynamic tensions may take in the commands (``command_window``)
 COMMAND_PATH_WINDOW_M = 5e-3  # m of cable-space arc length (``cable_arc_length``): the
                               # nominal tension is first averaged over +- this along the path
 
@@ -38,8 +41,10 @@ class PlannedPath:
     velocities: np.ndarray  # (N, m): one column per cable
     accelerations: np.ndarray  # (N, m): one column per cable
     cable_stiffness: np.ndarray = None  # (m,) N, or None: rigid cables (not per waypoint)
+    command_window_s: float = COMMAND_WINDOW_S  # s: the commands' time average (not per
+                                                # waypoint; ``command_window``)
 
-    def commanded(self, window_s=COMMAND_WINDOW_S):
+    def commanded(self, window_s=None):
         """(lengths m, velocities m/s, accelerations m/s^2), each (N, m): the points a
         length controller receives. Elastic cables: the unstretched lengths L0 = L / (1 + t
         / EA) that are the planned lengths L under the tensions t, so that the cables carry
@@ -48,7 +53,7 @@ class PlannedPath:
         centred rule turns its nominal by hundreds of newtons within millimetres of motion:
         the average spreads that turn over a length the dynamic timing can bound the
         stretch's rates on, ``dynamics._command_rates``), then over ``window_s`` s
-        either side, both with a tent weight (``command_tensions``): a dynamic timing's tension
+        (default ``command_window_s``) either side, both with a tent weight (``command_tensions``): a dynamic timing's tension
         jumps where its acceleration switches, and a step in L0 there would make a
         controller's quintic (and a damped cable) jerk and the winch exceed its limits;
         the average spreads a jump J over the window, its second rate at most J /
@@ -57,6 +62,7 @@ class PlannedPath:
         lengths and rates themselves (the same arrays)."""
         if self.cable_stiffness is None:
             return self.lengths, self.velocities, self.accelerations
+        window_s = self.command_window_s if window_s is None else window_s
         along = self.tension_nominal
         if averaged_along_path(along.shape[1]):
             along = command_tensions(cable_arc_length(self.lengths), along,
@@ -92,6 +98,23 @@ def averaged_along_path(m):
     cables' t0 = J^-1 w0 turns no faster than the pose. One answer for both, so that the
     timing bounds the commands that are sent."""
     return m > 6
+
+
+def command_window(lengths, dynamic, cable_stiffness, max_cable_accel):
+    """s: the half-width of the commands' time average (``PlannedPath.commanded``) for
+    waypoints of lengths (N, m) m whose nominal tensions' dynamic part (what the motion's
+    accelerations add, N) is ``dynamic`` (N, m): the least that keeps the stretch of each
+    jump J of it between consecutive waypoints within COMMAND_ACCEL_SHARE of the winch
+    acceleration limit (m/s^2; one number or m), at least COMMAND_WINDOW_S. The tent
+    average's second rate of a jump is at most J / w^2, its stretch's L J / (EA w^2)
+    (EA = ``cable_stiffness``, (m,) N). A heavy platform's switches of acceleration jump by
+    up to 100 N (CoGiRo: 0.10 s); a light one's by 0.1 N (robot2_8: COMMAND_WINDOW_S)."""
+    if cable_stiffness is None or len(lengths) < 2:
+        return COMMAND_WINDOW_S
+    amax = np.broadcast_to(np.asarray(max_cable_accel, dtype=float), (lengths.shape[1],))
+    jump = np.abs(np.diff(np.asarray(dynamic, dtype=float), axis=0))
+    stretch = np.max(lengths[1:] * jump / cable_stiffness / (COMMAND_ACCEL_SHARE * amax))
+    return max(COMMAND_WINDOW_S, float(np.sqrt(stretch)))
 
 
 def cable_arc_length(L):
