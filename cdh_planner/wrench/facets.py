@@ -12,7 +12,7 @@ from .compiled import facet_batch, pose_geometry
 from .record import (SINGULAR_DET, STATUS_EXCEEDS, STATUS_INFEASIBLE, STATUS_OK,
                      STATUS_SINGULAR, Feasibility, WrenchFeasibility, constraint_names,
                      normalised_margins)
-from .rules import rule_of, stiffness_band
+from .rules import rule_of, stiff_nominal, stiffness_band
 
 NO_SUBSETS = np.empty((0, 5), dtype=np.int64)  # the kernel without the facet test
 
@@ -59,6 +59,7 @@ def _poses(robot, p, R, subsets):
         J, c, robot.wrench_center_local, inverse_factor(robot), robot.ellipsoid_frame == "load",
         robot.tension_min, robot.tension_max, subsets, SINGULAR_DET)
     t0, v = rule_of(robot).tensions(robot, J, c, ranked, ranked & (mr > 0))
+    t0 = stiff_nominal(robot, p, R, J, t0)
     return lengths, u, scale, mn, mr, arg, hi, t0, stiffness_band(robot, J, c, t0, lengths, v)
 
 

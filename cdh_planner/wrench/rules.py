@@ -116,3 +116,61 @@ def stiffness_band(robot, J, c, t0, lengths, v):
     v = v.copy()
     v[ok] = np.linalg.norm(P @ inverse_ellipsoid_factor(robot, c[ok]), axis=-1)
     return v
+
+
+STIFFNESS_PENDULUM_M = 1.0  # m: the least stiffness of an elastic platform is that of its
+                            # load hanging as a pendulum this long, |load force| / this
+STIFFNESS_ITERATIONS = 30   # linearised projections at most
+STIFFNESS_TOL = 1e-6        # relative: a least eigenvalue this close below the goal is met
+
+
+def least_stiffness(robot):
+    """kappa (N/m, N m/rad): the least eigenvalue of the platform's stiffness
+    (``model.elastic.platform_stiffness``) that a nominal of elastic cables keeps,
+    |load force| / STIFFNESS_PENDULUM_M (zero without a load: stability alone)."""
+    return float(np.linalg.norm(robot.wrench_center_local[:3])) / STIFFNESS_PENDULUM_M
+
+
+def stiff_nominal(robot, p, R, J, t0):
+    """The nominal tensions t0 (N, m) N at poses (p (N, 3) m, R (N, 3, 3), J (N, 6, m))
+    moved least (Euclidean, in N) within the null space of J (the same wrench J t0) so that
+    elastic cables held at the lengths that carry them leave the platform at least
+    ``least_stiffness`` stiff: the least eigenvalue of K(t) (``platform_stiffness``) at
+    least kappa. Where the rule's t0 already is, it is kept (bit for bit). The least
+    eigenvalue of K, affine in t, is concave in t: the stiff set is convex and its nearest
+    point unique (continuous along a path). Found by projecting onto the tangent half-space
+    of lambda_min = kappa (gradient v^T K_a v, v its eigenvector) until met, at most
+    STIFFNESS_ITERATIONS times (a pose no shift makes stiff ends wherever that leaves it;
+    its band then usually leaves the limits). Rigid cables, six cables, poses where t0 is
+    not finite: t0 unchanged. The elastic platform otherwise has a soft mode there (a tilt
+    of CoGiRo where the centred nominal turns), or an unstable equilibrium."""
+    m = J.shape[-1]
+    if robot.cable_stiffness is None or m == 6:
+        return t0
+    from ..model.elastic import platform_stiffness
+    kappa = least_stiffness(robot)
+    ok = np.all(np.isfinite(t0), axis=1)
+    soft = np.zeros(len(t0), dtype=bool)
+    soft[ok] = np.linalg.eigvalsh(platform_stiffness(robot, p[ok], R[ok], t0[ok]))[:, 0] < kappa
+    if not soft.any():
+        return t0
+    p, R, t = p[soft], R[soft], t0[soft]
+    N = np.linalg.svd(J[soft])[2][:, 6:, :]                     # (M, k, m): null(J), orthonormal
+    K0 = platform_stiffness(robot, p, R, t)
+    Ka = np.stack([platform_stiffness(robot, p, R, t + N[:, a]) - K0
+                   for a in range(m - 6)], axis=1)              # (M, k, 6, 6): exact (affine)
+    z = np.zeros((len(t), m - 6))
+    for _ in range(STIFFNESS_ITERATIONS):
+        lam, vec = np.linalg.eigh(K0 + np.einsum("na,naij->nij", z, Ka))
+        lam, v = lam[:, 0], vec[:, :, 0]
+        if np.all(lam >= kappa * (1 - STIFFNESS_TOL)):
+            break
+        g = np.einsum("ni,naij,nj->na", v, Ka, v)               # d lambda_min / dz
+        gg = np.maximum(np.sum(g * g, axis=1), 1e-300)
+        # the nearest point of {y: lambda + g . (y - z) >= kappa}, a little inside
+        need = (np.sum(g * z, axis=1) + kappa * (1 + STIFFNESS_TOL) - lam)
+        z = np.where((lam < kappa * (1 - STIFFNESS_TOL))[:, None],
+                     g * (need / gg)[:, None], z)
+    t0 = t0.copy()
+    t0[soft] = t + np.einsum("na,nai->ni", z, N)
+    return t0
