@@ -160,17 +160,18 @@ def stiff_nominal(robot, p, R, J, t0):
     Ka = np.stack([platform_stiffness(robot, p, R, t + N[:, a]) - K0
                    for a in range(m - 6)], axis=1)              # (M, k, 6, 6): exact (affine)
     z = np.zeros((len(t), m - 6))
+    todo = np.arange(len(t))                                    # poses not yet stiff enough
     for _ in range(STIFFNESS_ITERATIONS):
-        lam, vec = np.linalg.eigh(K0 + np.einsum("na,naij->nij", z, Ka))
-        lam, v = lam[:, 0], vec[:, :, 0]
-        if np.all(lam >= kappa * (1 - STIFFNESS_TOL)):
+        lam, vec = np.linalg.eigh(K0[todo] + np.einsum("na,naij->nij", z[todo], Ka[todo]))
+        short = lam[:, 0] < kappa * (1 - STIFFNESS_TOL)
+        todo, lam, v = todo[short], lam[short, 0], vec[short, :, 0]
+        if not todo.size:
             break
-        g = np.einsum("ni,naij,nj->na", v, Ka, v)               # d lambda_min / dz
+        g = np.einsum("ni,naij,nj->na", v, Ka[todo], v)         # d lambda_min / dz
         gg = np.maximum(np.sum(g * g, axis=1), 1e-300)
         # the nearest point of {y: lambda + g . (y - z) >= kappa}, a little inside
-        need = (np.sum(g * z, axis=1) + kappa * (1 + STIFFNESS_TOL) - lam)
-        z = np.where((lam < kappa * (1 - STIFFNESS_TOL))[:, None],
-                     g * (need / gg)[:, None], z)
+        need = np.sum(g * z[todo], axis=1) + kappa * (1 + STIFFNESS_TOL) - lam
+        z[todo] = g * (need / gg)[:, None]
     t0 = t0.copy()
     t0[soft] = t + np.einsum("na,nai->ni", z, N)
     return t0
