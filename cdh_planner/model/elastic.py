@@ -139,26 +139,6 @@ def platform_stiffness(robot, p, R, t):
     return 0.5 * (jac + jac.transpose(0, 2, 1))
 
 
-def tension_compliance(robot, p, R, t):
-    """P (M, m, 6): how the tensions of elastic cables held at their lengths (carrying t
-    (M, m) N at the poses (p (M, 3) m, R (M, 3, 3)), ``platform_stiffness``) change per
-    change dw (N, N m) of the load wrench about the origin, to first order: the platform
-    moves by dx = K^-1 dw_p (dw_p about p) and cable i's tension by k_i dL_i,
-    k_i = EA_i / L0_i = (EA_i + t_i) / L_i, dL_i = [u_i; r_i x u_i] . dx. With the
-    geometric stiffness left out, K = J_p diag(k) J_p^T and P is P_K = diag(k) J^T
-    (J diag(k) J^T)^-1; with it, a soft tilt of the platform amplifies what a small wrench
-    does to the tensions (and J P is not I: the cables turn as it sways)."""
-    p, R, t = (np.asarray(x, dtype=float) for x in (p, R, t))
-    r = robot.platform_anchors @ R.transpose(0, 2, 1)
-    d = p[:, None, :] + r - robot.base_anchors
-    L = np.linalg.norm(d, axis=-1)
-    u = d / L[..., None]
-    kJ = ((robot.cable_stiffness + t) / L)[..., None] * np.concatenate([u, cross(r, u)], axis=-1)
-    to_p = np.broadcast_to(np.eye(6), (len(p), 6, 6)).copy()
-    to_p[:, 3:, :3] = -_skew(p)                          # dw_p = [dF; dM - p x dF]
-    return kJ @ np.linalg.solve(platform_stiffness(robot, p, R, t), to_p)
-
-
 def equilibrium_poses(robot, L0, p0, R0, force, moment, arm,
                       max_iterations=EQUILIBRIUM_ITERATIONS):
     """Equilibria of the platform on elastic cables of unstretched lengths L0 (M, m) m under

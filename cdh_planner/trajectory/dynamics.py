@@ -45,7 +45,7 @@ from functools import partial
 import numpy as np
 
 from ..errors import InputError, check_finite
-from ..wrench import band_feasibility, cable_vectors, response_map, rule_tensions, screw_jacobian
+from ..wrench import band_feasibility, cable_vectors, rule_tensions, screw_jacobian, tension_map
 from ..model.elastic import is_elastic
 from ..model.pose import tau_from_rotation
 from .executed import executable, spline_rates, unique_sorted
@@ -138,11 +138,10 @@ def _terms(robot, geo, s, mass, inertia):
     L = np.linalg.norm(d, axis=-1)
     u = d / L[..., None]
     J = screw_jacobian(robot, u)
-    # the published rule's t0 and band v = |rows of P L| (with elastic cables P_K's:
-    # wrench.stiffness_band); tensions t0 + P (w - w0) with P as executed (J^-1 for six
-    # cables, the platform's compliance for elastic m > 6: wrench.response_map)
+    # the published rule, t0 + P (w - w0) (P = J^-1 for six cables), its band v = |rows of
+    # P L| (with elastic cables P_K's: wrench.stiffness_band)
+    J_inv = tension_map(robot, J)
     f0, v = rule_tensions(robot, p, R)
-    J_inv = response_map(robot, p, R, J, f0)
     # the platform anchor q_i = p + R b_i: q_s = p_s + R (w x b), q_ss = p_ss + R (w_s x b +
     # w x (w x b)); L = |q - a| gives L_s = u . q_s and L_ss = (|q_s|^2 - L_s^2) / L + u . q_ss
     b = robot.platform_anchors[None]

@@ -12,9 +12,7 @@ Entries, one test each:
   robot's tension rule's band t0 +- v within the limits (which implies the facet test, so
   that is not run). ``band_margin``: its margin alone (the atlas's domain test).
 - ``rule_tensions``: the rule's nominal tensions t0 and band v at poses (no facet test),
-  optionally under an inertial wrench (``response_map``); ``tension_map``: the rule's P,
-  t(w) = t0 + P (w - w0); ``response_map``: the tensions' response to a wrench change as
-  a length-controlled robot executes it (the rule's P, or elastic cables' compliance).
+  optionally under an inertial wrench; ``tension_map``: the rule's P, t(w) = t0 + P (w - w0).
 - ``stiffness_band``: the band of elastic cables under length control, whatever the rule.
 - ``stiff_nominal``: the rule's t0 of elastic cables moved least in the null space of J so
   that the platform stays at least ``least_stiffness`` stiff (m > 6; every t0 the package
@@ -61,7 +59,7 @@ from .rules import (DEFAULT_RULE, RULES, TensionRule, least_stiffness, register,
                     stiff_nominal, stiffness_band)
 
 __all__ = ["wrench_feasibility", "band_feasibility", "band_margin", "rule_tensions",
-           "tension_map", "response_map", "stiffness_band", "stiff_nominal", "least_stiffness", "RULES", "DEFAULT_RULE", "TensionRule", "register",
+           "tension_map", "stiffness_band", "stiff_nominal", "least_stiffness", "RULES", "DEFAULT_RULE", "TensionRule", "register",
            "Feasibility", "WrenchFeasibility", "CONSTRAINTS", "SINGULAR_DET", "STATUS_OK",
            "STATUS_EXCEEDS", "STATUS_INFEASIBLE", "STATUS_SINGULAR", "cable_vectors",
            "screw_jacobian", "load_point", "nominal_wrench", "inverse_ellipsoid_factor", "skew"]
@@ -126,24 +124,8 @@ def rule_tensions(robot, p, R, inertial=None):
         return t0, v
     u = cable_vectors(robot, p, R)
     u /= np.linalg.norm(u, axis=-1)[..., None]
-    P = response_map(robot, p, R, screw_jacobian(robot, u), t0)
+    P = tension_map(robot, screw_jacobian(robot, u))
     return t0 - np.einsum("nij,nj->ni", P, inertial), v
-
-
-def response_map(robot, p, R, J, t0):
-    """P (N, m, 6): how the tensions respond, to first order, to a change of the load
-    wrench (about the origin) at poses (p (N, 3) m, R (N, 3, 3), J (N, 6, m)) with nominal
-    tensions t0 (N, m) N, as a length-controlled robot executes it: the rule's map
-    (``tension_map``) for rigid cables and six cables; for elastic m > 6 cables the
-    platform's compliance (``model.elastic.tension_compliance``: the stiffness, not the
-    rule, shares the change, and the platform sways; nan where t0 is not finite)."""
-    if robot.cable_stiffness is None or _six_cables(robot):
-        return tension_map(robot, J)
-    from ..model.elastic import tension_compliance
-    P = np.full((J.shape[0], J.shape[2], 6), np.nan)
-    ok = np.all(np.isfinite(t0), axis=1)
-    P[ok] = tension_compliance(robot, p[ok], R[ok], t0[ok])
-    return P
 
 
 def tension_map(robot, J):
