@@ -133,3 +133,20 @@ def test_six_and_rigid_cables_keep_the_rules_nominal(robot):
     assert stiff_nominal(rigid, p, R, J, t0) is t0
     six = stiff_nominal(robot, p, R, J[:, :, :6], t0[:, :6])
     np.testing.assert_array_equal(six, t0[:, :6])
+
+
+def test_the_least_stiffness_of_the_robot_file(robot):
+    """``robot.least_stiffness`` replaces |load force| / 1 m: 0 asks for stability alone
+    (the turn's nominal then moves less, to lambda_min = 0); test_robot_file refuses a
+    negative one."""
+    assert least_stiffness(robot) == pytest.approx(np.linalg.norm(robot.wrench_center_local[:3]))
+    p, R = poses(17)
+    J = jacobian(robot, p, R)
+    centred = rule_tensions(replace(robot, cable_stiffness=None), p, R)[0]
+    stable = replace(robot, least_stiffness=0.0)
+    assert least_stiffness(stable) == 0.0
+    t_stable, t_stiff = (stiff_nominal(r, p, R, J, centred) for r in (stable, robot))
+    lam = np.linalg.eigvalsh(platform_stiffness(robot, p, R, t_stable))[:, 0]
+    assert lam.min() >= -1e-6 * least_stiffness(robot) and lam.min() < 1.0
+    assert np.all(np.linalg.norm(t_stable - centred, axis=1)
+                  <= np.linalg.norm(t_stiff - centred, axis=1) + 1e-9)

@@ -118,16 +118,19 @@ def stiffness_band(robot, J, c, t0, lengths, v):
     return v
 
 
-STIFFNESS_PENDULUM_M = 1.0  # m: the least stiffness of an elastic platform is that of its
-                            # load hanging as a pendulum this long, |load force| / this
+STIFFNESS_PENDULUM_M = 1.0  # m: without robot.least_stiffness, an elastic platform keeps the
+                            # stiffness of its load hanging as a pendulum this long
 STIFFNESS_ITERATIONS = 30   # linearised projections at most
 STIFFNESS_TOL = 1e-6        # relative: a least eigenvalue this close below the goal is met
 
 
 def least_stiffness(robot):
     """kappa (N/m, N m/rad): the least eigenvalue of the platform's stiffness
-    (``model.elastic.platform_stiffness``) that a nominal of elastic cables keeps,
-    |load force| / STIFFNESS_PENDULUM_M (zero without a load: stability alone)."""
+    (``model.elastic.platform_stiffness``) that a nominal of elastic cables keeps:
+    ``robot.least_stiffness``, else |load force| / STIFFNESS_PENDULUM_M (zero without a
+    load: stability alone)."""
+    if robot.least_stiffness is not None:
+        return float(robot.least_stiffness)
     return float(np.linalg.norm(robot.wrench_center_local[:3])) / STIFFNESS_PENDULUM_M
 
 
