@@ -91,9 +91,8 @@ class Robot:
         limit=MAX_STIFFNESS_N, default=None,
         description="with cable_stiffness and more than 6 cables: the least eigenvalue of the "
                     "platform's stiffness (N/m, N m/rad) its nominal tensions keep, moved in "
-                    "the null space where the rule's would leave it softer (absent: the load "
-                    "force's norm / 1 m, a pendulum of the load 1 m long; 0: stable only; "
-                    "docs/elastic-cables.md)")
+                    "the null space where the rule's would leave it softer (absent: 0, a "
+                    "stable equilibrium; docs/elastic-cables.md)")
     tension_rule: str = robot_field(
         key="tension_rule", kind=NAME, unit="", default="centred",
         description="how more than 6 cables share the wrench: a tension rule of "

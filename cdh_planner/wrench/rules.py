@@ -118,20 +118,16 @@ def stiffness_band(robot, J, c, t0, lengths, v):
     return v
 
 
-STIFFNESS_PENDULUM_M = 1.0  # m: without robot.least_stiffness, an elastic platform keeps the
-                            # stiffness of its load hanging as a pendulum this long
 STIFFNESS_ITERATIONS = 30   # linearised projections at most
-STIFFNESS_TOL = 1e-6        # relative: a least eigenvalue this close below the goal is met
+STIFFNESS_TOL = 1e-6        # of the largest eigenvalue: a least one this close below kappa meets it
 
 
 def least_stiffness(robot):
     """kappa (N/m, N m/rad): the least eigenvalue of the platform's stiffness
     (``model.elastic.platform_stiffness``) that a nominal of elastic cables keeps:
-    ``robot.least_stiffness``, else |load force| / STIFFNESS_PENDULUM_M (zero without a
-    load: stability alone)."""
-    if robot.least_stiffness is not None:
-        return float(robot.least_stiffness)
-    return float(np.linalg.norm(robot.wrench_center_local[:3])) / STIFFNESS_PENDULUM_M
+    ``robot.least_stiffness``, else 0 (a stable equilibrium: one that is not cannot be
+    executed)."""
+    return 0.0 if robot.least_stiffness is None else float(robot.least_stiffness)
 
 
 def stiff_nominal(robot, p, R, J, t0):
@@ -163,17 +159,18 @@ def stiff_nominal(robot, p, R, J, t0):
     Ka = np.stack([platform_stiffness(robot, p, R, t + N[:, a]) - K0
                    for a in range(m - 6)], axis=1)              # (M, k, 6, 6): exact (affine)
     z = np.zeros((len(t), m - 6))
+    tol = STIFFNESS_TOL * np.linalg.eigvalsh(K0)[:, -1]         # of the stiffest mode (kappa may be 0)
     todo = np.arange(len(t))                                    # poses not yet stiff enough
     for _ in range(STIFFNESS_ITERATIONS):
         lam, vec = np.linalg.eigh(K0[todo] + np.einsum("na,naij->nij", z[todo], Ka[todo]))
-        short = lam[:, 0] < kappa * (1 - STIFFNESS_TOL)
+        short = lam[:, 0] < kappa - tol[todo]
         todo, lam, v = todo[short], lam[short, 0], vec[short, :, 0]
         if not todo.size:
             break
         g = np.einsum("ni,naij,nj->na", v, Ka[todo], v)         # d lambda_min / dz
         gg = np.maximum(np.sum(g * g, axis=1), 1e-300)
         # the nearest point of {y: lambda + g . (y - z) >= kappa}, a little inside
-        need = np.sum(g * z[todo], axis=1) + kappa * (1 + STIFFNESS_TOL) - lam
+        need = np.sum(g * z[todo], axis=1) + kappa + tol[todo] - lam
         z[todo] = g * (need / gg)[:, None]
     t0 = t0.copy()
     t0[soft] = t + np.einsum("na,nai->ni", z, N)
