@@ -7,8 +7,9 @@ times over or refused it (``not_executable``; a CoGiRo query of benchmarks/eight
 slowed 50 times, a 787 s trajectory of 1.5 million checked samples). The commands now
 average the tensions along the path too (``COMMAND_PATH_WINDOW_M``) and the dynamic timing
 bounds the commanded lengths' rates (``dynamics._command_rates``, checked here by finite
-differences). Still open (xfail): the elastic platform's soft mode there, where the
-executed equilibrium leaves the planned pose by more than a centimetre."""
+differences). The centred nominal also left the elastic platform a soft (then unstable) tilt
+there; the stiff nominal (``wrench.stiff_nominal``) keeps it stiff, and the motion executes
+(test_platform_stiffness.py has the mathematics)."""
 
 from dataclasses import replace
 
@@ -58,10 +59,12 @@ def straight(robot, n):
     return time_path(path, *LIMITS)
 
 
-def test_the_stretch_of_the_centred_nominal_outruns_the_geometry(robot):
+def test_the_stretch_of_the_nominal_outruns_the_geometry(robot):
     """Along these 8 cm the stretch L t0 / (EA + t0) of some cable changes more than
     five times as much as any geometric length (45 mm against 5 mm), in one 5 mm step (a
-    fact of the rule, measured here so that a fix can be judged against it)."""
+    fact of the rule, which the stiff nominal at CoGiRo's least_stiffness of 250 N/m keeps
+    (at 893 N/m: 256 N and 12 mm a step); measured here so that a fix can be judged
+    against it)."""
     path = straight(robot, 17)                                   # 5 mm steps
     t0 = rule_tensions(robot, path.p, Rotation.from_quat(path.quaternion).as_matrix())[0]
     stretch = path.lengths * t0 / (robot.cable_stiffness + t0)
@@ -85,7 +88,7 @@ def test_the_timings_command_rates_by_finite_differences(robot):
     """dynamics._command_rates is d L0 / ds and d^2 L0 / ds^2 of the commanded lengths
     (between waypoints, where the arc is smooth in s); at the waypoints L0 is what
     ``PlannedPath.commanded`` sends for the path slowed 100 times (its time average then
-    spans 2 % of a segment: 0.2 mm of its 45 mm of stretch change allowed)."""
+    spans 2 % of a segment: 0.25 mm of its 45 mm of stretch change allowed)."""
     path = straight(robot, 17)
     geo = D._Geometry(robot, path)
     rng = np.random.default_rng(1)
@@ -101,22 +104,21 @@ def test_the_timings_command_rates_by_finite_differences(robot):
                                atol=1e-3 * np.abs(C_ss).max())
     assert np.abs(C_s - L_s).max() > np.abs(L_s).max()      # the stretch dominates here
     sent = with_commands(robot, replace(path, t=path.t * 100)).commanded()[0]
-    np.testing.assert_allclose(_commanded_lengths(robot, geo, geo.s_wp), sent, rtol=0, atol=2e-4)
+    np.testing.assert_allclose(_commanded_lengths(robot, geo, geo.s_wp), sent, rtol=0, atol=2.5e-4)
 
 
 def test_the_dynamic_timing_keeps_the_commanded_winch_rates(robot):
     """The dynamic timing's own points, executed: the winch speeds within their limit, the
     accelerations within the quintic's overshoot of it (the geometric-rate timing: 2.1 x
-    and 20 x the limits)."""
+    and 20 x the limits; with the centred nominal 0.44 x and 1.46 x, with the stiff one
+    0.31 x and 1.79 x: its turn ends in a bend that the quintic overshoots more)."""
     timing = D.dynamic_timing(robot, straight(robot, 17), robot.mass, robot.inertia, *LIMITS)
     assert timing.feasible, timing.reason
     check = check_path(robot, timing.path, robot.mass, robot.inertia, *LIMITS)
-    assert check.speed_ratio <= 1.0 and check.accel_ratio < 1.5, (check.speed_ratio,
+    assert check.speed_ratio <= 1.0 and check.accel_ratio < 1.8, (check.speed_ratio,
                                                                  check.accel_ratio)
 
 
-@pytest.mark.xfail(strict=True, reason="open: the elastic platform's soft mode at the turn "
-                   "(docs/elastic-cables.md, 'Not yet')")
 def test_the_timed_motion_executes_without_slowing_it_down_many_times(robot):
     """The dynamic timing's motion through the turn, made executable, is at most twice as
     slow as the timing: what the planner timed is what executes."""

@@ -78,6 +78,7 @@ BAD_ROBOTS = [
     ("absurd_stiffness", "cable_stiffness", 1e12, "robot.cable_stiffness[0]", "1e+10"),
     ("seven_stiffnesses", "cable_stiffness", [1000.0] * 7, "robot.cable_stiffness", "expected 6 numbers"),
     ("negative_length_error", "length_error", -1e-4, "robot.length_error[0]", "must be non-negative"),
+    ("negative_least_stiffness", "least_stiffness", -1.0, "robot.least_stiffness", "must be non-negative"),
     ("length_error_over_range", "length_error", [1e-4, 1e-4, 1e-4, 1e-4, 0.5, 1e-4], "robot.length_error[4]",
      "below the cable's length range"),
     ("text_instead_of_number", "length_max", [0.55, "long", 0.55, 0.55, 0.55, 0.55], "robot.length_max[1]",

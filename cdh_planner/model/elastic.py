@@ -112,6 +112,33 @@ def wrench_balance(robot, L0, p, R, force, moment, arm, bilateral=False, jacobia
     return res, jac, t
 
 
+def static_load(robot, n):
+    """(force, moment, arm), each (n, 3), N and N m: the load wrench of ``wrench_balance``
+    at rest, ``robot.wrench_center_local`` (its force at the load point when the ellipsoid's
+    frame is "load", else at the origin)."""
+    w = np.broadcast_to(robot.wrench_center_local, (n, 6))
+    force, moment = w[:, :3], w[:, 3:]
+    arm = force if robot.ellipsoid_frame == "load" else np.zeros_like(force)
+    return force, moment, arm
+
+
+def platform_stiffness(robot, p, R, t):
+    """K (M, 6, 6): the stiffness of the platform on elastic cables that carry tensions t
+    (M, m) N at poses (p (M, 3) m, R (M, 3, 3)) under the load at rest (``static_load``),
+    cables held at their unstretched lengths L0 = L / (1 + t / EA): the change of the
+    wrench the platform must resist, about p (rows: N, N m), per [dp; dtheta] (m, rad;
+    ``wrench_balance``'s Jacobian, its moment rows moved from the origin to p). Elastic and
+    geometric stiffness (tensions, load) both; symmetrised (symmetric where t balances the
+    load, a conservative system). Affine in t. The equilibrium is stable iff K is positive
+    definite; a small wrench dw about p moves it by K^-1 dw."""
+    p, R, t = (np.asarray(x, dtype=float) for x in (p, R, t))
+    d = p[:, None, :] + robot.platform_anchors @ R.transpose(0, 2, 1) - robot.base_anchors
+    L0 = unstretched_lengths(robot, np.linalg.norm(d, axis=-1), t)
+    _, jac, _ = wrench_balance(robot, L0, p, R, *static_load(robot, len(p)), bilateral=True)
+    jac[:, 3:, :] -= _skew(p) @ jac[:, :3, :]   # moments about p: M_p = M_o - p x F
+    return 0.5 * (jac + jac.transpose(0, 2, 1))
+
+
 def equilibrium_poses(robot, L0, p0, R0, force, moment, arm,
                       max_iterations=EQUILIBRIUM_ITERATIONS):
     """Equilibria of the platform on elastic cables of unstretched lengths L0 (M, m) m under

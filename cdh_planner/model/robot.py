@@ -87,6 +87,13 @@ class Robot:
         description="axial stiffness EA of each cable: of unstretched length L0 under tension t "
                     "it is L0 (1 + t / EA) long; above the cable's greatest tension (absent: "
                     "rigid cables; required to execute by lengths alone with more than 6 cables)")
+    least_stiffness: float = robot_field(
+        key="least_stiffness", kind=NUMBER, unit="N/m", sign="non-negative",
+        limit=MAX_STIFFNESS_N, default=None,
+        description="with cable_stiffness and more than 6 cables: the least eigenvalue of the "
+                    "platform's stiffness (N/m, N m/rad) its nominal tensions keep, moved in "
+                    "the null space where the rule's would leave it softer (absent: 0, a "
+                    "stable equilibrium; docs/elastic-cables.md)")
     tension_rule: str = robot_field(
         key="tension_rule", kind=NAME, unit="", default="centred",
         description="how more than 6 cables share the wrench: a tension rule of "

@@ -40,7 +40,7 @@ from dataclasses import dataclass, field, replace
 import numpy as np
 
 from ..wrench import load_point, rule_tensions
-from ..model.elastic import equilibrium_poses, is_elastic
+from ..model.elastic import equilibrium_poses, is_elastic, static_load
 from ..model.forward_kinematics import forward_kinematics_many
 from ..model.pose import cross, tau_from_rotation
 from ..ports import CubicSpline, Rotation, Slerp
@@ -296,7 +296,7 @@ def _executed_margins(robot, t_wp, L, V, A, seed, ts, mid, q, mass, inertia, col
         eq = _equilibria(robot, pos[at[1]], p_mid, R[1],
                          _inertial(R[1], c[1], c_dd, omega, alpha, mass, inertia))
         p_mid, R[1] = eq.p, eq.R
-        lost_mid = lost_mid | ~eq.ok | (np.linalg.norm(eq.p - p_seed[at[1]], axis=1) > SEED_TOL_M)
+        lost_mid = lost_mid | ~eq.ok  # its sway from the static pose is the motion's own
         f, v = eq.tensions, _band(robot, p_mid, R[1])
     else:
         f, v = _tensions(robot, p_mid, R[1], c[1], c_dd, omega, alpha, mass, inertia)
@@ -312,9 +312,7 @@ def _equilibria(robot, L0, p, R, inertial=None):
     under the load wrench (``wrench.nominal_wrench``'s force at the load point and
     moment) minus ``inertial`` (M, 6), the motion's wrench about the origin (None: at rest),
     from the poses (p (M, 3) m, R (M, 3, 3))."""
-    w = np.broadcast_to(robot.wrench_center_local, (len(p), 6))
-    force, moment = w[:, :3], w[:, 3:]
-    arm = force if robot.ellipsoid_frame == "load" else np.zeros_like(force)
+    force, moment, arm = static_load(robot, len(p))
     if inertial is not None:  # [m c''; c x m c'' + R (I alpha + omega x I omega)]
         c = load_point(robot, p, R)
         moment = moment - (inertial[:, 3:] - cross(c, inertial[:, :3]))

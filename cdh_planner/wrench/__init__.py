@@ -15,6 +15,9 @@ Entries, one test each:
 - ``rule_tensions``: the rule's nominal tensions t0 and band v at poses (no facet test),
   optionally under an inertial wrench; ``tension_map``: the rule's P, t(w) = t0 + P (w - w0).
 - ``stiffness_band``: the band of elastic cables under length control, whatever the rule.
+- ``stiff_nominal``: the rule's t0 of elastic cables moved least in the null space of J so
+  that the platform stays at least ``least_stiffness`` stiff (m > 6; every t0 the package
+  gives, so the domain's band is that of a stiff nominal).
 - ``RULES`` / ``TensionRule``: the tension rules (``rules``), chosen by ``robot.tension_rule``.
 Six cables have one rule, P = J^-1: ``_six_cables`` is the one place that case is decided.
 
@@ -53,14 +56,15 @@ from .geometry import (cable_vectors, inverse_ellipsoid_factor, load_point, nomi
                        screw_jacobian, skew)
 from .record import (CONSTRAINTS, SINGULAR_DET, STATUS_EXCEEDS, STATUS_INFEASIBLE, STATUS_OK,
                      STATUS_SINGULAR, Feasibility, Margin, WrenchFeasibility)
-from .rules import DEFAULT_RULE, RULES, TensionRule, register, rule_of, stiffness_band
+from .rules import (DEFAULT_RULE, RULES, TensionRule, least_stiffness, register, rule_of,
+                    stiff_nominal, stiffness_band)
 
 __all__ = ["wrench_feasibility", "wrench_margin", "band_feasibility", "band_margin",
-           "rule_tensions", "tension_map", "stiffness_band", "RULES", "DEFAULT_RULE",
-           "TensionRule", "register", "Feasibility", "WrenchFeasibility", "Margin", "CONSTRAINTS",
-           "SINGULAR_DET", "STATUS_OK", "STATUS_EXCEEDS", "STATUS_INFEASIBLE", "STATUS_SINGULAR",
-           "cable_vectors", "screw_jacobian", "load_point", "nominal_wrench",
-           "inverse_ellipsoid_factor", "skew"]
+           "rule_tensions", "tension_map", "stiffness_band", "stiff_nominal", "least_stiffness",
+           "RULES", "DEFAULT_RULE", "TensionRule", "register", "Feasibility", "WrenchFeasibility",
+           "Margin", "CONSTRAINTS", "SINGULAR_DET", "STATUS_OK", "STATUS_EXCEEDS",
+           "STATUS_INFEASIBLE", "STATUS_SINGULAR", "cable_vectors", "screw_jacobian", "load_point",
+           "nominal_wrench", "inverse_ellipsoid_factor", "skew"]
 
 
 def _six_cables(robot):

@@ -12,7 +12,7 @@ from .compiled import facet_batch, pose_geometry
 from .record import (SINGULAR_DET, STATUS_EXCEEDS, STATUS_INFEASIBLE, STATUS_OK,
                      STATUS_SINGULAR, Feasibility, Margin, WrenchFeasibility, constraint_names,
                      length_margins, normalised_margins)
-from .rules import rule_of, stiffness_band
+from .rules import rule_of, stiff_nominal, stiffness_band
 
 NO_SUBSETS = np.empty((0, 5), dtype=np.int64)  # the kernel without the facet test
 
@@ -65,6 +65,7 @@ def _poses(robot, p, R, subsets):
     rule centres where the facet test holds (every ranked pose without subsets)."""
     lengths, u, J, c, scale, mn, mr, arg, hi, ranked = _facets(robot, p, R, subsets)
     t0, v = rule_of(robot).tensions(robot, J, c, ranked, ranked & (mr > 0))
+    t0 = stiff_nominal(robot, p, R, J, t0, ranked & (mr > 0))
     return lengths, u, scale, mn, mr, arg, hi, t0, stiffness_band(robot, J, c, t0, lengths, v)
 
 

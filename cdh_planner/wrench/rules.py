@@ -116,3 +116,83 @@ def stiffness_band(robot, J, c, t0, lengths, v):
     v = v.copy()
     v[ok] = np.linalg.norm(P @ inverse_ellipsoid_factor(robot, c[ok]), axis=-1)
     return v
+
+
+STIFFNESS_ITERATIONS = 30   # linearised projections at most
+STIFFNESS_TOL = 1e-6        # of the largest eigenvalue: a least one this close below kappa meets it
+
+
+def least_stiffness(robot):
+    """kappa (N/m, N m/rad): the least eigenvalue of the platform's stiffness
+    (``model.elastic.platform_stiffness``) that a nominal of elastic cables keeps:
+    ``robot.least_stiffness``, else 0 (a stable equilibrium: one that is not cannot be
+    executed)."""
+    return 0.0 if robot.least_stiffness is None else float(robot.least_stiffness)
+
+
+def _within_reach(robot, t, shift):
+    """The largest a in [0, 1] (M,) that keeps t + a shift (M, m) N within one tension range
+    of the limits (tension_min - range .. tension_max + range): a nominal the shift takes
+    further is outside the limits either way (its band too), and a far shift would reach
+    tensions that stretch elastic cables beyond any meaning (robot2_8: 1e13 N)."""
+    span = robot.tension_max - robot.tension_min
+    lo, hi = robot.tension_min - span, robot.tension_max + span
+    with np.errstate(divide="ignore", invalid="ignore"):
+        room = np.where(shift > 0, (hi - t) / shift, np.where(shift < 0, (lo - t) / shift, np.inf))
+    return np.clip(np.min(room, axis=1), 0.0, 1.0)
+
+
+def stiff_nominal(robot, p, R, J, t0, where=None):
+    """The nominal tensions t0 (N, m) N at poses (p (N, 3) m, R (N, 3, 3), J (N, 6, m))
+    moved least (Euclidean, in N) within the null space of J (the same wrench J t0) so that
+    elastic cables held at the lengths that carry them leave the platform at least
+    ``least_stiffness`` stiff: the least eigenvalue of K(t) (``platform_stiffness``) at
+    least kappa. Where the rule's t0 already is, it is kept (bit for bit). The least
+    eigenvalue of K, affine in t, is concave in t: the stiff set is convex and its nearest
+    point unique (continuous along a path). Found by projecting onto the tangent half-space
+    of lambda_min = kappa (gradient v^T K_a v, v its eigenvector) until met, at most
+    STIFFNESS_ITERATIONS times (a pose no shift makes stiff ends wherever that leaves it;
+    its band then usually leaves the limits), each shift cut where it leaves the limits by
+    a whole range (``_within_reach``: that pose is outside the domain). Rigid cables, six cables, poses where t0 is
+    not finite, poses outside ``where`` (N,) bool (None: all; the facet test's infeasible
+    poses, which no nominal makes feasible and whose shift can be unbounded) and poses
+    whose stiffness is not finite: t0 unchanged. The elastic platform otherwise has a soft
+    mode there (a tilt of CoGiRo where the centred nominal turns), or an unstable
+    equilibrium."""
+    m = J.shape[-1]
+    if robot.cable_stiffness is None or m == 6:
+        return t0
+    from ..model.elastic import platform_stiffness
+    kappa = least_stiffness(robot)
+    ok = np.all(np.isfinite(t0), axis=1) if where is None else where & np.all(np.isfinite(t0), axis=1)
+    K = platform_stiffness(robot, p[ok], R[ok], t0[ok])
+    finite = np.all(np.isfinite(K), axis=(1, 2))
+    soft = np.zeros(len(t0), dtype=bool)
+    soft[np.flatnonzero(ok)[finite]] = np.linalg.eigvalsh(K[finite])[:, 0] < kappa
+    if not soft.any():
+        return t0
+    p, R, t = p[soft], R[soft], t0[soft]
+    N = np.linalg.svd(J[soft])[2][:, 6:, :]                     # (M, k, m): null(J), orthonormal
+    K0 = platform_stiffness(robot, p, R, t)
+    Ka = np.stack([platform_stiffness(robot, p, R, t + N[:, a]) - K0
+                   for a in range(m - 6)], axis=1)              # (M, k, 6, 6): exact (affine)
+    z = np.zeros((len(t), m - 6))
+    tol = STIFFNESS_TOL * np.linalg.eigvalsh(K0)[:, -1]         # of the stiffest mode (kappa may be 0)
+    todo = np.arange(len(t))                                    # poses not yet stiff enough
+    for _ in range(STIFFNESS_ITERATIONS):
+        lam, vec = np.linalg.eigh(K0[todo] + np.einsum("na,naij->nij", z[todo], Ka[todo]))
+        short = lam[:, 0] < kappa - tol[todo]
+        todo, lam, v = todo[short], lam[short, 0], vec[short, :, 0]
+        if not todo.size:
+            break
+        g = np.einsum("ni,naij,nj->na", v, Ka[todo], v)         # d lambda_min / dz
+        gg = np.maximum(np.sum(g * g, axis=1), 1e-300)
+        # the nearest point of {y: lambda + g . (y - z) >= kappa}, a little inside
+        need = np.sum(g * z[todo], axis=1) + kappa + tol[todo] - lam
+        target = g * (need / gg)[:, None]
+        step = _within_reach(robot, t[todo], np.einsum("na,nai->ni", target, N[todo]))
+        z[todo] = target * step[:, None]
+        todo = todo[step >= 1.0]  # the others left the limits' reach: out of the domain
+    t0 = t0.copy()
+    t0[soft] = t + np.einsum("na,nai->ni", z, N)
+    return t0
