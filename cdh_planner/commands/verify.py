@@ -97,8 +97,10 @@ def run(args):
         margin, binding = combine(feas.margin, feas.binding, collision, poses.positions,
                                   poses.rotations)
         feas = dataclasses.replace(feas, margin=margin, binding=binding)
+    # The segments' ends are the poses (poses.rotations is Rotation.from_quat's): their
+    # margins are those above, not evaluated again (wrench_margin's are the same numbers).
     segments = check_motion(robot, poses.positions, poses.quaternions, step_m, step_rad,
-                            collision)
+                            collision, waypoints=feas)
     ok = bool(np.all(feas.feasible)) and bool(np.all(segments.feasible))
 
     acc = (pose_accuracy(robot, poses.positions, R=poses.rotations,  # the tensions: once

@@ -95,20 +95,27 @@ def interpolate_segment(p0, q0, p1, q1, s):
 
 class SlerpPath:
     """Waypoints joined by linear position and slerp orientation, as scipy's Slerp does:
-    r(s) = r0 exp(s log(r0^-1 r1)); evaluated for many segments at once."""
+    r(s) = r0 exp(s log(r0^-1 r1)); evaluated for many segments at once. ``exact_ends``:
+    at s = 0 and s = 1 the waypoints themselves (positions as given, rotation matrices
+    ``Rotation.from_quat(q).as_matrix()``, bit for bit) rather than the formula's value,
+    which differs in the last bits: what lets ``check_path`` reuse the waypoints' margins."""
 
-    def __init__(self, positions, quaternions):
+    def __init__(self, positions, quaternions, exact_ends=False):
         self.positions = np.atleast_2d(positions)
         self.rotations = Rotation.from_quat(np.atleast_2d(quaternions))
         self.rotvecs = (self.rotations[:-1].inv() * self.rotations[1:]).as_rotvec()
         self.n_segments = self.positions.shape[0] - 1
+        self.exact_ends = exact_ends
 
     def __call__(self, seg, s):
         """Positions (M, 3) and rotation matrices (M, 3, 3) at s (M,) of segments seg (M,)."""
         p0, p1 = self.positions[seg], self.positions[seg + 1]
         p = p0 + s[:, None] * (p1 - p0)
-        r = self.rotations[seg] * Rotation.from_rotvec(s[:, None] * self.rotvecs[seg])
-        return p, r.as_matrix()
+        R = (self.rotations[seg] * Rotation.from_rotvec(s[:, None] * self.rotvecs[seg])).as_matrix()
+        if self.exact_ends:
+            end, k = waypoint_samples(seg, s)
+            p[end], R[end] = self.positions[k], self.rotations[k].as_matrix()
+        return p, R
 
     def speeds(self):
         """Per segment: (position change m, rotation angle rad) per unit s (constant)."""
@@ -145,12 +152,18 @@ class TaskLinePath:
 
 
 def check_motion(robot, positions, quaternions, max_step_m=DEFAULT_STEP_M,
-                 max_step_rad=DEFAULT_STEP_RAD, collision=None, feasibility=None):
+                 max_step_rad=DEFAULT_STEP_RAD, collision=None, feasibility=None,
+                 waypoints=None):
     """Check the motion through waypoints (positions (N, 3) m, quaternions (N, 4)) with
     position linear and orientation slerp between consecutive ones: the SegmentChecks of
-    the N - 1 segments (a sequence of SegmentCheck, also by column)."""
-    path = SlerpPath(np.asarray(positions, dtype=float), np.asarray(quaternions, dtype=float))
-    return check_path(robot, path, max_step_m, max_step_rad, collision, feasibility)
+    the N - 1 segments (a sequence of SegmentCheck, also by column). ``waypoints``: None,
+    or the waypoints' own ``margin`` (N,) and ``binding`` (N,) as ``feasibility`` and
+    ``collision`` (``combine``) give them at (positions, ``Rotation.from_quat(quaternions)
+    .as_matrix()``): the samples at s = 0 and 1 are those poses, so they take these rather
+    than being evaluated again (``verify`` has them already)."""
+    path = SlerpPath(np.asarray(positions, dtype=float), np.asarray(quaternions, dtype=float),
+                     exact_ends=waypoints is not None)
+    return check_path(robot, path, max_step_m, max_step_rad, collision, feasibility, waypoints)
 
 
 def check_task_motion(robot, task, coords, max_step_m=DEFAULT_STEP_M,
@@ -160,13 +173,18 @@ def check_task_motion(robot, task, coords, max_step_m=DEFAULT_STEP_M,
 
 
 def check_path(robot, path, max_step_m=DEFAULT_STEP_M, max_step_rad=DEFAULT_STEP_RAD,
-               collision=None, feasibility=None):
+               collision=None, feasibility=None, waypoints=None):
     """Dense check of every segment of ``path`` (SlerpPath, TaskLinePath or alike:
     ``path(seg, s) -> (p, R)``, ``path.speeds()``, ``path.n_segments``); ``collision``: a
     scene's CollisionModel or None; ``feasibility(robot, p, R=R)``: the margin checked, a
     record with ``margin`` and ``binding`` (default ``wrench_margin``, the exact test's; the
-    planner's is ``band_feasibility``). Returns the SegmentChecks of the segments."""
-    samples = _Samples(robot, path, collision, feasibility or wrench_margin)
+    planner's is ``band_feasibility``); ``waypoints``: None, or the margins and bindings
+    (a record, n_segments + 1 each) of the poses at s = 0 and 1, taken for those samples
+    (the path must be the waypoints there: ``SlerpPath(exact_ends=True)``). Returns the
+    SegmentChecks of the segments."""
+    if waypoints is not None and not getattr(path, "exact_ends", False):
+        raise ValueError("check_path: waypoint margins need a path exact at its ends")
+    samples = _Samples(robot, path, collision, feasibility or wrench_margin, waypoints)
     if path.n_segments < 1:
         return _segment_results(samples, {}, np.zeros(0, dtype=int))
     samples.add(*_initial_grid(path, max_step_m, max_step_rad))
@@ -200,12 +218,20 @@ def _initial_grid(path, max_step_m, max_step_rad):
     return seg, s
 
 
-class _Samples:
-    """Evaluated samples of all segments, kept sorted by (segment, s)."""
+def waypoint_samples(seg, s):
+    """The samples (seg (M,), s (M,)) at a segment's ends: their indices, and the indices
+    of the waypoints they are (seg at s = 0, seg + 1 at s = 1)."""
+    end = np.flatnonzero((s == 0.0) | (s == 1.0))
+    return end, seg[end] + (s[end] == 1.0)
 
-    def __init__(self, robot, path, collision=None, feasibility=wrench_margin):
+
+class _Samples:
+    """Evaluated samples of all segments, kept sorted by (segment, s); ``waypoints``: None
+    or the known margins and bindings of the segments' ends (``check_path``)."""
+
+    def __init__(self, robot, path, collision=None, feasibility=wrench_margin, waypoints=None):
         self.robot, self.path, self.collision = robot, path, collision
-        self.feasibility = feasibility
+        self.feasibility, self.waypoints = feasibility, waypoints
         self.seg = np.empty(0, dtype=int)
         self.s = np.empty(0)
         self.margin = np.empty(0)
@@ -214,11 +240,17 @@ class _Samples:
     def evaluate(self, seg, s):
         """Margins and binding constraints at (seg, s), in chunks to bound memory."""
         margin, binding = np.empty(s.size), np.empty(s.size, dtype=object)
-        for a in range(0, s.size, CHUNK):
-            p, R = self.path(seg[a:a + CHUNK], s[a:a + CHUNK])
+        todo = np.ones(s.size, dtype=bool)
+        if self.waypoints is not None:  # the ends are waypoints: their values are known
+            end, k = waypoint_samples(seg, s)
+            margin[end], binding[end] = self.waypoints.margin[k], self.waypoints.binding[k]
+            todo[end] = False
+        todo = np.flatnonzero(todo)
+        for a in range(0, todo.size, CHUNK):
+            i = todo[a:a + CHUNK]
+            p, R = self.path(seg[i], s[i])
             f = self.feasibility(self.robot, p, R=R)
-            margin[a:a + CHUNK], binding[a:a + CHUNK] = combine(f.margin, f.binding,
-                                                                self.collision, p, R)
+            margin[i], binding[i] = combine(f.margin, f.binding, self.collision, p, R)
         return np.where(np.isnan(margin), -np.inf, margin), binding
 
     def add(self, seg, s):
