@@ -141,7 +141,7 @@ def _terms(robot, geo, s, mass, inertia):
     # the published rule, t0 + P (w - w0) (P = J^-1 for six cables), its band v = |rows of
     # P L| (with elastic cables P_K's: wrench.stiffness_band)
     J_inv = tension_map(robot, J)
-    f0, v = rule_tensions(robot, p, R)
+    f0, v = rule_tensions(robot, p, R, inverted=(L, J, J_inv))  # J inverted once
     # the platform anchor q_i = p + R b_i: q_s = p_s + R (w x b), q_ss = p_ss + R (w_s x b +
     # w x (w x b)); L = |q - a| gives L_s = u . q_s and L_ss = (|q_s|^2 - L_s^2) / L + u . q_ss
     b = robot.platform_anchors[None]
