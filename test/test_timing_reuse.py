@@ -12,7 +12,7 @@ from cdh_planner.model.robot import load_robot
 from cdh_planner.parsing.problem import load_problem
 from cdh_planner.planner import Planner
 from cdh_planner.ports import Rotation
-from cdh_planner.trajectory import executed
+from cdh_planner.trajectory import dynamics as D, executed
 from cdh_planner.trajectory.dynamics import _Geometry, _terms
 from cdh_planner.wrench import cable_vectors, rule_tensions, screw_jacobian, tension_map
 
@@ -111,3 +111,30 @@ def test_stencil_turns_are_the_same_bits_and_computed_once(ball, sparse, monkeyp
     old_front, old_back = _old_turns(R, need, mid, q)
     assert np.array_equal(front, old_front) and np.array_equal(back, old_back)
     assert np.max(np.abs(front)) > 0  # the path turns: the comparison is not of zeros
+
+
+def test_the_limit_curve_is_solved_when_asked_and_is_the_same(ball, monkeypatch):
+    """toppra's feasible sets (two LPs per gridpoint) are solved only when ``limit`` is
+    read (a picture), not per plan: the same numbers as solving them right after the
+    parameterization, as the timing did before."""
+    robot, path = ball
+    TOPPRA = D.toppra.algorithm.TOPPRA
+    calls, eager = [], []
+
+    class Counting(TOPPRA):
+        def compute_parameterization(self, *args, **kwargs):
+            out = super().compute_parameterization(*args, **kwargs)
+            eager.append(TOPPRA.compute_feasible_sets(self).copy())  # what was done before
+            return out
+
+        def compute_feasible_sets(self):
+            calls.append(1)
+            return super().compute_feasible_sets()
+
+    monkeypatch.setattr(D.toppra.algorithm, "TOPPRA", Counting)
+    timing = D.dynamic_timing(robot, path, robot.mass, robot.inertia, 0.05, 0.2)
+    assert timing.feasible and calls == []
+    limit = timing.limit
+    assert calls == [1]
+    assert np.array_equal(limit, np.sqrt(np.maximum(eager[-1][:, 1], 0.0)))
+    assert np.all(limit >= timing.sd - 1e-9)  # the timing's s' stays under its limit curve

@@ -82,7 +82,15 @@ class DynamicTiming:
     s: np.ndarray
     sd: np.ndarray
     geometry: object = None
-    limit: np.ndarray = None  # largest s' at each gridpoint over every feasible s'' (m/s)
+    reachability: object = None  # the toppra instance that timed it: ``limit`` asks it
+
+    @property
+    def limit(self):
+        """The largest s' (m/s) at each gridpoint over every feasible s'' (None without
+        ``reachability``): two LPs per gridpoint, solved when a picture asks, not per plan."""
+        if self.reachability is None:
+            return None
+        return np.sqrt(np.maximum(self.reachability.compute_feasible_sets()[:, 1], 0.0))
 
     def pose_at(self, t):
         """The timed motion itself: positions (M, 3) m and rotations (M, 3, 3) at times t (s)."""
@@ -241,7 +249,6 @@ def dynamic_timing(robot, path, mass, inertia, max_cable_speed, max_cable_accel,
                                                           amax * (1 - DERATE))],
                                        _Interval(geo.length, m), gridpoints=grid)
     _, sd, _ = instance.compute_parameterization(0.0, 0.0)  # (s'', s', extra variables)
-    limit = np.sqrt(np.maximum(instance.compute_feasible_sets()[:, 1], 0.0))
     if sd is None or not np.all(np.isfinite(sd)):
         return _infeasible(path, geo, grid, "no dynamically feasible timing: the path has no "
                                               "speed at which every tension stays in range")
@@ -260,7 +267,7 @@ def dynamic_timing(robot, path, mass, inertia, max_cable_speed, max_cable_accel,
             timed = _retimed(robot, path, geo, grid, sd / scale, t_grid, mass, inertia, amax)
             return DynamicTiming(path=timed, feasible=True, reason="", duration=float(t_grid[-1]),
                                  slowdown=scale, least_tension_margin_n=check[1], samples=check[2],
-                                 s=grid, sd=sd / scale, geometry=geo, limit=limit)
+                                 s=grid, sd=sd / scale, geometry=geo, reachability=instance)
     return _infeasible(path, geo, grid, f"the dense check failed after {MAX_SLOWDOWNS} slowdowns "
                                         f"({check[3]})")
 
