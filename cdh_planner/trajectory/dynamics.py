@@ -82,7 +82,15 @@ class DynamicTiming:
     s: np.ndarray
     sd: np.ndarray
     geometry: object = None
-    limit: np.ndarray = None  # largest s' at each gridpoint over every feasible s'' (m/s)
+    reachability: object = None  # the toppra instance that timed it: ``limit`` asks it
+
+    @property
+    def limit(self):
+        """The largest s' (m/s) at each gridpoint over every feasible s'' (None without
+        ``reachability``): two LPs per gridpoint, solved when a picture asks, not per plan."""
+        if self.reachability is None:
+            return None
+        return np.sqrt(np.maximum(self.reachability.compute_feasible_sets()[:, 1], 0.0))
 
     def pose_at(self, t):
         """The timed motion itself: positions (M, 3) m and rotations (M, 3, 3) at times t (s)."""
@@ -141,7 +149,7 @@ def _terms(robot, geo, s, mass, inertia):
     # the published rule, t0 + P (w - w0) (P = J^-1 for six cables), its band v = |rows of
     # P L| (with elastic cables P_K's: wrench.stiffness_band)
     J_inv = tension_map(robot, J)
-    f0, v = rule_tensions(robot, p, R)
+    f0, v = rule_tensions(robot, p, R, inverted=(L, J, J_inv))  # J inverted once
     # the platform anchor q_i = p + R b_i: q_s = p_s + R (w x b), q_ss = p_ss + R (w_s x b +
     # w x (w x b)); L = |q - a| gives L_s = u . q_s and L_ss = (|q_s|^2 - L_s^2) / L + u . q_ss
     b = robot.platform_anchors[None]
@@ -241,7 +249,6 @@ def dynamic_timing(robot, path, mass, inertia, max_cable_speed, max_cable_accel,
                                                           amax * (1 - DERATE))],
                                        _Interval(geo.length, m), gridpoints=grid)
     _, sd, _ = instance.compute_parameterization(0.0, 0.0)  # (s'', s', extra variables)
-    limit = np.sqrt(np.maximum(instance.compute_feasible_sets()[:, 1], 0.0))
     if sd is None or not np.all(np.isfinite(sd)):
         return _infeasible(path, geo, grid, "no dynamically feasible timing: the path has no "
                                               "speed at which every tension stays in range")
@@ -260,7 +267,7 @@ def dynamic_timing(robot, path, mass, inertia, max_cable_speed, max_cable_accel,
             timed = _retimed(robot, path, geo, grid, sd / scale, t_grid, mass, inertia, amax)
             return DynamicTiming(path=timed, feasible=True, reason="", duration=float(t_grid[-1]),
                                  slowdown=scale, least_tension_margin_n=check[1], samples=check[2],
-                                 s=grid, sd=sd / scale, geometry=geo, limit=limit)
+                                 s=grid, sd=sd / scale, geometry=geo, reachability=instance)
     return _infeasible(path, geo, grid, f"the dense check failed after {MAX_SLOWDOWNS} slowdowns "
                                         f"({check[3]})")
 

@@ -287,8 +287,7 @@ def _executed_margins(robot, t_wp, L, V, A, seed, ts, mid, q, mass, inertia, col
     R, c = [fk.R[i] for i in at], [c_all[i] for i in at]
     h = ts[q] - ts[0]
     c_dd = (c[2] - 2 * c[1] + c[0]) / h ** 2
-    back = Rotation.from_matrix(np.swapaxes(R[1], 1, 2) @ R[2]).as_rotvec()   # body frame
-    front = Rotation.from_matrix(np.swapaxes(R[0], 1, 2) @ R[1]).as_rotvec()
+    front, back = _stencil_turns(fk.R, need, mid, q)
     omega = (back + front) / (2 * h)
     alpha = (back - front) / h ** 2
     p_mid, lost_mid = fk.p[at[1]], lost[at[1]]
@@ -305,6 +304,17 @@ def _executed_margins(robot, t_wp, L, V, A, seed, ts, mid, q, mass, inertia, col
     if collision is not None:
         blocked = collision.margins(p_mid, R[1])[0] < 0
     return margin, lost[at[0]] | lost_mid | lost[at[2]], blocked
+
+
+def _stencil_turns(R, need, mid, q):
+    """(front, back) (M, 3) rad: the body-frame rotation vectors from sample mid - q to mid
+    and from mid to mid + q of the rotations R (len(need), 3, 3) at the samples ``need``.
+    The back turn of a sample is the front turn of the one q later: each turn is computed
+    once (of a whole check's contiguous samples, half as many)."""
+    first = unique_sorted(np.concatenate([mid - q, mid]))    # where each turn starts
+    a, b = np.searchsorted(need, first), np.searchsorted(need, first + q)
+    turn = Rotation.from_matrix(np.swapaxes(R[a], 1, 2) @ R[b]).as_rotvec()
+    return turn[np.searchsorted(first, mid - q)], turn[np.searchsorted(first, mid)]
 
 
 def _equilibria(robot, L0, p, R, inertial=None):

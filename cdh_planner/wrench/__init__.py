@@ -123,14 +123,16 @@ def band_margin(robot, p, tau=None, R=None):
     return margin(robot, p, R)
 
 
-def rule_tensions(robot, p, R, inertial=None):
+def rule_tensions(robot, p, R, inertial=None, inverted=None):
     """The rule's tensions t (N, m) N holding w0 - ``inertial`` (N, 6) (None: w0, t = t0)
     and its band v (N, m) N at poses (p (N, 3) m, R (N, 3, 3)), without the facet test:
     J^-1 (w0 - inertial) for six cables, t0 - P inertial for more (t0 centred at every
-    pose). nan / inf where singular."""
+    pose). nan / inf where singular. ``inverted``: (cable lengths (N, m) m, J, P =
+    ``tension_map(robot, J)``) at these poses, when the caller has them: six cables then do
+    not invert J again (the same numbers); more cables do not use them."""
     p, R = _poses(p, None, R)
     if _six_cables(robot):
-        return closed_form_tensions(robot, p, R, inertial)
+        return closed_form_tensions(robot, p, R, inertial, inverted)
     from .facets import band_tensions
     t0, v = band_tensions(robot, p, R)
     if inertial is None:

@@ -21,11 +21,17 @@ def inverse_jacobian(robot, p, R):
     lengths = np.linalg.norm(dvec, axis=-1)
     u = dvec / np.where(lengths > 0, lengths, 1.0)[..., None]
     J = screw_jacobian(robot, u)
-    with np.errstate(divide="ignore", invalid="ignore"):  # singular J: reported by callers
-        det = np.linalg.det(J)
-    singular = ~(np.abs(det) > SINGULAR_DET) | (lengths.min(axis=1) <= 0)
+    det, singular = _singular(J, lengths)
     J_safe = np.where(singular[:, None, None], np.eye(6), J)
     return lengths, u, det, np.linalg.inv(J_safe), load_point(robot, p, R), singular
+
+
+def _singular(J, lengths):
+    """det J (N,) and where the pose is singular (N,): |det J| not above SINGULAR_DET, or a
+    cable of no length (lengths (N, 6) m)."""
+    with np.errstate(divide="ignore", invalid="ignore"):  # singular J: reported by callers
+        det = np.linalg.det(J)
+    return det, ~(np.abs(det) > SINGULAR_DET) | (lengths.min(axis=1) <= 0)
 
 
 def _envelope(robot, J_inv, c, inertial=None):
@@ -38,9 +44,18 @@ def _envelope(robot, J_inv, c, inertial=None):
     return f0, np.linalg.norm(J_inv @ inverse_ellipsoid_factor(robot, c), axis=-1)
 
 
-def closed_form_tensions(robot, p, R, inertial=None):
-    """``_envelope`` at poses (p (N, 3) m, R (N, 3, 3)); nan / inf where singular."""
-    _, _, _, J_inv, c, singular = inverse_jacobian(robot, p, R)
+def closed_form_tensions(robot, p, R, inertial=None, inverted=None):
+    """``_envelope`` at poses (p (N, 3) m, R (N, 3, 3)); nan / inf where singular.
+    ``inverted``: (lengths (N, 6) m, J, J^-1 (N, 6, 6)) at these poses when the caller has
+    inverted J already (the dynamic timing's tension map): the same numbers without
+    inverting it again (J^-1 is read only where J is not singular, where it is the same
+    inverse of the same J)."""
+    if inverted is None:
+        _, _, _, J_inv, c, singular = inverse_jacobian(robot, p, R)
+    else:
+        lengths, J, J_inv = inverted
+        singular = _singular(J, lengths)[1]
+        J_inv, c = np.where(singular[:, None, None], np.eye(6), J_inv), load_point(robot, p, R)
     f0, spread = _envelope(robot, J_inv, c, inertial)
     return np.where(singular[:, None], np.nan, f0), np.where(singular[:, None], np.inf, spread)
 
