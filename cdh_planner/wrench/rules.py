@@ -153,10 +153,10 @@ def stiff_nominal(robot, p, R, J, t0, where=None):
     of lambda_min = kappa (gradient v^T K_a v, v its eigenvector) until met, at most
     STIFFNESS_ITERATIONS times (a pose no shift makes stiff ends wherever that leaves it;
     its band then usually leaves the limits), each shift cut where it leaves the limits by
-    a whole range (``_within_reach``: that pose is outside the domain). Rigid cables, six cables, poses where t0 is
-    not finite, poses outside ``where`` (N,) bool (None: all; the facet test's infeasible
-    poses, which no nominal makes feasible and whose shift can be unbounded) and poses
-    whose stiffness is not finite: t0 unchanged. The elastic platform otherwise has a soft
+    a whole range (``_within_reach``: that pose is outside the domain). Rigid cables, six
+    cables, poses where t0 is not finite, poses outside ``where`` (N,) bool (None: all; the
+    facet test's infeasible poses, which no nominal makes feasible and whose shift can be
+    unbounded) and poses whose stiffness is not finite: t0 unchanged. The elastic platform otherwise has a soft
     mode there (a tilt of CoGiRo where the centred nominal turns), or an unstable
     equilibrium."""
     m = J.shape[-1]
@@ -164,7 +164,9 @@ def stiff_nominal(robot, p, R, J, t0, where=None):
         return t0
     from ..model.elastic import platform_stiffness
     kappa = least_stiffness(robot)
-    ok = np.all(np.isfinite(t0), axis=1) if where is None else where & np.all(np.isfinite(t0), axis=1)
+    ok = np.all(np.isfinite(t0), axis=1)
+    if where is not None:
+        ok &= where
     K = platform_stiffness(robot, p[ok], R[ok], t0[ok])
     finite = np.all(np.isfinite(K), axis=(1, 2))
     soft = np.zeros(len(t0), dtype=bool)
