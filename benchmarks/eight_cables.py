@@ -28,7 +28,7 @@ steps, wrench feasibility): "unsafe" counts paths that fail it. Printed: per que
 median over ``--repeats`` runs of the wall clock and of the process's CPU time (user +
 system: on a machine shared by other work the wall clock is several times the CPU time),
 then the medians over the queries (a failure counts as --timeout), solved count and unsafe
-count against the issue's target (median <= 2 s, >= 8 of 9 solved, 0 unsafe), with the
+count against the target (median <= 2 s, >= 8 of 9 solved, 0 unsafe), with the
 load average (2 CPUs shared). Exit code 0 always.
 """
 

@@ -1,7 +1,7 @@
 """``verify`` in bulk: the poses parsed as whole arrays accept and refuse exactly what the
 pose-by-pose check does (same messages), the JSON built column by column is byte-identical
 to the per-row output of before (test/verify_reference, written by the previous code; the
-segments' end points since rewritten, the poses' own margins there, issue 32 item 4), and
+segments' end points since rewritten: the poses' own margins there, test_verify_waypoints), and
 the text report of many poses lists only what is not feasible unless ``--all``."""
 import json
 
