@@ -174,11 +174,11 @@ class Planner:
         expired = stop.expired if stop.expired() is None else None
         timed = time_stage(self.robot, path, s, self.collision, expired)
         if not timed.executed.ok:  # bounded: never hand out a trajectory that was not checked
-            expired = expired and expired()
-            if expired:  # the check stopped between its rounds
-                limit = "a cancel" if expired == Status.CANCELED else f"{s.timeout_s:g} s"
-                return answer(False, expired, f"a path, but its executed check was stopped by "
-                                              f"{limit} before it passed: {timed.executed.reason}")
+            why = expired() if expired else None
+            if why:  # the check stopped between its rounds
+                limit = "a cancel" if why == Status.CANCELED else f"{s.timeout_s:g} s"
+                return answer(False, why, f"a path, but its executed check was stopped by "
+                                          f"{limit} before it passed: {timed.executed.reason}")
             return answer(False, Status.NOT_EXECUTABLE, "no trajectory a JointTrajectory"
                           f"Controller executes within the limits: {timed.executed.reason}")
         how = "the direct motion" if direct else f"{charts} charts"

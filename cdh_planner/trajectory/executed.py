@@ -441,13 +441,13 @@ def executable(robot, path, motion=None, mass=None, inertia=None, max_cable_spee
         k = check.bad_segments
         winch_only = not np.isfinite(check.least_tension_margin_n)  # tensions not reached
         winch_rounds += winch_only
+        failing_now = failing_time(path, k)
         if (motion is not None and rounds < MAX_ROUNDS and len(path) + k.size <= max_points
                 and winch_rounds <= WINCH_ROUNDS
-                and not (len(failing) >= 2
-                         and failing_time(path, k) > (1 - PROGRESS) * failing[-2])
+                and not (len(failing) >= 2 and failing_now > (1 - PROGRESS) * failing[-2])
                 and not (winch_only and _points_exceed(robot, path, max_cable_speed,
                                                        max_cable_accel))):
-            failing.append(failing_time(path, k))
+            failing.append(failing_now)
             t = 0.5 * (path.t[k] + path.t[k + 1])
             within = np.column_stack([path.t[k] - CHECK_DT, path.t[k + 1] + CHECK_DT])
             changed.append(within)

@@ -53,11 +53,11 @@ class PlannedPath:
         centred rule turns its nominal by hundreds of newtons within millimetres of motion:
         the average spreads that turn over a length the dynamic timing can bound the
         stretch's rates on, ``dynamics._command_rates``), then over ``window_s`` s
-        (default ``command_window_s``) either side, both with a tent weight (``command_tensions``): a dynamic timing's tension
-        jumps where its acceleration switches, and a step in L0 there would make a
-        controller's quintic (and a damped cable) jerk and the winch exceed its limits;
-        the average spreads a jump J over the window, its second rate at most J /
-        window^2. Rates: those of L - stretch, exactly (the stretch L t / (EA + t) with the
+        (default ``command_window_s``) either side, both with a tent weight
+        (``command_tensions``): a dynamic timing's tension jumps where its acceleration
+        switches, and a step in L0 there would make a controller's quintic (and a damped
+        cable) jerk and the winch exceed its limits; the average spreads a jump J over the
+        window, its second rate at most J / window^2. Rates: those of L - stretch, exactly (the stretch L t / (EA + t) with the
         average's own rates), zero where the path rests. Rigid cables: the geometric
         lengths and rates themselves (the same arrays)."""
         if self.cable_stiffness is None:

@@ -64,8 +64,9 @@ def _poses(robot, p, R, subsets):
     facet and mask, and the rule's t0 and v (v of elastic cables: ``stiffness_band``). The
     rule centres where the facet test holds (every ranked pose without subsets)."""
     lengths, u, J, c, scale, mn, mr, arg, hi, ranked = _facets(robot, p, R, subsets)
-    t0, v = rule_of(robot).tensions(robot, J, c, ranked, ranked & (mr > 0))
-    t0 = stiff_nominal(robot, p, R, J, t0, ranked & (mr > 0))
+    centre = ranked & (mr > 0)
+    t0, v = rule_of(robot).tensions(robot, J, c, ranked, centre)
+    t0 = stiff_nominal(robot, p, R, J, t0, centre)
     return lengths, u, scale, mn, mr, arg, hi, t0, stiffness_band(robot, J, c, t0, lengths, v)
 
 
