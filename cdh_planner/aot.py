@@ -3,7 +3,8 @@
 
 A kernel module holds plain Python functions (no numba import), its entries' names and
 signatures (AOT_EXPORTS, {name: numba signature}), the prefix of its builds (AOT_PREFIX),
-``source_digest()`` and ``jit_kernels()`` ({name: numba's JIT function}). Two compilations
+the files beside it that its machine code is of (AOT_SOURCES, this one among them) and
+``jit_kernels()`` ({name: numba's JIT function}). Two compilations
 of the same source, the first one found is used (``entries``):
 
 - ahead of time (numba.pycc, ``python -m cdh_planner.manifold.aot`` / ``.scene.aot`` /
@@ -27,19 +28,20 @@ import warnings
 from pathlib import Path
 
 
-def source_digest(directory, names):
-    """12 hex digits of sha256 over the files ``names`` in ``directory``: what the
-    machine code is of."""
+def source_digest(kernels):
+    """12 hex digits of sha256 over the kernel module's AOT_SOURCES (paths relative to its
+    folder): what the machine code is of."""
+    folder = Path(kernels.__file__).resolve().parent
     h = hashlib.sha256()
-    for name in names:
-        h.update((Path(directory) / name).read_bytes())
+    for name in kernels.AOT_SOURCES:
+        h.update((folder / name).read_bytes())
     return h.hexdigest()[:12]
 
 
 def module_name(kernels):
     """The ahead-of-time module of the kernel module ``kernels`` built from its current
-    source: its AOT_PREFIX and its ``source_digest()``."""
-    return kernels.AOT_PREFIX + kernels.source_digest()
+    source: its AOT_PREFIX and ``source_digest``."""
+    return kernels.AOT_PREFIX + source_digest(kernels)
 
 
 def load(kernels):

@@ -11,7 +11,6 @@ says, unchecked.
 """
 
 import sys
-from pathlib import Path
 
 import numpy as np
 
@@ -64,9 +63,7 @@ AOT_EXPORTS = {"assemble_rows": (
 AOT_PREFIX = "_json_rows_aot_"
 
 
-def source_digest():
-    """12 hex digits of sha256 over this file: what the machine code is of."""
-    return aot.source_digest(Path(__file__).resolve().parent, ("json_rows.py",))
+AOT_SOURCES = ("json_rows.py",)  # what the machine code is of: this file
 
 
 def jit_kernels():

@@ -19,7 +19,6 @@ Two compilations of the same source, the first one found is used:
 
 import math
 import sys
-from pathlib import Path
 
 import numpy as np
 
@@ -340,9 +339,7 @@ AOT_EXPORTS = {"navigation_residual_and_jacobian":
 AOT_PREFIX = "_kernels_aot_"
 
 
-def source_digest():
-    """12 hex digits of sha256 over this file and layout.py: what the machine code is of."""
-    return aot.source_digest(Path(__file__).resolve().parent, ("kernels.py", "layout.py"))
+AOT_SOURCES = ("kernels.py", "layout.py")  # what the machine code is of: this file and layout.py
 
 
 def aot_kernel():

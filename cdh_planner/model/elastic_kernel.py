@@ -10,7 +10,6 @@ float64 arrays and two ints, as AOT_EXPORTS says, unchecked. Units: m, N, N m.
 """
 
 import sys
-from pathlib import Path
 
 import numpy as np
 
@@ -278,9 +277,7 @@ AOT_EXPORTS = {"equilibrium_kernel": (
 AOT_PREFIX = "_elastic_aot_"
 
 
-def source_digest():
-    """12 hex digits of sha256 over this file: what the machine code is of."""
-    return aot.source_digest(Path(__file__).resolve().parent, ("elastic_kernel.py",))
+AOT_SOURCES = ("elastic_kernel.py",)  # what the machine code is of: this file
 
 
 def jit_kernels():

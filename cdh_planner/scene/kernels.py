@@ -9,7 +9,6 @@ ahead of time by ``python -m cdh_planner.scene.aot`` (``make``), else by the JIT
 
 import math
 import sys
-from pathlib import Path
 
 import numpy as np
 
@@ -334,10 +333,7 @@ AOT_EXPORTS = {"collision_batch": (
 AOT_PREFIX = "_kernels_aot_"
 
 
-def source_digest():
-    """12 hex digits of sha256 over this file: what the machine code is of."""
-    return aot.source_digest(Path(__file__).resolve().parent,
-                             ("kernels.py", "../model/shape_forms.py"))
+AOT_SOURCES = ("kernels.py", "../model/shape_forms.py")  # what the machine code is of: this file and the shape forms it reads
 
 
 def aot_kernel():

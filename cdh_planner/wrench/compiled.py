@@ -15,7 +15,6 @@ them so. Units: m, N, N m.
 """
 
 import sys
-from pathlib import Path
 
 import numpy as np
 
@@ -48,11 +47,7 @@ CENTRED_HELPERS = ("householder_r", "forward_substitute", "null_basis", "cholesk
                    "load_wrench", "_log_product", "_slacks", "_centre", "_centred_poses")
 
 
-def source_digest():
-    """12 hex digits of sha256 over the kernels' sources and this file (the signatures):
-    what the machine code is of."""
-    return aot.source_digest(Path(__file__).resolve().parent,
-                             ("compiled.py", "kernel.py", "centred.py", "linalg.py"))
+AOT_SOURCES = ("compiled.py", "kernel.py", "centred.py", "linalg.py")  # what the machine code is of: the kernels' sources and this file (the signatures)
 
 
 def jit_helpers():
