@@ -11,7 +11,7 @@ Per scene it prints the median and mean microseconds per ``CollisionModel.cleara
 the obstacles; the cables against them in the compiled kernel), the compiled kernel alone
 (the 15 cable pairs and the 6 cables against the box platform exactly, the 70 bounds, and
 the cables against the primitive obstacles where a bound does not rule them out), and
-one coal capsule-box distance call from Python. Then the issue's planning target: Robot 2
+one coal capsule-box distance call from Python. Then the planning target: Robot 2
 free flight q2 -> q3 (Table 1) with a 1 cm ball on the platform's straight path and a ball
 platform of 3 cm: seconds per plan (a new Planner each time, in a process that has loaded
 the compiled kernels), median of ``--plans``. Exit code 0 always (a benchmark).

@@ -9,7 +9,7 @@ platform turns by about 2 rad about the vertical through the yaw window where th
 rule's band leaves the limits; each end has a planning margin >= 0.01 and the direct motion
 (slerp, 64 samples) leaves the domain. Printed per query: total plan time, the route's
 share (lift and atlas search; the rest is smoothing, densifying, dynamic timing and the
-executed check), charts; then the medians against the issue's target (median < 1 s), with
+executed check), charts; then the medians against the target (median < 1 s), with
 the machine's load average (2 CPUs shared). Exit code 0 always.
 """
 

@@ -567,7 +567,7 @@ def run_table1(args):
 
 
 def targets_table(ratios):
-    """The issue's targets, ours against OMPL-fine: warm <= 1.0x, cold <= 2.0x."""
+    """The targets, ours against OMPL-fine: warm <= 1.0x, cold <= 2.0x."""
     print("== ours against OMPL RRTConnect fine (targets: warm <= 1.0x, cold <= 2.0x)\n"
           "| row | planner | cold s | OMPL-fine cold s | cold ratio | warm s | OMPL-fine warm s | warm ratio | |\n"
           "|---|---|---|---|---|---|---|---|---|", flush=True)

@@ -7,7 +7,7 @@ the reach map in this process and on a local Ray of 1 and 2 workers, and Ray's s
 The point test is timed warm (a first small run loads the kernels: the facet test of more
 than six cables, the collision kernel of a scene).
 
-Prints numbers only (machines differ); the issue's targets (2 workers >= 1.7x 1 worker on a
+Prints numbers only (machines differ); the targets (2 workers >= 1.7x 1 worker on a
 reach job, Ray start < 3 s) are printed beside them, never turned into an exit code.
 """
 
