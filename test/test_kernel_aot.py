@@ -152,6 +152,21 @@ def test_aot_and_jit_wrench_kernels_agree_bit_for_bit(name, n):
 
 
 @pytest.mark.skipif(not ALL_BUILT, reason=NOT_BUILT)
+@pytest.mark.parametrize("name", ["robot2", "robot1"])
+def test_aot_and_jit_six_cable_kernels_agree_bit_for_bit(name):
+    """The six-cable rule (t0, band, J^-1 W, singular) of a walk, both builds."""
+    robot = load_robot(CONFIG / f"{name}.yaml")
+    geometry, ellipsoid, _ = _wrench_inputs(robot, 300, 6)
+    W = np.random.default_rng(6).normal(size=(300, 2, 6))
+    args = (*geometry, *ellipsoid[:3], W, 1e-12)
+    aot = aot_helper.load(wrench_kernels)["six_cable_kernel"](*args)
+    jit = wrench_kernels.jit_kernels()["six_cable_kernel"](*args)
+    assert np.isfinite(aot[0]).all()
+    for a, j in zip(aot, jit):
+        np.testing.assert_array_equal(a, j)
+
+
+@pytest.mark.skipif(not ALL_BUILT, reason=NOT_BUILT)
 @pytest.mark.parametrize("name", ["robot2", "cogiro", "robot2_8"])
 def test_aot_and_jit_accuracy_kernels_agree_bit_for_bit(name):
     """The zonotope kernel on the position and rotation rows of the error maps of a walk,
@@ -240,7 +255,7 @@ def test_the_wrench_entries_take_any_layout_and_type():
 
 # Each compiled kernel called once in a fresh process: the manifold's F / F_x, the collision
 # kernel, the wrench entries (the pose geometry, the facet test, the centred rule) of an
-# 8-cable robot through the package's entries, its elastic equilibrium and its accuracy
+# 8-cable robot and the six-cable rule through the package's entries, its elastic equilibrium and its accuracy
 # (the zonotope kernel). Prints whether
 # numba was imported.
 FRESH_CALLS = f"""
@@ -259,11 +274,12 @@ kernels.navigation_residual_and_jacobian(X, prm, True)
 robot2 = load_robot({str(CONFIG / "robot2.yaml")!r})
 scene = load_scene({str(CONFIG / "scenes" / "robot2_ball.yaml")!r}, robot2)
 assert CollisionModel(robot2, scene).clearance(np.array([0, 0, 0.4]), np.eye(3)).distance > 0
+six = float(wrench.rule_tensions(robot2, np.array([[0.0, 0.0, 0.4]]), np.eye(3)[None])[1][0, 0])
 robot = load_robot({str(CONFIG / "cogiro.yaml")!r})
 p, R = np.array([[0.0, 0.0, 2.5]]), np.eye(3)[None]
 answers = [float(wrench.wrench_feasibility(robot, p, R=R).margin[0]),
            float(wrench.band_margin(robot, p, R=R)[0]),
-           float(wrench.rule_tensions(robot, p, R)[0][0, 0])]
+           float(wrench.rule_tensions(robot, p, R)[0][0, 0]), six]
 from cdh_planner.model import elastic
 f = wrench.band_feasibility(robot, p, R=R)
 L0 = elastic.unstretched_lengths(robot, f.lengths, f.tension_nominal)

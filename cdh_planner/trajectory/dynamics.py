@@ -45,7 +45,7 @@ from functools import partial
 import numpy as np
 
 from ..errors import InputError, check_finite
-from ..wrench import band_feasibility, cable_vectors, rule_tensions, screw_jacobian, tension_map
+from ..wrench import band_feasibility, cable_vectors, rule_responses, rule_tensions
 from ..model.elastic import is_elastic
 from ..model.pose import tau_from_rotation
 from .executed import executable, spline_rates, unique_sorted
@@ -145,11 +145,9 @@ def _terms(robot, geo, s, mass, inertia):
     d = cable_vectors(robot, p, R)
     L = np.linalg.norm(d, axis=-1)
     u = d / L[..., None]
-    J = screw_jacobian(robot, u)
     # the published rule, t0 + P (w - w0) (P = J^-1 for six cables), its band v = |rows of
-    # P L| (with elastic cables P_K's: wrench.stiffness_band)
-    J_inv = tension_map(robot, J)
-    f0, v = rule_tensions(robot, p, R, inverted=(L, J, J_inv))  # J inverted once
+    # P L| (with elastic cables P_K's: wrench.stiffness_band), and P A, P B, in one pass
+    f0, v, change = rule_responses(robot, p, R, np.stack([A, B], axis=1))
     # the platform anchor q_i = p + R b_i: q_s = p_s + R (w x b), q_ss = p_ss + R (w_s x b +
     # w x (w x b)); L = |q - a| gives L_s = u . q_s and L_ss = (|q_s|^2 - L_s^2) / L + u . q_ss
     b = robot.platform_anchors[None]
@@ -159,7 +157,7 @@ def _terms(robot, geo, s, mass, inertia):
                                         + np.cross(w[:, None, :], wxb))
     L_s = np.einsum("nki,nki->nk", u, q_s)
     L_ss = (np.einsum("nki,nki->nk", q_s, q_s) - L_s ** 2) / L + np.einsum("nki,nki->nk", u, q_ss)
-    return L, L_s, L_ss, f0, v, -np.einsum("nij,nj->ni", J_inv, A), -np.einsum("nij,nj->ni", J_inv, B)
+    return L, L_s, L_ss, f0, v, -change[:, 0], -change[:, 1]
 
 
 def _command_rates(robot, geo, s, L, L_s, L_ss):
