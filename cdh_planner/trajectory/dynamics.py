@@ -51,7 +51,7 @@ from ..model.pose import tau_from_rotation
 from .executed import executable, spline_rates, unique_sorted
 from .path import (COMMAND_PATH_WINDOW_M, PlannedPath, averaged_along_path, cable_arc_length,
                    command_tensions, command_window, with_commands)
-from ..ports import CubicSpline, Rotation, RotationSpline, import_toppra
+from ..ports import CubicSpline, Rotation, RotationSpline, import_toppra, spline_derivatives
 
 GRID_POINTS = 400       # toppra gridpoints along the path (at least one per waypoint)
 CHECK_DT = 1e-3         # s: the dense check's time step
@@ -124,8 +124,8 @@ class _Geometry:
     def at(self, s):
         """p, R, c_s-ready pieces at s (M,): p, p_s, p_ss (M,3), R (M,3,3), w, w_s (M,3) body."""
         s = np.clip(s, 0.0, self.length)
-        return (self.p(s), self.p(s, 1), self.p(s, 2), self.R(s).as_matrix(), self.R(s, 1),
-                self.R(s, 2))
+        rot, w, w_s = spline_derivatives(self.R, s)
+        return (*spline_derivatives(self.p, s), rot.as_matrix(), w, w_s)
 
 
 def _terms(robot, geo, s, mass, inertia):
