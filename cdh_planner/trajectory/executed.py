@@ -301,8 +301,8 @@ def _executed_margins(robot, t_wp, L, V, A, seed, ts, mid, q, mass, inertia, col
         f, v = _tensions(robot, p_mid, R[1], c[1], c_dd, omega, alpha, mass, inertia)
     margin = np.minimum(f - v - robot.tension_min, robot.tension_max - f - v)
     blocked = np.zeros(len(mid), dtype=bool)
-    if collision is not None:
-        blocked = collision.margins(p_mid, R[1])[0] < 0
+    if collision is not None:  # the samples in order: exact where a sweep bound cannot clear them
+        blocked = collision.blocked_along(p_mid, R[1])
     return margin, lost[at[0]] | lost_mid | lost[at[2]], blocked
 
 
