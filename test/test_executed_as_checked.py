@@ -148,6 +148,9 @@ def test_quintic_matches_its_ends_and_its_derivatives():
     assert np.allclose(pos, jtc_quintic(t_wp, L, V, A, t), atol=1e-12)
     held, v_held, _ = E.quintic(t_wp, L, V, A, np.array([t_wp[-1] + 1.0]))
     assert np.allclose(held, L[-1]) and np.all(v_held == 0)
+    around = np.concatenate([[t_wp[0] - 1.0], t, [t_wp[-1] + 1.0]])  # the positions alone:
+    only, none, _ = E.quintic(t_wp, L, V, A, around, rates=False)   # the same bits
+    assert none is None and np.array_equal(only, E.quintic(t_wp, L, V, A, around)[0])
 
 
 def test_many_poses_forward_kinematics_agrees_with_one_at_a_time(problem):

@@ -69,22 +69,26 @@ PROGRESS = 0.1         # two rounds of added points that shrink the time the che
 
 # ----------------------------------------------------------------------------- the quintic
 
-def quintic(t_wp, L, V, A, t):
+def quintic(t_wp, L, V, A, t, rates=True):
     """Positions (M, J) m, velocities m/s and accelerations m/s^2 at times ``t`` (M,) of the
     JTC interpolation of points at ``t_wp`` (N,) s with positions L, velocities V and
     accelerations A (N, J): per segment the quintic through both ends' position, velocity
-    and acceleration; before the first point and after the last the end is held (rest)."""
+    and acceleration; before the first point and after the last the end is held (rest).
+    ``rates`` False: the positions alone (velocities and accelerations None)."""
     t_wp = np.asarray(t_wp, dtype=float)
     t = np.asarray(t, dtype=float)
     k = np.clip(np.searchsorted(t_wp, t, side="right") - 1, 0, len(t_wp) - 2)
     h = (t_wp[k + 1] - t_wp[k])[:, None]
     s = np.clip((t - t_wp[k]) / h[:, 0], 0.0, 1.0)[:, None]
-    b0, b1, b2, b3, b4, b5 = _coefficients(t_wp, L, V, A, k)
+    # each segment's coefficients once, then per sample (the same numbers)
+    b0, b1, b2, b3, b4, b5 = (b[k] for b in _coefficients(t_wp, L, V, A, np.arange(len(t_wp) - 1)))
     pos = b0 + s * (b1 + s * (b2 + s * (b3 + s * (b4 + s * b5))))
-    vel = (b1 + s * (2 * b2 + s * (3 * b3 + s * (4 * b4 + s * 5 * b5)))) / h
-    acc = (2 * b2 + s * (6 * b3 + s * (12 * b4 + s * 20 * b5))) / (h * h)
     before, after = t < t_wp[0], t > t_wp[-1]
     pos[before], pos[after] = L[0], L[-1]
+    if not rates:
+        return pos, None, None
+    vel = (b1 + s * (2 * b2 + s * (3 * b3 + s * (4 * b4 + s * 5 * b5)))) / h
+    acc = (2 * b2 + s * (6 * b3 + s * (12 * b4 + s * 20 * b5))) / (h * h)
     vel[before | after] = 0.0
     acc[before | after] = 0.0
     return pos, vel, acc
@@ -274,7 +278,7 @@ def _executed_margins(robot, t_wp, L, V, A, seed, ts, mid, q, mass, inertia, col
     where the pose is closer to the scene than its clearance (M,) (none without a
     ``collision`` model)."""
     need = unique_sorted(np.concatenate([mid - q, mid, mid + q]))
-    pos, _, _ = quintic(t_wp, L, V, A, ts[need])
+    pos = quintic(t_wp, L, V, A, ts[need], rates=False)[0]
     p_seed, R_seed = seed(ts[need])
     elastic = is_elastic(robot)
     if elastic:  # the static equilibrium first: the motion's accelerations from it
