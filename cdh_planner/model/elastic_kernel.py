@@ -256,14 +256,21 @@ def _equilibrium_poses(a, b, g, EA, L0, p, R, force, moment, arm, tol, iteration
     residual = np.empty(n)
     ok = np.zeros(n, dtype=np.bool_)
     scratch = _scratch(m)
-    res, jac = scratch[0], scratch[1]
+    res, jac, t = scratch[0], scratch[1], scratch[2]
     for q in range(n):
-        _newton_pose(a, b, g, EA, L0[q], p[q], R[q], force[q], moment[q], arm[q], True, tol[q],
-                     iterations, halvings, scratch)
-        ok[q] = _newton_pose(a, b, g, EA, L0[q], p[q], R[q], force[q], moment[q], arm[q], False,
-                             tol[q], iterations, halvings, scratch)
-        _balance(a, b, g, EA, L0[q], p[q], R[q], force[q], moment[q], arm[q], False, res, jac,
-                 tensions[q], False)
+        # a converged Newton leaves the residual and tensions of its pose in scratch; where
+        # no pushing cable was needed the tension-only pass would stop at once with the
+        # same numbers, so it is not run
+        pushing = not _newton_pose(a, b, g, EA, L0[q], p[q], R[q], force[q], moment[q], arm[q],
+                                   True, tol[q], iterations, halvings, scratch)
+        for i in range(m):
+            pushing = pushing or t[i] < 0.0
+        ok[q] = not pushing or _newton_pose(a, b, g, EA, L0[q], p[q], R[q], force[q], moment[q],
+                                            arm[q], False, tol[q], iterations, halvings, scratch)
+        if not ok[q]:  # stuck: scratch may hold a rejected trial's
+            _balance(a, b, g, EA, L0[q], p[q], R[q], force[q], moment[q], arm[q], False, res, jac,
+                     t, False)
+        tensions[q] = t
         residual[q] = _max_abs(res)
     return p, R, tensions, residual, ok
 
