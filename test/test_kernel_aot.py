@@ -162,12 +162,7 @@ def test_aot_and_jit_six_cable_kernels_agree_bit_for_bit(name):
     robot = load_robot(CONFIG / f"{name}.yaml")
     geometry, ellipsoid, _ = _wrench_inputs(robot, 300, 6)
     W = np.random.default_rng(6).normal(size=(300, 2, 6))
-    args = (*geometry, *ellipsoid[:3], W, 1e-12)
-    aot = aot_helper.load(wrench_kernels)["six_cable_kernel"](*args)
-    jit = wrench_kernels.jit_kernels()["six_cable_kernel"](*args)
-    assert np.isfinite(aot[0]).all()
-    for a, j in zip(aot, jit):
-        np.testing.assert_array_equal(a, j)
+    _builds_agree(wrench_kernels, "six_cable_kernel", (*geometry, *ellipsoid[:3], W, 1e-12))
 
 
 @pytest.mark.skipif(not ALL_BUILT, reason=NOT_BUILT)
@@ -177,12 +172,19 @@ def test_aot_and_jit_motion_kernels_agree_bit_for_bit(name):
     robot = load_robot(CONFIG / f"{name}.yaml")
     p, R, a, b, g = _wrench_inputs(robot, 200, 9)[0]
     rates = np.random.default_rng(9).normal(size=(4, 200, 3))
-    args = (p, rates[0], rates[1], R, rates[2], rates[3], a, b, g, 0.6, np.diag([1e-3, 2e-3, 3e-3]))
-    aot = aot_helper.load(motion_kernel)["motion_terms_kernel"](*args)
-    jit = motion_kernel.jit_kernels()["motion_terms_kernel"](*args)
+    _builds_agree(motion_kernel, "motion_terms_kernel",
+                  (p, rates[0], rates[1], R, rates[2], rates[3], a, b, g, 0.6,
+                   np.diag([1e-3, 2e-3, 3e-3])))
+
+
+def _builds_agree(module, entry, args):
+    """The kernel module's entry, built ahead of time and by the JIT, on ``args``: the same
+    bits (its first output finite: the comparison is not of nan)."""
+    aot = aot_helper.load(module)[entry](*args)
+    jit = module.jit_kernels()[entry](*args)
     assert np.isfinite(aot[0]).all()
-    for x, y in zip(aot, jit):
-        np.testing.assert_array_equal(x, y)
+    for a, j in zip(aot, jit):
+        np.testing.assert_array_equal(a, j)
 
 
 @pytest.mark.skipif(not ALL_BUILT, reason=NOT_BUILT)
