@@ -124,18 +124,27 @@ def run(atlas, x_start, x_goal, cost: Callable, stop: Stop, strategy="astar",
     link_ok's probe. ``check_meetings``: a strategy checks the link where the two sides
     meet (its points and ``link_ok``, else ``direct``) before it answers, and cuts a bad
     one and goes on: past a thin obstacle the sides' charts overlap across it, so that is
-    the link that fails, and each failure found in the route instead restarts the search."""
+    the link that fails, and each failure found in the route instead restarts the search;
+    and a restarted search of a strategy whose answer need not be least-cost (not
+    ``admissible``: GBF) first walks the charts there are, growing none, and grows only
+    when they hold no route (a restart from the roots grew charts near them again, for a
+    route the atlas already had)."""
     if strategy not in STRATEGIES:
         raise ValueError(f"unknown strategy {strategy!r} (expected one of {', '.join(STRATEGIES)})")
     strategy = STRATEGIES[strategy]()
     i_start, i_goal = atlas.chart_at(x_start), atlas.chart_at(x_goal)
     memo = _Memo({} if edge_costs is None else edge_costs)
+    walk = False  # check_meetings: a restart of a strategy that need not answer least cost
     while True:  # lazy links: a route's links are checked once found; a bad one is cut
         search = Bidirectional(atlas, cost, strategy, direct, progress, memo, heuristic,
-                               link_ok if check_meetings else None)
+                               link_ok if check_meetings else None, walk)
         status, route, hops = search.run(i_start, i_goal, stop)
+        if walk and status == Status.NO_PATH:
+            walk = False  # no route on them: grow
+            continue
         if status != Status.OK:
             return SearchOutcome(status, expanded=search.expanded)
+        walk = check_meetings and not strategy.admissible
         points, direct_idx, owners, bad = _route_points(atlas, route, hops, link_ok,
                                                         search.direct_ok, memo.links_ok)
         if bad is None and route_check is not None:
@@ -225,8 +234,9 @@ class Bidirectional:
     (memoised across restarts), direct motions, chart growth and joining a route."""
 
     def __init__(self, atlas, cost, strategy, direct, progress, memo, heuristic=None,
-                 meeting_link_ok=None):
+                 meeting_link_ok=None, walk=False):
         self.atlas = atlas
+        self.walk = walk  # no chart grows: a route on the charts there are, or NO_PATH
         self.meeting_link_ok = meeting_link_ok  # run's link_ok when it checks meetings
         self.links_ok = memo.links_ok
         self.cost = cost
@@ -314,6 +324,8 @@ class Bidirectional:
         h than i. Returns (a limit status of ``stop`` or None, the new charts)."""
         ch = self.atlas.charts[i]
         new = []
+        if self.walk:
+            return None, new
         for _ in range(MAX_EXPANSIONS_PER_CHART):
             if ch.closed:
                 return None, new
@@ -488,7 +500,7 @@ class GreedyBestFirst(Strategy):
                         side.parent.setdefault(j, i)
                         return (Status.OK, *s.join(side, j, k, True))
             ch = s.atlas.charts[i]
-            if ch.closed:
+            if ch.closed or s.walk:
                 side.done.add(i)
                 s.expanded += 1
             else:
