@@ -40,6 +40,11 @@ benchmarks and the pictures. The two built-in strategies:
 A new strategy that only reorders A* (weighted A*: g + w h) overrides ``priority``; one
 with its own loop overrides ``search`` too (test/test_strategies.py).
 
+Links are checked lazily: a route's links once it is found (``link_ok``, the caller's
+``route_check``); a bad one is cut and the search restarts, sharing what it computed.
+Past a thin obstacle (``check_meetings``) GBF also checks the link where its sides meet
+before it answers, and a restart first walks the charts there are before it grows more.
+
 "No path" (``Status.NO_PATH``): one side has no chart left to pop, so the component of
 its end (at this resolution, see ``atlas.domain``) holds no path to the other end.
 """
