@@ -113,15 +113,22 @@ class Validity:
         """``quaternion_from_tau`` of the rows of tau (N, 3) rad, remembered per row: the
         search's direct motions share their ends (a chart, the other side's root), and
         the conversion costs more than the rest of building a motion. Row by row the same
-        numbers as one call on all rows (the conversion treats each row alone)."""
-        keys = [row.tobytes() for row in tau]
-        new = [k for k, key in enumerate(keys) if key not in self._quaternion_memo]
+        numbers as one call on all rows (the conversion treats each row alone). Read
+        into its own array, so a memo cleared meanwhile (another thread) loses nothing."""
+        memo, keys = self._quaternion_memo, [row.tobytes() for row in tau]
+        out, new = np.empty((len(keys), 4)), []
+        for k, key in enumerate(keys):
+            q = memo.get(key)
+            if q is None:
+                new.append(k)
+            else:
+                out[k] = q
         if new:
-            if len(self._quaternion_memo) + len(new) > QUATERNION_MEMO:
-                self._quaternion_memo.clear()
-            for k, q in zip(new, quaternion_from_tau(tau[new])):
-                self._quaternion_memo[keys[k]] = q
-        return np.array([self._quaternion_memo[key] for key in keys])
+            out[new] = quaternion_from_tau(tau[new])
+            if len(memo) + len(new) > QUATERNION_MEMO:
+                memo.clear()
+            memo.update((keys[k], out[k].copy()) for k in new)
+        return out
 
     def probe(self, y, n, motion=None, samples=None):
         """Are n evenly spaced poses of every direct motion between the rows of y valid?
