@@ -168,13 +168,16 @@ def test_aot_and_jit_six_cable_kernels_agree_bit_for_bit(name):
 @pytest.mark.skipif(not ALL_BUILT, reason=NOT_BUILT)
 @pytest.mark.parametrize("name", ["robot2", "robot2_8"])
 def test_aot_and_jit_motion_kernels_agree_bit_for_bit(name):
-    """The dynamic timing's per-sample geometry on a walk with random rates, both builds."""
+    """The dynamic timing's per-sample geometry on a walk with random rates, and the turns
+    between its rotations, both builds."""
     robot = load_robot(CONFIG / f"{name}.yaml")
     p, R, a, b, g = _wrench_inputs(robot, 200, 9)[0]
     rates = np.random.default_rng(9).normal(size=(4, 200, 3))
     _builds_agree(motion_kernel, "motion_terms_kernel",
                   (p, rates[0], rates[1], R, rates[2], rates[3], a, b, g, 0.6,
                    np.diag([1e-3, 2e-3, 3e-3])))
+    index = np.arange(200, dtype=np.int64)
+    _builds_agree(motion_kernel, "turns_kernel", (R, index[:-2], index[2:], 1e-3))
 
 
 def _builds_agree(module, entry, args):

@@ -14,7 +14,7 @@ from cdh_planner.model.robot import load_robot
 from cdh_planner.parsing.problem import load_problem
 from cdh_planner.ports import Rotation
 from cdh_planner.trajectory.dynamics import _Geometry
-from cdh_planner.trajectory.motion_kernel import motion_terms
+from cdh_planner.trajectory.motion_kernel import motion_terms, turns
 from cdh_planner.wrench import cable_vectors
 
 
@@ -90,3 +90,25 @@ def test_the_length_rates_are_the_derivatives_along_the_path(geometry):
     _, _, L, L_s, L_ss = motion_terms(robot, *geo.at(s), robot.mass, robot.inertia)
     assert np.allclose(L_s, (lengths(s + h) - lengths(s - h)) / (2 * h), atol=1e-6)
     assert np.allclose(L_ss, (lengths(s + h) - 2 * L + lengths(s - h)) / h ** 2, atol=1e-3)
+
+
+def test_the_turns_are_the_ports_rotation_vectors():
+    """``turns`` against Rotation.from_matrix(R[a]^T R[b]).as_rotvec(): random rotations and
+    turns of 0, 1e-9, 1e-4, 1e-3 (the series' edge), pi / 2 and near pi about each axis (each
+    quaternion branch); a product off orthogonal (a matrix scaled by 1 + 1e-9) goes to the
+    port, which projects it; a reflection is refused as the port refuses it."""
+    rng = np.random.default_rng(12)
+    base = Rotation.from_rotvec(rng.normal(size=(40, 3))).as_matrix()
+    special = [Rotation.from_rotvec(angle * axis).as_matrix()
+               for axis in np.eye(3) for angle in (0.0, 1e-9, 1e-4, 1e-3, 1.1e-3, np.pi / 2, np.pi - 1e-6)]
+    R = np.concatenate([base, base[:len(special)] @ np.array(special)])
+    a = np.concatenate([rng.integers(0, 40, 60), np.arange(len(special))])
+    b = np.concatenate([rng.integers(0, 40, 60), 40 + np.arange(len(special))])
+    R[3] *= 1.0 + 1e-9  # off orthogonal
+    a[0] = 3
+    got = turns(R, a, b)
+    ref = Rotation.from_matrix(np.swapaxes(R[a], 1, 2) @ R[b]).as_rotvec()
+    np.testing.assert_allclose(got, ref, rtol=0, atol=1e-15)
+    R[5] = -R[5]  # left-handed
+    with pytest.raises(ValueError):
+        turns(R, np.array([5]), np.array([6]))

@@ -44,6 +44,7 @@ from ..model.elastic import equilibrium_poses, is_elastic, static_load
 from ..model.forward_kinematics import forward_kinematics_many
 from ..model.pose import cross, tau_from_rotation
 from ..ports import CubicSpline, Rotation, Slerp
+from .motion_kernel import turns
 from .path import with_commands
 from .timing import limit_ratio
 
@@ -317,7 +318,7 @@ def _stencil_turns(R, need, mid, q):
     once (of a whole check's contiguous samples, half as many)."""
     first = unique_sorted(np.concatenate([mid - q, mid]))    # where each turn starts
     a, b = np.searchsorted(need, first), np.searchsorted(need, first + q)
-    turn = Rotation.from_matrix(np.swapaxes(R[a], 1, 2) @ R[b]).as_rotvec()
+    turn = turns(R, a, b)  # compiled: Rotation.from_matrix(R[a]^T R[b]).as_rotvec()
     return turn[np.searchsorted(first, mid - q)], turn[np.searchsorted(first, mid)]
 
 

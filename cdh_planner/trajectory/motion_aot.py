@@ -1,5 +1,5 @@
-"""Build the dynamic timing's per-sample geometry kernel (motion_kernel.py) ahead of time
-next to its source.
+"""Build the trajectory's per-sample kernels (motion_kernel.py) ahead of time next to their
+source.
 
     python -m cdh_planner.trajectory.motion_aot
 
@@ -16,13 +16,15 @@ from . import motion_kernel
 
 
 def warm_jit():
-    """Compile the JIT kernel once (six cables, one sample) so that its cache is there."""
+    """Compile the JIT kernels once (six cables, one sample) so that their cache is there."""
     rows = np.zeros((1, 3))
     angles = np.linspace(0.0, 2 * np.pi, 6, endpoint=False)
     a = np.stack([np.cos(angles), np.sin(angles), np.ones(6)], axis=1)
     motion_kernel.jit_kernels()["motion_terms_kernel"](
         rows, rows, rows, np.eye(3)[None].copy(), rows, rows, a, 0.1 * a, np.zeros(3), 1.0,
         np.eye(3))
+    motion_kernel.jit_kernels()["turns_kernel"](np.eye(3)[None].copy(), np.zeros(1, dtype=np.int64),
+                                               np.zeros(1, dtype=np.int64), 1e-3)
 
 
 if __name__ == "__main__":

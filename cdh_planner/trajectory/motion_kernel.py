@@ -1,13 +1,14 @@
-"""The dynamic timing's per-sample geometry compiled by numba (``dynamics._terms``): at
-each sample of the path, from its pose p, R and their s-derivatives (p_s, p_ss; the body
-rates w, w_s of R), the load's inertial wrench coefficients A, B (w_in = A s'' + B s'^2) and
-the cable lengths with their s-derivatives. The timing evaluates them at every
-millisecond of a motion (some 10^4 samples), where numpy spent its time on (N, 3) and
-(N, m, 3) temporaries. Plain Python here (no numba import): ``motion_terms_kernel`` is the
-build ahead of time (``python -m cdh_planner.trajectory.motion_aot``, run by ``make``),
-else numba's JIT with ``cache=True`` (``cdh_planner.aot``). Its arguments are C-contiguous
-float64 arrays and a float, as AOT_EXPORTS says (``motion_terms`` passes them so).
-Units: m, rad, kg, kg m^2, N, per m of path parameter s.
+"""The trajectory's per-sample arithmetic compiled by numba. The dynamic timing's geometry
+(``dynamics._terms``): at each sample of the path, from its pose p, R and their
+s-derivatives (p_s, p_ss; the body rates w, w_s of R), the load's inertial wrench
+coefficients A, B (w_in = A s'' + B s'^2) and the cable lengths with their s-derivatives,
+at every millisecond of a motion (some 10^4 samples), where numpy spent its time on (N, 3)
+and (N, m, 3) temporaries. The executed check's stencil turns (``turns``: the rotation
+between two samples, some 10^4 a check). Plain Python here (no numba import): the entries
+are the build ahead of time (``python -m cdh_planner.trajectory.motion_aot``, run by
+``make``), else numba's JIT with ``cache=True`` (``cdh_planner.aot``). Their arguments are
+C-contiguous float64 and int64 arrays and floats, as AOT_EXPORTS says (``motion_terms``
+and ``turns`` pass them so). Units: m, rad, kg, kg m^2, N, per m of path parameter s.
 """
 
 import sys
@@ -15,6 +16,8 @@ import sys
 import numpy as np
 
 from .. import aot
+from ..ports import Rotation
+from ..ports.rotation import SMALL_ANGLE
 
 
 def _rotate(R, x0, x1, x2, i):
@@ -95,12 +98,82 @@ def _motion_terms(p, p_s, p_ss, R, w, w_s, a, b, g, mass, inertia):
     return A, B, L, L_s, L_ss
 
 
+def _turns(R, a, b, small):
+    """The rotation vectors (K, 3) rad of R[a_k]^T R[b_k] (R (N, 3, 3), a, b (K,)): the body
+    frame turn from rotation a_k to b_k, as ``ports.Rotation.from_matrix(...).as_rotvec()``
+    computes it (scipy's quaternion of the largest of the diagonal and the trace,
+    normalised, w >= 0, angle 2 atan2(|xyz|, w), its series below ``small`` rad), and
+    whether that needs the port itself (K,): the product not orthogonal to 1e-12 (the
+    port projects it first) or not right-handed (the port refuses it)."""
+    n = a.shape[0]
+    out = np.empty((n, 3))
+    other = np.zeros(n, dtype=np.bool_)
+    M = np.empty((3, 3))
+    q = np.empty(4)
+    for k in range(n):
+        A, B = R[a[k]], R[b[k]]
+        for i in range(3):
+            for j in range(3):
+                M[i, j] = A[0, i] * B[0, j] + A[1, i] * B[1, j] + A[2, i] * B[2, j]
+        det = (M[0, 0] * (M[1, 1] * M[2, 2] - M[1, 2] * M[2, 1])
+               - M[0, 1] * (M[1, 0] * M[2, 2] - M[1, 2] * M[2, 0])
+               + M[0, 2] * (M[1, 0] * M[2, 1] - M[1, 1] * M[2, 0]))
+        for i in range(3):
+            for j in range(3):
+                gram = M[i, 0] * M[j, 0] + M[i, 1] * M[j, 1] + M[i, 2] * M[j, 2]
+                eye = 1.0 if i == j else 0.0
+                if not abs(gram - eye) <= 1e-12 + 1e-5 * eye:
+                    other[k] = True
+        if not det > 0.0:
+            other[k] = True
+        if other[k]:
+            continue
+        trace = M[0, 0] + M[1, 1] + M[2, 2]
+        choice, big = 0, M[0, 0]
+        if M[1, 1] > big:
+            choice, big = 1, M[1, 1]
+        if M[2, 2] > big:
+            choice, big = 2, M[2, 2]
+        if trace > big:
+            choice = 3
+        if choice == 3:
+            q[0] = M[2, 1] - M[1, 2]
+            q[1] = M[0, 2] - M[2, 0]
+            q[2] = M[1, 0] - M[0, 1]
+            q[3] = 1 + trace
+        else:
+            i = choice
+            j, l = (i + 1) % 3, (i + 2) % 3
+            q[i] = 1 - trace + 2 * M[i, i]
+            q[j] = M[j, i] + M[i, j]
+            q[l] = M[l, i] + M[i, l]
+            q[3] = M[l, j] - M[j, l]
+        norm = np.sqrt(q[0] * q[0] + q[1] * q[1] + q[2] * q[2] + q[3] * q[3])
+        for i in range(4):
+            q[i] = q[i] / norm
+        flip = q[3] < 0 or (q[3] == 0 and (q[0] < 0 or (q[0] == 0 and (
+            q[1] < 0 or (q[1] == 0 and q[2] < 0)))))
+        if flip:
+            for i in range(4):
+                q[i] = -q[i]
+        angle = 2 * np.arctan2(np.sqrt(q[0] * q[0] + q[1] * q[1] + q[2] * q[2]), q[3])
+        if angle <= small:
+            a2 = angle * angle
+            scale = 2 + a2 / 12 + 7 * a2 * a2 / 2880
+        else:
+            scale = angle / np.sin(angle / 2)
+        for i in range(3):
+            out[k, i] = scale * q[i]
+    return out, other
+
+
 # ----- compilation -------------------------------------------------------------------------
 HELPERS = ("_rotate",)
 _F2, _F3 = "float64[:, ::1]", "float64[:, :, ::1]"
 AOT_EXPORTS = {"motion_terms_kernel": (
     f"Tuple(({_F2}, {_F2}, {_F2}, {_F2}, {_F2}))"
-    f"({_F2}, {_F2}, {_F2}, {_F3}, {_F2}, {_F2}, {_F2}, {_F2}, float64[::1], float64, {_F2})")}
+    f"({_F2}, {_F2}, {_F2}, {_F3}, {_F2}, {_F2}, {_F2}, {_F2}, float64[::1], float64, {_F2})"),
+    "turns_kernel": f"Tuple(({_F2}, boolean[::1]))({_F3}, int64[::1], int64[::1], float64)"}
 AOT_PREFIX = "_motion_aot_"
 
 
@@ -110,10 +183,12 @@ AOT_SOURCES = ("motion_kernel.py",)  # what the machine code is of: this file
 def jit_kernels():
     """numba's JIT entry (cache=True) by name (``cdh_planner.aot``); the helper becomes a
     numba function here."""
-    return {"motion_terms_kernel": aot.jit(globals(), HELPERS, inline=HELPERS)(_motion_terms)}
+    njit = aot.jit(globals(), HELPERS, inline=HELPERS)
+    return {"motion_terms_kernel": njit(_motion_terms), "turns_kernel": njit(_turns)}
 
 
-motion_terms_kernel = aot.entries(sys.modules[__name__])["motion_terms_kernel"]
+_entries = aot.entries(sys.modules[__name__])
+motion_terms_kernel, turns_kernel = _entries["motion_terms_kernel"], _entries["turns_kernel"]
 
 
 def motion_terms(robot, p, p_s, p_ss, R, w, w_s, mass, inertia):
@@ -124,3 +199,15 @@ def motion_terms(robot, p, p_s, p_ss, R, w, w_s, mass, inertia):
     return motion_terms_kernel(f(p), f(p_s), f(p_ss), f(R), f(w), f(w_s), f(robot.base_anchors),
                                f(robot.platform_anchors), f(robot.load_point), float(mass),
                                f(np.asarray(inertia, dtype=float).reshape(3, 3)))
+
+
+def turns(R, a, b):
+    """Rotation vectors (K, 3) rad of R[a]^T R[b] (R (N, 3, 3), indices a, b (K,)): the
+    compiled ``_turns``, the port's own ``Rotation`` where the product needs it (not
+    orthogonal to 1e-12: projected; left-handed: refused)."""
+    R = np.ascontiguousarray(R, dtype=np.float64)
+    a, b = np.ascontiguousarray(a, dtype=np.int64), np.ascontiguousarray(b, dtype=np.int64)
+    out, other = turns_kernel(R, a, b, SMALL_ANGLE)
+    if other.any():
+        out[other] = Rotation.from_matrix(np.swapaxes(R[a[other]], 1, 2) @ R[b[other]]).as_rotvec()
+    return out
