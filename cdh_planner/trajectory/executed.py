@@ -36,6 +36,7 @@ docstring of that function).
 """
 
 from dataclasses import dataclass, field, replace
+from math import comb
 
 import numpy as np
 
@@ -107,20 +108,37 @@ def _coefficients(t_wp, L, V, A, k):
             6 * d - 3 * dv + 0.5 * da)
 
 
-def quintic_bounds(t_wp, L, V, A, segments=None):
+def quintic_bounds(t_wp, L, V, A, segments=None, limits=None):
     """Per segment (K of them, default all) and joint, exactly: the least and largest
     position (m), the largest |velocity| (m/s) and |acceleration| (m/s^2) of the JTC's
     quintic, each (K, J). Each is a polynomial on [0, 1]: its extremes are at the ends or
     where its derivative vanishes (real roots from the companion matrix, and a few fixed
-    fractions in case a root is ill-conditioned)."""
+    fractions in case a root is ill-conditioned). ``limits`` (least, largest) (J,) m: the
+    positions' extremes only where their Bernstein hull (the range of the Bernstein
+    coefficients, which holds the polynomial on [0, 1]) is not within the limits by
+    HULL_ROUNDING_M; elsewhere the hull's ends, within the limits as the extremes are."""
     t_wp, L, V, A = (np.asarray(x, dtype=float) for x in (t_wp, L, V, A))
     k = np.arange(len(t_wp) - 1) if segments is None else np.asarray(segments, dtype=int)
     h = (t_wp[k + 1] - t_wp[k])[:, None]
     b = np.stack(_coefficients(t_wp, L, V, A, k), axis=-1)                # (K, J, 6)
     vel = b[..., 1:] * np.arange(1, 6)                                     # per unit s
     acc = vel[..., 1:] * np.arange(1, 5)
-    lo, hi = _extremes(b)
+    if limits is None:
+        lo, hi = _extremes(b)
+    else:
+        hull = b @ BERNSTEIN_5.T
+        lo, hi = hull.min(axis=-1), hull.max(axis=-1)
+        inside = (lo >= limits[0] + HULL_ROUNDING_M) & (hi <= limits[1] - HULL_ROUNDING_M)
+        if not inside.all():
+            lo[~inside], hi[~inside] = _extremes(b[~inside])
     return lo, hi, np.max(np.abs(_extremes(vel)), axis=0) / h, np.max(np.abs(_extremes(acc)), axis=0) / h ** 2
+
+
+# a quintic's Bernstein coefficients on [0, 1] from its power ones b_i: sum_{i <= j}
+# C(j, i) / C(5, i) b_i (row j)
+BERNSTEIN_5 = np.array([[comb(j, i) / comb(5, i) if i <= j else 0.0 for i in range(6)]
+                        for j in range(6)])
+HULL_ROUNDING_M = 1e-12  # m: a hull within the limits by this is so despite rounding
 
 
 def _extremes(c):
@@ -220,8 +238,9 @@ def check_executed(robot, t_wp, L, V, A, seed, mass=None, inertia=None, max_cabl
     k = np.arange(len(t_wp) - 1)
     if within is not None:
         k = k[np.any((t_wp[1:, None] >= w[:, 0]) & (t_wp[:-1, None] <= w[:, 1]), axis=1)]
-    lo, hi, vel, acc = quintic_bounds(t_wp, L, V, A, k)
-    lengths_ok = (lo >= robot.length_min - TOL) & (hi <= robot.length_max + TOL)
+    limits = (robot.length_min - TOL, robot.length_max + TOL)
+    lo, hi, vel, acc = quintic_bounds(t_wp, L, V, A, k, limits)
+    lengths_ok = (lo >= limits[0]) & (hi <= limits[1])
     m = L.shape[1]
     speed = np.max(vel / np.broadcast_to(max_cable_speed, (m,)), axis=1, initial=0.0)
     accel = np.max(acc / np.broadcast_to(max_cable_accel, (m,)), axis=1, initial=0.0)
