@@ -138,7 +138,7 @@ def test_the_kernels_balance_is_wrench_balance(name, bilateral):
     for q in range(len(p)):
         r, j, tq = np.empty(6), np.empty((6, 6)), np.empty(m)
         K._balance(a, b, g, EA, L0[q], p[q], R[q], force[q], moment[q], arm[q], bilateral, r, j,
-                   tq, True)
+                   tq, True, np.empty((m, K.CABLE_TERMS)))
         scale = np.abs(jac[q]).max()
         np.testing.assert_allclose(r, res[q], rtol=0, atol=1e-9 * max(1.0, np.abs(t[q]).max()))
         np.testing.assert_allclose(tq, t[q], rtol=0, atol=1e-9 * max(1.0, np.abs(t[q]).max()))

@@ -16,21 +16,29 @@ import numpy as np
 from .. import aot
 
 
-def _balance(a, b, g, EA, L0, p, R, force, moment, arm, bilateral, res, jac, t, want_jac):
+def _balance(a, b, g, EA, L0, p, R, force, moment, arm, bilateral, res, jac, t, want_jac,
+             cables):
     """``elastic.wrench_balance`` at one pose into res (6,), t (m,) and, when ``want_jac``,
-    jac (6, 6): the same residual, tensions and Jacobian (scalars only: no allocation)."""
+    jac (6, 6): the same residual, tensions and Jacobian (scalars only: no allocation).
+    ``cables`` (m, CABLE_TERMS): work space (``_residual``). The kernel's Newton calls its
+    two parts apart: the Jacobian only where a step starts."""
+    _residual(a, b, g, EA, L0, p, R, force, moment, arm, bilateral, res, t, cables)
+    if want_jac:
+        _jacobian(a, g, p, R, arm, jac, cables)
+
+
+CABLE_TERMS = 11  # per cable: r = R b_i (3), u (3), a_i x u (3), t / L, k - t / L
+
+
+def _residual(a, b, g, EA, L0, p, R, force, moment, arm, bilateral, res, t, cables):
+    """The residual res (6,) and tensions t (m,) of ``_balance``, and per cable into
+    ``cables`` (m, CABLE_TERMS) the numbers its Jacobian is made of (``_jacobian``): the
+    arm r = R b_i, the unit vector u, a_i x u, t / L and k - t / L. A Newton step needs the
+    Jacobian only at a pose its line search accepted, whose residual it has: these are
+    what that Jacobian would compute again."""
     m = a.shape[0]
     for j in range(6):
         res[j] = 0.0
-    if want_jac:
-        for i in range(6):
-            for j in range(6):
-                jac[i, j] = 0.0
-    sum_tl = 0.0
-    s0 = s1 = s2 = 0.0                      # sum (t_i / L_i) r_i
-    a0 = a1 = a2 = 0.0                      # sum (t_i / L_i) a_i
-    wr_dot_a = 0.0
-    w00 = w01 = w02 = w10 = w11 = w12 = w20 = w21 = w22 = 0.0  # sum (t_i / L_i) r_i a_i^T
     for i in range(m):
         r0 = R[0, 0] * b[i, 0] + R[0, 1] * b[i, 1] + R[0, 2] * b[i, 2]
         r1 = R[1, 0] * b[i, 0] + R[1, 1] * b[i, 1] + R[1, 2] * b[i, 2]
@@ -58,38 +66,10 @@ def _balance(a, b, g, EA, L0, p, R, force, moment, arm, bilateral, res, jac, t, 
         res[3] += ti * au0
         res[4] += ti * au1
         res[5] += ti * au2
-        if want_jac:
-            tl = ti / L
-            kt = k_i - tl
-            dL3 = (r1 * u2 - r2 * u1) * kt    # (k - t / L) [u; r x u]
-            dL4 = (r2 * u0 - r0 * u2) * kt
-            dL5 = (r0 * u1 - r1 * u0) * kt
-            dL0, dL1, dL2 = u0 * kt, u1 * kt, u2 * kt
-            for k in range(6):
-                uk = (u0, u1, u2, au0, au1, au2)[k]
-                jac[k, 0] += uk * dL0
-                jac[k, 1] += uk * dL1
-                jac[k, 2] += uk * dL2
-                jac[k, 3] += uk * dL3
-                jac[k, 4] += uk * dL4
-                jac[k, 5] += uk * dL5
-            sum_tl += tl
-            s0 += tl * r0
-            s1 += tl * r1
-            s2 += tl * r2
-            a0 += tl * ai0
-            a1 += tl * ai1
-            a2 += tl * ai2
-            w00 += tl * r0 * ai0
-            w01 += tl * r0 * ai1
-            w02 += tl * r0 * ai2
-            w10 += tl * r1 * ai0
-            w11 += tl * r1 * ai1
-            w12 += tl * r1 * ai2
-            w20 += tl * r2 * ai0
-            w21 += tl * r2 * ai1
-            w22 += tl * r2 * ai2
-            wr_dot_a += tl * (r0 * ai0 + r1 * ai1 + r2 * ai2)
+        tl = ti / L
+        c = cables[i]
+        c[0], c[1], c[2], c[3], c[4], c[5] = r0, r1, r2, u0, u1, u2
+        c[6], c[7], c[8], c[9], c[10] = au0, au1, au2, tl, k_i - tl
     c0 = p[0] + R[0, 0] * g[0] + R[0, 1] * g[1] + R[0, 2] * g[2]
     c1 = p[1] + R[1, 0] * g[0] + R[1, 1] * g[1] + R[1, 2] * g[2]
     c2 = p[2] + R[2, 0] * g[0] + R[2, 1] * g[1] + R[2, 2] * g[2]
@@ -99,8 +79,57 @@ def _balance(a, b, g, EA, L0, p, R, force, moment, arm, bilateral, res, jac, t, 
     res[3] -= moment[0] + c1 * arm[2] - c2 * arm[1]
     res[4] -= moment[1] + c2 * arm[0] - c0 * arm[2]
     res[5] -= moment[2] + c0 * arm[1] - c1 * arm[0]
-    if not want_jac:
-        return
+
+
+def _jacobian(a, g, p, R, arm, jac, cables):
+    """The Jacobian (6, 6) of ``_balance`` into jac, from the per-cable numbers the
+    ``_residual`` of the same pose left in ``cables`` (the same arithmetic, in the same
+    order, as computing them again)."""
+    m = a.shape[0]
+    for i in range(6):
+        for j in range(6):
+            jac[i, j] = 0.0
+    sum_tl = 0.0
+    s0 = s1 = s2 = 0.0                      # sum (t_i / L_i) r_i
+    a0 = a1 = a2 = 0.0                      # sum (t_i / L_i) a_i
+    wr_dot_a = 0.0
+    w00 = w01 = w02 = w10 = w11 = w12 = w20 = w21 = w22 = 0.0  # sum (t_i / L_i) r_i a_i^T
+    for i in range(m):
+        c = cables[i]
+        r0, r1, r2, u0, u1, u2, tl, kt = c[0], c[1], c[2], c[3], c[4], c[5], c[9], c[10]
+        ai0, ai1, ai2 = a[i, 0], a[i, 1], a[i, 2]
+        dL3 = (r1 * u2 - r2 * u1) * kt    # (k - t / L) [u; r x u]
+        dL4 = (r2 * u0 - r0 * u2) * kt
+        dL5 = (r0 * u1 - r1 * u0) * kt
+        dL0, dL1, dL2 = u0 * kt, u1 * kt, u2 * kt
+        for k in range(6):
+            uk = c[3 + k]  # u, then a_i x u
+            jac[k, 0] += uk * dL0
+            jac[k, 1] += uk * dL1
+            jac[k, 2] += uk * dL2
+            jac[k, 3] += uk * dL3
+            jac[k, 4] += uk * dL4
+            jac[k, 5] += uk * dL5
+        sum_tl += tl
+        s0 += tl * r0
+        s1 += tl * r1
+        s2 += tl * r2
+        a0 += tl * ai0
+        a1 += tl * ai1
+        a2 += tl * ai2
+        w00 += tl * r0 * ai0
+        w01 += tl * r0 * ai1
+        w02 += tl * r0 * ai2
+        w10 += tl * r1 * ai0
+        w11 += tl * r1 * ai1
+        w12 += tl * r1 * ai2
+        w20 += tl * r2 * ai0
+        w21 += tl * r2 * ai1
+        w22 += tl * r2 * ai2
+        wr_dot_a += tl * (r0 * ai0 + r1 * ai1 + r2 * ai2)
+    c0 = p[0] + R[0, 0] * g[0] + R[0, 1] * g[1] + R[0, 2] * g[2]
+    c1 = p[1] + R[1, 0] * g[0] + R[1, 1] * g[1] + R[1, 2] * g[2]
+    c2 = p[2] + R[2, 0] * g[0] + R[2, 1] * g[1] + R[2, 2] * g[2]
     # top: + sum(t/L) I on dp, - [sum (t/L) r]x on dtheta
     jac[0, 0] += sum_tl
     jac[1, 1] += sum_tl
@@ -197,9 +226,11 @@ def _max_abs(v):
 def _scratch(m):
     """The work arrays of ``_newton_pose`` for m cables: residual (6,), Jacobian (6, 6),
     tensions (m,), trial residual (6,), trial p (3,) and R (3, 3), the step's rotation (3, 3)
-    and rotation vector (3,), the step (6,) and ``_solve6``'s copy (6, 6)."""
+    and rotation vector (3,), the step (6,), ``_solve6``'s copy (6, 6) and the cables'
+    terms of the last residual (m, CABLE_TERMS)."""
     return (np.empty(6), np.empty((6, 6)), np.empty(m), np.empty(6), np.empty(3),
-            np.empty((3, 3)), np.empty((3, 3)), np.empty(3), np.empty(6), np.empty((6, 6)))
+            np.empty((3, 3)), np.empty((3, 3)), np.empty(3), np.empty(6), np.empty((6, 6)),
+            np.empty((m, CABLE_TERMS)))
 
 
 def _newton_pose(a, b, g, EA, L0, p, R, force, moment, arm, bilateral, tol, iterations,
@@ -207,13 +238,15 @@ def _newton_pose(a, b, g, EA, L0, p, R, force, moment, arm, bilateral, tol, iter
     """``elastic._newton`` at one pose, in place on p (3,) and R (3, 3): converged?
     ``scratch``: ``_scratch(m)``'s arrays, overwritten (allocated once per batch, not per
     pose: the allocations cost as much as the arithmetic)."""
-    res, jac, t, after, p_try, R_try, E, rv, step, work = scratch
-    _balance(a, b, g, EA, L0, p, R, force, moment, arm, bilateral, res, jac, t, False)
+    res, jac, t, after, p_try, R_try, E, rv, step, work, cables = scratch
+    _residual(a, b, g, EA, L0, p, R, force, moment, arm, bilateral, res, t, cables)
     for _ in range(iterations):
         before = _max_abs(res)
         if before <= tol:
             return True
-        _balance(a, b, g, EA, L0, p, R, force, moment, arm, bilateral, after, jac, t, True)
+        # the Jacobian at (p, R) from its residual's cable terms: the last residual
+        # computed is this pose's (the first, or the trial the line search accepted)
+        _jacobian(a, g, p, R, arm, jac, cables)
         for k in range(6):
             step[k] = -res[k]
         if not _solve6(jac, step, work):  # singular: not converged
@@ -231,8 +264,8 @@ def _newton_pose(a, b, g, EA, L0, p, R, force, moment, arm, bilateral, tol, iter
             for i in range(3):
                 for j in range(3):
                     R_try[i, j] = E[i, 0] * R[0, j] + E[i, 1] * R[1, j] + E[i, 2] * R[2, j]
-            _balance(a, b, g, EA, L0, p_try, R_try, force, moment, arm, bilateral, after, jac,
-                     t, False)
+            _residual(a, b, g, EA, L0, p_try, R_try, force, moment, arm, bilateral, after, t,
+                      cables)
             if _max_abs(after) < before:
                 p[:] = p_try
                 R[:, :] = R_try
@@ -256,7 +289,7 @@ def _equilibrium_poses(a, b, g, EA, L0, p, R, force, moment, arm, tol, iteration
     residual = np.empty(n)
     ok = np.zeros(n, dtype=np.bool_)
     scratch = _scratch(m)
-    res, jac, t = scratch[0], scratch[1], scratch[2]
+    res, t, cables = scratch[0], scratch[2], scratch[10]
     for q in range(n):
         # a converged Newton leaves the residual and tensions of its pose in scratch; where
         # no pushing cable was needed the tension-only pass would stop at once with the
@@ -268,15 +301,16 @@ def _equilibrium_poses(a, b, g, EA, L0, p, R, force, moment, arm, tol, iteration
         ok[q] = not pushing or _newton_pose(a, b, g, EA, L0[q], p[q], R[q], force[q], moment[q],
                                             arm[q], False, tol[q], iterations, halvings, scratch)
         if not ok[q]:  # stuck: scratch may hold a rejected trial's
-            _balance(a, b, g, EA, L0[q], p[q], R[q], force[q], moment[q], arm[q], False, res, jac,
-                     t, False)
+            _residual(a, b, g, EA, L0[q], p[q], R[q], force[q], moment[q], arm[q], False, res, t,
+                      cables)
         tensions[q] = t
         residual[q] = _max_abs(res)
     return p, R, tensions, residual, ok
 
 
 # ----- compilation -------------------------------------------------------------------------
-HELPERS = ("_balance", "_solve6", "_rotvec_matrix", "_max_abs", "_scratch", "_newton_pose")
+HELPERS = ("_residual", "_jacobian", "_solve6", "_rotvec_matrix", "_max_abs", "_scratch",
+           "_newton_pose")
 _F1, _F2, _F3 = "float64[::1]", "float64[:, ::1]", "float64[:, :, ::1]"
 AOT_EXPORTS = {"equilibrium_kernel": (
     f"Tuple(({_F2}, {_F3}, {_F2}, {_F1}, boolean[::1]))"
