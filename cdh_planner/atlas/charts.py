@@ -77,6 +77,8 @@ class Atlas:
         self.periodic = np.asarray(constraint.periodic, dtype=bool)
         self._periodic_at = np.flatnonzero(self.periodic)  # faster to index than the mask
         self._inside = getattr(constraint, "inside", None)  # the domain's predicate part
+        # Newton's step: the constraint's own solve where it knows F_x's structure
+        self._solve = getattr(constraint, "solve", None) or np.linalg.solve
         self._index = _KeyIndex()
         self._centres = _Rows()  # chart centres (N, n_vars), for vectorised distances
         self._radii = _Rows()  # chart radii (N,), kept equal to charts[i].radius
@@ -135,7 +137,7 @@ class Atlas:
                     return x
                 A[:m] = Fx
                 try:
-                    step = np.linalg.solve(A, rhs)
+                    step = self._solve(A, rhs)
                 except np.linalg.LinAlgError:
                     return None
                 if not math.isfinite(np.abs(step).max()):

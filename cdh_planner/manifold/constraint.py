@@ -30,6 +30,7 @@ class TaskConstraint:
         self._row_scale_col = self.row_scale[:, None]
         # free flight: no task equations or variables, F and F_x are the navigation rows
         self._navigation_only = self.n_task_vars == 0 and task.n_equations == 0
+        self._block_solve = None  # ``solve``'s kernel, loaded at its first call
         self._task_row_scale = np.where(task.length_rows, self.nav.length_ref, 1.0)
         self.dim = self.n_vars - N_EQS - task.n_equations
         self._task_var_names = task.names[:self.n_task_vars]
@@ -53,6 +54,22 @@ class TaskConstraint:
         J[:N_EQS, :N_VARS] = FX
         J[N_EQS:] = FtX
         return F_all, J * self.scale
+
+    def solve(self, A, rhs):
+        """The Newton step x with A x = rhs, A (n_vars, n_vars) = [F_x; a chart's basis^T]
+        (``Atlas.newton``). Free flight: by F_x's block structure (``kernels.block_solve``:
+        d, l, f0, G and the slacks follow from the pose block by block, a 6 x 6 system for
+        the pose), where it has it and no pivot is zero; else, and with a task's rows,
+        LAPACK's dense solve (LinAlgError where singular)."""
+        if self._navigation_only:
+            if self._block_solve is None:  # the compiled kernels load with F's, when first used
+                from .kernels import block_solve, navigation_blocks
+                self._block_solve = (block_solve, navigation_blocks())
+            kernel, blocks = self._block_solve
+            x, ok = kernel(np.ascontiguousarray(A), rhs, blocks)
+            if ok:
+                return x
+        return np.linalg.solve(A, rhs)
 
     def _task(self, X):
         """The task's equations and Jacobian in X, rows in metres scaled by the length."""
