@@ -118,12 +118,14 @@ class Rotation:
         if not isinstance(other, Rotation):
             return NotImplemented
         p, q = np.broadcast_arrays(self._quat, other._quat)
-        cross = np.cross(p[:, :3], q[:, :3])
-        r = np.stack([p[:, 3] * q[:, 0] + q[:, 3] * p[:, 0] + cross[:, 0],
-                      p[:, 3] * q[:, 1] + q[:, 3] * p[:, 1] + cross[:, 1],
-                      p[:, 3] * q[:, 2] + q[:, 3] * p[:, 2] + cross[:, 2],
-                      p[:, 3] * q[:, 3] - p[:, 0] * q[:, 0] - p[:, 1] * q[:, 1] - p[:, 2] * q[:, 2]],
-                     axis=-1)
+        px, py, pz, pw = p.T
+        qx, qy, qz, qw = q.T
+        # the vector part's p x q written out: np.cross's products and differences (the
+        # same numbers), without its axis moves and copies (two thirds of a 2-row product)
+        r = np.stack([pw * qx + qw * px + (py * qz - pz * qy),
+                      pw * qy + qw * py + (pz * qx - px * qz),
+                      pw * qz + qw * pz + (px * qy - py * qx),
+                      pw * qw - px * qx - py * qy - pz * qz], axis=-1)
         return Rotation(_normalised(r), self.single and other.single)
 
     def __len__(self):
