@@ -162,15 +162,14 @@ def stiff_nominal(robot, p, R, J, t0, where=None):
     m = J.shape[-1]
     if robot.cable_stiffness is None or m == 6:
         return t0
-    from ..model.elastic import platform_stiffness
+    from ..model.elastic import platform_stiffness, soft_poses
     kappa = least_stiffness(robot)
     ok = np.all(np.isfinite(t0), axis=1)
     if where is not None:
         ok &= where
-    K = platform_stiffness(robot, p[ok], R[ok], t0[ok])
-    finite = np.all(np.isfinite(K), axis=(1, 2))
-    soft = np.zeros(len(t0), dtype=bool)
-    soft[np.flatnonzero(ok)[finite]] = np.linalg.eigvalsh(K[finite])[:, 0] < kappa
+    # compiled, decided by Cholesky; a pose it calls soft within rounding of kappa is kept
+    # as it is below (its first projection finds it within STIFFNESS_TOL): the same t0
+    soft = soft_poses(robot, p, R, t0, ok, kappa)
     if not soft.any():
         return t0
     p, R, t = p[soft], R[soft], t0[soft]
