@@ -7,10 +7,15 @@ sums, the cross products, the vertices' coordinates: bit for bit the same maximu
 one exception that cannot change the result: the dot products c . g_k, read only for
 their signs and for the in-plane test, need not round like BLAS's.
 
-Plain Python here (no numba import): ``vertex_max_kernel`` is the build ahead of time
-(``python -m cdh_planner.accuracy_aot``, run by ``make``), else numba's JIT with
-``cache=True`` (``cdh_planner.aot``). Its arguments are C-contiguous arrays as AOT_EXPORTS
-says, unchecked.
+``error_map_kernel`` is ``accuracy.error_map`` one pose at a time (A, K, and the 6 x 6
+system by Gaussian elimination with partial pivoting), without numpy's (N, 6, m)
+temporaries: the same algebra as its batched solve, to rounding rather than bit for bit
+(test_accuracy: 1e-12 of G's largest entry; the accuracies move by about 1e-15).
+
+Plain Python here (no numba import): ``vertex_max_kernel`` and ``error_map_kernel`` are
+the build ahead of time (``python -m cdh_planner.accuracy_aot``, run by ``make``), else
+numba's JIT with ``cache=True`` (``cdh_planner.aot``). Their arguments are C-contiguous
+arrays as AOT_EXPORTS says, unchecked.
 """
 
 import sys
@@ -81,11 +86,117 @@ def _vertex_max_poses(g, norms, tiny, parallel_tol, ortho_tol):
     return best, degenerate, used
 
 
+def _eliminate(M, X):
+    """X <- M^-1 X and the determinant of M (square n x n, overwritten), by Gaussian
+    elimination with partial pivoting; 0 (X then meaningless) where a pivot is zero."""
+    n, k = M.shape[0], X.shape[1]
+    det = 1.0
+    for c in range(n):
+        piv, big = c, abs(M[c, c])
+        for i in range(c + 1, n):
+            if abs(M[i, c]) > big:
+                piv, big = i, abs(M[i, c])
+        if not big > 0.0:
+            return 0.0
+        if piv != c:
+            det = -det
+            for j in range(n):
+                M[c, j], M[piv, j] = M[piv, j], M[c, j]
+            for j in range(k):
+                X[c, j], X[piv, j] = X[piv, j], X[c, j]
+        det *= M[c, c]
+        for i in range(c + 1, n):
+            f = M[i, c] / M[c, c]
+            if f != 0.0:
+                for j in range(c + 1, n):
+                    M[i, j] -= f * M[c, j]
+                for j in range(k):
+                    X[i, j] -= f * X[c, j]
+    for c in range(n - 1, -1, -1):
+        for j in range(k):
+            acc = X[c, j]
+            for i in range(c + 1, n):
+                acc -= M[c, i] * X[i, j]
+            X[c, j] = acc / M[c, c]
+    return det
+
+
+def _error_maps(a, b, p, R, EA, t, elastic, singular_scale):
+    """``accuracy.error_map`` at poses p (N, 3), R (N, 3, 3) of anchors a, b (m, 3): G
+    (N, 6, m), nan where singular (sqrt |det A A^T| not above singular_scale, a length not
+    positive, a stiffness not finite and positive). Six cables G = A^-T; more
+    (A K A^T)^-1 A K, k_i = EA_i / L0_i with L0 = L / (1 + t / EA) where ``elastic``, else
+    1 / L_i."""
+    n, m = p.shape[0], a.shape[0]
+    G = np.empty((n, 6, m))
+    A = np.empty((6, m))
+    k = np.empty(m)
+    M = np.empty((6, 6))
+    X = np.empty((6, m))
+    for q in range(n):
+        bad = False
+        for i in range(m):
+            r0 = R[q, 0, 0] * b[i, 0] + R[q, 0, 1] * b[i, 1] + R[q, 0, 2] * b[i, 2]
+            r1 = R[q, 1, 0] * b[i, 0] + R[q, 1, 1] * b[i, 1] + R[q, 1, 2] * b[i, 2]
+            r2 = R[q, 2, 0] * b[i, 0] + R[q, 2, 1] * b[i, 1] + R[q, 2, 2] * b[i, 2]
+            d0, d1, d2 = p[q, 0] + r0 - a[i, 0], p[q, 1] + r1 - a[i, 1], p[q, 2] + r2 - a[i, 2]
+            L = np.sqrt(d0 * d0 + d1 * d1 + d2 * d2)
+            if not L > 0.0:
+                bad = True
+                L = 1.0
+            u0, u1, u2 = d0 / L, d1 / L, d2 / L
+            A[0, i], A[1, i], A[2, i] = u0, u1, u2
+            # (R b_i) x u_i = (a_i - p) x u_i
+            e0, e1, e2 = a[i, 0] - p[q, 0], a[i, 1] - p[q, 1], a[i, 2] - p[q, 2]
+            A[3, i] = e1 * u2 - e2 * u1
+            A[4, i] = e2 * u0 - e0 * u2
+            A[5, i] = e0 * u1 - e1 * u0
+            stretch = 1.0 + t[q, i] / EA[i] if elastic else 1.0
+            L0 = L / stretch if stretch != 0.0 else np.inf  # (numba raises on x / 0)
+            k[i] = (EA[i] / L0 if elastic else 1.0 / L) if L0 != 0.0 else np.inf
+            if not (np.isfinite(k[i]) and k[i] > 0.0):
+                bad = True
+                k[i] = 1.0
+        if m == 6:  # G = A^-T: A^T G = I
+            for r in range(6):
+                for c in range(6):
+                    M[r, c] = A[c, r]
+                    X[r, c] = 1.0 if r == c else 0.0
+            scale = abs(_eliminate(M, X))
+        else:
+            for r in range(6):
+                for c in range(r + 1):
+                    acc = 0.0
+                    for i in range(m):
+                        acc += A[r, i] * A[c, i]
+                    M[r, c] = acc
+                    M[c, r] = acc
+            scale = np.sqrt(abs(_eliminate(M, X[:, :0])))
+            for r in range(6):
+                for c in range(r + 1):
+                    acc = 0.0
+                    for i in range(m):
+                        acc += A[r, i] * k[i] * A[c, i]
+                    M[r, c] = acc
+                    M[c, r] = acc
+                for i in range(m):
+                    X[r, i] = A[r, i] * k[i]
+            if _eliminate(M, X) == 0.0:
+                bad = True
+        bad = bad or not scale > singular_scale
+        for r in range(6):
+            for i in range(m):
+                G[q, r, i] = np.nan if bad else X[r, i]
+    return G
+
+
 # ----- compilation -------------------------------------------------------------------------
-HELPERS = ("_pose_vertex_max",)
+HELPERS = ("_pose_vertex_max", "_eliminate")
 AOT_EXPORTS = {"vertex_max_kernel": (
     "Tuple((float64[::1], boolean[::1], boolean[::1]))"
-    "(float64[:, :, ::1], float64[:, ::1], boolean[:, ::1], float64, float64)")}
+    "(float64[:, :, ::1], float64[:, ::1], boolean[:, ::1], float64, float64)"),
+    "error_map_kernel": ("float64[:, :, ::1](float64[:, ::1], float64[:, ::1], float64[:, ::1], "
+                         "float64[:, :, ::1], float64[::1], float64[:, ::1], boolean, float64)")}
 AOT_PREFIX = "_accuracy_aot_"
 
 
@@ -95,7 +206,9 @@ AOT_SOURCES = ("accuracy_kernel.py",)  # what the machine code is of: this file
 def jit_kernels():
     """numba's JIT entry (cache=True) by name (``cdh_planner.aot``); the helper becomes a
     numba function here."""
-    return {"vertex_max_kernel": aot.jit(globals(), HELPERS)(_vertex_max_poses)}
+    njit = aot.jit(globals(), HELPERS)
+    return {"vertex_max_kernel": njit(_vertex_max_poses), "error_map_kernel": njit(_error_maps)}
 
 
-vertex_max_kernel = aot.entries(sys.modules[__name__])["vertex_max_kernel"]
+_entries = aot.entries(sys.modules[__name__])
+vertex_max_kernel, error_map_kernel = _entries["vertex_max_kernel"], _entries["error_map_kernel"]

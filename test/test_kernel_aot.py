@@ -155,7 +155,8 @@ def test_aot_and_jit_wrench_kernels_agree_bit_for_bit(name, n):
 @pytest.mark.parametrize("name", ["robot2", "cogiro", "robot2_8"])
 def test_aot_and_jit_accuracy_kernels_agree_bit_for_bit(name):
     """The zonotope kernel on the position and rotation rows of the error maps of a walk,
-    and on generators made degenerate (parallel, in a pair's plane, tiny), both builds."""
+    and on generators made degenerate (parallel, in a pair's plane, tiny), both builds; the
+    error map kernel on the walk, both builds."""
     robot = load_robot(CONFIG / f"{name}.yaml")
     p, R = _wrench_inputs(robot, 300, 8)[0][:2]
     G = error_map(robot, p, R)
@@ -175,6 +176,14 @@ def test_aot_and_jit_accuracy_kernels_agree_bit_for_bit(name):
         assert flags is plain or (aot[1][:100].all() and aot[2].all())  # degenerate ones seen
         for a, j in zip(aot, jit):
             np.testing.assert_array_equal(a, j)
+    # the error maps themselves, rigid (k = 1 / L) and elastic (k from the tensions)
+    m = len(robot.base_anchors)
+    t = np.ascontiguousarray(np.random.default_rng(3).uniform(100.0, 900.0, (len(p), m)))
+    for elastic, EA in ((False, np.ones(m)), (True, np.full(m, 2e5))):
+        args = (robot.base_anchors, robot.platform_anchors, p, R, EA, t, elastic, 1e-12)
+        args = tuple(np.ascontiguousarray(x) if isinstance(x, np.ndarray) else x for x in args)
+        np.testing.assert_array_equal(aot_helper.load(accuracy_kernel)["error_map_kernel"](*args),
+                                      accuracy_kernel.jit_kernels()["error_map_kernel"](*args))
 
 
 @pytest.mark.skipif(not ALL_BUILT, reason=NOT_BUILT)

@@ -3,10 +3,13 @@ maths: ``wrench_balance`` is the residual and Jacobian written once in numpy, th
 the same algebra per pose, checked against it to 1e-9 in test_elastic_kernel.py). The
 executed check solves it at every sample of a trajectory (some 10^5 poses for a slowed
 eight-cable plan), where numpy's batched version spent most of its time allocating
-(M, m, 6) temporaries. Plain Python here (no numba import): ``equilibrium_kernel`` is the
-build ahead of time (``python -m cdh_planner.model.elastic_aot``, run by ``make``), else
-numba's JIT with ``cache=True`` (``cdh_planner.aot``). Its arguments are C-contiguous
-float64 arrays and two ints, as AOT_EXPORTS says, unchecked. Units: m, N, N m.
+(M, m, 6) temporaries. ``soft_kernel``: the same Jacobian as the platform's stiffness K
+(``elastic.platform_stiffness``) and whether its least eigenvalue is below a bound, for
+the stiff nominal's check of every pose (``elastic.soft_poses``). Plain Python here (no
+numba import): ``equilibrium_kernel`` and ``soft_kernel`` are the build ahead of time
+(``python -m cdh_planner.model.elastic_aot``, run by ``make``), else numba's JIT with
+``cache=True`` (``cdh_planner.aot``). Their arguments are C-contiguous arrays and scalars
+as AOT_EXPORTS says, unchecked. Units: m, N, N m.
 """
 
 import sys
@@ -303,11 +306,23 @@ def _soft_poses(a, b, g, EA, p, R, t, force, moment, arm, ok, kappa):
         if not ok[q]:
             continue
         P, Rq = p[q], R[q]
+        usable = True  # numpy's K is not finite where a length is 0 or L0 not finite
         for i in range(m):
-            d0 = P[0] + Rq[0, 0] * b[i, 0] + Rq[0, 1] * b[i, 1] + Rq[0, 2] * b[i, 2] - a[i, 0]
-            d1 = P[1] + Rq[1, 0] * b[i, 0] + Rq[1, 1] * b[i, 1] + Rq[1, 2] * b[i, 2] - a[i, 1]
-            d2 = P[2] + Rq[2, 0] * b[i, 0] + Rq[2, 1] * b[i, 1] + Rq[2, 2] * b[i, 2] - a[i, 2]
-            L0[i] = np.sqrt(d0 * d0 + d1 * d1 + d2 * d2) / (1.0 + t[q, i] / EA[i])
+            r0 = Rq[0, 0] * b[i, 0] + Rq[0, 1] * b[i, 1] + Rq[0, 2] * b[i, 2]  # as _balance
+            r1 = Rq[1, 0] * b[i, 0] + Rq[1, 1] * b[i, 1] + Rq[1, 2] * b[i, 2]
+            r2 = Rq[2, 0] * b[i, 0] + Rq[2, 1] * b[i, 1] + Rq[2, 2] * b[i, 2]
+            d0, d1, d2 = P[0] + r0 - a[i, 0], P[1] + r1 - a[i, 1], P[2] + r2 - a[i, 2]
+            L = np.sqrt(d0 * d0 + d1 * d1 + d2 * d2)
+            stretch = 1.0 + t[q, i] / EA[i]
+            if L == 0.0 or stretch == 0.0:
+                usable = False
+                break
+            L0[i] = L / stretch
+            if not (L0[i] != 0.0 and np.isfinite(L0[i])):
+                usable = False
+                break
+        if not usable:  # (numba raises on a division by zero: not reached)
+            continue
         _balance(a, b, g, EA, L0, P, Rq, force, moment, arm, True, res, jac, tv, True)
         for j in range(6):  # moments about p: M_p = M_o - p x F
             f0, f1, f2 = jac[0, j], jac[1, j], jac[2, j]
