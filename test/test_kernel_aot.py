@@ -198,9 +198,9 @@ def test_aot_and_jit_json_rows_kernels_agree_byte_for_byte():
                 '{"p": [null, 3.0], "ok": false, "worst": {"binding": "singular", "n": 8}}')
     (rows,) = _rows_text(columns)
     assert rows.tobytes().decode() == expected
-    src = np.frombuffer(b"[1.5,2],[3,4]abc", dtype=np.uint8).copy()
-    args = (src, np.array([[0, 13], [8, 15]]), np.array([[7, 15], [13, 16]]),
-            np.array([True, False]), np.frombuffer(b"{a: , b: }", dtype=np.uint8).copy(),
+    src = np.frombuffer(b"[[1.5,2],[3,4]]abc", dtype=np.uint8).copy()  # ROWS, then GIVEN
+    args = (src, np.array([[0, 15], [0, 17]]), np.array([[15, 17], [15, 18]]),
+            np.array([2, 0]), np.frombuffer(b"{a: , b: }", dtype=np.uint8).copy(),
             np.array([0, 4, 9, 10]), np.frombuffer(ROW_SEPARATOR.encode(), dtype=np.uint8).copy())
     aot = aot_helper.load(json_rows)["assemble_rows"](*args)
     jit = json_rows.jit_kernels()["assemble_rows"](*args)

@@ -173,22 +173,21 @@ def _rows_text(columns):
     """The JSON object texts of the rows of ``columns`` (name -> array, list of strings,
     nested mapping of them, or a ``_Texts`` of ready texts), joined as ``layout_rows`` joins
     list entries: a list of that one text. Each column's texts lie in one buffer (numbers by
-    one orjson call a column); the compiled ``json_rows`` puts the rows together (the text
-    as its uint8 array of ASCII)."""
+    one orjson call a column); the compiled ``json_rows`` finds the numbers' entries and
+    puts the rows together (the text as its uint8 array of ASCII)."""
     from .json_rows import assemble_rows  # machine code: loaded only for a --json
     literals, cols = _row_literals(columns)
-    buffers, starts, ends, spaced, base = [], [], [], [], 0
-    for col in cols:
-        data, a, b, space = _column_bytes(col)
+    starts, ends = (np.zeros((len(cols[0]), len(cols)), dtype=np.int64) for _ in range(2))
+    buffers, layout, base = [], [], 0
+    for k, col in enumerate(cols):
+        data, a, b, kind = _column_bytes(col)
         buffers.append(np.frombuffer(data, dtype=np.uint8))
-        starts.append(a + base)
-        ends.append(b + base)
-        spaced.append(space)
+        starts[:, k], ends[:, k] = a + base, b + base
+        layout.append(kind)
         base += len(data)
     bounds = np.cumsum([0] + [len(t) for t in literals])
-    out = assemble_rows(np.concatenate(buffers), np.column_stack(starts), np.column_stack(ends),
-                        np.array(spaced), _ascii("".join(literals)), bounds,
-                        _ascii(ROW_SEPARATOR))
+    out = assemble_rows(np.concatenate(buffers), starts, ends, np.array(layout, dtype=np.int64),
+                        _ascii("".join(literals)), bounds, _ascii(ROW_SEPARATOR))
     return [out]
 
 
@@ -216,27 +215,24 @@ def _row_literals(columns):
 
 
 def _column_bytes(col):
-    """(the JSON texts of ``col``'s entries in one ASCII buffer, where each entry starts (N,),
-    where it ends (N,), whether its commas need a space after them): numbers and booleans
-    by one ``number_bytes`` of the whole array, split at the entries (a row of a 2-D column
-    with its brackets; their texts hold no "[" or "," of their own), strings (binding
-    names, few distinct) each distinct one encoded once, a ``_Texts`` as given."""
+    """(the JSON texts of ``col``'s entries in one ASCII buffer, where each entry starts (N,)
+    and ends (N,) in it, its ``json_rows`` layout): numbers and booleans by one
+    ``number_bytes`` of the whole array, the array's text whose entries the kernel finds
+    (ENTRIES, or ROWS for a 2-D column; the start and end given are the whole text's);
+    strings (binding names, few distinct) each distinct one encoded once, a ``_Texts`` as
+    given (GIVEN)."""
+    from .json_rows import ENTRIES, GIVEN, ROWS
     if not isinstance(col, _Texts):
         arr = np.asarray(col)
         if arr.dtype.kind in "biuf":
             data = number_bytes(arr)
-            buf = np.frombuffer(data, dtype=np.uint8)
-            if arr.ndim == 1:
-                commas = np.flatnonzero(buf == ord(","))
-                return data, np.r_[1, commas + 1], np.r_[commas, len(data) - 1], True
-            return (data, np.flatnonzero(buf == ord("["))[1:],
-                    np.flatnonzero(buf == ord("]"))[:-1] + 1, True)
+            return data, 0, len(data), ENTRIES if arr.ndim == 1 else ROWS
         values = arr.tolist()
         texts = {v: _encode(v) for v in set(values)}
         col = list(map(texts.__getitem__, values))
     lengths = np.fromiter(map(len, col), dtype=np.int64, count=len(col))
     ends = np.cumsum(lengths)
-    return "".join(col).encode("ascii"), ends - lengths, ends, False
+    return "".join(col).encode("ascii"), ends - lengths, ends, GIVEN
 
 
 def number_text(arr):
