@@ -112,9 +112,10 @@ def stiffness_band(robot, J, c, t0, lengths, v):
     ok = np.all(np.isfinite(t0), axis=1)
     if not ok.any():
         return v
-    P = weighted_pseudo_inverse(J[ok], (robot.cable_stiffness + t0[ok]) / lengths[ok])
+    rows = slice(None) if ok.all() else ok  # every pose (verify's): views, not copies
+    P = weighted_pseudo_inverse(J[rows], (robot.cable_stiffness + t0[rows]) / lengths[rows])
     v = v.copy()
-    v[ok] = np.linalg.norm(P @ inverse_ellipsoid_factor(robot, c[ok]), axis=-1)
+    v[rows] = np.linalg.norm(P @ inverse_ellipsoid_factor(robot, c[rows]), axis=-1)
     return v
 
 
