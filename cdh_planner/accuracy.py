@@ -75,29 +75,46 @@ def error_map(robot, p, R, tensions=None):
     one pose at a time (``accuracy_kernel.error_map_kernel``: numpy's batched products and
     solves spent 3 us a pose on temporaries)."""
     from .accuracy_kernel import error_map_kernel  # machine code: loaded only when needed
+    return error_map_kernel(*_map_inputs(robot, p, R, tensions), SINGULAR_SCALE)
+
+
+def _map_inputs(robot, p, R, tensions):
+    """The error map kernels' arguments of the poses (p (N, 3) m, R (N, 3, 3)): anchors,
+    p, R, EA (m,), the nominal tensions t (N, m) N and whether K is the elastic one (six
+    cables: G = A^-T whatever K is; rigid cables: equal EA)."""
     p = np.ascontiguousarray(np.atleast_2d(np.asarray(p, dtype=float)))
     R = np.ascontiguousarray(np.asarray(R, dtype=float).reshape(-1, 3, 3))
     m = len(robot.base_anchors)
-    stiff = elastic.is_elastic(robot) and m > 6  # six cables: G = A^-T whatever K is
+    stiff = elastic.is_elastic(robot) and m > 6
     if stiff:
         t = rule_tensions(robot, p, R)[0] if tensions is None else tensions
         EA = np.broadcast_to(np.asarray(robot.cable_stiffness, dtype=float), (m,))
     else:
         t, EA = np.zeros((len(p), m)), np.ones(m)
-    return error_map_kernel(np.ascontiguousarray(robot.base_anchors, dtype=float),
-                            np.ascontiguousarray(robot.platform_anchors, dtype=float), p, R,
-                            np.ascontiguousarray(EA), np.ascontiguousarray(t, dtype=float),
-                            stiff, SINGULAR_SCALE)
+    return (np.ascontiguousarray(robot.base_anchors, dtype=float),
+            np.ascontiguousarray(robot.platform_anchors, dtype=float), p, R,
+            np.ascontiguousarray(EA), np.ascontiguousarray(t, dtype=float), stiff)
 
 
 def pose_accuracy(robot, p, tau=None, R=None, tensions=None):
     """The Accuracy of poses (p (N, 3) m, tau (N, 3) rad or R (N, 3, 3)) of a robot with
-    ``length_error`` (module docstring); ``tensions``: as ``error_map``'s."""
+    ``length_error`` (module docstring); ``tensions``: as ``error_map``'s. One compiled pass
+    (``accuracy_kernel.accuracy_kernel``: the error map and the zonotope maximum of its
+    rows, the same numbers as ``box_max_norm`` of ``error_map``'s) where the pose is
+    regular and its generators are not degenerate; the others (singular, a tiny, parallel
+    or coplanar generator) by ``error_map`` and ``box_max_norm``."""
+    from .accuracy_kernel import accuracy_kernel, error_map_kernel
     if R is None:
         R = rotation_tt(np.atleast_2d(np.asarray(tau, dtype=float)))
-    G = error_map(robot, p, R, tensions)
-    return Accuracy(box_max_norm(G[:, :3], robot.length_error),
-                    box_max_norm(G[:, 3:], robot.length_error))
+    inputs = _map_inputs(robot, p, R, tensions)
+    m = len(robot.base_anchors)
+    e = np.ascontiguousarray(np.broadcast_to(np.asarray(robot.length_error, dtype=float), (m,)))
+    out, other = accuracy_kernel(*inputs, SINGULAR_SCALE, e, TINY, PARALLEL_TOL, ORTHO_TOL)
+    if other.any():
+        a, b, p, R, EA, t, stiff = inputs
+        G = error_map_kernel(a, b, p[other], R[other], EA, t[other], stiff, SINGULAR_SCALE)
+        out[other, 0], out[other, 1] = box_max_norm(G[:, :3], e), box_max_norm(G[:, 3:], e)
+    return Accuracy(out[:, 0].copy(), out[:, 1].copy())
 
 
 @dataclass(frozen=True)

@@ -103,6 +103,21 @@ def test_the_compiled_error_map_is_the_numpy_algebra(name, robot):
     assert np.all(np.isnan(error_map(robot, on_anchor, R[:1])))
 
 
+@pytest.mark.parametrize("name,robot", VARIANTS, ids=[v[0] for v in VARIANTS])
+def test_the_one_pass_accuracy_is_the_error_maps_box_maximum(name, robot):
+    """``pose_accuracy``'s compiled pass gives bit for bit ``box_max_norm`` of
+    ``error_map``'s rows, and the poses it leaves to those (a singular one: inf) too."""
+    rng = np.random.default_rng(zlib.crc32(name.encode()) + 2)
+    p, R = random_poses(robot, 30, rng)
+    p[7] = robot.base_anchors[0] - R[7] @ robot.platform_anchors[0]  # a cable of length 0
+    t = rule_tensions(robot, p, R)[0]
+    G = error_map(robot, p, R, t)
+    acc = pose_accuracy(robot, p, R=R, tensions=t)
+    np.testing.assert_array_equal(acc.position_m, box_max_norm(G[:, :3], robot.length_error))
+    np.testing.assert_array_equal(acc.orientation_rad, box_max_norm(G[:, 3:], robot.length_error))
+    assert acc.position_m[7] == np.inf and np.isfinite(np.delete(acc.position_m, 7)).all()
+
+
 # ------------------------------------------------------------ exact against brute force
 
 @pytest.mark.parametrize("name,robot", VARIANTS, ids=[v[0] for v in VARIANTS])

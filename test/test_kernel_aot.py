@@ -156,7 +156,7 @@ def test_aot_and_jit_wrench_kernels_agree_bit_for_bit(name, n):
 def test_aot_and_jit_accuracy_kernels_agree_bit_for_bit(name):
     """The zonotope kernel on the position and rotation rows of the error maps of a walk,
     and on generators made degenerate (parallel, in a pair's plane, tiny), both builds; the
-    error map kernel on the walk, both builds."""
+    error map kernel and the one-pass accuracy on the walk, both builds."""
     robot = load_robot(CONFIG / f"{name}.yaml")
     p, R = _wrench_inputs(robot, 300, 8)[0][:2]
     G = error_map(robot, p, R)
@@ -184,6 +184,10 @@ def test_aot_and_jit_accuracy_kernels_agree_bit_for_bit(name):
         args = tuple(np.ascontiguousarray(x) if isinstance(x, np.ndarray) else x for x in args)
         np.testing.assert_array_equal(aot_helper.load(accuracy_kernel)["error_map_kernel"](*args),
                                       accuracy_kernel.jit_kernels()["error_map_kernel"](*args))
+        args += (np.full(m, 1e-3), 1e-13, 1e-6, 1e-9)
+        for a, j in zip(aot_helper.load(accuracy_kernel)["accuracy_kernel"](*args),
+                        accuracy_kernel.jit_kernels()["accuracy_kernel"](*args)):
+            np.testing.assert_array_equal(a, j)
 
 
 @pytest.mark.skipif(not ALL_BUILT, reason=NOT_BUILT)
