@@ -5,7 +5,9 @@ around each (``accuracy``'s module docstring has the maths). numpy's version bui
 allocating them; this loop does the same arithmetic in the same order (the norms'
 sums, the cross products, the vertices' coordinates: bit for bit the same maximum), with
 one exception that cannot change the result: the dot products c . g_k, read only for
-their signs and for the in-plane test, need not round like BLAS's.
+their signs and for the in-plane test, need not round like BLAS's (nor is c normalised
+first: the tests multiply instead of dividing; a sign that rounding could flip is that of
+a g_k the in-plane test already calls degenerate).
 
 ``error_map_kernel`` is ``accuracy.error_map`` one pose at a time (A, K, and the 6 x 6
 system by Gaussian elimination with partial pivoting), without numpy's (N, 6, m)
@@ -43,16 +45,16 @@ def _pose_vertex_max(g, norms, tiny, parallel_tol, ortho_tol):
             c1 = g[2, i] * g[0, j] - g[0, i] * g[2, j]
             c2 = g[0, i] * g[1, j] - g[1, i] * g[0, j]
             cn = np.sqrt(c0 * c0 + c1 * c1 + c2 * c2)
-            if not cn / (norms[i] * norms[j]) > parallel_tol:
+            if not cn > parallel_tol * (norms[i] * norms[j]):
                 degenerate = True  # parallel: the pair gives no corner
                 continue
-            h0, h1, h2 = c0 / cn, c1 / cn, c2 / cn
+            near = ortho_tol * cn  # |c . g_k| / (|c| |g_k|) at most ortho_tol: in the plane
             b0 = b1 = b2 = 0.0  # the vertex: sum of sign(c . g_k) g_k over the other k
             for k in range(m):
                 if k == i or k == j or tiny[k]:
                     continue
-                d = h0 * g[0, k] + h1 * g[1, k] + h2 * g[2, k]
-                if not abs(d) / norms[k] > ortho_tol:
+                d = c0 * g[0, k] + c1 * g[1, k] + c2 * g[2, k]
+                if not abs(d) > near * norms[k]:
                     degenerate = True  # g_k in the plane of the pair
                 if d > 0.0:
                     b0 += g[0, k]
