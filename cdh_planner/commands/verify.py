@@ -121,19 +121,20 @@ def _positive(value, option, text):
 
 
 def result_json(robot, poses, feas, segments, ok, step_m, step_rad, accuracy=None):
-    """The JSON document (ASCII bytes) as ``dump_rows`` lays it out (a pose or a segment a
-    line), built column by column: each array goes through the C encoder once, then the rows
-    are assembled by the compiled ``json_rows`` (the encoder per row costs 3x more for 10^4
-    poses, a template per row 2x), then one join of bytes (no str of the 27 MB to encode
-    again); ``accuracy``: the poses' ``accuracy.Accuracy`` (robots with length_error), or
-    None."""
-    return b"".join(piece.encode("ascii") if isinstance(piece, str) else piece
-                    for piece in _layout_pieces({
+    """The JSON document as ``dump_rows`` lays it out (a pose or a segment a line), as the
+    list of its pieces in order (ASCII bytes, and the rows as uint8 arrays: written one
+    after another, the 27 MB are not copied into one string; ``b"".join`` makes the
+    document), built column by column: each array goes through the C encoder once, then the
+    rows are assembled by the compiled ``json_rows`` (the encoder per row costs 3x more for
+    10^4 poses, a template per row 2x); ``accuracy``: the poses' ``accuracy.Accuracy``
+    (robots with length_error), or None."""
+    return [piece.encode("ascii") if isinstance(piece, str) else piece
+            for piece in _layout_pieces({
         "robot": _encode(robot.name), "robot_file": _encode(robot.source),
         "max_step_m": _encode(step_m), "max_step_rad": _encode(step_rad),
         "poses": _rows_text(pose_columns(poses, feas, accuracy)),
         "segments": _rows_text(segment_columns(segments)) if segments else [],
-        "all_feasible": _encode(bool(ok))}))
+        "all_feasible": _encode(bool(ok))})]
 
 
 def pose_columns(poses, feas, accuracy=None):
