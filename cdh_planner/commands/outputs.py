@@ -74,12 +74,17 @@ def write_text(option, path, text):
     ``option``."""
     with writing(option, path):
         if isinstance(text, list):
-            with open(path, "wb") as f:
-                f.writelines(text)
+            write_pieces(path, text)
         elif isinstance(text, bytes):
             Path(path).write_bytes(text)
         else:
             Path(path).write_text(text)
+
+
+def write_pieces(path, pieces):
+    """Write the bytes-like ``pieces`` to ``path`` one after another (not joined first)."""
+    with open(path, "wb") as f:
+        f.writelines(pieces)
 
 
 def print_or_write(option, path, text):
