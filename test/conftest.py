@@ -17,7 +17,8 @@ PACKAGE = REPO / "cdh_planner"
 
 def aot_built(*kernels):
     """Whether each kernel module (manifold.kernels, scene.kernels, wrench.compiled,
-    model.elastic_kernel) has its ahead-of-time build of its current source (``make``)."""
+    model.elastic_kernel, trajectory.motion_kernel, ...) has its ahead-of-time build of its
+    current source (``make``)."""
     from cdh_planner import aot
     return all(aot.load(k) is not None for k in kernels)
 

@@ -182,3 +182,66 @@ def test_a_route_motion_the_caller_refuses_cuts_its_link_and_the_search_goes_on(
         assert not any(np.array_equal(a, p) and np.array_equal(b, q) for p, q in zip(out.points, out.points[1:]))
     for i, j in zip(out.charts, out.charts[1:]):
         assert j in atlas.charts[i].neighbours
+
+
+def crosses_wall(p, q, gap=1.0):
+    """Does the chord p -> q cross the wall x0 = 0 below x1 = gap (short arcs only)?"""
+    if (p[0] < 0) == (q[0] < 0) or abs(p[0] - q[0]) > np.pi:
+        return False
+    t = p[0] / (p[0] - q[0])
+    return p[1] + t * (q[1] - p[1]) < gap
+
+
+def test_sides_that_meet_across_a_wall_cut_that_link_and_go_on(monkeypatch):
+    """``check_meetings``: the link where the two sides meet is checked before the search
+    answers; across a thin wall (which no chart centre is in, but charts overlap) that link
+    is cut and the same search goes on; a restart walks the charts there are before it
+    grows more. The answer never crosses the wall, and it needs fewer searches and fewer
+    charts than finding each such link in a route and restarting from the roots."""
+    from cdh_planner.search import strategies
+
+    def link_ok(points):
+        return not any(crosses_wall(p, q) for p, q in zip(points, points[1:]))
+
+    searches, charts = {}, {}
+    for check in (False, True):
+        c = Wave()
+        atlas = Atlas(c, radius=0.3)
+        count = [0]
+        inner = strategies.Bidirectional.run
+
+        def counted(self, *args, count=count, inner=inner):
+            count[0] += 1
+            return inner(self, *args)
+
+        monkeypatch.setattr(strategies.Bidirectional, "run", counted)
+        xs, xg = c.point(-0.5, 0.0), c.point(0.5, 0.0)
+        cost = lambda a, b, atlas=atlas: float(np.linalg.norm(atlas.diff(a, b)))
+        out = run(atlas, xs, xg, cost, Stop(max_charts=5000), "gbf", link_ok=link_ok,
+                  check_meetings=check)
+        assert out.status == Status.OK
+        assert not any(crosses_wall(p, q) for p, q in zip(out.points, out.points[1:]))
+        assert max(p[1] for p in out.points) >= 1.0  # through the gap
+        searches[check], charts[check] = count[0], len(atlas.charts)
+        monkeypatch.undo()
+    assert searches[True] < searches[False] and charts[True] < charts[False]
+
+
+def test_a_walk_grows_no_chart():
+    """A restart's walk answers from the charts there are: a route when they hold one, else
+    NO_PATH, and never a new chart."""
+    from cdh_planner.search.strategies import Bidirectional, GreedyBestFirst, _Memo
+
+    c = Wave()
+    atlas = Atlas(c, radius=0.3)
+    cost = lambda a, b: float(np.linalg.norm(atlas.diff(a, b)))
+    i, j = atlas.add_chart(c.point(-1.0, 0.0)), atlas.add_chart(c.point(1.0, 0.0))
+    walk = Bidirectional(atlas, cost, GreedyBestFirst(), None, None, _Memo({}), walk=True)
+    assert walk.run(i, j, Stop())[0] == Status.NO_PATH and len(atlas.charts) == 2
+    out = run(atlas, atlas.charts[i].x, atlas.charts[j].x, cost, Stop(max_charts=5000), "gbf")
+    assert out.status == Status.OK
+    n = len(atlas.charts)
+    walk = Bidirectional(atlas, cost, GreedyBestFirst(), None, None, _Memo({}), walk=True)
+    status, route, _ = walk.run(i, j, Stop())
+    assert status == Status.OK and route[0] == i and route[-1] == j and len(atlas.charts) == n
+    assert all(b in atlas.charts[a].neighbours for a, b in zip(route, route[1:]))

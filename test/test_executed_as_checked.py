@@ -148,6 +148,9 @@ def test_quintic_matches_its_ends_and_its_derivatives():
     assert np.allclose(pos, jtc_quintic(t_wp, L, V, A, t), atol=1e-12)
     held, v_held, _ = E.quintic(t_wp, L, V, A, np.array([t_wp[-1] + 1.0]))
     assert np.allclose(held, L[-1]) and np.all(v_held == 0)
+    around = np.concatenate([[t_wp[0] - 1.0], t, [t_wp[-1] + 1.0]])  # the positions alone:
+    only, none, _ = E.quintic(t_wp, L, V, A, around, rates=False)   # the same bits
+    assert none is None and np.array_equal(only, E.quintic(t_wp, L, V, A, around)[0])
 
 
 def test_many_poses_forward_kinematics_agrees_with_one_at_a_time(problem):
@@ -302,6 +305,27 @@ def test_quintic_bounds_are_the_extremes_of_the_quintic():
         assert np.allclose(hi[k], p.max(axis=0), rtol=1e-6, atol=1e-9)
         assert np.allclose(vel[k], np.abs(v).max(axis=0), rtol=1e-6)
         assert np.allclose(acc[k], np.abs(a).max(axis=0), rtol=1e-6)
+
+
+def test_the_bernstein_hull_holds_the_quintic_and_the_limits_give_the_same_verdict():
+    """The hull of a segment's Bernstein coefficients holds its positions (sampled), and
+    with limits the bounds say within / not within exactly where the exact extremes do
+    (limits through the middle of the positions' range, at its edges and beyond)."""
+    rng = np.random.default_rng(12)
+    t_wp = np.concatenate([[0.0], np.cumsum(rng.uniform(1e-3, 0.3, 30))])
+    L, V, A = (rng.normal(size=(31, 6)) * x for x in (0.1, 0.5, 5.0))
+    k = np.arange(30)
+    b = np.stack(E._coefficients(t_wp, L, V, A, k), axis=-1)
+    hull = b @ E.BERNSTEIN_5.T
+    s = np.linspace(0.0, 1.0, 2001)
+    p = np.polynomial.polynomial.polyval(s, np.moveaxis(b, -1, 0))  # (30, 6, 2001)
+    assert np.all(hull.min(-1)[..., None] <= p + 1e-12) and np.all(p <= hull.max(-1)[..., None] + 1e-12)
+    lo, hi, vel, acc = E.quintic_bounds(t_wp, L, V, A)
+    for low, high in ((lo.min(0) - 1e-3, hi.max(0) + 1e-3), (lo.min(0), hi.max(0)),
+                      (np.median(lo, 0), np.median(hi, 0)), (lo.max(0) + 1, hi.min(0) - 1)):
+        got = E.quintic_bounds(t_wp, L, V, A, limits=(low, high))
+        assert np.array_equal((got[0] >= low) & (got[1] <= high), (lo >= low) & (hi <= high))
+        assert np.array_equal(got[2], vel) and np.array_equal(got[3], acc)
 
 
 def test_a_quasi_static_timing_is_handed_out_as_its_spline_and_slowed_to_the_limits(problem, route):

@@ -18,6 +18,7 @@ from cdh_planner import accuracy_kernel, aot as aot_helper
 from cdh_planner.commands import json_rows
 from cdh_planner.manifold import kernels
 from cdh_planner.model import elastic_kernel
+from cdh_planner.trajectory import motion_kernel
 from cdh_planner.accuracy import error_map
 from cdh_planner.model.pose import rotation_tt
 from cdh_planner.model.robot import load_robot
@@ -29,21 +30,24 @@ from conftest import CONFIG, aot_built
 
 AOT_BUILT = aot_built(kernels)
 ALL_BUILT = aot_built(kernels, scene_kernels, wrench_kernels, elastic_kernel, accuracy_kernel,
-                      json_rows)
+                      json_rows, motion_kernel)
 NOT_BUILT = ("no ahead-of-time kernels built (make, or python -m "
              "cdh_planner.<manifold|scene|wrench>.aot, cdh_planner.model.elastic_aot, "
-             "cdh_planner.accuracy_aot, cdh_planner.commands.json_rows_aot)")
+             "cdh_planner.accuracy_aot, cdh_planner.commands.json_rows_aot, "
+             "cdh_planner.trajectory.motion_aot)")
 
 SOURCES = [(kernels, ("kernels.py", "layout.py")),
            (scene_kernels, ("kernels.py", "../model/shape_forms.py")),
            (wrench_kernels, ("compiled.py", "kernel.py", "centred.py", "linalg.py")),
            (elastic_kernel, ("elastic_kernel.py",)),
-           (accuracy_kernel, ("accuracy_kernel.py",)), (json_rows, ("json_rows.py",))]
-MODULES = ["manifold", "scene", "wrench", "elastic", "accuracy", "json_rows"]
+           (accuracy_kernel, ("accuracy_kernel.py",)), (json_rows, ("json_rows.py",)),
+           (motion_kernel, ("motion_kernel.py",))]
+MODULES = ["manifold", "scene", "wrench", "elastic", "accuracy", "json_rows", "motion"]
 BUILDERS = {"manifold": "cdh_planner.manifold.aot", "scene": "cdh_planner.scene.aot",
             "wrench": "cdh_planner.wrench.aot", "elastic": "cdh_planner.model.elastic_aot",
             "accuracy": "cdh_planner.accuracy_aot",
-            "json_rows": "cdh_planner.commands.json_rows_aot"}
+            "json_rows": "cdh_planner.commands.json_rows_aot",
+            "motion": "cdh_planner.trajectory.motion_aot"}
 
 
 @pytest.mark.parametrize("module, sources", SOURCES, ids=MODULES)
@@ -54,7 +58,7 @@ def test_the_aot_module_is_named_after_the_digest_of_the_kernel_source(module, s
 
 
 @pytest.mark.parametrize("module", [kernels, scene_kernels, wrench_kernels, elastic_kernel,
-                                    accuracy_kernel, json_rows], ids=MODULES)
+                                    accuracy_kernel, json_rows, motion_kernel], ids=MODULES)
 def test_a_build_of_other_source_is_never_loaded(module, monkeypatch):
     monkeypatch.setattr(module, "AOT_SOURCES", ("__init__.py",))  # another source's digest
     assert aot_helper.load(module) is None
@@ -148,6 +152,41 @@ def test_aot_and_jit_wrench_kernels_agree_bit_for_bit(name, n):
         outputs[which] = out
     assert outputs["aot"][-1].dtype == np.float64 and np.isfinite(outputs["aot"][-1]).any()
     for a, j in zip(outputs["aot"], outputs["jit"]):
+        np.testing.assert_array_equal(a, j)
+
+
+@pytest.mark.skipif(not ALL_BUILT, reason=NOT_BUILT)
+@pytest.mark.parametrize("name", ["robot2", "robot1"])
+def test_aot_and_jit_six_cable_kernels_agree_bit_for_bit(name):
+    """The six-cable rule (t0, band, J^-1 W, singular) of a walk, both builds."""
+    robot = load_robot(CONFIG / f"{name}.yaml")
+    geometry, ellipsoid, _ = _wrench_inputs(robot, 300, 6)
+    W = np.random.default_rng(6).normal(size=(300, 2, 6))
+    _builds_agree(wrench_kernels, "six_cable_kernel", (*geometry, *ellipsoid[:3], W, 1e-12))
+
+
+@pytest.mark.skipif(not ALL_BUILT, reason=NOT_BUILT)
+@pytest.mark.parametrize("name", ["robot2", "robot2_8"])
+def test_aot_and_jit_motion_kernels_agree_bit_for_bit(name):
+    """The dynamic timing's per-sample geometry on a walk with random rates, and the turns
+    between its rotations, both builds."""
+    robot = load_robot(CONFIG / f"{name}.yaml")
+    p, R, a, b, g = _wrench_inputs(robot, 200, 9)[0]
+    rates = np.random.default_rng(9).normal(size=(4, 200, 3))
+    _builds_agree(motion_kernel, "motion_terms_kernel",
+                  (p, rates[0], rates[1], R, rates[2], rates[3], a, b, g, 0.6,
+                   np.diag([1e-3, 2e-3, 3e-3])))
+    index = np.arange(200, dtype=np.int64)
+    _builds_agree(motion_kernel, "turns_kernel", (R, index[:-2], index[2:], 1e-3))
+
+
+def _builds_agree(module, entry, args):
+    """The kernel module's entry, built ahead of time and by the JIT, on ``args``: the same
+    bits (its first output finite: the comparison is not of nan)."""
+    aot = aot_helper.load(module)[entry](*args)
+    jit = module.jit_kernels()[entry](*args)
+    assert np.isfinite(aot[0]).all()
+    for a, j in zip(aot, jit):
         np.testing.assert_array_equal(a, j)
 
 
@@ -253,8 +292,8 @@ def test_the_wrench_entries_take_any_layout_and_type():
 
 # Each compiled kernel called once in a fresh process: the manifold's F / F_x, the collision
 # kernel, the wrench entries (the pose geometry, the facet test, the centred rule) of an
-# 8-cable robot through the package's entries, its elastic equilibrium and its accuracy
-# (the zonotope kernel). Prints whether
+# 8-cable robot and the six-cable rule through the package's entries, its elastic equilibrium,
+# its accuracy (the zonotope kernel) and the dynamic timing's motion terms. Prints whether
 # numba was imported.
 FRESH_CALLS = f"""
 import sys, json
@@ -272,11 +311,12 @@ kernels.navigation_residual_and_jacobian(X, prm, True)
 robot2 = load_robot({str(CONFIG / "robot2.yaml")!r})
 scene = load_scene({str(CONFIG / "scenes" / "robot2_ball.yaml")!r}, robot2)
 assert CollisionModel(robot2, scene).clearance(np.array([0, 0, 0.4]), np.eye(3)).distance > 0
+six = float(wrench.rule_tensions(robot2, np.array([[0.0, 0.0, 0.4]]), np.eye(3)[None])[1][0, 0])
 robot = load_robot({str(CONFIG / "cogiro.yaml")!r})
 p, R = np.array([[0.0, 0.0, 2.5]]), np.eye(3)[None]
 answers = [float(wrench.wrench_feasibility(robot, p, R=R).margin[0]),
            float(wrench.band_margin(robot, p, R=R)[0]),
-           float(wrench.rule_tensions(robot, p, R)[0][0, 0])]
+           float(wrench.rule_tensions(robot, p, R)[0][0, 0]), six]
 from cdh_planner.model import elastic
 f = wrench.band_feasibility(robot, p, R=R)
 L0 = elastic.unstretched_lengths(robot, f.lengths, f.tension_nominal)
@@ -285,6 +325,8 @@ eq = elastic.equilibrium_poses(robot, L0, p, R, w[None, :3], w[None, 3:], np.zer
 answers.append(float(eq.p[0, 2]))
 from cdh_planner.accuracy import pose_accuracy
 answers.append(float(pose_accuracy(robot, p, R=R).position_m[0]))
+from cdh_planner.trajectory.motion_kernel import motion_terms
+answers.append(float(motion_terms(robot, p, p, p, R, p, p, 1.0, np.eye(3))[2][0, 0]))
 print(json.dumps(["numba" in sys.modules, answers]))
 """
 

@@ -34,7 +34,7 @@ def test_not_a_terminal_writes_at_most_one_line_per_interval():
 def test_a_short_plan_off_a_terminal_writes_nothing():
     stream, clock = io.StringIO(), FakeClock()
     with chart_progress(stream=stream, clock=clock) as update:
-        for k in range(18):  # the 1 s plan: 18 frames
+        for k in range(18):  # a 1 s plan: 18 frames
             clock.t += 1.0 / 18
             update(k, 0.1)
     assert stream.getvalue() == ""

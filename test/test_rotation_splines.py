@@ -122,6 +122,22 @@ def test_rotation_spline_and_its_rates_agree_with_scipy(n):
         np.testing.assert_allclose(ours(ts, order), theirs(ts, order), atol=TOL * scale, rtol=0)
 
 
+@pytest.mark.parametrize("n", [2, 3, 30])
+def test_all_derivatives_at_once_are_the_single_calls_bit_for_bit(n):
+    """``derivatives`` (the pieces and rotation vectors found once, as the dynamic timing's
+    geometry asks) gives each order's own call's numbers exactly."""
+    rng = np.random.default_rng(20 + n)
+    t = np.cumsum(rng.uniform(0.05, 0.2, n))
+    ts = np.concatenate([t, np.linspace(t[0] - 0.1, t[-1] + 0.1, 300)])
+    rotations = RotationSpline(t, Rotation.from_rotvec(np.cumsum(rng.normal(scale=0.3, size=(n, 3)), 0)))
+    rot, rate, accel = rotations.derivatives(ts)
+    assert np.array_equal(rot.as_matrix(), rotations(ts).as_matrix())
+    assert np.array_equal(rate, rotations(ts, 1)) and np.array_equal(accel, rotations(ts, 2))
+    cubic = CubicSpline(t, rng.normal(size=(n, 3)))
+    for nu, values in zip((0, 1, 2, 3), cubic.derivatives(ts, (0, 1, 2, 3))):
+        assert np.array_equal(values, cubic(ts, nu))
+
+
 def test_the_banded_solve_is_scipys_below_and_above_the_dense_limit(monkeypatch):
     rng = np.random.default_rng(5)
     n = 50

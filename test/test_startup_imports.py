@@ -62,7 +62,9 @@ def _kernels_built():
     from cdh_planner.wrench import compiled
     from cdh_planner import accuracy_kernel
     from cdh_planner.commands import json_rows
-    return aot_built(kernels, scene_kernels, compiled, elastic_kernel, accuracy_kernel, json_rows)
+    from cdh_planner.trajectory import motion_kernel
+    return aot_built(kernels, scene_kernels, compiled, elastic_kernel, accuracy_kernel, json_rows,
+                     motion_kernel)
 
 
 @pytest.mark.skipif(not _kernels_built(), reason="no ahead-of-time kernels built (make)")

@@ -1,8 +1,8 @@
 """Work the dynamic timing and the executed check no longer do twice, and the numbers they
-still give bit for bit: the dynamic timing's J^-1 reused for the rule's tensions
-(``rule_tensions(..., inverted=...)``), and the executed check's rotation between two
-samples of its stencil computed once for the sample before and the one after
-(``_stencil_turns``)."""
+still give: the six-cable rule's tensions, band and tension rates in one compiled pass
+(``wrench.rule_responses``, against closed_form's numpy inverse to rounding), and the
+executed check's rotation between two samples of its stencil computed once for the sample
+before and the one after (``_stencil_turns``, compiled: the port's numbers to 1e-15 rad)."""
 
 import numpy as np
 import pytest
@@ -14,7 +14,11 @@ from cdh_planner.planner import Planner
 from cdh_planner.ports import Rotation
 from cdh_planner.trajectory import dynamics as D, executed
 from cdh_planner.trajectory.dynamics import _Geometry, _terms
-from cdh_planner.wrench import cable_vectors, rule_tensions, screw_jacobian, tension_map
+import importlib
+
+from cdh_planner.wrench import rule_responses, rule_tensions
+
+CF = importlib.import_module("cdh_planner.wrench.closed_form")  # the numpy reference
 
 
 @pytest.fixture(scope="module")
@@ -36,48 +40,69 @@ def _poses(robot, n=300, seed=0):
     return p, R
 
 
-def _inverted(robot, p, R):
-    d = cable_vectors(robot, p, R)
-    L = np.linalg.norm(d, axis=-1)
-    J = screw_jacobian(robot, d / L[..., None])
-    return L, J, tension_map(robot, J)
+def _reference(robot, p, R, W):
+    """The six-cable rule by numpy: closed_form's J^-1 (LAPACK) and envelope, J^-1 W, and
+    where singular."""
+    _, _, _, J_inv, c, singular = CF.inverse_jacobian(robot, p, R)
+    t0, v = CF._envelope(robot, J_inv, c)
+    return t0, v, np.einsum("nij,nkj->nki", J_inv, W), singular
 
 
 @pytest.mark.parametrize("robot_file", ["robot2.yaml", "robot1.yaml"])
-def test_rule_tensions_from_the_callers_inverse_are_the_same_bits(robot_file):
+def test_the_compiled_six_cable_rule_is_the_numpy_closed_form(robot_file):
+    """rule_responses (one LU per pose, compiled) against closed_form's LAPACK inverse: the
+    same tensions, band and J^-1 W to rounding (1e-9 of their scale), nan / inf at the
+    same singular poses (robot2's ellipsoid in the load frame, robot1's in the base frame)."""
     robot = load_robot(PROBLEMS.parent / robot_file)
     p, R = _poses(robot)
-    inverted = _inverted(robot, p, R)
-    for inertial in (None, np.random.default_rng(1).normal(size=(len(p), 6))):
-        old = rule_tensions(robot, p, R, inertial)
-        new = rule_tensions(robot, p, R, inertial, inverted=inverted)
-        for a, b in zip(old, new):
-            assert np.array_equal(a, b, equal_nan=True)
+    p[:2], R[:2] = [0.0, 0.0, 0.05], np.eye(3)  # platform in a plane parallel to the base
+    p[:2, 2] = robot.base_anchors[0, 2] - robot.platform_anchors[0, 2]  # anchors': singular
+    W = np.random.default_rng(1).normal(size=(len(p), 3, 6))
+    t0, v, change = rule_responses(robot, p, R, W)
+    r_t0, r_v, r_change, singular = _reference(robot, p, R, W)
+    assert singular[:2].all() and not singular.all()
+    ok = ~singular
+    assert np.all(np.isnan(t0[singular])) and np.all(np.isinf(v[singular]))
+    assert np.all(np.isnan(change[singular]))
+    for a, b in ((t0, r_t0), (v, r_v), (change, r_change)):
+        scale = np.max(np.abs(b[ok]), axis=tuple(range(1, b.ndim)), keepdims=True)
+        assert np.all(np.abs(a[ok] - b[ok]) <= 1e-9 * scale)
 
 
-def test_a_singular_pose_stays_nan_and_inf_with_the_callers_inverse():
+def test_rule_tensions_under_a_wrench_are_t0_minus_its_change():
     robot = load_robot(PROBLEMS.parent / "robot2.yaml")
-    p, R = _poses(robot, n=4)
-    L, J, J_inv = _inverted(robot, p, R)
-    L[1, 2] = 0.0  # a cable of no length: singular whatever J^-1 says
-    f0, v = rule_tensions(robot, p, R, inverted=(L, J, J_inv))
-    assert np.all(np.isnan(f0[1])) and np.all(np.isinf(v[1]))
-    assert np.array_equal(f0[[0, 2, 3]], rule_tensions(robot, p[[0, 2, 3]], R[[0, 2, 3]])[0])
+    p, R = _poses(robot)
+    inertial = np.random.default_rng(2).normal(size=(len(p), 6))
+    t0, v, change = rule_responses(robot, p, R, inertial[:, None, :])
+    t, v_t = rule_tensions(robot, p, R, inertial)
+    assert np.array_equal(t, t0 - change[:, 0], equal_nan=True) and np.array_equal(v, v_t)
+    assert np.array_equal(rule_tensions(robot, p, R)[0], t0, equal_nan=True)
 
 
-def test_the_timing_terms_invert_j_once_and_give_the_rules_tensions(ball, monkeypatch):
+def test_a_cable_of_no_length_is_singular():
+    robot = load_robot(PROBLEMS.parent / "robot2.yaml")
+    p, R = _poses(robot, n=3)
+    p[1] = robot.base_anchors[2] - R[1] @ robot.platform_anchors[2]  # cable 2 of length 0
+    t0, v, _ = rule_responses(robot, p, R, np.zeros((3, 0, 6)))
+    assert np.all(np.isnan(t0[1])) and np.all(np.isinf(v[1]))
+
+
+def test_the_timing_terms_invert_nothing_and_give_the_rules_tensions(ball, monkeypatch):
+    """_terms: the rule's t0, v and the rates of its tensions (P A, P B) in one compiled pass
+    (no LAPACK inverse), t0 and v those of rule_tensions, bit for bit."""
     robot, path = ball
     geo = _Geometry(robot, path)
     s = np.linspace(0.0, geo.length, 500)
     calls = []
     inv = np.linalg.inv
     monkeypatch.setattr(np.linalg, "inv", lambda a: calls.append(len(a)) or inv(a))
-    _, _, _, f0, v, _, _ = _terms(robot, geo, s, robot.mass, robot.inertia)
-    assert calls == [len(s)]  # the tension map's; the rule's tensions reuse it
+    _, _, _, f0, v, a_f, b_f = _terms(robot, geo, s, robot.mass, robot.inertia)
+    assert calls == []
     monkeypatch.undo()
     p, _, _, R, _, _ = geo.at(s)
     old_f0, old_v = rule_tensions(robot, p, R)
     assert np.array_equal(f0, old_f0) and np.array_equal(v, old_v)
+    assert np.all(np.isfinite(a_f)) and np.all(np.isfinite(b_f)) and np.max(np.abs(a_f)) > 0
 
 
 def _old_turns(R, need, mid, q):
@@ -90,7 +115,9 @@ def _old_turns(R, need, mid, q):
 
 
 @pytest.mark.parametrize("sparse", [False, True])
-def test_stencil_turns_are_the_same_bits_and_computed_once(ball, sparse, monkeypatch):
+def test_stencil_turns_are_the_ports_and_computed_once(ball, sparse, monkeypatch):
+    """Each turn once (the compiled ``turns``), and the port's Rotation's numbers to 1e-15
+    rad."""
     robot, path = ball
     q, n = executed.PHASES, 2000
     ts = np.linspace(path.t[0], path.t[-1], n + 1)
@@ -100,16 +127,16 @@ def test_stencil_turns_are_the_same_bits_and_computed_once(ball, sparse, monkeyp
     need = executed.unique_sorted(np.concatenate([mid - q, mid, mid + q]))
     _, R = executed.path_seed(path)(ts[need])
     rows = []
-    from_matrix = Rotation.from_matrix.__func__
-    monkeypatch.setattr(Rotation, "from_matrix",
-                        classmethod(lambda cls, m: rows.append(len(m)) or from_matrix(cls, m)))
+    turns = executed.turns
+    monkeypatch.setattr(executed, "turns", lambda R, a, b: rows.append(len(a)) or turns(R, a, b))
     front, back = executed._stencil_turns(R, need, mid, q)
     assert rows == [len(executed.unique_sorted(np.concatenate([mid - q, mid])))]
     if not sparse:
         assert rows[0] == len(mid) + q  # half the 2 len(mid) of one per side
     monkeypatch.undo()
     old_front, old_back = _old_turns(R, need, mid, q)
-    assert np.array_equal(front, old_front) and np.array_equal(back, old_back)
+    assert np.allclose(front, old_front, rtol=0, atol=1e-15)
+    assert np.allclose(back, old_back, rtol=0, atol=1e-15)
     assert np.max(np.abs(front)) > 0  # the path turns: the comparison is not of zeros
 
 

@@ -75,6 +75,7 @@ class Atlas:
         self.newton_iters = newton_iters
         self.charts = []
         self.periodic = np.asarray(constraint.periodic, dtype=bool)
+        self._periodic_at = np.flatnonzero(self.periodic)  # faster to index than the mask
         self._inside = getattr(constraint, "inside", None)  # the domain's predicate part
         self._index = _KeyIndex()
         self._centres = _Rows()  # chart centres (N, n_vars), for vectorised distances
@@ -86,7 +87,7 @@ class Atlas:
     def diff(self, x, y):
         """y - x with periodic coordinates wrapped to [-pi, pi)."""
         d = y - x
-        d[self.periodic] = _wrap_angle(d[self.periodic])
+        d[self._periodic_at] = _wrap_angle(d[self._periodic_at])
         return d
 
     def wrap(self, x):
@@ -127,21 +128,22 @@ class Atlas:
                 F, Fx = self.c.residual_and_jacobian(x)
                 rhs[:m] = F
                 rhs[m:] = basis.T @ self.diff(x0, x) - s_target
-                if not np.all(np.isfinite(rhs)):
+                largest = np.abs(rhs).max()  # nan or inf if any entry is
+                if not math.isfinite(largest):
                     return None
-                if np.max(np.abs(rhs)) < self.newton_tol:
+                if largest < self.newton_tol:
                     return x
                 A[:m] = Fx
                 try:
                     step = np.linalg.solve(A, rhs)
                 except np.linalg.LinAlgError:
                     return None
-                if not np.all(np.isfinite(step)):
+                if not math.isfinite(np.abs(step).max()):
                     return None
                 x = x - step
             F, _ = self.c.residual_and_jacobian(x)  # diverged iterates overflow: quietly
-        ok = np.all(np.isfinite(F)) and np.max(np.abs(F)) < 1e3 * self.newton_tol
-        return x if ok else None
+        largest = np.abs(F).max()
+        return x if math.isfinite(largest) and largest < 1e3 * self.newton_tol else None
 
     def psi(self, i, s):
         """Projection onto M of the point with tangent coordinates s in chart i."""
@@ -313,17 +315,24 @@ class Atlas:
         near, _, dist = self._near(x, self.c.key(x), self.radius if k_radius is None else k_radius)
         return near[dist < self._radii.rows[near]].tolist()
 
-    def segment(self, i, j, n_points):
+    def segment(self, i, j, n_points, first=None):
         """Points on M from the centre of chart i to that of its neighbour j: the first half
-        projected from i's tangent space, the second from j's. None if Newton fails."""
+        projected from i's tangent space, the second from j's. None if Newton fails, or if
+        the point ``first`` (an index, projected before the others) fails ``in_domain``:
+        a link that crosses an obstacle mostly does so in its middle, and then the other
+        points need no Newton."""
         si = self.coordinates(i, self.charts[j].x)
         sj = self.coordinates(j, self.charts[i].x)
-        pts = []
-        for t in np.linspace(0.0, 1.0, n_points):
+        ts = np.linspace(0.0, 1.0, n_points)
+        pts = [None] * n_points
+        order = list(range(n_points)) if first is None else \
+            [first] + [k for k in range(n_points) if k != first]
+        for k in order:
+            t = ts[k]
             x = self.psi(i, t * si) if t <= 0.5 else self.psi(j, (1.0 - t) * sj)
-            if x is None:
+            if x is None or (k == first and not self.in_domain(x)):
                 return None
-            pts.append(x)
+            pts[k] = x
         return pts
 
     def edge_points(self, a, b, spacing=0.25):
@@ -341,7 +350,7 @@ class Atlas:
     def _edge_points(self, a, b, spacing):
         gap = np.linalg.norm(self.diff(self.charts[a].x, self.charts[b].x))
         n = max(3, int(math.ceil(gap / (spacing * self.radius))) + 1)
-        pts = self.segment(a, b, n)
+        pts = self.segment(a, b, n, first=n // 2)
         if pts is None or not self._all_in_domain(pts):
             return None
         steps = [np.linalg.norm(self.diff(u, v)) for u, v in zip(pts, pts[1:])]

@@ -27,6 +27,9 @@ class TaskConstraint:
         self.n_vars = N_VARS + self.n_task_vars
         self.scale = np.concatenate([self.nav.variable_scale(), np.ones(self.n_task_vars)])
         self.row_scale = self.nav.equation_scale()
+        self._row_scale_col = self.row_scale[:, None]
+        # free flight: no task equations or variables, F and F_x are the navigation rows
+        self._navigation_only = self.n_task_vars == 0 and task.n_equations == 0
         self._task_row_scale = np.where(task.length_rows, self.nav.length_ref, 1.0)
         self.dim = self.n_vars - N_EQS - task.n_equations
         self._task_var_names = task.names[:self.n_task_vars]
@@ -41,7 +44,9 @@ class TaskConstraint:
         X = x * self.scale
         F, FX = self.nav.residual_and_jacobian(X[:N_VARS])
         F = F / self.row_scale
-        FX = FX / self.row_scale[:, None]
+        FX = FX / self._row_scale_col
+        if self._navigation_only:  # the same numbers as the stacking below, without it
+            return F, FX * self.scale
         Ft, FtX = self._task(X)
         F_all = np.concatenate([F, Ft])
         J = np.zeros((F_all.size, self.n_vars))

@@ -197,20 +197,20 @@ def _max_abs(v):
     return best
 
 
+def _scratch(m):
+    """The work arrays of ``_newton_pose`` for m cables: residual (6,), Jacobian (6, 6),
+    tensions (m,), trial residual (6,), trial p (3,) and R (3, 3), the step's rotation (3, 3)
+    and rotation vector (3,), the step (6,) and ``_solve6``'s copy (6, 6)."""
+    return (np.empty(6), np.empty((6, 6)), np.empty(m), np.empty(6), np.empty(3),
+            np.empty((3, 3)), np.empty((3, 3)), np.empty(3), np.empty(6), np.empty((6, 6)))
+
+
 def _newton_pose(a, b, g, EA, L0, p, R, force, moment, arm, bilateral, tol, iterations,
-                 halvings):
-    """``elastic._newton`` at one pose, in place on p (3,) and R (3, 3): converged?"""
-    m = a.shape[0]
-    res = np.empty(6)
-    jac = np.empty((6, 6))
-    t = np.empty(m)
-    after = np.empty(6)
-    p_try = np.empty(3)
-    R_try = np.empty((3, 3))
-    E = np.empty((3, 3))
-    rv = np.empty(3)
-    step = np.empty(6)
-    work = np.empty((6, 6))
+                 halvings, scratch):
+    """``elastic._newton`` at one pose, in place on p (3,) and R (3, 3): converged?
+    ``scratch``: ``_scratch(m)``'s arrays, overwritten (allocated once per batch, not per
+    pose: the allocations cost as much as the arithmetic)."""
+    res, jac, t, after, p_try, R_try, E, rv, step, work = scratch
     _balance(a, b, g, EA, L0, p, R, force, moment, arm, bilateral, res, jac, t, False)
     for _ in range(iterations):
         before = _max_abs(res)
@@ -258,15 +258,22 @@ def _equilibrium_poses(a, b, g, EA, L0, p, R, force, moment, arm, tol, iteration
     tensions = np.empty((n, m))
     residual = np.empty(n)
     ok = np.zeros(n, dtype=np.bool_)
-    res = np.empty(6)
-    jac = np.empty((6, 6))
+    scratch = _scratch(m)
+    res, jac, t = scratch[0], scratch[1], scratch[2]
     for q in range(n):
-        _newton_pose(a, b, g, EA, L0[q], p[q], R[q], force[q], moment[q], arm[q], True, tol[q],
-                     iterations, halvings)
-        ok[q] = _newton_pose(a, b, g, EA, L0[q], p[q], R[q], force[q], moment[q], arm[q], False,
-                             tol[q], iterations, halvings)
-        _balance(a, b, g, EA, L0[q], p[q], R[q], force[q], moment[q], arm[q], False, res, jac,
-                 tensions[q], False)
+        # a converged Newton leaves the residual and tensions of its pose in scratch; where
+        # no pushing cable was needed the tension-only pass would stop at once with the
+        # same numbers, so it is not run
+        pushing = not _newton_pose(a, b, g, EA, L0[q], p[q], R[q], force[q], moment[q], arm[q],
+                                   True, tol[q], iterations, halvings, scratch)
+        for i in range(m):
+            pushing = pushing or t[i] < 0.0
+        ok[q] = not pushing or _newton_pose(a, b, g, EA, L0[q], p[q], R[q], force[q], moment[q],
+                                            arm[q], False, tol[q], iterations, halvings, scratch)
+        if not ok[q]:  # stuck: scratch may hold a rejected trial's
+            _balance(a, b, g, EA, L0[q], p[q], R[q], force[q], moment[q], arm[q], False, res, jac,
+                     t, False)
+        tensions[q] = t
         residual[q] = _max_abs(res)
     return p, R, tensions, residual, ok
 
@@ -339,7 +346,8 @@ def _soft_poses(a, b, g, EA, p, R, t, force, moment, arm, ok, kappa):
 
 
 # ----- compilation -------------------------------------------------------------------------
-HELPERS = ("_balance", "_solve6", "_rotvec_matrix", "_max_abs", "_newton_pose", "_below_kappa")
+HELPERS = ("_balance", "_solve6", "_rotvec_matrix", "_max_abs", "_scratch", "_newton_pose",
+           "_below_kappa")
 _F1, _F2, _F3 = "float64[::1]", "float64[:, ::1]", "float64[:, :, ::1]"
 AOT_EXPORTS = {"equilibrium_kernel": (
     f"Tuple(({_F2}, {_F3}, {_F2}, {_F1}, boolean[::1]))"

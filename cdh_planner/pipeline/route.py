@@ -81,7 +81,8 @@ class Route:
         if det[0] * det[1] < 0:
             return None, 0, False, (Status.NO_PATH, SINGULAR_BETWEEN.format(*det), {})
         out = run(self.atlas, xs[0], xs[1], self.cost, stop, strategy, self.direct_x, progress,
-                  self._edge_costs, self.link_ok, self.heuristic(strategy), self.route_unsafe)
+                  self._edge_costs, self.link_ok, self.heuristic(strategy), self.route_unsafe,
+                  check_meetings=self.validity.blocks)
         if out.status != Status.OK:
             return None, 0, False, (out.status, None, {"expanded": out.expanded})
         return self.route_coords(out), len(out.charts), False, None

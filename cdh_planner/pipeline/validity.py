@@ -22,6 +22,7 @@ from ..scene.margin import COLLISION_UNIT_M, combine
 from ..trajectory.path_check import SlerpPath, TaskLinePath, check_motion, check_path
 
 COARSE_SAMPLES = 17  # a direct motion is first checked at these few points (a cheap "no")
+QUATERNION_MEMO = 4096  # orientations whose quaternion Validity remembers
 KNOWN_COLLISIONS = 512  # poses in collision remembered (``KnownCollisions``; the deepest kept)
 
 
@@ -41,6 +42,7 @@ class Validity:
         self.feasibility = (feasibility if self.accuracy is None
                             else _within_accuracy(feasibility, self.accuracy))
         self.periodic = np.array(task.periodic, dtype=bool)
+        self._quaternion_memo = {}  # tau row bytes -> quaternion (``_quaternions``)
         self.scene = scene
         self.collision = _collision_model(robot, scene)
         self.known = None if self.collision is None else KnownCollisions(
@@ -102,16 +104,38 @@ class Validity:
         y = np.array(y, dtype=float)
         if self.task.slerp:
             p, tau = self.task.pose(y)
-            return SlerpPath(p, quaternion_from_tau(tau))
+            return SlerpPath(p, self._quaternions(tau))
         per = self.periodic
         y[1:, per] = y[0, per] + np.cumsum(wrap_angle(np.diff(y[:, per], axis=0)), axis=0)  # short arcs
         return TaskLinePath(self.task, y)
 
-    def probe(self, y, n, motion=None):
+    def _quaternions(self, tau):
+        """``quaternion_from_tau`` of the rows of tau (N, 3) rad, remembered per row: the
+        search's direct motions share their ends (a chart, the other side's root), and
+        the conversion costs more than the rest of building a motion. Row by row the same
+        numbers as one call on all rows (the conversion treats each row alone). Read
+        into its own array, so a memo cleared meanwhile (another thread) loses nothing."""
+        memo, keys = self._quaternion_memo, [row.tobytes() for row in tau]
+        out, new = np.empty((len(keys), 4)), []
+        for k, key in enumerate(keys):
+            q = memo.get(key)
+            if q is None:
+                new.append(k)
+            else:
+                out[k] = q
+        if new:
+            out[new] = quaternion_from_tau(tau[new])
+            if len(memo) + len(new) > QUATERNION_MEMO:
+                memo.clear()
+            memo.update((keys[k], out[k].copy()) for k in new)
+        return out
+
+    def probe(self, y, n, motion=None, samples=None):
         """Are n evenly spaced poses of every direct motion between the rows of y valid?
-        (one vectorised closed-form call; ``motion``: ``direct_motion(y)`` if already built)"""
+        (one vectorised closed-form call; ``motion``: ``direct_motion(y)`` if already built,
+        ``samples``: its ``_samples(motion, n)`` if already taken)"""
         motion = self.direct_motion(y) if motion is None else motion
-        p, R = _samples(motion, n)
+        p, R = _samples(motion, n) if samples is None else samples
         bad = ~(self.pose_margins(p, R=R)[0] >= self.margin_floor)
         if self.known is not None and bad.any():
             self.known.add(p[bad], R[bad])
@@ -123,9 +147,11 @@ class Validity:
         few points first (most unsafe motions fail there), then the dense check."""
         y = np.array([ya, yb])
         motion = self.direct_motion(y)  # built once for the looks
-        if self.known is not None and self.known.crossed(*_samples(motion, COARSE_SAMPLES)):
+        coarse = _samples(motion, COARSE_SAMPLES)  # and its coarse poses taken once
+        if self.known is not None and self.known.crossed(*coarse):
             return False
-        if not (self.probe(y, COARSE_SAMPLES, motion) and self.probe(y, 8 * COARSE_SAMPLES, motion)):
+        if not (self.probe(y, COARSE_SAMPLES, motion, coarse)
+                and self.probe(y, 8 * COARSE_SAMPLES, motion)):
             return False
         seg = check_path(self.robot, motion, collision=self.collision,
                          feasibility=self.feasibility)[0]

@@ -24,6 +24,15 @@ else:
     from .splines import CubicSpline, RotationSpline, solve_banded
 
 
+def spline_derivatives(spline, xs):
+    """[value, first, second derivative] at xs (M,) of a CubicSpline or (rotation, rate,
+    acceleration) of a RotationSpline: the ports' ``derivatives`` (the pieces found once),
+    scipy's one call per order."""
+    if USE_SCIPY:
+        return spline(xs), spline(xs, 1), spline(xs, 2)
+    return spline.derivatives(xs)
+
+
 def import_toppra():
     """The toppra package, its ``algorithm`` and ``constraint`` modules imported."""
     if USE_SCIPY:
@@ -35,4 +44,4 @@ def import_toppra():
 
 
 __all__ = ["CubicSpline", "Rotation", "RotationSpline", "Slerp", "USE_SCIPY", "import_toppra",
-           "solve_banded"]
+           "solve_banded", "spline_derivatives"]

@@ -144,8 +144,23 @@ class PiecewiseCubic:
         xs = np.asarray(xs, dtype=float)
         single = xs.ndim == 0
         xs = np.atleast_1d(xs)
+        res = self._power_sum(*self._pieces(xs), nu)
+        return res[0] if single else res
+
+    def derivatives(self, xs, orders=(0, 1, 2)):
+        """[``self(xs, nu)`` for nu in orders] at xs (M,), the pieces found once (the same
+        numbers)."""
+        xs = np.atleast_1d(np.asarray(xs, dtype=float))
+        i, s = self._pieces(xs)
+        return [self._power_sum(i, s, nu) for nu in orders]
+
+    def _pieces(self, xs):
+        """The piece of each x (M,) and x's offset in it (M, 1, ...)."""
         i = np.clip(np.searchsorted(self.x, xs, side="right") - 1, 0, len(self.x) - 2)
-        s = (xs - self.x[i]).reshape((-1,) + (1,) * (self.c.ndim - 2))
+        return i, (xs - self.x[i]).reshape((-1,) + (1,) * (self.c.ndim - 2))
+
+    def _power_sum(self, i, s, nu):
+        """The nu-th derivative (M, ...) of pieces i at offsets s."""
         degree = self.c.shape[0] - 1
         res, z = 0.0, 1.0
         for kp in range(degree + 1):
@@ -155,8 +170,7 @@ class PiecewiseCubic:
             res = res + self.c[degree - kp, i] * z * prefactor
             if kp < degree:
                 z = z * s
-        res = np.broadcast_to(res, (len(xs),) + self.c.shape[2:]) + 0.0
-        return res[0] if single else res
+        return np.broadcast_to(res, (len(i),) + self.c.shape[2:]) + 0.0
 
 
 def hermite_coefficients(x, y, dydx):
@@ -359,3 +373,14 @@ class RotationSpline:
         else:
             raise ValueError("`order` must be 0, 1 or 2.")
         return result[0] if single else result
+
+    def derivatives(self, times):
+        """(``self(times)``, ``self(times, 1)``, ``self(times, 2)``) at times (M,): the
+        rotation vectors and their rate matrix computed once (the same numbers)."""
+        times = np.atleast_1d(np.asarray(times, dtype=float))
+        rotvecs, rotvecs_dot, rotvecs_ddot = self.interpolator.derivatives(times)
+        index = np.clip(np.searchsorted(self.times, times, side="right") - 1, 0,
+                        len(self.times) - 2)
+        rate = _rotvec_dot_to_rate(rotvecs)
+        return (self.rotations[index] * Rotation.from_rotvec(rotvecs), _matvec(rate, rotvecs_dot),
+                _matvec(rate, rotvecs_ddot) + _acceleration_nonlinear_term(rotvecs, rotvecs_dot))

@@ -40,6 +40,11 @@ benchmarks and the pictures. The two built-in strategies:
 A new strategy that only reorders A* (weighted A*: g + w h) overrides ``priority``; one
 with its own loop overrides ``search`` too (test/test_strategies.py).
 
+Links are checked lazily: a route's links once it is found (``link_ok``, the caller's
+``route_check``); a bad one is cut and the search restarts, sharing what it computed.
+Past a thin obstacle (``check_meetings``) GBF also checks the link where its sides meet
+before it answers, and a restart first walks the charts there are before it grows more.
+
 "No path" (``Status.NO_PATH``): one side has no chart left to pop, so the component of
 its end (at this resolution, see ``atlas.domain``) holds no path to the other end.
 """
@@ -110,7 +115,8 @@ class SearchOutcome:
 def run(atlas, x_start, x_goal, cost: Callable, stop: Stop, strategy="astar",
         direct: Optional[Callable] = None, progress: Optional[Callable] = None,
         edge_costs: Optional[dict] = None, link_ok: Optional[Callable] = None,
-        heuristic: Optional[Callable] = None, route_check: Optional[Callable] = None) -> SearchOutcome:
+        heuristic: Optional[Callable] = None, route_check: Optional[Callable] = None,
+        check_meetings=False) -> SearchOutcome:
     """One query from x_start to x_goal (points on M) on ``atlas``; module docstring.
     ``progress`` is called with {"charts", "time_s", "best_h"} every PROGRESS_PERIOD_S;
     ``edge_costs`` caches chart-link costs across queries; ``link_ok(points)`` is the
@@ -120,17 +126,30 @@ def run(atlas, x_start, x_goal, cost: Callable, stop: Stop, strategy="astar",
     links passed ``link_ok`` (``direct``: the indices of direct motions): the index k of a
     motion points[k] -> points[k + 1] that fails, whose link is then cut, or None. One
     dense check of a route is cheaper than one per link, and finds the walls thinner than
-    link_ok's probe."""
+    link_ok's probe. ``check_meetings``: a strategy checks the link where the two sides
+    meet (its points and ``link_ok``, else ``direct``) before it answers, and cuts a bad
+    one and goes on: past a thin obstacle the sides' charts overlap across it, so that is
+    the link that fails, and each failure found in the route instead restarts the search;
+    and a restarted search of a strategy whose answer need not be least-cost (not
+    ``admissible``: GBF) first walks the charts there are, growing none, and grows only
+    when they hold no route (a restart from the roots grew charts near them again, for a
+    route the atlas already had)."""
     if strategy not in STRATEGIES:
         raise ValueError(f"unknown strategy {strategy!r} (expected one of {', '.join(STRATEGIES)})")
     strategy = STRATEGIES[strategy]()
     i_start, i_goal = atlas.chart_at(x_start), atlas.chart_at(x_goal)
     memo = _Memo({} if edge_costs is None else edge_costs)
+    walk = False  # check_meetings: a restart of a strategy that need not answer least cost
     while True:  # lazy links: a route's links are checked once found; a bad one is cut
-        search = Bidirectional(atlas, cost, strategy, direct, progress, memo, heuristic)
+        search = Bidirectional(atlas, cost, strategy, direct, progress, memo, heuristic,
+                               link_ok if check_meetings else None, walk)
         status, route, hops = search.run(i_start, i_goal, stop)
+        if walk and status == Status.NO_PATH:
+            walk = False  # no route on them: grow
+            continue
         if status != Status.OK:
             return SearchOutcome(status, expanded=search.expanded)
+        walk = check_meetings and not strategy.admissible
         points, direct_idx, owners, bad = _route_points(atlas, route, hops, link_ok,
                                                         search.direct_ok, memo.links_ok)
         if bad is None and route_check is not None:
@@ -219,8 +238,12 @@ class Bidirectional:
     ``sides`` (forward from the start, backward from the goal), the costs and heuristic
     (memoised across restarts), direct motions, chart growth and joining a route."""
 
-    def __init__(self, atlas, cost, strategy, direct, progress, memo, heuristic=None):
+    def __init__(self, atlas, cost, strategy, direct, progress, memo, heuristic=None,
+                 meeting_link_ok=None, walk=False):
         self.atlas = atlas
+        self.walk = walk  # no chart grows: a route on the charts there are, or NO_PATH
+        self.meeting_link_ok = meeting_link_ok  # run's link_ok when it checks meetings
+        self.links_ok = memo.links_ok
         self.cost = cost
         self.heuristic = cost if heuristic is None else heuristic
         self.strategy = strategy
@@ -272,6 +295,18 @@ class Bidirectional:
             self.direct_cache[key] = bool(self.direct(self.atlas.charts[i].x, self.atlas.charts[j].x))
         return self.direct_cache[key]
 
+    def meets(self, i, j):
+        """May the sides meet on the link i - j? (``run``'s ``check_meetings``: its points
+        pass the caller's link check or its direct motion is safe, else it is cut; always
+        without.)"""
+        if self.meeting_link_ok is None:
+            return True
+        bad = _route_points(self.atlas, [i, j], set(), self.meeting_link_ok, self.direct_ok,
+                            self.links_ok)[3]
+        if bad is not None:
+            self.atlas.unlink(i, j)
+        return bad is None
+
     def push(self, side, priority, i):
         """Chart i on ``side``'s heap (ties: first pushed first)."""
         heapq.heappush(side.heap, (priority, next(self._count), i))
@@ -294,6 +329,8 @@ class Bidirectional:
         h than i. Returns (a limit status of ``stop`` or None, the new charts)."""
         ch = self.atlas.charts[i]
         new = []
+        if self.walk:
+            return None, new
         for _ in range(MAX_EXPANSIONS_PER_CHART):
             if ch.closed:
                 return None, new
@@ -468,13 +505,13 @@ class GreedyBestFirst(Strategy):
                         side.parent.setdefault(j, i)
                         return (Status.OK, *s.join(side, j, k, True))
             ch = s.atlas.charts[i]
-            if ch.closed:
+            if ch.closed or s.walk:
                 side.done.add(i)
                 s.expanded += 1
             else:
                 s.push(side, self.priority(0.0, s.h(side, i)), i)
             for j in sorted(ch.neighbours):
-                if j in side.parent:
+                if j in side.parent or (j in other.parent and not s.meets(i, j)):
                     continue
                 side.parent[j] = i
                 if j in other.parent:

@@ -45,13 +45,14 @@ from functools import partial
 import numpy as np
 
 from ..errors import InputError, check_finite
-from ..wrench import band_feasibility, cable_vectors, rule_tensions, screw_jacobian, tension_map
+from ..wrench import band_feasibility, rule_responses, rule_tensions
 from ..model.elastic import is_elastic
 from ..model.pose import tau_from_rotation
 from .executed import executable, spline_rates, unique_sorted
+from .motion_kernel import motion_terms
 from .path import (COMMAND_PATH_WINDOW_M, PlannedPath, averaged_along_path, cable_arc_length,
                    command_tensions, command_window, with_commands)
-from ..ports import CubicSpline, Rotation, RotationSpline, import_toppra
+from ..ports import CubicSpline, Rotation, RotationSpline, import_toppra, spline_derivatives
 
 GRID_POINTS = 400       # toppra gridpoints along the path (at least one per waypoint)
 CHECK_DT = 1e-3         # s: the dense check's time step
@@ -124,42 +125,22 @@ class _Geometry:
     def at(self, s):
         """p, R, c_s-ready pieces at s (M,): p, p_s, p_ss (M,3), R (M,3,3), w, w_s (M,3) body."""
         s = np.clip(s, 0.0, self.length)
-        return (self.p(s), self.p(s, 1), self.p(s, 2), self.R(s).as_matrix(), self.R(s, 1),
-                self.R(s, 2))
+        rot, w, w_s = spline_derivatives(self.R, s)
+        return (*spline_derivatives(self.p, s), rot.as_matrix(), w, w_s)
 
 
 def _terms(robot, geo, s, mass, inertia):
     """Per s: cable lengths L (M,6), L_s, L_ss, static tensions f0 (M,6), spread v (M,6),
     tension rates a_f, b_f (M,6) with f = f0 + a_f u + b_f x."""
     p, p_s, p_ss, R, w, w_s = geo.at(s)
-    g = robot.load_point
-    Rg = np.einsum("nij,j->ni", R, g)
-    c = p + Rg
-    wxg = np.cross(w, g)
-    c_s = p_s + np.einsum("nij,nj->ni", R, wxg)
-    c_ss = p_ss + np.einsum("nij,nj->ni", R, np.cross(w_s, g) + np.cross(w, wxg))
-    Iw, Iws = w @ inertia.T, w_s @ inertia.T
-    A = np.concatenate([mass * c_s, np.cross(c, mass * c_s) + np.einsum("nij,nj->ni", R, Iw)], axis=1)
-    B = np.concatenate([mass * c_ss, np.cross(c, mass * c_ss)
-                        + np.einsum("nij,nj->ni", R, Iws + np.cross(w, Iw))], axis=1)
-    d = cable_vectors(robot, p, R)
-    L = np.linalg.norm(d, axis=-1)
-    u = d / L[..., None]
-    J = screw_jacobian(robot, u)
+    # w_in = A u + B x and the lengths' s-rates, compiled (motion_kernel: the module
+    # docstring's Newton-Euler; L_s = u . q_s, L_ss = (|q_s|^2 - L_s^2) / L + u . q_ss of
+    # the platform anchors q_i = p + R b_i)
+    A, B, L, L_s, L_ss = motion_terms(robot, p, p_s, p_ss, R, w, w_s, mass, inertia)
     # the published rule, t0 + P (w - w0) (P = J^-1 for six cables), its band v = |rows of
-    # P L| (with elastic cables P_K's: wrench.stiffness_band)
-    J_inv = tension_map(robot, J)
-    f0, v = rule_tensions(robot, p, R, inverted=(L, J, J_inv))  # J inverted once
-    # the platform anchor q_i = p + R b_i: q_s = p_s + R (w x b), q_ss = p_ss + R (w_s x b +
-    # w x (w x b)); L = |q - a| gives L_s = u . q_s and L_ss = (|q_s|^2 - L_s^2) / L + u . q_ss
-    b = robot.platform_anchors[None]
-    wxb = np.cross(w[:, None, :], b)
-    q_s = p_s[:, None, :] + np.einsum("nij,nkj->nki", R, wxb)
-    q_ss = p_ss[:, None, :] + np.einsum("nij,nkj->nki", R, np.cross(w_s[:, None, :], b)
-                                        + np.cross(w[:, None, :], wxb))
-    L_s = np.einsum("nki,nki->nk", u, q_s)
-    L_ss = (np.einsum("nki,nki->nk", q_s, q_s) - L_s ** 2) / L + np.einsum("nki,nki->nk", u, q_ss)
-    return L, L_s, L_ss, f0, v, -np.einsum("nij,nj->ni", J_inv, A), -np.einsum("nij,nj->ni", J_inv, B)
+    # P L| (with elastic cables P_K's: wrench.stiffness_band), and P A, P B, in one pass
+    f0, v, change = rule_responses(robot, p, R, np.stack([A, B], axis=1))
+    return L, L_s, L_ss, f0, v, -change[:, 0], -change[:, 1]
 
 
 def _command_rates(robot, geo, s, L, L_s, L_ss):

@@ -36,6 +36,7 @@ docstring of that function).
 """
 
 from dataclasses import dataclass, field, replace
+from math import comb
 
 import numpy as np
 
@@ -44,6 +45,7 @@ from ..model.elastic import equilibrium_poses, is_elastic, static_load
 from ..model.forward_kinematics import forward_kinematics_many
 from ..model.pose import cross, tau_from_rotation
 from ..ports import CubicSpline, Rotation, Slerp
+from .motion_kernel import turns
 from .path import with_commands
 from .timing import limit_ratio
 
@@ -69,22 +71,26 @@ PROGRESS = 0.1         # two rounds of added points that shrink the time the che
 
 # ----------------------------------------------------------------------------- the quintic
 
-def quintic(t_wp, L, V, A, t):
+def quintic(t_wp, L, V, A, t, rates=True):
     """Positions (M, J) m, velocities m/s and accelerations m/s^2 at times ``t`` (M,) of the
     JTC interpolation of points at ``t_wp`` (N,) s with positions L, velocities V and
     accelerations A (N, J): per segment the quintic through both ends' position, velocity
-    and acceleration; before the first point and after the last the end is held (rest)."""
+    and acceleration; before the first point and after the last the end is held (rest).
+    ``rates`` False: the positions alone (velocities and accelerations None)."""
     t_wp = np.asarray(t_wp, dtype=float)
     t = np.asarray(t, dtype=float)
     k = np.clip(np.searchsorted(t_wp, t, side="right") - 1, 0, len(t_wp) - 2)
     h = (t_wp[k + 1] - t_wp[k])[:, None]
     s = np.clip((t - t_wp[k]) / h[:, 0], 0.0, 1.0)[:, None]
-    b0, b1, b2, b3, b4, b5 = _coefficients(t_wp, L, V, A, k)
+    # each segment's coefficients once, then per sample (the same numbers)
+    b0, b1, b2, b3, b4, b5 = (b[k] for b in _coefficients(t_wp, L, V, A, np.arange(len(t_wp) - 1)))
     pos = b0 + s * (b1 + s * (b2 + s * (b3 + s * (b4 + s * b5))))
-    vel = (b1 + s * (2 * b2 + s * (3 * b3 + s * (4 * b4 + s * 5 * b5)))) / h
-    acc = (2 * b2 + s * (6 * b3 + s * (12 * b4 + s * 20 * b5))) / (h * h)
     before, after = t < t_wp[0], t > t_wp[-1]
     pos[before], pos[after] = L[0], L[-1]
+    if not rates:
+        return pos, None, None
+    vel = (b1 + s * (2 * b2 + s * (3 * b3 + s * (4 * b4 + s * 5 * b5)))) / h
+    acc = (2 * b2 + s * (6 * b3 + s * (12 * b4 + s * 20 * b5))) / (h * h)
     vel[before | after] = 0.0
     acc[before | after] = 0.0
     return pos, vel, acc
@@ -102,20 +108,37 @@ def _coefficients(t_wp, L, V, A, k):
             6 * d - 3 * dv + 0.5 * da)
 
 
-def quintic_bounds(t_wp, L, V, A, segments=None):
+def quintic_bounds(t_wp, L, V, A, segments=None, limits=None):
     """Per segment (K of them, default all) and joint, exactly: the least and largest
     position (m), the largest |velocity| (m/s) and |acceleration| (m/s^2) of the JTC's
     quintic, each (K, J). Each is a polynomial on [0, 1]: its extremes are at the ends or
     where its derivative vanishes (real roots from the companion matrix, and a few fixed
-    fractions in case a root is ill-conditioned)."""
+    fractions in case a root is ill-conditioned). ``limits`` (least, largest) (J,) m: the
+    positions' extremes only where their Bernstein hull (the range of the Bernstein
+    coefficients, which holds the polynomial on [0, 1]) is not within the limits by
+    HULL_ROUNDING_M; elsewhere the hull's ends, within the limits as the extremes are."""
     t_wp, L, V, A = (np.asarray(x, dtype=float) for x in (t_wp, L, V, A))
     k = np.arange(len(t_wp) - 1) if segments is None else np.asarray(segments, dtype=int)
     h = (t_wp[k + 1] - t_wp[k])[:, None]
     b = np.stack(_coefficients(t_wp, L, V, A, k), axis=-1)                # (K, J, 6)
     vel = b[..., 1:] * np.arange(1, 6)                                     # per unit s
     acc = vel[..., 1:] * np.arange(1, 5)
-    lo, hi = _extremes(b)
+    if limits is None:
+        lo, hi = _extremes(b)
+    else:
+        hull = b @ BERNSTEIN_5.T
+        lo, hi = hull.min(axis=-1), hull.max(axis=-1)
+        inside = (lo >= limits[0] + HULL_ROUNDING_M) & (hi <= limits[1] - HULL_ROUNDING_M)
+        if not inside.all():
+            lo[~inside], hi[~inside] = _extremes(b[~inside])
     return lo, hi, np.max(np.abs(_extremes(vel)), axis=0) / h, np.max(np.abs(_extremes(acc)), axis=0) / h ** 2
+
+
+# a quintic's Bernstein coefficients on [0, 1] from its power ones b_i: sum_{i <= j}
+# C(j, i) / C(5, i) b_i (row j)
+BERNSTEIN_5 = np.array([[comb(j, i) / comb(5, i) if i <= j else 0.0 for i in range(6)]
+                        for j in range(6)])
+HULL_ROUNDING_M = 1e-12  # m: a hull within the limits by this is so despite rounding
 
 
 def _extremes(c):
@@ -215,8 +238,9 @@ def check_executed(robot, t_wp, L, V, A, seed, mass=None, inertia=None, max_cabl
     k = np.arange(len(t_wp) - 1)
     if within is not None:
         k = k[np.any((t_wp[1:, None] >= w[:, 0]) & (t_wp[:-1, None] <= w[:, 1]), axis=1)]
-    lo, hi, vel, acc = quintic_bounds(t_wp, L, V, A, k)
-    lengths_ok = (lo >= robot.length_min - TOL) & (hi <= robot.length_max + TOL)
+    limits = (robot.length_min - TOL, robot.length_max + TOL)
+    lo, hi, vel, acc = quintic_bounds(t_wp, L, V, A, k, limits)
+    lengths_ok = (lo >= limits[0]) & (hi <= limits[1])
     m = L.shape[1]
     speed = np.max(vel / np.broadcast_to(max_cable_speed, (m,)), axis=1, initial=0.0)
     accel = np.max(acc / np.broadcast_to(max_cable_accel, (m,)), axis=1, initial=0.0)
@@ -274,7 +298,7 @@ def _executed_margins(robot, t_wp, L, V, A, seed, ts, mid, q, mass, inertia, col
     where the pose is closer to the scene than its clearance (M,) (none without a
     ``collision`` model)."""
     need = unique_sorted(np.concatenate([mid - q, mid, mid + q]))
-    pos, _, _ = quintic(t_wp, L, V, A, ts[need])
+    pos = quintic(t_wp, L, V, A, ts[need], rates=False)[0]
     p_seed, R_seed = seed(ts[need])
     elastic = is_elastic(robot)
     if elastic:  # the static equilibrium first: the motion's accelerations from it
@@ -301,8 +325,8 @@ def _executed_margins(robot, t_wp, L, V, A, seed, ts, mid, q, mass, inertia, col
         f, v = _tensions(robot, p_mid, R[1], c[1], c_dd, omega, alpha, mass, inertia)
     margin = np.minimum(f - v - robot.tension_min, robot.tension_max - f - v)
     blocked = np.zeros(len(mid), dtype=bool)
-    if collision is not None:
-        blocked = collision.margins(p_mid, R[1])[0] < 0
+    if collision is not None:  # the samples in order: exact where a sweep bound cannot clear them
+        blocked = collision.blocked_along(p_mid, R[1])
     return margin, lost[at[0]] | lost_mid | lost[at[2]], blocked
 
 
@@ -313,7 +337,7 @@ def _stencil_turns(R, need, mid, q):
     once (of a whole check's contiguous samples, half as many)."""
     first = unique_sorted(np.concatenate([mid - q, mid]))    # where each turn starts
     a, b = np.searchsorted(need, first), np.searchsorted(need, first + q)
-    turn = Rotation.from_matrix(np.swapaxes(R[a], 1, 2) @ R[b]).as_rotvec()
+    turn = turns(R, a, b)  # compiled: Rotation.from_matrix(R[a]^T R[b]).as_rotvec()
     return turn[np.searchsorted(first, mid - q)], turn[np.searchsorted(first, mid)]
 
 

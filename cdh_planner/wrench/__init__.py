@@ -13,7 +13,8 @@ Entries, one test each:
   robot's tension rule's band t0 +- v within the limits (which implies the facet test, so
   that is not run). ``band_margin``: its margin alone (the atlas's domain test).
 - ``rule_tensions``: the rule's nominal tensions t0 and band v at poses (no facet test),
-  optionally under an inertial wrench; ``tension_map``: the rule's P, t(w) = t0 + P (w - w0).
+  optionally under an inertial wrench; ``rule_responses``: t0, v and P w for given wrenches
+  (the trajectory's per-sample tensions); ``tension_map``: the rule's P, t(w) = t0 + P (w - w0).
 - ``stiffness_band``: the band of elastic cables under length control, whatever the rule.
 - ``stiff_nominal``: the rule's t0 of elastic cables moved least in the null space of J so
   that the platform stays at least ``least_stiffness`` stiff (m > 6; every t0 the package
@@ -44,23 +45,24 @@ shares a wrench change: the band is |rows of P_K L|, P_K = K J^T (J K J^T)^-1,
 K = diag(EA / L0) at t0 (``stiffness_band``).
 
 The compiled kernels (``compiled``: built ahead of time by ``make``, else numba's JIT) are
-imported on first use by an m > 6 robot; built ahead of time, no command loads numba for them
-(test_startup_imports), except batches large enough to repay numba's threads.
+imported on first use by an m > 6 robot, or by a six-cable robot's ``rule_responses`` (the
+trajectory's tensions at thousands of samples); built ahead of time, no command loads numba
+for them (test_startup_imports), except batches large enough to repay numba's threads.
 """
 
 import numpy as np
 
 from ..model.pose import rotation_tt
-from .closed_form import closed_form, closed_form_tensions
-from .geometry import (cable_vectors, inverse_ellipsoid_factor, load_point, nominal_wrench,
-                       screw_jacobian, skew)
+from .closed_form import closed_form
+from .geometry import (cable_vectors, inverse_ellipsoid_factor, inverse_factor, load_point,
+                       nominal_wrench, screw_jacobian, skew)
 from .record import (CONSTRAINTS, SINGULAR_DET, STATUS_EXCEEDS, STATUS_INFEASIBLE, STATUS_OK,
                      STATUS_SINGULAR, Feasibility, Margin, WrenchFeasibility)
 from .rules import (DEFAULT_RULE, RULES, TensionRule, least_stiffness, register, rule_of,
                     stiff_nominal, stiffness_band)
 
 __all__ = ["wrench_feasibility", "wrench_margin", "band_feasibility", "band_margin",
-           "rule_tensions", "tension_map", "stiffness_band", "stiff_nominal", "least_stiffness",
+           "rule_tensions", "rule_responses", "tension_map", "stiffness_band", "stiff_nominal", "least_stiffness",
            "RULES", "DEFAULT_RULE", "TensionRule", "register", "Feasibility", "WrenchFeasibility",
            "Margin", "CONSTRAINTS", "SINGULAR_DET", "STATUS_OK", "STATUS_EXCEEDS",
            "STATUS_INFEASIBLE", "STATUS_SINGULAR", "cable_vectors", "screw_jacobian", "load_point",
@@ -123,24 +125,41 @@ def band_margin(robot, p, tau=None, R=None):
     return margin(robot, p, R)
 
 
-def rule_tensions(robot, p, R, inertial=None, inverted=None):
+def rule_tensions(robot, p, R, inertial=None):
     """The rule's tensions t (N, m) N holding w0 - ``inertial`` (N, 6) (None: w0, t = t0)
     and its band v (N, m) N at poses (p (N, 3) m, R (N, 3, 3)), without the facet test:
-    J^-1 (w0 - inertial) for six cables, t0 - P inertial for more (t0 centred at every
-    pose). nan / inf where singular. ``inverted``: (cable lengths (N, m) m, J, P =
-    ``tension_map(robot, J)``) at these poses, when the caller has them: six cables then do
-    not invert J again (the same numbers); more cables do not use them."""
+    t0 - P inertial (``rule_responses``; J^-1 (w0 - inertial) for six cables, to rounding).
+    nan / inf where singular."""
+    p, R = _poses(p, None, R)
+    if inertial is None:
+        return rule_responses(robot, p, R, np.zeros((len(p), 0, 6)))[:2]
+    t0, v, change = rule_responses(robot, p, R, np.asarray(inertial, dtype=float)[:, None, :])
+    return t0 - change[:, 0], v
+
+
+def rule_responses(robot, p, R, wrenches):
+    """The rule at poses (p (N, 3) m, R (N, 3, 3)): its nominal tensions t0 (N, m) N, band
+    v (N, m) N and the tension changes P w (N, K, m) N of the K wrenches ``wrenches``
+    (N, K, 6) of each pose (``tension_map``: t(w0 + w) = t0 + P w). Six cables: J^-1 applied
+    by one LU factorisation per pose, compiled (``compiled.six_cable_batch``; its numpy
+    reference is ``closed_form``'s envelope); more: t0 centred at every pose
+    (``facets.band_tensions``) and P = ``tension_map``. nan / inf where singular."""
     p, R = _poses(p, None, R)
     if _six_cables(robot):
-        return closed_form_tensions(robot, p, R, inertial, inverted)
+        from .compiled import six_cable_batch
+        t0, v, change, _ = six_cable_batch(
+            p, R, robot.base_anchors, robot.platform_anchors, robot.load_point,
+            robot.wrench_center_local, inverse_factor(robot), robot.ellipsoid_frame == "load",
+            wrenches, SINGULAR_DET)
+        return t0, v, change
     from .facets import band_tensions
     t0, v = band_tensions(robot, p, R)
-    if inertial is None:
-        return t0, v
+    if wrenches.shape[1] == 0:
+        return t0, v, np.zeros(wrenches.shape[:2] + (t0.shape[1],))
     u = cable_vectors(robot, p, R)
     u /= np.linalg.norm(u, axis=-1)[..., None]
     P = tension_map(robot, screw_jacobian(robot, u))
-    return t0 - np.einsum("nij,nj->ni", P, inertial), v
+    return t0, v, np.einsum("nij,nkj->nki", P, wrenches)
 
 
 def tension_map(robot, J):

@@ -43,6 +43,10 @@ def warm_jit():
     kernels["pose_geometry"](np.zeros((1, 3)), np.eye(3)[None], np.eye(3), np.eye(3), np.zeros(3))
     ranked = kernels["facet_kernel"](*args, np.array(list(combinations(range(8), 5))), 1e-9)[-1]
     kernels["centred_kernel"](*args, ranked, ranked, 1)
+    six = warm_inputs(1, 6)
+    kernels["six_cable_kernel"](np.zeros((1, 3)), np.eye(3)[None], 2.0 * np.eye(6, 3),
+                                0.1 * np.eye(6, 3), np.zeros(3), six[2], six[3], True,
+                                np.zeros((1, 1, 6)), 1e-12)
 
 
 def warm_threads():

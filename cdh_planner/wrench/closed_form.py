@@ -34,30 +34,12 @@ def _singular(J, lengths):
     return det, ~(np.abs(det) > SINGULAR_DET) | (lengths.min(axis=1) <= 0)
 
 
-def _envelope(robot, J_inv, c, inertial=None):
-    """f0 = J^-1 (w0 - inertial) (N, 6) N and v = |rows of J^-1 L| (N, 6) N at load points
-    c (N, 3) m; ``inertial`` (N, 6): a wrench the load takes off w0 (None: none)."""
+def _envelope(robot, J_inv, c):
+    """f0 = J^-1 w0 (N, 6) N and v = |rows of J^-1 L| (N, 6) N at load points c (N, 3) m
+    (compiled for many poses, with wrenches of the caller's: ``kernel.six_cable_kernel``)."""
     w = nominal_wrench(robot, c)
-    if inertial is not None:
-        w = w - inertial
     f0 = np.einsum("nij,nj->ni", J_inv, w)
     return f0, np.linalg.norm(J_inv @ inverse_ellipsoid_factor(robot, c), axis=-1)
-
-
-def closed_form_tensions(robot, p, R, inertial=None, inverted=None):
-    """``_envelope`` at poses (p (N, 3) m, R (N, 3, 3)); nan / inf where singular.
-    ``inverted``: (lengths (N, 6) m, J, J^-1 (N, 6, 6)) at these poses when the caller has
-    inverted J already (the dynamic timing's tension map): the same numbers without
-    inverting it again (J^-1 is read only where J is not singular, where it is the same
-    inverse of the same J)."""
-    if inverted is None:
-        _, _, _, J_inv, c, singular = inverse_jacobian(robot, p, R)
-    else:
-        lengths, J, J_inv = inverted
-        singular = _singular(J, lengths)[1]
-        J_inv, c = np.where(singular[:, None, None], np.eye(6), J_inv), load_point(robot, p, R)
-    f0, spread = _envelope(robot, J_inv, c, inertial)
-    return np.where(singular[:, None], np.nan, f0), np.where(singular[:, None], np.inf, spread)
 
 
 def closed_form(robot, p, R):

@@ -1,6 +1,6 @@
 """The wrench kernels as machine code (kernel.py: the pose geometry and the facet test;
 centred.py: the centred rule; linalg.py: their linear algebra; plain Python, no numba
-import): three entries built ahead of time into one extension module (``python -m
+import): four entries built ahead of time into one extension module (``python -m
 cdh_planner.wrench.aot``, run by ``make``; ``cdh_planner.aot``), else compiled by numba's JIT
 with ``cache=True``. Ahead of time, importing this module and a first call take about 10 ms
 and numba is not imported; the JIT costs 0.5 - 1 s of a fresh process (the cached code).
@@ -10,8 +10,8 @@ time), so the threaded variants (``threaded``) are JIT only: ``facet_batch`` and
 ``centred_batch`` use them only where they pay for loading numba (``threads_pay``).
 
 The entries take C-contiguous float64 arrays, bool arrays, a bool and an int, as
-AOT_EXPORTS says, unchecked: ``pose_geometry``, ``facet_batch`` and ``centred_batch`` pass
-them so. Units: m, N, N m.
+AOT_EXPORTS says, unchecked: ``pose_geometry``, ``facet_batch``, ``centred_batch`` and
+``six_cable_batch`` pass them so. Units: m, N, N m.
 """
 
 import sys
@@ -38,11 +38,14 @@ AOT_EXPORTS = {
                     f"({_POSES_AND_LIMITS}, int64[:, ::1], float64)",
     "centred_kernel": f"Tuple(({_F64_2}, {_F64_2}))"
                       f"({_POSES_AND_LIMITS}, boolean[::1], boolean[::1], int64)",
+    "six_cable_kernel": f"Tuple(({_F64_2}, {_F64_2}, {_F64_3}, boolean[::1]))"
+                        f"({_F64_2}, {_F64_3}, {_F64_2}, {_F64_2}, {_F64_1}, {_F64_1}, {_F64_2}, "
+                        f"boolean, {_F64_3}, float64)",
 }
 AOT_PREFIX = "_kernels_aot_"
 # the functions the entries call, by module: numba functions under the JIT
 KERNEL_HELPERS = ("gauss_jordan", "householder_r", "null_vector", "_subset_normal", "load_wrench",
-                  "_facet_outputs", "_facet_poses")
+                  "_facet_outputs", "_facet_poses", "lu_factor6", "lu_solve6")
 CENTRED_HELPERS = ("householder_r", "forward_substitute", "null_basis", "cholesky_solve",
                    "load_wrench", "_log_product", "_slacks", "_centre", "_centred_poses")
 
@@ -61,7 +64,8 @@ def jit_kernels():
     """numba's JIT entries (cache=True), by name (``cdh_planner.aot``)."""
     njit = jit_helpers()
     return {"pose_geometry": njit(kernel.pose_geometry), "facet_kernel": njit(kernel.facet_kernel),
-            "centred_kernel": njit(centred.centred_kernel)}
+            "centred_kernel": njit(centred.centred_kernel),
+            "six_cable_kernel": njit(kernel.six_cable_kernel)}
 
 
 _entries = aot.entries(sys.modules[__name__])
@@ -79,6 +83,13 @@ def pose_geometry(p, R, a, b, g):
     """``kernel.pose_geometry``: lengths (N, m) m, u (N, m, 3), J (N, 6, m), load points
     c (N, 3) m at poses p (N, 3) m, R (N, 3, 3) of anchors a, b (m, 3) m, load point g (3,) m."""
     return _entries["pose_geometry"](*_typed((p, R, a, b, g)))
+
+
+def six_cable_batch(p, R, a, b, g, w_local, L3, load_frame, W, singular_det):
+    """``kernel.six_cable_kernel`` (its arguments and outputs): t0, v (N, 6) N, J^-1 W
+    (N, K, 6), singular (N,)."""
+    return _entries["six_cable_kernel"](*_typed((p, R, a, b, g, w_local, L3)), bool(load_frame),
+                                        *_typed((W,)), float(singular_det))
 
 
 def threaded_kernels():

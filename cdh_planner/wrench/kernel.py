@@ -9,12 +9,15 @@ the (at most m - 6) columns of S off the basis: a tiny null-vector problem (y = 
 m = 6: c is a row of J^-1, the closed form). Then c.J_i = y.N_i, c.w0 = y.(E w0) and
 L^T c = (E L)^T y touch only the rows of y's support. The direct transcription (a normal
 per subset from J's columns) is the reference the tests compare it with
-(test/wrench_reference.py). Units: m, N, N m.
+(test/wrench_reference.py).
+
+``six_cable_kernel`` is the six-cable rule P = J^-1 (``closed_form``'s envelope, its numpy
+reference) at many poses, for the trajectory's per-sample tensions. Units: m, N, N m.
 """
 
 import numpy as np
 
-from .linalg import gauss_jordan, householder_r, null_vector
+from .linalg import gauss_jordan, householder_r, lu_factor6, lu_solve6, null_vector
 
 # a 5-subset whose last pivot is below this fraction of its first one is rank 4: it spans
 # no facet (every facet hyperplane is spanned by some 5 independent columns)
@@ -230,3 +233,65 @@ def _facet_poses(q0, q1, J, c, w_local, L3, load_frame, tmin, tmax, subsets, sin
                     best_r, arg_r[q] = sr, 2 * k + sign
                     hi_r[q] = up if sign == 0 else down
         out_n[q], out_r[q] = best_n, best_r
+
+
+def six_cable_kernel(p, R, a, b, g, w_local, L3, load_frame, W, singular_det):
+    """Six cables at poses (p (N, 3) m, R (N, 3, 3)), anchors a, b (6, 3) m, load point g (3,)
+    m, the ellipsoid's centre w_local (6,) and factor L3 (6, 6) in the load frame
+    (``load_frame``) or the base frame: the rule's tensions t0 = J^-1 w0 (N, 6) N, its band
+    v = |rows of J^-1 L| (N, 6) N (``closed_form._envelope``), J^-1 W (N, K, 6) of the K
+    wrenches W (N, K, 6) of each pose, and singular (N,) (|det J| not above singular_det,
+    or a cable of no length; ``closed_form._singular``), where t0 and J^-1 W are nan and v
+    inf. One LU factorisation of J (partial pivoting) per pose: J^-1 is never formed."""
+    n, k_w = p.shape[0], W.shape[1]
+    t0 = np.empty((n, 6))
+    v = np.empty((n, 6))
+    X = np.empty((n, k_w, 6))
+    singular = np.zeros(n, dtype=np.bool_)
+    c = np.empty((n, 3))
+    J = np.empty((6, 6))
+    perm = np.empty(6, dtype=np.int64)
+    w0 = np.empty(6)
+    L = np.empty((6, 6))
+    col = np.empty(6)
+    y = np.empty(6)
+    for q in range(n):
+        Rq = R[q]
+        for r in range(3):
+            c[q, r] = p[q, r] + Rq[r, 0] * g[0] + Rq[r, 1] * g[1] + Rq[r, 2] * g[2]
+        short = False
+        for i in range(6):
+            for r in range(3):
+                y[r] = p[q, r] + Rq[r, 0] * b[i, 0] + Rq[r, 1] * b[i, 1] + Rq[r, 2] * b[i, 2] - a[i, r]
+            length = np.sqrt(y[0] * y[0] + y[1] * y[1] + y[2] * y[2])
+            short = short or not length > 0.0
+            s = 1.0 / length if length > 0.0 else 1.0
+            u0, u1, u2 = y[0] * s, y[1] * s, y[2] * s
+            J[0, i], J[1, i], J[2, i] = u0, u1, u2
+            J[3, i] = a[i, 1] * u2 - a[i, 2] * u1
+            J[4, i] = a[i, 2] * u0 - a[i, 0] * u2
+            J[5, i] = a[i, 0] * u1 - a[i, 1] * u0
+        det = lu_factor6(J, perm)
+        if short or not abs(det) > singular_det:
+            singular[q] = True
+            for i in range(6):
+                t0[q, i] = np.nan
+                v[q, i] = np.inf
+                for k in range(k_w):
+                    X[q, k, i] = np.nan
+            continue
+        load_wrench(q, c, w_local, L3, load_frame, w0, L)
+        lu_solve6(J, perm, w0, t0[q])
+        for i in range(6):
+            v[q, i] = 0.0
+        for j in range(6):
+            for i in range(6):
+                col[i] = L[i, j]
+            lu_solve6(J, perm, col, y)
+            for i in range(6):
+                v[q, i] += y[i] * y[i]
+        for i in range(6):
+            v[q, i] = np.sqrt(v[q, i])
+        for k in range(k_w):
+            lu_solve6(J, perm, W[q, k], X[q, k])
+    return t0, v, X, singular

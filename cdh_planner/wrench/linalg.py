@@ -153,3 +153,50 @@ def forward_substitute(R, b, x):
         for k in range(i):
             s -= R[k, i] * x[k]
         x[i] = s / R[i, i]
+
+
+def lu_factor6(A, perm):
+    """A (6, 6) <- its LU factors in place (Gaussian elimination with partial pivoting, as
+    LAPACK's getrf: the unit lower factor's multipliers below the diagonal), perm (6,) <-
+    the original row of each factor row. Returns det A (0.0 at a zero pivot, where the
+    factors are incomplete). The size is fixed so that numba unrolls the loops (twice as
+    fast as A.shape[0])."""
+    n = 6
+    det = 1.0
+    for i in range(n):
+        perm[i] = i
+    for k in range(n):
+        piv, big = k, abs(A[k, k])
+        for i in range(k + 1, n):
+            if abs(A[i, k]) > big:
+                piv, big = i, abs(A[i, k])
+        if big == 0.0:
+            return 0.0
+        if piv != k:
+            for j in range(n):
+                A[k, j], A[piv, j] = A[piv, j], A[k, j]
+            perm[k], perm[piv] = perm[piv], perm[k]
+            det = -det
+        det *= A[k, k]
+        for i in range(k + 1, n):
+            f = A[i, k] / A[k, k]
+            A[i, k] = f
+            for j in range(k + 1, n):
+                A[i, j] -= f * A[k, j]
+    return det
+
+
+def lu_solve6(A, perm, b, x):
+    """x (6,) <- A^-1 b from ``lu_factor6``'s factors A and row order perm (b (6,) unchanged;
+    x is not b)."""
+    n = 6
+    for i in range(n):
+        s = b[perm[i]]
+        for j in range(i):
+            s -= A[i, j] * x[j]
+        x[i] = s
+    for i in range(n - 1, -1, -1):
+        s = x[i]
+        for j in range(i + 1, n):
+            s -= A[i, j] * x[j]
+        x[i] = s / A[i, i]
