@@ -188,3 +188,28 @@ def test_the_cli_asks_for_one_blas_thread_unless_told_otherwise(given, expected)
             "print(os.environ['OPENBLAS_NUM_THREADS'])")
     out = subprocess.run([sys.executable, "-c", code], capture_output=True, text=True, check=True, env=env)
     assert out.stdout.strip() == expected
+
+
+@pytest.mark.parametrize("enabled", [True, False])
+def test_a_command_is_imported_with_the_collector_paused_and_left_as_it_was(enabled):
+    """The cycle collector is off while a command's modules load, then as the caller had it."""
+    code = ("import gc\nfrom cdh_planner import cli\n"
+            f"{'gc.enable()' if enabled else 'gc.disable()'}\n"
+            "seen = []\n"
+            "import importlib\nreal = importlib.import_module\n"
+            "importlib.import_module = lambda name, *a: seen.append((name, gc.isenabled())) or real(name, *a)\n"
+            "cli.build_parser(['plan'])\n"
+            "assert seen[0] == ('cdh_planner.commands.plan', False)\n"
+            f"assert gc.isenabled() is {enabled}\n")
+    subprocess.run([sys.executable, "-c", code], check=True)
+
+
+def test_a_plan_process_exits_with_its_output_whole(tmp_path):
+    """``python -m cdh_planner.cli``: the process's own command, whose exit freezes the objects
+    still alive (its finalization then skips the collector): the JSON and stdout complete."""
+    problem = REPO / "config" / "problems" / "robot2_q1_q2.yaml"
+    out = tmp_path / "plan.json"
+    run = subprocess.run([sys.executable, "-m", "cdh_planner.cli", "plan", str(problem), "--quiet",
+                          "--json", str(out)], capture_output=True, text=True)
+    assert run.returncode == 0 and run.stdout.rstrip().endswith(f"JSON: {out}")
+    assert json.loads(out.read_text())["success"] is True
