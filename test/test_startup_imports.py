@@ -54,6 +54,19 @@ def test_a_direct_motion_plan_loads_no_plotting_ros_numba_or_scipy_module():
     assert not loaded & ({"matplotlib", "matplotlib.pyplot", "rclpy", "numba", "numpy.ma"} | SCIPY)
 
 
+def test_a_plan_over_charts_past_a_ball_loads_no_numpy_random_or_scipy():
+    """robot2_q2_q3_ball: an atlas of charts (their fixed directions and the polytopes' hash
+    weights are read, not drawn: test_atlas_draws), dynamically timed, a scene."""
+    problem = REPO / "config" / "problems" / "robot2_q2_q3_ball.yaml"
+    code = ("import contextlib, io, re\nfrom cdh_planner import cli\n"
+            "with contextlib.redirect_stdout(io.StringIO()) as out:\n"
+            f"    assert cli.main(['plan', {str(problem)!r}, '--quiet']) == 0\n"
+            "assert re.search(r'over [1-9][0-9]* charts', out.getvalue())\n")
+    loaded = _modules_after(code)
+    assert "toppra" in loaded
+    assert not loaded & ({"numpy.random", "matplotlib", "rclpy", "numba"} | SCIPY)
+
+
 def _kernels_built():
     """Whether every kernel module has its ahead-of-time build (``make``)."""
     from cdh_planner.manifold import kernels
