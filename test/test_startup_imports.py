@@ -226,3 +226,10 @@ def test_a_plan_process_exits_with_its_output_whole(tmp_path):
                           "--json", str(out)], capture_output=True, text=True)
     assert run.returncode == 0 and run.stdout.rstrip().endswith(f"JSON: {out}")
     assert json.loads(out.read_text())["success"] is True
+
+
+def test_a_runs_parser_holds_only_its_command_and_help_holds_every_one():
+    def choices(parser):
+        return set(next(a for a in parser._actions if a.dest == "command").choices)
+    assert choices(cli.build_parser(["plan"], others=False)) == {"plan"}
+    assert choices(cli.build_parser([])) == set(cli.COMMANDS)
