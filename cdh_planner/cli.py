@@ -96,17 +96,7 @@ def _command_module(name: str, load: bool = True):
                 return None
         except (ImportError, ValueError):
             return None
-    if not load:
-        return modname
-    # Importing a command's modules (numpy, the planner: some 100,000 objects, hardly any
-    # garbage) with the cycle collector off: its passes over them were ~8 ms of a plan's start.
-    collecting = gc.isenabled()
-    gc.disable()
-    try:
-        return importlib.import_module(modname)
-    finally:
-        if collecting:
-            gc.enable()
+    return importlib.import_module(modname) if load else modname
 
 
 def requested_command(argv: list[str]) -> str | None:
@@ -171,11 +161,15 @@ def _error(message: str, code: int = EXIT_USAGE, debug: bool = False) -> int:
 def main(argv: list[str] | None = None) -> int:
     """Run ``cdh-planner`` with ``argv`` (default: ``sys.argv[1:]``); return the exit code
     (the contract in this module's docstring)."""
-    if argv is None:  # the process's own command (the console script, python -m)
+    own = argv is None  # the process's own command (the console script, python -m)
+    if own:
         argv = sys.argv[1:]
-        # At its exit, the objects still alive frozen out of the cycle collector: the
-        # interpreter's finalization then does not walk them all again before freeing them
-        # (~20 ms of a plan's process).
+        # The modules it imports (numpy, the planner: some 100,000 objects, hardly any
+        # garbage) live to its end: the cycle collector is off while they load, then they are
+        # frozen out of it, and so is all that lives at exit (the interpreter's finalization
+        # then does not walk it again before freeing it). The collector's passes over them
+        # were ~25 ms of a plan's process.
+        gc.disable()
         atexit.register(gc.freeze)
     # One BLAS thread, set before numpy loads OpenBLAS: planning runs its many small solves
     # on one thread anyway (planner.py), and starting the pool costs 30 ms of every start.
@@ -184,6 +178,9 @@ def main(argv: list[str] | None = None) -> int:
     try:
         command = requested_command(argv)
         parser = build_parser([command] if command else [], others=not command)
+        if own:
+            gc.freeze()
+            gc.enable()
         try:
             args = parser.parse_args(argv)
         except SystemExit as exc:  # --help, --version, usage errors: argparse already printed

@@ -203,17 +203,17 @@ def test_the_cli_asks_for_one_blas_thread_unless_told_otherwise(given, expected)
     assert out.stdout.strip() == expected
 
 
-@pytest.mark.parametrize("enabled", [True, False])
-def test_a_command_is_imported_with_the_collector_paused_and_left_as_it_was(enabled):
-    """The cycle collector is off while a command's modules load, then as the caller had it."""
-    code = ("import gc\nfrom cdh_planner import cli\n"
-            f"{'gc.enable()' if enabled else 'gc.disable()'}\n"
-            "seen = []\n"
-            "import importlib\nreal = importlib.import_module\n"
-            "importlib.import_module = lambda name, *a: seen.append((name, gc.isenabled())) or real(name, *a)\n"
-            "cli.build_parser(['plan'])\n"
-            "assert seen[0] == ('cdh_planner.commands.plan', False)\n"
-            f"assert gc.isenabled() is {enabled}\n")
+@pytest.mark.parametrize("own", [True, False])
+def test_only_the_processs_own_command_freezes_its_modules_and_the_collector_runs_after(own):
+    """main() of the process (argv from sys.argv): the modules its command imported frozen
+    out of the cycle collector, which is on again; main(argv) of a caller: left alone."""
+    call = ("sys.argv = ['cdh-planner', 'plan', '--help']\ncli.main()" if own
+            else "cli.main(['plan', '--help'])")
+    code = ("import contextlib, gc, io, sys\nfrom cdh_planner import cli\n"
+            "with contextlib.redirect_stdout(io.StringIO()):\n"
+            f"    {call}\n"
+            "assert 'cdh_planner.commands.plan' in sys.modules and gc.isenabled()\n"
+            f"assert (gc.get_freeze_count() > 10000) is {own}\n")
     subprocess.run([sys.executable, "-c", code], check=True)
 
 
