@@ -23,6 +23,16 @@ def _modules_after(code):
     return set(json.loads(out.stdout.strip().splitlines()[-1]))
 
 
+def _modules_after_plan(name, check):
+    """_modules_after planning config/problems/NAME.yaml (exit 0) and running ``check``
+    (Python, on ``out``, the printed text)."""
+    problem = REPO / "config" / "problems" / f"{name}.yaml"
+    return _modules_after("import contextlib, io, re\nfrom cdh_planner import cli\n"
+                          "with contextlib.redirect_stdout(io.StringIO()) as out:\n"
+                          f"    assert cli.main(['plan', {str(problem)!r}, '--quiet']) == 0\n"
+                          f"{check}\n")
+
+
 def test_importing_the_cli_loads_no_heavy_library():
     assert _modules_after("import cdh_planner.cli") == set()
 
@@ -44,12 +54,7 @@ def test_a_direct_motion_plan_loads_no_plotting_ros_numba_or_scipy_module():
     """robot2_q1_q2: one direct motion, dynamically timed (toppra runs), no chart: numpy
     alone does its rotations, splines and small banded solves (for start-up: scipy's
     submodules were 0.2 s of its 0.55 s)."""
-    problem = REPO / "config" / "problems" / "robot2_q1_q2.yaml"
-    code = ("import contextlib, io\nfrom cdh_planner import cli\n"
-            "with contextlib.redirect_stdout(io.StringIO()) as out:\n"
-            f"    assert cli.main(['plan', {str(problem)!r}, '--quiet']) == 0\n"
-            "assert 'dynamic timing' in out.getvalue()")
-    loaded = _modules_after(code)
+    loaded = _modules_after_plan("robot2_q1_q2", "assert 'dynamic timing' in out.getvalue()")
     assert "toppra" in loaded
     assert not loaded & ({"matplotlib", "matplotlib.pyplot", "rclpy", "numba", "numpy.ma"} | SCIPY)
 
@@ -57,12 +62,8 @@ def test_a_direct_motion_plan_loads_no_plotting_ros_numba_or_scipy_module():
 def test_a_plan_over_charts_past_a_ball_loads_no_numpy_random_or_scipy():
     """robot2_q2_q3_ball: an atlas of charts (their fixed directions and the polytopes' hash
     weights are read, not drawn: test_atlas_draws), dynamically timed, a scene."""
-    problem = REPO / "config" / "problems" / "robot2_q2_q3_ball.yaml"
-    code = ("import contextlib, io, re\nfrom cdh_planner import cli\n"
-            "with contextlib.redirect_stdout(io.StringIO()) as out:\n"
-            f"    assert cli.main(['plan', {str(problem)!r}, '--quiet']) == 0\n"
-            "assert re.search(r'over [1-9][0-9]* charts', out.getvalue())\n")
-    loaded = _modules_after(code)
+    loaded = _modules_after_plan("robot2_q2_q3_ball",
+                                 "assert re.search(r'over [1-9][0-9]* charts', out.getvalue())")
     assert "toppra" in loaded
     assert not loaded & ({"numpy.random", "matplotlib", "rclpy", "numba"} | SCIPY)
 
