@@ -1,4 +1,5 @@
-"""Pose accuracy from the winches (numpy only): how far the platform can be from a planned
+"""Pose accuracy from the winches (numpy; the error map and the zonotope maximum compiled in
+``accuracy_kernel``): how far the platform can be from a planned
 pose when every winch realises its cable length only within +- e_i (``robot.length_error``,
 m). The paper's first item of future work ("propagating known bounds on the position error
 of the actuators to a bound on the platform pose").
@@ -39,7 +40,7 @@ from dataclasses import dataclass
 import numpy as np
 
 from .errors import InputError
-from .wrench import cable_vectors, rule_tensions, screw_jacobian
+from .wrench import rule_tensions
 from .model import elastic
 from .model.pose import rotation_tt
 
@@ -65,62 +66,55 @@ def has_accuracy(robot):
     return robot.length_error is not None
 
 
-def structure_matrix(robot, p, R):
-    """A (N, 6, m): columns [u_i; (R b_i) x u_i] at poses (p (N, 3) m, R (N, 3, 3)), and the
-    cable lengths L (N, m) m; dL = A^T [dp; dw] (module docstring)."""
-    d = cable_vectors(robot, p, R)
-    L = np.linalg.norm(d, axis=-1)
-    u = d / np.where(L > 0, L, 1.0)[..., None]
-    A = screw_jacobian(robot, u)  # [u_i; a_i x u_i]: moments about the base origin
-    # about the platform origin: R b_i = a_i + L_i u_i - p, so (R b_i) x u_i = (a_i - p) x u_i
-    A[..., 3:, :] -= np.swapaxes(np.cross(p[:, None, :], u), -1, -2)
-    return A, L
-
-
-def cable_stiffness_matrix(robot, p, R, L, tensions=None):
-    """k (N, m) N/m, the diagonal of K: EA_i / L0_i with L0 the unstretched lengths that
-    carry the nominal tensions (``tensions`` (N, m) N, else ``rule_tensions``'s t0) at the
-    poses; rigid cables: 1 / L (equal EA)."""
-    if not elastic.is_elastic(robot):
-        return 1.0 / L
-    t = rule_tensions(robot, p, R)[0] if tensions is None else tensions
-    L0 = elastic.unstretched_lengths(robot, L, t)
-    return elastic.axial_stiffness(robot, L0)
-
-
 def error_map(robot, p, R, tensions=None):
     """G (N, 6, m): dx = G dl, the platform motion [dp m; dw rad] of winch errors dl (m) in
-    the unstretched lengths (module docstring); nan where the pose is singular.
-    ``tensions`` (N, m) N: the nominal tensions if known (a Feasibility's), else computed."""
-    p = np.atleast_2d(np.asarray(p, dtype=float))
-    R = np.asarray(R, dtype=float).reshape(-1, 3, 3)
-    A, L = structure_matrix(robot, p, R)
-    n, m = L.shape
-    with np.errstate(invalid="ignore", over="ignore"):
-        scale = np.sqrt(np.abs(np.linalg.det(A @ np.swapaxes(A, -1, -2))))
-    bad = ~(scale > SINGULAR_SCALE) | (L.min(axis=1) <= 0)
-    if m == 6:
-        At = np.where(bad[:, None, None], np.eye(6), np.swapaxes(A, -1, -2))
-        G = np.linalg.solve(At, np.broadcast_to(np.eye(6), At.shape))
+    the unstretched lengths (module docstring); nan where the pose is singular. A (N, 6, m)
+    has columns [u_i; (R b_i) x u_i] at the poses; k_i = EA_i / L0_i, L0 the unstretched
+    lengths that carry the nominal tensions (``tensions`` (N, m) N if known, a
+    Feasibility's, else ``rule_tensions``'s t0); rigid cables 1 / L_i (equal EA). Compiled,
+    one pose at a time (``accuracy_kernel.error_map_kernel``: numpy's batched products and
+    solves spent 3 us a pose on temporaries)."""
+    from .accuracy_kernel import error_map_kernel  # machine code: loaded only when needed
+    return error_map_kernel(*_map_inputs(robot, p, R, tensions), SINGULAR_SCALE)
+
+
+def _map_inputs(robot, p, R, tensions):
+    """The error map kernels' arguments of the poses (p (N, 3) m, R (N, 3, 3)): anchors,
+    p, R, EA (m,), the nominal tensions t (N, m) N and whether K is the elastic one (six
+    cables: G = A^-T whatever K is; rigid cables: equal EA)."""
+    p = np.ascontiguousarray(np.atleast_2d(np.asarray(p, dtype=float)))
+    R = np.ascontiguousarray(np.asarray(R, dtype=float).reshape(-1, 3, 3))
+    m = len(robot.base_anchors)
+    stiff = elastic.is_elastic(robot) and m > 6
+    if stiff:
+        t = rule_tensions(robot, p, R)[0] if tensions is None else tensions
+        EA = np.broadcast_to(np.asarray(robot.cable_stiffness, dtype=float), (m,))
     else:
-        k = cable_stiffness_matrix(robot, p, R, L, tensions)
-        bad |= ~np.all(np.isfinite(k) & (k > 0), axis=1)
-        k = np.where(bad[:, None], 1.0, k)
-        AK = np.where(bad[:, None, None], np.eye(6, m), A * k[:, None, :])  # singular: I
-        At = np.where(bad[:, None, None], np.eye(m, 6), np.swapaxes(A, -1, -2))
-        G = np.linalg.solve(AK @ At, AK)
-    G[bad] = np.nan
-    return G
+        t, EA = np.zeros((len(p), m)), np.ones(m)
+    return (np.ascontiguousarray(robot.base_anchors, dtype=float),
+            np.ascontiguousarray(robot.platform_anchors, dtype=float), p, R,
+            np.ascontiguousarray(EA), np.ascontiguousarray(t, dtype=float), stiff)
 
 
 def pose_accuracy(robot, p, tau=None, R=None, tensions=None):
     """The Accuracy of poses (p (N, 3) m, tau (N, 3) rad or R (N, 3, 3)) of a robot with
-    ``length_error`` (module docstring); ``tensions``: as ``error_map``'s."""
+    ``length_error`` (module docstring); ``tensions``: as ``error_map``'s. One compiled pass
+    (``accuracy_kernel.accuracy_kernel``: the error map and the zonotope maximum of its
+    rows, the same numbers as ``box_max_norm`` of ``error_map``'s) where the pose is
+    regular and its generators are not degenerate; the others (singular, a tiny, parallel
+    or coplanar generator) by ``error_map`` and ``box_max_norm``."""
+    from .accuracy_kernel import accuracy_kernel, error_map_kernel
     if R is None:
         R = rotation_tt(np.atleast_2d(np.asarray(tau, dtype=float)))
-    G = error_map(robot, p, R, tensions)
-    return Accuracy(box_max_norm(G[:, :3], robot.length_error),
-                    box_max_norm(G[:, 3:], robot.length_error))
+    inputs = _map_inputs(robot, p, R, tensions)
+    m = len(robot.base_anchors)
+    e = np.ascontiguousarray(np.broadcast_to(np.asarray(robot.length_error, dtype=float), (m,)))
+    out, other = accuracy_kernel(*inputs, SINGULAR_SCALE, e, TINY, PARALLEL_TOL, ORTHO_TOL)
+    if other.any():
+        a, b, p, R, EA, t, stiff = inputs
+        G = error_map_kernel(a, b, p[other], R[other], EA, t[other], stiff, SINGULAR_SCALE)
+        out[other, 0], out[other, 1] = box_max_norm(G[:, :3], e), box_max_norm(G[:, 3:], e)
+    return Accuracy(out[:, 0].copy(), out[:, 1].copy())
 
 
 @dataclass(frozen=True)

@@ -70,6 +70,54 @@ def brute_force(M, e):
     return np.linalg.norm(np.einsum("nxk,vk->nvx", M, V), axis=2).max(axis=1)
 
 
+def numpy_error_map(robot, p, R, tensions):
+    """The error map written in numpy (the compiled one's reference): A (N, 6, m) with
+    columns [u_i; (a_i - p) x u_i], G = A^-T (six cables) or (A K A^T)^-1 A K."""
+    d = p[:, None, :] + np.einsum("nij,kj->nki", R, robot.platform_anchors) - robot.base_anchors
+    L = np.linalg.norm(d, axis=-1)
+    u = d / L[..., None]
+    A = np.concatenate([u, np.cross(robot.base_anchors - p[:, None, :], u)], axis=-1)
+    A = np.swapaxes(A, -1, -2)
+    if A.shape[-1] == 6:
+        return np.linalg.inv(np.swapaxes(A, -1, -2))
+    k = (elastic.axial_stiffness(robot, elastic.unstretched_lengths(robot, L, tensions))
+         if elastic.is_elastic(robot) else 1.0 / L)
+    AK = A * k[:, None, :]
+    return np.linalg.solve(AK @ np.swapaxes(A, -1, -2), AK)
+
+
+@pytest.mark.parametrize("name,robot", VARIANTS, ids=[v[0] for v in VARIANTS])
+def test_the_compiled_error_map_is_the_numpy_algebra(name, robot):
+    """``error_map`` (compiled, one pose at a time) equals the batched numpy formula to
+    rounding, with the nominal tensions given or computed; a singular pose is nan."""
+    rng = np.random.default_rng(zlib.crc32(name.encode()) + 1)
+    p, R = random_poses(robot, 30, rng)
+    t = rule_tensions(robot, p, R)[0]
+    want = numpy_error_map(robot, p, R, t)
+    scale = np.abs(want).max(axis=(1, 2))[:, None, None]
+    for got in (error_map(robot, p, R, t), error_map(robot, p, R)):
+        np.testing.assert_allclose(got, want, rtol=0, atol=1e-12 * scale.max())
+        assert np.all(np.abs(got - want) <= 1e-12 * scale)
+    on_anchor = p[:1] + 0.0
+    on_anchor[0] = robot.base_anchors[0] - R[0] @ robot.platform_anchors[0]  # cable length 0
+    assert np.all(np.isnan(error_map(robot, on_anchor, R[:1])))
+
+
+@pytest.mark.parametrize("name,robot", VARIANTS, ids=[v[0] for v in VARIANTS])
+def test_the_one_pass_accuracy_is_the_error_maps_box_maximum(name, robot):
+    """``pose_accuracy``'s compiled pass gives bit for bit ``box_max_norm`` of
+    ``error_map``'s rows, and the poses it leaves to those (a singular one: inf) too."""
+    rng = np.random.default_rng(zlib.crc32(name.encode()) + 2)
+    p, R = random_poses(robot, 30, rng)
+    p[7] = robot.base_anchors[0] - R[7] @ robot.platform_anchors[0]  # a cable of length 0
+    t = rule_tensions(robot, p, R)[0]
+    G = error_map(robot, p, R, t)
+    acc = pose_accuracy(robot, p, R=R, tensions=t)
+    np.testing.assert_array_equal(acc.position_m, box_max_norm(G[:, :3], robot.length_error))
+    np.testing.assert_array_equal(acc.orientation_rad, box_max_norm(G[:, 3:], robot.length_error))
+    assert acc.position_m[7] == np.inf and np.isfinite(np.delete(acc.position_m, 7)).all()
+
+
 # ------------------------------------------------------------ exact against brute force
 
 @pytest.mark.parametrize("name,robot", VARIANTS, ids=[v[0] for v in VARIANTS])

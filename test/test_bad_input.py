@@ -282,7 +282,8 @@ def test_a_write_error_at_the_end_is_one_line(tmp_path, capsys, poses, monkeypat
         raise OSError(errno.ENOSPC, os.strerror(errno.ENOSPC), str(self))
 
     monkeypatch.setattr("pathlib.Path.write_text", full)
-    monkeypatch.setattr("pathlib.Path.write_bytes", full)  # verify's JSON: ASCII bytes
+    monkeypatch.setattr("pathlib.Path.write_bytes", full)
+    monkeypatch.setattr("cdh_planner.commands.outputs.write_pieces", full)  # verify's JSON
     line = run_cli(capsys, ["verify", ROBOT2, poses, "--json", tmp_path / "out.json"])
     assert "--json" in line and "No space left" in line
 

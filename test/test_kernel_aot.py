@@ -194,7 +194,8 @@ def _builds_agree(module, entry, args):
 @pytest.mark.parametrize("name", ["robot2", "cogiro", "robot2_8"])
 def test_aot_and_jit_accuracy_kernels_agree_bit_for_bit(name):
     """The zonotope kernel on the position and rotation rows of the error maps of a walk,
-    and on generators made degenerate (parallel, in a pair's plane, tiny), both builds."""
+    and on generators made degenerate (parallel, in a pair's plane, tiny), both builds; the
+    error map kernel and the one-pass accuracy on the walk, both builds."""
     robot = load_robot(CONFIG / f"{name}.yaml")
     p, R = _wrench_inputs(robot, 300, 8)[0][:2]
     G = error_map(robot, p, R)
@@ -214,6 +215,18 @@ def test_aot_and_jit_accuracy_kernels_agree_bit_for_bit(name):
         assert flags is plain or (aot[1][:100].all() and aot[2].all())  # degenerate ones seen
         for a, j in zip(aot, jit):
             np.testing.assert_array_equal(a, j)
+    # the error maps themselves, rigid (k = 1 / L) and elastic (k from the tensions)
+    m = len(robot.base_anchors)
+    t = np.ascontiguousarray(np.random.default_rng(3).uniform(100.0, 900.0, (len(p), m)))
+    for elastic, EA in ((False, np.ones(m)), (True, np.full(m, 2e5))):
+        args = (robot.base_anchors, robot.platform_anchors, p, R, EA, t, elastic, 1e-12)
+        args = tuple(np.ascontiguousarray(x) if isinstance(x, np.ndarray) else x for x in args)
+        np.testing.assert_array_equal(aot_helper.load(accuracy_kernel)["error_map_kernel"](*args),
+                                      accuracy_kernel.jit_kernels()["error_map_kernel"](*args))
+        args += (np.full(m, 1e-3), 1e-13, 1e-6, 1e-9)
+        for a, j in zip(aot_helper.load(accuracy_kernel)["accuracy_kernel"](*args),
+                        accuracy_kernel.jit_kernels()["accuracy_kernel"](*args)):
+            np.testing.assert_array_equal(a, j)
 
 
 @pytest.mark.skipif(not ALL_BUILT, reason=NOT_BUILT)
@@ -228,9 +241,9 @@ def test_aot_and_jit_json_rows_kernels_agree_byte_for_byte():
                 '{"p": [null, 3.0], "ok": false, "worst": {"binding": "singular", "n": 8}}')
     (rows,) = _rows_text(columns)
     assert rows.tobytes().decode() == expected
-    src = np.frombuffer(b"[1.5,2],[3,4]abc", dtype=np.uint8).copy()
-    args = (src, np.array([[0, 13], [8, 15]]), np.array([[7, 15], [13, 16]]),
-            np.array([True, False]), np.frombuffer(b"{a: , b: }", dtype=np.uint8).copy(),
+    src = np.frombuffer(b"[[1.5,2],[3,4]]abc", dtype=np.uint8).copy()  # ROWS, then GIVEN
+    args = (src, np.array([[0, 15], [0, 17]]), np.array([[15, 17], [15, 18]]),
+            np.array([2, 0]), np.frombuffer(b"{a: , b: }", dtype=np.uint8).copy(),
             np.array([0, 4, 9, 10]), np.frombuffer(ROW_SEPARATOR.encode(), dtype=np.uint8).copy())
     aot = aot_helper.load(json_rows)["assemble_rows"](*args)
     jit = json_rows.jit_kernels()["assemble_rows"](*args)

@@ -11,8 +11,8 @@ import numpy as np
 import pytest
 
 from conftest import CONFIG
-from cdh_planner.model.elastic import (equilibrium_poses, platform_stiffness, static_load,
-                                       unstretched_lengths, wrench_balance)
+from cdh_planner.model.elastic import (equilibrium_poses, platform_stiffness, soft_poses,
+                                       static_load, unstretched_lengths, wrench_balance)
 from cdh_planner.model.robot import load_robot
 from cdh_planner.ports import Rotation, Slerp
 from cdh_planner.wrench import (cable_vectors, least_stiffness, rule_tensions, screw_jacobian,
@@ -98,6 +98,30 @@ def test_the_soft_mode_is_the_equilibriums_sensitivity(robot):
     moved = np.concatenate([eq.p - p, dtheta], axis=1)
     predicted = dw / lam[:, :1]
     np.testing.assert_allclose(moved, predicted, rtol=0, atol=1e-2 * np.abs(predicted).max())
+
+
+def test_the_compiled_soft_test_is_the_least_eigenvalue_below_kappa(robot):
+    """``soft_poses`` (compiled K, Cholesky of K - kappa I) says soft exactly where
+    eigvalsh of ``platform_stiffness`` is below kappa, at kappa on either side of every
+    pose's least eigenvalue by 1e-9 of the largest; poses outside ``where`` and non-finite
+    tensions are never soft."""
+    p, R = poses(17)
+    t = rule_tensions(replace(robot, cable_stiffness=None), p, R)[0]
+    lam = np.linalg.eigvalsh(platform_stiffness(robot, p, R, t))
+    everywhere = np.ones(len(p), dtype=bool)
+    for k in range(len(p)):
+        for sign in (1.0, -1.0):
+            kappa = lam[k, 0] + sign * 1e-9 * lam[k, -1]
+            np.testing.assert_array_equal(soft_poses(robot, p, R, t, everywhere, kappa),
+                                          lam[:, 0] < kappa)
+    kappa = np.mean(np.sort(lam[:, 0])[8:10])  # between two poses' least eigenvalues
+    where = np.arange(len(p)) % 2 == 0
+    t_nan = t.copy()
+    t_nan[4, 2] = np.nan
+    soft = soft_poses(robot, p, R, t_nan, where, kappa)
+    expected = (lam[:, 0] < kappa) & where
+    expected[4] = False
+    np.testing.assert_array_equal(soft, expected)
 
 
 def test_the_stiff_nominal(robot):

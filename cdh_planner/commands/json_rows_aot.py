@@ -16,10 +16,10 @@ from . import json_rows
 
 def warm_jit():
     """Compile the JIT kernel once (two rows of two fields) so that its cache is there."""
-    src = np.frombuffer(b"[1,2]x", dtype=np.uint8).copy()
-    starts, ends = np.array([[0, 5], [0, 5]]), np.array([[5, 6], [5, 6]])
+    src = np.frombuffer(b"[[1,2],[3,4]]x", dtype=np.uint8).copy()
+    starts, ends = np.array([[0, 13], [0, 13]]), np.array([[13, 14], [13, 14]])
     literals = np.frombuffer(b"{a: , b: }", dtype=np.uint8).copy()
-    json_rows.jit_kernels()["assemble_rows"](src, starts, ends, np.array([True, False]),
+    json_rows.jit_kernels()["assemble_rows"](src, starts, ends, np.array([2, 0]),
                                              literals, np.array([0, 4, 9, 10]),
                                              np.frombuffer(b",\n", dtype=np.uint8).copy())
 

@@ -69,13 +69,22 @@ def writing(option, path):
 
 
 def write_text(option, path, text):
-    """Write ``text`` (a str, or bytes written as they are) to ``path``; an OSError becomes
-    an InputError naming ``option``."""
+    """Write ``text`` (a str, bytes written as they are, or a list of bytes-like pieces
+    written one after another) to ``path``; an OSError becomes an InputError naming
+    ``option``."""
     with writing(option, path):
-        if isinstance(text, bytes):
+        if isinstance(text, list):
+            write_pieces(path, text)
+        elif isinstance(text, bytes):
             Path(path).write_bytes(text)
         else:
             Path(path).write_text(text)
+
+
+def write_pieces(path, pieces):
+    """Write the bytes-like ``pieces`` to ``path`` one after another (not joined first)."""
+    with open(path, "wb") as f:
+        f.writelines(pieces)
 
 
 def print_or_write(option, path, text):

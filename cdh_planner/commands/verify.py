@@ -121,19 +121,20 @@ def _positive(value, option, text):
 
 
 def result_json(robot, poses, feas, segments, ok, step_m, step_rad, accuracy=None):
-    """The JSON document (ASCII bytes) as ``dump_rows`` lays it out (a pose or a segment a
-    line), built column by column: each array goes through the C encoder once, then the rows
-    are assembled by the compiled ``json_rows`` (the encoder per row costs 3x more for 10^4
-    poses, a template per row 2x), then one join of bytes (no str of the 27 MB to encode
-    again); ``accuracy``: the poses' ``accuracy.Accuracy`` (robots with length_error), or
-    None."""
-    return b"".join(piece.encode("ascii") if isinstance(piece, str) else piece
-                    for piece in _layout_pieces({
+    """The JSON document as ``dump_rows`` lays it out (a pose or a segment a line), as the
+    list of its pieces in order (ASCII bytes, and the rows as uint8 arrays: written one
+    after another, the 27 MB are not copied into one string; ``b"".join`` makes the
+    document), built column by column: each array goes through the C encoder once, then the
+    rows are assembled by the compiled ``json_rows`` (the encoder per row costs 3x more for
+    10^4 poses, a template per row 2x); ``accuracy``: the poses' ``accuracy.Accuracy``
+    (robots with length_error), or None."""
+    return [piece.encode("ascii") if isinstance(piece, str) else piece
+            for piece in _layout_pieces({
         "robot": _encode(robot.name), "robot_file": _encode(robot.source),
         "max_step_m": _encode(step_m), "max_step_rad": _encode(step_rad),
         "poses": _rows_text(pose_columns(poses, feas, accuracy)),
         "segments": _rows_text(segment_columns(segments)) if segments else [],
-        "all_feasible": _encode(bool(ok))}))
+        "all_feasible": _encode(bool(ok))})]
 
 
 def pose_columns(poses, feas, accuracy=None):
@@ -173,22 +174,21 @@ def _rows_text(columns):
     """The JSON object texts of the rows of ``columns`` (name -> array, list of strings,
     nested mapping of them, or a ``_Texts`` of ready texts), joined as ``layout_rows`` joins
     list entries: a list of that one text. Each column's texts lie in one buffer (numbers by
-    one orjson call a column); the compiled ``json_rows`` puts the rows together (the text
-    as its uint8 array of ASCII)."""
+    one orjson call a column); the compiled ``json_rows`` finds the numbers' entries and
+    puts the rows together (the text as its uint8 array of ASCII)."""
     from .json_rows import assemble_rows  # machine code: loaded only for a --json
     literals, cols = _row_literals(columns)
-    buffers, starts, ends, spaced, base = [], [], [], [], 0
-    for col in cols:
-        data, a, b, space = _column_bytes(col)
+    starts, ends = (np.zeros((len(cols[0]), len(cols)), dtype=np.int64) for _ in range(2))
+    buffers, layout, base = [], [], 0
+    for k, col in enumerate(cols):
+        data, a, b, kind = _column_bytes(col)
         buffers.append(np.frombuffer(data, dtype=np.uint8))
-        starts.append(a + base)
-        ends.append(b + base)
-        spaced.append(space)
+        starts[:, k], ends[:, k] = a + base, b + base
+        layout.append(kind)
         base += len(data)
     bounds = np.cumsum([0] + [len(t) for t in literals])
-    out = assemble_rows(np.concatenate(buffers), np.column_stack(starts), np.column_stack(ends),
-                        np.array(spaced), _ascii("".join(literals)), bounds,
-                        _ascii(ROW_SEPARATOR))
+    out = assemble_rows(np.concatenate(buffers), starts, ends, np.array(layout, dtype=np.int64),
+                        _ascii("".join(literals)), bounds, _ascii(ROW_SEPARATOR))
     return [out]
 
 
@@ -216,27 +216,24 @@ def _row_literals(columns):
 
 
 def _column_bytes(col):
-    """(the JSON texts of ``col``'s entries in one ASCII buffer, where each entry starts (N,),
-    where it ends (N,), whether its commas need a space after them): numbers and booleans
-    by one ``number_bytes`` of the whole array, split at the entries (a row of a 2-D column
-    with its brackets; their texts hold no "[" or "," of their own), strings (binding
-    names, few distinct) each distinct one encoded once, a ``_Texts`` as given."""
+    """(the JSON texts of ``col``'s entries in one ASCII buffer, where each entry starts (N,)
+    and ends (N,) in it, its ``json_rows`` layout): numbers and booleans by one
+    ``number_bytes`` of the whole array, the array's text whose entries the kernel finds
+    (ENTRIES, or ROWS for a 2-D column; the start and end given are the whole text's);
+    strings (binding names, few distinct) each distinct one encoded once, a ``_Texts`` as
+    given (GIVEN)."""
+    from .json_rows import ENTRIES, GIVEN, ROWS
     if not isinstance(col, _Texts):
         arr = np.asarray(col)
         if arr.dtype.kind in "biuf":
             data = number_bytes(arr)
-            buf = np.frombuffer(data, dtype=np.uint8)
-            if arr.ndim == 1:
-                commas = np.flatnonzero(buf == ord(","))
-                return data, np.r_[1, commas + 1], np.r_[commas, len(data) - 1], True
-            return (data, np.flatnonzero(buf == ord("["))[1:],
-                    np.flatnonzero(buf == ord("]"))[:-1] + 1, True)
+            return data, 0, len(data), ENTRIES if arr.ndim == 1 else ROWS
         values = arr.tolist()
         texts = {v: _encode(v) for v in set(values)}
         col = list(map(texts.__getitem__, values))
     lengths = np.fromiter(map(len, col), dtype=np.int64, count=len(col))
     ends = np.cumsum(lengths)
-    return "".join(col).encode("ascii"), ends - lengths, ends, False
+    return "".join(col).encode("ascii"), ends - lengths, ends, GIVEN
 
 
 def number_text(arr):

@@ -139,6 +139,23 @@ def platform_stiffness(robot, p, R, t):
     return 0.5 * (jac + jac.transpose(0, 2, 1))
 
 
+def soft_poses(robot, p, R, t, where, kappa):
+    """Soft (M,) bool: where ``where`` (M,) and the platform's stiffness K
+    (``platform_stiffness``) at tensions t (M, m) N and poses (p (M, 3) m, R (M, 3, 3)) is
+    finite with its least eigenvalue below kappa (N/m, N m/rad). Compiled, one pose at a
+    time (``elastic_kernel``: the same K, decided by a Cholesky factor of K - kappa I
+    rather than an eigenvalue solver; a pose within rounding of kappa may fall either
+    way)."""
+    from .elastic_kernel import soft_kernel  # machine code: loaded only for elastic robots
+    m = len(robot.base_anchors)
+    f64 = [np.ascontiguousarray(x, dtype=float) for x in
+           (robot.base_anchors, robot.platform_anchors, robot.load_point,
+            np.broadcast_to(np.asarray(robot.cable_stiffness, dtype=float), (m,)), p, R, t)]
+    force, moment, arm = (np.ascontiguousarray(x[0], dtype=float) for x in static_load(robot, 1))
+    return soft_kernel(*f64, force, moment, arm, np.ascontiguousarray(where, dtype=bool),
+                       float(kappa))
+
+
 def equilibrium_poses(robot, L0, p0, R0, force, moment, arm,
                       max_iterations=EQUILIBRIUM_ITERATIONS):
     """Equilibria of the platform on elastic cables of unstretched lengths L0 (M, m) m under

@@ -3,10 +3,13 @@ maths: ``wrench_balance`` is the residual and Jacobian written once in numpy, th
 the same algebra per pose, checked against it to 1e-9 in test_elastic_kernel.py). The
 executed check solves it at every sample of a trajectory (some 10^5 poses for a slowed
 eight-cable plan), where numpy's batched version spent most of its time allocating
-(M, m, 6) temporaries. Plain Python here (no numba import): ``equilibrium_kernel`` is the
-build ahead of time (``python -m cdh_planner.model.elastic_aot``, run by ``make``), else
-numba's JIT with ``cache=True`` (``cdh_planner.aot``). Its arguments are C-contiguous
-float64 arrays and two ints, as AOT_EXPORTS says, unchecked. Units: m, N, N m.
+(M, m, 6) temporaries. ``soft_kernel``: the same Jacobian as the platform's stiffness K
+(``elastic.platform_stiffness``) and whether its least eigenvalue is below a bound, for
+the stiff nominal's check of every pose (``elastic.soft_poses``). Plain Python here (no
+numba import): ``equilibrium_kernel`` and ``soft_kernel`` are the build ahead of time
+(``python -m cdh_planner.model.elastic_aot``, run by ``make``), else numba's JIT with
+``cache=True`` (``cdh_planner.aot``). Their arguments are C-contiguous arrays and scalars
+as AOT_EXPORTS says, unchecked. Units: m, N, N m.
 """
 
 import sys
@@ -275,12 +278,82 @@ def _equilibrium_poses(a, b, g, EA, L0, p, R, force, moment, arm, tol, iteration
     return p, R, tensions, residual, ok
 
 
+def _below_kappa(K, kappa, work):
+    """Whether the least eigenvalue of the symmetric K (6, 6) is below kappa, decided by
+    Cholesky: K - kappa I has a factor (every pivot positive) iff it is positive definite."""
+    for j in range(6):
+        for i in range(j, 6):
+            s = K[i, j] - (kappa if i == j else 0.0)
+            for k in range(j):
+                s -= work[i, k] * work[j, k]
+            if i == j:
+                if not s > 0.0:
+                    return True
+                work[j, j] = np.sqrt(s)
+            else:
+                work[i, j] = s / work[j, j]
+    return False
+
+
+def _soft_poses(a, b, g, EA, p, R, t, force, moment, arm, ok, kappa):
+    """``elastic.soft_poses``: at the poses p (M, 3), R (M, 3, 3) where ``ok`` (M,), the
+    platform's stiffness K (``elastic.platform_stiffness``, the same algebra: ``_balance``'s
+    Jacobian of cables held at L0 = L / (1 + t / EA), bilateral, moments moved to p,
+    symmetrised) under the load rows force, moment, arm (3,) at tensions t (M, m): soft (M,)
+    where K is finite and its least eigenvalue below kappa."""
+    n, m = p.shape[0], a.shape[0]
+    soft = np.zeros(n, dtype=np.bool_)
+    res = np.empty(6)
+    jac = np.empty((6, 6))
+    K = np.empty((6, 6))
+    work = np.empty((6, 6))
+    tv = np.empty(m)
+    L0 = np.empty(m)
+    for q in range(n):
+        if not ok[q]:
+            continue
+        P, Rq = p[q], R[q]
+        usable = True  # numpy's K is not finite where a length is 0 or L0 not finite
+        for i in range(m):
+            r0 = Rq[0, 0] * b[i, 0] + Rq[0, 1] * b[i, 1] + Rq[0, 2] * b[i, 2]  # as _balance
+            r1 = Rq[1, 0] * b[i, 0] + Rq[1, 1] * b[i, 1] + Rq[1, 2] * b[i, 2]
+            r2 = Rq[2, 0] * b[i, 0] + Rq[2, 1] * b[i, 1] + Rq[2, 2] * b[i, 2]
+            d0, d1, d2 = P[0] + r0 - a[i, 0], P[1] + r1 - a[i, 1], P[2] + r2 - a[i, 2]
+            L = np.sqrt(d0 * d0 + d1 * d1 + d2 * d2)
+            stretch = 1.0 + t[q, i] / EA[i]
+            if L == 0.0 or stretch == 0.0:
+                usable = False
+                break
+            L0[i] = L / stretch
+            if not (L0[i] != 0.0 and np.isfinite(L0[i])):
+                usable = False
+                break
+        if not usable:  # (numba raises on a division by zero: not reached)
+            continue
+        _balance(a, b, g, EA, L0, P, Rq, force, moment, arm, True, res, jac, tv, True)
+        for j in range(6):  # moments about p: M_p = M_o - p x F
+            f0, f1, f2 = jac[0, j], jac[1, j], jac[2, j]
+            jac[3, j] -= P[1] * f2 - P[2] * f1
+            jac[4, j] -= P[2] * f0 - P[0] * f2
+            jac[5, j] -= P[0] * f1 - P[1] * f0
+        finite = True
+        for i in range(6):
+            for j in range(6):
+                K[i, j] = 0.5 * (jac[i, j] + jac[j, i])
+                finite = finite and np.isfinite(K[i, j])
+        soft[q] = finite and _below_kappa(K, kappa, work)
+    return soft
+
+
 # ----- compilation -------------------------------------------------------------------------
-HELPERS = ("_balance", "_solve6", "_rotvec_matrix", "_max_abs", "_scratch", "_newton_pose")
+HELPERS = ("_balance", "_solve6", "_rotvec_matrix", "_max_abs", "_scratch", "_newton_pose",
+           "_below_kappa")
 _F1, _F2, _F3 = "float64[::1]", "float64[:, ::1]", "float64[:, :, ::1]"
 AOT_EXPORTS = {"equilibrium_kernel": (
     f"Tuple(({_F2}, {_F3}, {_F2}, {_F1}, boolean[::1]))"
-    f"({_F2}, {_F2}, {_F1}, {_F1}, {_F2}, {_F2}, {_F3}, {_F2}, {_F2}, {_F2}, {_F1}, int64, int64)")}
+    f"({_F2}, {_F2}, {_F1}, {_F1}, {_F2}, {_F2}, {_F3}, {_F2}, {_F2}, {_F2}, {_F1}, int64, int64)"),
+    "soft_kernel": (f"boolean[::1]({_F2}, {_F2}, {_F1}, {_F1}, {_F2}, {_F3}, {_F2}, {_F1}, {_F1}, "
+                    f"{_F1}, boolean[::1], float64)")}
 AOT_PREFIX = "_elastic_aot_"
 
 
@@ -290,7 +363,9 @@ AOT_SOURCES = ("elastic_kernel.py",)  # what the machine code is of: this file
 def jit_kernels():
     """numba's JIT entry (cache=True) by name (``cdh_planner.aot``); the helpers become
     numba functions here."""
-    return {"equilibrium_kernel": aot.jit(globals(), HELPERS)(_equilibrium_poses)}
+    njit = aot.jit(globals(), HELPERS)
+    return {"equilibrium_kernel": njit(_equilibrium_poses), "soft_kernel": njit(_soft_poses)}
 
 
-equilibrium_kernel = aot.entries(sys.modules[__name__])["equilibrium_kernel"]
+_entries = aot.entries(sys.modules[__name__])
+equilibrium_kernel, soft_kernel = _entries["equilibrium_kernel"], _entries["soft_kernel"]

@@ -111,11 +111,21 @@ class SlerpPath:
         """Positions (M, 3) and rotation matrices (M, 3, 3) at s (M,) of segments seg (M,)."""
         p0, p1 = self.positions[seg], self.positions[seg + 1]
         p = p0 + s[:, None] * (p1 - p0)
-        R = (self.rotations[seg] * Rotation.from_rotvec(s[:, None] * self.rotvecs[seg])).as_matrix()
-        if self.exact_ends:
-            end, k = waypoint_samples(seg, s)
-            p[end], R[end] = self.positions[k], self.rotations[k].as_matrix()
+        if not self.exact_ends:
+            return p, self._slerp(seg, s)
+        end, k = waypoint_samples(seg, s)
+        inner = np.ones(len(s), dtype=bool)
+        inner[end] = False  # the formula only there (row by row: the same numbers)
+        R = np.empty((len(s), 3, 3))
+        R[inner] = self._slerp(seg[inner], s[inner])
+        p[end], R[end] = self.positions[k], self.rotations[k].as_matrix()
         return p, R
+
+    def _slerp(self, seg, s):
+        """The formula's rotation matrices (M, 3, 3) at s (M,) of segments seg (M,)."""
+        if not len(s):
+            return np.empty((0, 3, 3))
+        return (self.rotations[seg] * Rotation.from_rotvec(s[:, None] * self.rotvecs[seg])).as_matrix()
 
     def speeds(self):
         """Per segment: (position change m, rotation angle rad) per unit s (constant)."""

@@ -112,9 +112,10 @@ def stiffness_band(robot, J, c, t0, lengths, v):
     ok = np.all(np.isfinite(t0), axis=1)
     if not ok.any():
         return v
-    P = weighted_pseudo_inverse(J[ok], (robot.cable_stiffness + t0[ok]) / lengths[ok])
+    rows = slice(None) if ok.all() else ok  # every pose (verify's): views, not copies
+    P = weighted_pseudo_inverse(J[rows], (robot.cable_stiffness + t0[rows]) / lengths[rows])
     v = v.copy()
-    v[ok] = np.linalg.norm(P @ inverse_ellipsoid_factor(robot, c[ok]), axis=-1)
+    v[rows] = np.linalg.norm(P @ inverse_ellipsoid_factor(robot, c[rows]), axis=-1)
     return v
 
 
@@ -162,15 +163,14 @@ def stiff_nominal(robot, p, R, J, t0, where=None):
     m = J.shape[-1]
     if robot.cable_stiffness is None or m == 6:
         return t0
-    from ..model.elastic import platform_stiffness
+    from ..model.elastic import platform_stiffness, soft_poses
     kappa = least_stiffness(robot)
     ok = np.all(np.isfinite(t0), axis=1)
     if where is not None:
         ok &= where
-    K = platform_stiffness(robot, p[ok], R[ok], t0[ok])
-    finite = np.all(np.isfinite(K), axis=(1, 2))
-    soft = np.zeros(len(t0), dtype=bool)
-    soft[np.flatnonzero(ok)[finite]] = np.linalg.eigvalsh(K[finite])[:, 0] < kappa
+    # compiled, decided by Cholesky; a pose it calls soft within rounding of kappa is kept
+    # as it is below (its first projection finds it within STIFFNESS_TOL): the same t0
+    soft = soft_poses(robot, p, R, t0, ok, kappa)
     if not soft.any():
         return t0
     p, R, t = p[soft], R[soft], t0[soft]
