@@ -20,6 +20,8 @@ setup(
     name=package_name,
     version='0.1.0',
     packages=find_packages(exclude=['test', 'test.*']),
+    # the directions' draws (atlas/domain.py: read instead of importing numpy.random)
+    package_data={'cdh_planner.atlas': ['directions.npy']},
     data_files=[
         ('share/ament_index/resource_index/packages', ['resource/' + package_name]),
         ('share/' + package_name, ['package.xml', 'LICENSE']),

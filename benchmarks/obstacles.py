@@ -23,7 +23,8 @@ needs a planner). Cable radius 1 mm.
   collision margin) is > 0; motions at OMPL's default resolution; in a fresh process
   (this script with ``--child``); seconds = setup + solve + simplifySolution, as in
   vs_ompl.py, and the process's wall clock and CPU seconds (which include the child's own
-  dense check of the path for the "unsafe" count, a few ms).
+  dense check of the path for the "unsafe" count, a few ms). Like ours, with one BLAS thread
+  from its start (OPENBLAS_NUM_THREADS=1 unless set): else the pool it starts costs ~30 ms.
 
 Both run on a case before the next case starts (interleaved). Every path is checked
 densely with the scene (``trajectory.path_check.check_motion`` with the collision model,
@@ -179,7 +180,10 @@ def run_ompl(case, timeout, checkout=ROOT):
     try:
         res = subprocess.run([sys.executable, __file__, "--child", job], capture_output=True, text=True,
                              timeout=timeout + 60, cwd=ROOT,
-                             env=dict(os.environ, PYTHONPATH=str(checkout)))
+                             # one BLAS thread from the start unless told otherwise, as
+                             # cdh-planner sets for itself: else OpenBLAS starts its pool
+                             # (~30 ms of the process), then told to use one thread
+                             env={"OPENBLAS_NUM_THREADS": "1", **os.environ, "PYTHONPATH": str(checkout)})
     except subprocess.TimeoutExpired:
         return "timeout", timeout, timeout, timeout, None
     wall, cpu = time.perf_counter() - t, children_cpu() - cpu

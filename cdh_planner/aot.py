@@ -20,19 +20,23 @@ numba marks pycc "pending deprecation" (0.57 - 0.68 still ship it): if it is mis
 the build fails (no C compiler), ``main`` warms numba's JIT cache instead and exits 0.
 """
 
-import hashlib
 import importlib
 import sys
 import time
 import warnings
 from pathlib import Path
 
+try:  # CPython's built-in SHA-256 (to 3.11): hashlib's import loads OpenSSL, 2.5 ms of a start
+    from _sha256 import sha256
+except ImportError:  # 3.12 renamed it; hashlib's is the same function
+    from hashlib import sha256
+
 
 def source_digest(kernels):
     """12 hex digits of sha256 over the kernel module's AOT_SOURCES (paths relative to its
     folder): what the machine code is of."""
     folder = Path(kernels.__file__).resolve().parent
-    h = hashlib.sha256()
+    h = sha256()
     for name in kernels.AOT_SOURCES:
         h.update((folder / name).read_bytes())
     return h.hexdigest()[:12]

@@ -10,7 +10,6 @@ most every ``LINE_INTERVAL_S`` seconds (none for a plan shorter than that).
 
 import os
 import sys
-import tempfile
 import time
 from contextlib import contextmanager
 
@@ -86,6 +85,7 @@ def stderr_held():
     """What C code (rcl's, Ray's logging) writes to file descriptor 2 in the block: written
     to stderr after it if the block returns, dropped if it raises (its exception says what
     matters; the yielded ``Held.text`` keeps the words for the caller to read)."""
+    import tempfile  # here: only the ROS and Ray commands hold stderr (1 ms of every start)
     sys.stderr.flush()
     held = Held()
     saved = os.dup(2)

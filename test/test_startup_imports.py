@@ -12,7 +12,7 @@ from conftest import REPO, aot_built
 
 HEAVY = ("toppra", "matplotlib", "matplotlib.pyplot", "rclpy", "scipy.spatial", "numba", "numpy",
          "scipy", "scipy.interpolate", "scipy.sparse", "scipy.linalg", "scipy.optimize", "numpy.ma",
-         "coal", "numpy.random", "yaml")
+         "coal", "numpy.random", "yaml", "hashlib")
 SCIPY = {"scipy", "scipy.spatial", "scipy.interpolate", "scipy.sparse", "scipy.linalg", "scipy.optimize"}
 
 
@@ -21,6 +21,16 @@ def _modules_after(code):
     probe = f"import sys, json\n{code}\nprint(json.dumps([m for m in {HEAVY!r} if m in sys.modules]))"
     out = subprocess.run([sys.executable, "-c", probe], capture_output=True, text=True, check=True)
     return set(json.loads(out.stdout.strip().splitlines()[-1]))
+
+
+def _modules_after_plan(name, check):
+    """_modules_after planning config/problems/NAME.yaml (exit 0) and running ``check``
+    (Python, on ``out``, the printed text)."""
+    problem = REPO / "config" / "problems" / f"{name}.yaml"
+    return _modules_after("import contextlib, io, re\nfrom cdh_planner import cli\n"
+                          "with contextlib.redirect_stdout(io.StringIO()) as out:\n"
+                          f"    assert cli.main(['plan', {str(problem)!r}, '--quiet']) == 0\n"
+                          f"{check}\n")
 
 
 def test_importing_the_cli_loads_no_heavy_library():
@@ -44,14 +54,19 @@ def test_a_direct_motion_plan_loads_no_plotting_ros_numba_or_scipy_module():
     """robot2_q1_q2: one direct motion, dynamically timed (toppra runs), no chart: numpy
     alone does its rotations, splines and small banded solves (for start-up: scipy's
     submodules were 0.2 s of its 0.55 s)."""
-    problem = REPO / "config" / "problems" / "robot2_q1_q2.yaml"
-    code = ("import contextlib, io\nfrom cdh_planner import cli\n"
-            "with contextlib.redirect_stdout(io.StringIO()) as out:\n"
-            f"    assert cli.main(['plan', {str(problem)!r}, '--quiet']) == 0\n"
-            "assert 'dynamic timing' in out.getvalue()")
-    loaded = _modules_after(code)
+    loaded = _modules_after_plan("robot2_q1_q2", "assert 'dynamic timing' in out.getvalue()")
     assert "toppra" in loaded
     assert not loaded & ({"matplotlib", "matplotlib.pyplot", "rclpy", "numba", "numpy.ma"} | SCIPY)
+
+
+def test_a_plan_over_charts_past_a_ball_loads_no_numpy_random_or_scipy():
+    """robot2_q2_q3_ball: an atlas of charts (their fixed directions and the polytopes' hash
+    weights are read, not drawn: test_atlas_draws), dynamically timed, a scene."""
+    loaded = _modules_after_plan("robot2_q2_q3_ball",
+                                 "assert re.search(r'over [1-9][0-9]* charts', out.getvalue())")
+    assert "toppra" in loaded
+    # nor hashlib (OpenSSL; the kernels' digests are CPython's own SHA-256's: aot.py)
+    assert not loaded & ({"numpy.random", "hashlib", "matplotlib", "rclpy", "numba"} | SCIPY)
 
 
 def _kernels_built():
@@ -188,3 +203,35 @@ def test_the_cli_asks_for_one_blas_thread_unless_told_otherwise(given, expected)
             "print(os.environ['OPENBLAS_NUM_THREADS'])")
     out = subprocess.run([sys.executable, "-c", code], capture_output=True, text=True, check=True, env=env)
     assert out.stdout.strip() == expected
+
+
+@pytest.mark.parametrize("own", [True, False])
+def test_only_the_processs_own_command_freezes_its_modules_and_the_collector_runs_after(own):
+    """main() of the process (argv from sys.argv): the modules its command imported frozen
+    out of the cycle collector, which is on again; main(argv) of a caller: left alone."""
+    call = ("sys.argv = ['cdh-planner', 'plan', '--help']\ncli.main()" if own
+            else "cli.main(['plan', '--help'])")
+    code = ("import contextlib, gc, io, sys\nfrom cdh_planner import cli\n"
+            "with contextlib.redirect_stdout(io.StringIO()):\n"
+            f"    {call}\n"
+            "assert 'cdh_planner.commands.plan' in sys.modules and gc.isenabled()\n"
+            f"assert (gc.get_freeze_count() > 10000) is {own}\n")
+    subprocess.run([sys.executable, "-c", code], check=True)
+
+
+def test_a_plan_process_exits_with_its_output_whole(tmp_path):
+    """``python -m cdh_planner.cli``: the process's own command, whose exit freezes the objects
+    still alive (its finalization then skips the collector): the JSON and stdout complete."""
+    problem = REPO / "config" / "problems" / "robot2_q1_q2.yaml"
+    out = tmp_path / "plan.json"
+    run = subprocess.run([sys.executable, "-m", "cdh_planner.cli", "plan", str(problem), "--quiet",
+                          "--json", str(out)], capture_output=True, text=True)
+    assert run.returncode == 0 and run.stdout.rstrip().endswith(f"JSON: {out}")
+    assert json.loads(out.read_text())["success"] is True
+
+
+def test_a_runs_parser_holds_only_its_command_and_help_holds_every_one():
+    def choices(parser):
+        return set(next(a for a in parser._actions if a.dest == "command").choices)
+    assert choices(cli.build_parser(["plan"], others=False)) == {"plan"}
+    assert choices(cli.build_parser([])) == set(cli.COMMANDS)

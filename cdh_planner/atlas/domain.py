@@ -26,21 +26,39 @@ radius r. Two representations, one interface (``clip``, ``set_radius``, ``fronti
 Half-spaces are kept by both, so a point can be tested against the domain (``contains``).
 """
 
+from pathlib import Path
+
 import numpy as np
 
 from .polytope import Polytope
 
 TOL = 1e-10
 _DIRECTIONS = {}  # (n, K) -> (K, n) unit vectors, shared by every chart of that dimension
+# numpy.random.default_rng(1000 n).standard_normal(384 n) for n = 1 .. 6, one after the
+# other: the draws of unit_directions written out, so that the first chart does not import
+# numpy.random (~9 ms of a plan's process); test_domains checks them against the generator.
+DRAWS_FILE = Path(__file__).with_name("directions.npy")
+DRAWS_MAX_DIM, DRAWS_MAX_COUNT = 6, 384
 
 
 def unit_directions(n, count, seed=0):
     """``count`` fixed pseudo-random unit vectors in R^n (the same on every machine)."""
     key = (n, count)
     if key not in _DIRECTIONS:
-        g = np.random.default_rng(seed + 1000 * n).standard_normal((count, n))
+        g = _normal_draws(seed + 1000 * n, (count, n))
         _DIRECTIONS[key] = g / np.linalg.norm(g, axis=1, keepdims=True)
     return _DIRECTIONS[key]
+
+
+def _normal_draws(seed, shape):
+    """numpy.random.default_rng(seed).standard_normal(shape): read from DRAWS_FILE when it
+    holds them (the first count * n numbers of the seed's stream, row by row)."""
+    count, n = shape
+    if seed == 1000 * n and 1 <= n <= DRAWS_MAX_DIM and count <= DRAWS_MAX_COUNT:
+        start = DRAWS_MAX_COUNT * n * (n - 1) // 2  # after the draws of dimensions 1 .. n - 1
+        return np.load(DRAWS_FILE)[start:start + count * n].reshape(count, n)
+    import numpy.random  # only here: other seeds, dimensions or counts
+    return numpy.random.default_rng(seed).standard_normal(shape)
 
 
 class HalfSpaces:
