@@ -32,7 +32,7 @@ $(STAMP): $(VENV)/bin/python requirements.txt test/requirements-urdf.txt setup.p
           cdh_planner/scene/kernels.py cdh_planner/scene/aot.py cdh_planner/model/shape_forms.py \
           $(addprefix cdh_planner/wrench/,kernel.py centred.py linalg.py compiled.py threaded.py aot.py) \
           cdh_planner/model/elastic_kernel.py cdh_planner/model/elastic_aot.py \
-          cdh_planner/accuracy_kernel.py cdh_planner/accuracy_aot.py \
+          cdh_planner/accuracy_kernel.py cdh_planner/accuracy_aot.py cdh_planner/kernel_linalg.py \
           cdh_planner/trajectory/motion_kernel.py cdh_planner/trajectory/motion_aot.py \
           cdh_planner/commands/json_rows.py cdh_planner/commands/json_rows_aot.py
 	$(PY) -m pip install -r requirements.txt

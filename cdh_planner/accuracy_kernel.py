@@ -27,6 +27,7 @@ import sys
 import numpy as np
 
 from . import aot
+from .kernel_linalg import eliminate as _eliminate
 
 
 def _pose_vertex_max(g, norms, tiny, parallel_tol, ortho_tol):
@@ -90,41 +91,6 @@ def _vertex_max_poses(g, norms, tiny, parallel_tol, ortho_tol):
     return best, degenerate, used
 
 
-def _eliminate(M, X):
-    """X <- M^-1 X and the determinant of M (square n x n, overwritten), by Gaussian
-    elimination with partial pivoting; 0 (X then meaningless) where a pivot is zero."""
-    n, k = M.shape[0], X.shape[1]
-    det = 1.0
-    for c in range(n):
-        piv, big = c, abs(M[c, c])
-        for i in range(c + 1, n):
-            if abs(M[i, c]) > big:
-                piv, big = i, abs(M[i, c])
-        if not big > 0.0:
-            return 0.0
-        if piv != c:
-            det = -det
-            for j in range(n):
-                M[c, j], M[piv, j] = M[piv, j], M[c, j]
-            for j in range(k):
-                X[c, j], X[piv, j] = X[piv, j], X[c, j]
-        det *= M[c, c]
-        for i in range(c + 1, n):
-            f = M[i, c] / M[c, c]
-            if f != 0.0:
-                for j in range(c + 1, n):
-                    M[i, j] -= f * M[c, j]
-                for j in range(k):
-                    X[i, j] -= f * X[c, j]
-    for c in range(n - 1, -1, -1):
-        for j in range(k):
-            acc = X[c, j]
-            for i in range(c + 1, n):
-                acc -= M[c, i] * X[i, j]
-            X[c, j] = acc / M[c, c]
-    return det
-
-
 def _pose_error_map(q, a, b, p, R, EA, t, elastic, singular_scale, A, k, M, X):
     """``accuracy.error_map`` of pose q (of p (N, 3), R (N, 3, 3); anchors a, b (m, 3)) into
     X (6, m), with A (6, m), k (m,), M (6, 6) as room: whether the pose is singular (sqrt
@@ -160,7 +126,7 @@ def _pose_error_map(q, a, b, p, R, EA, t, elastic, singular_scale, A, k, M, X):
             for c in range(6):
                 M[r, c] = A[c, r]
                 X[r, c] = 1.0 if r == c else 0.0
-        scale = abs(_eliminate(M, X))
+        scale = abs(_eliminate(M, X)[1])
     else:
         for r in range(6):
             for c in range(r + 1):
@@ -169,7 +135,7 @@ def _pose_error_map(q, a, b, p, R, EA, t, elastic, singular_scale, A, k, M, X):
                     acc += A[r, i] * A[c, i]
                 M[r, c] = acc
                 M[c, r] = acc
-        scale = np.sqrt(abs(_eliminate(M, X[:, :0])))
+        scale = np.sqrt(abs(_eliminate(M, X[:, :0])[1]))
         for r in range(6):
             for c in range(r + 1):
                 acc = 0.0
@@ -179,7 +145,7 @@ def _pose_error_map(q, a, b, p, R, EA, t, elastic, singular_scale, A, k, M, X):
                 M[c, r] = acc
             for i in range(m):
                 X[r, i] = A[r, i] * k[i]
-        if _eliminate(M, X) == 0.0:
+        if _eliminate(M, X)[1] == 0.0:
             bad = True
     return bad or not scale > singular_scale
 
@@ -252,7 +218,7 @@ AOT_EXPORTS = {"vertex_max_kernel": (
 AOT_PREFIX = "_accuracy_aot_"
 
 
-AOT_SOURCES = ("accuracy_kernel.py",)  # what the machine code is of: this file
+AOT_SOURCES = ("accuracy_kernel.py", "kernel_linalg.py")  # what the machine code is of
 
 
 def jit_kernels():

@@ -36,11 +36,11 @@ NOT_BUILT = ("no ahead-of-time kernels built (make, or python -m "
              "cdh_planner.accuracy_aot, cdh_planner.commands.json_rows_aot, "
              "cdh_planner.trajectory.motion_aot)")
 
-SOURCES = [(kernels, ("kernels.py", "layout.py")),
+SOURCES = [(kernels, ("kernels.py", "layout.py", "../kernel_linalg.py")),
            (scene_kernels, ("kernels.py", "../model/shape_forms.py")),
            (wrench_kernels, ("compiled.py", "kernel.py", "centred.py", "linalg.py")),
            (elastic_kernel, ("elastic_kernel.py",)),
-           (accuracy_kernel, ("accuracy_kernel.py",)), (json_rows, ("json_rows.py",)),
+           (accuracy_kernel, ("accuracy_kernel.py", "kernel_linalg.py")), (json_rows, ("json_rows.py",)),
            (motion_kernel, ("motion_kernel.py",))]
 MODULES = ["manifold", "scene", "wrench", "elastic", "accuracy", "json_rows", "motion"]
 BUILDERS = {"manifold": "cdh_planner.manifold.aot", "scene": "cdh_planner.scene.aot",

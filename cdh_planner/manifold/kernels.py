@@ -24,6 +24,7 @@ import sys
 import numpy as np
 
 from .. import aot
+from ..kernel_linalg import eliminate as _eliminate
 from .layout import I_D, I_F, I_G, I_L, I_P, I_S, I_T, I_TAU, I_V, N_EQS, N_VARS
 
 # Layout of the packed parameter vector.
@@ -334,39 +335,14 @@ def _residual_and_jacobian(X, prm, jacobian):
 
 
 # ----- compilation -------------------------------------------------------------------------
-def _eliminate(M, X, work):
-    """X <- M^-1 X for M (k, k) (copied into work (>= k, >= k)) and X (k, r), Gaussian
-    elimination with partial pivoting: False where M is singular (a zero pivot)."""
-    k, r = M.shape[0], X.shape[1]
+def _solve_in(M, X, work):
+    """X <- M^-1 X for M (k, k), left as it is (eliminated in work (>= k, >= k)): False
+    where a pivot is zero."""
+    k = M.shape[0]
     for i in range(k):
         for j in range(k):
             work[i, j] = M[i, j]
-    for c in range(k):
-        piv, big = c, abs(work[c, c])
-        for i in range(c + 1, k):
-            if abs(work[i, c]) > big:
-                piv, big = i, abs(work[i, c])
-        if big == 0.0:
-            return False
-        if piv != c:
-            for j in range(k):
-                work[c, j], work[piv, j] = work[piv, j], work[c, j]
-            for j in range(r):
-                X[c, j], X[piv, j] = X[piv, j], X[c, j]
-        for i in range(c + 1, k):
-            f = work[i, c] / work[c, c]
-            if f != 0.0:
-                for j in range(c + 1, k):
-                    work[i, j] -= f * work[c, j]
-                for j in range(r):
-                    X[i, j] -= f * X[c, j]
-    for c in range(k - 1, -1, -1):
-        for j in range(r):
-            acc = X[c, j]
-            for q in range(c + 1, k):
-                acc -= work[c, q] * X[q, j]
-            X[c, j] = acc / work[c, c]
-    return True
+    return _eliminate(work[:k, :k], X)[0]
 
 
 def _block_solve(A, rhs, blocks):
@@ -400,7 +376,7 @@ def _block_solve(A, rhs, blocks):
                 if a != 0.0:
                     for j in range(p + 1):
                         W[i, j] -= a * W[q, j]
-        if not _eliminate(A[r0:r1, p + r0:p + r1], W[r0:r1], work):
+        if not _solve_in(A[r0:r1, p + r0:p + r1], W[r0:r1], work):
             return np.zeros(n), False
     S, s = np.empty((p, p)), np.empty((p, 1))  # the Schur complement on the pose
     for i in range(p):
@@ -412,7 +388,7 @@ def _block_solve(A, rhs, blocks):
                 S[i, j] = acc
             else:
                 s[i, 0] = acc
-    if not _eliminate(S, s, work):
+    if not _solve_in(S, s, work):
         return np.zeros(n), False
     x = np.empty(n)
     for i in range(p):
@@ -433,7 +409,7 @@ def navigation_blocks():
                     dtype=np.int64)
 
 
-HELPERS = ("_mat3", "_matmul3", "_skew", "_rotation_and_derivatives", "_eliminate")
+HELPERS = ("_mat3", "_matmul3", "_skew", "_rotation_and_derivatives", "_eliminate", "_solve_in")
 AOT_EXPORTS = {"navigation_residual_and_jacobian":
                "Tuple((float64[::1], float64[:, ::1]))(float64[::1], float64[::1], boolean)",
                "block_solve":
@@ -441,7 +417,7 @@ AOT_EXPORTS = {"navigation_residual_and_jacobian":
 AOT_PREFIX = "_kernels_aot_"
 
 
-AOT_SOURCES = ("kernels.py", "layout.py")  # what the machine code is of: this file and layout.py
+AOT_SOURCES = ("kernels.py", "layout.py", "../kernel_linalg.py")  # what the machine code is of
 
 
 def aot_kernel():
