@@ -87,3 +87,40 @@ def test_a_pose_that_cannot_be_bounded_is_checked():
 
 def test_the_stride_and_slack_are_what_the_docstring_says():
     assert C.SWEEP_STRIDE >= 2 and 1e-8 <= C.SWEEP_SLACK_M <= 1e-5
+
+
+@pytest.mark.parametrize("floor", [0.0, 0.004, "wrench"])
+@pytest.mark.parametrize("platform", [True, False])
+def test_margins_along_are_exact_wherever_they_may_be_below_the_floor(floor, platform):
+    """``margins_along``: ``margins``'s numbers and bindings where the exact margin is below
+    floor + SWEEP_SLACK_M; elsewhere a true lower bound of the margin, at least the slack
+    above the floor (so that the least of it and the floor is decided without it)."""
+    cm = model(platform)
+    for p, R in (straight(400), walk(400, 0.0005, 3)):
+        exact, exact_binding = cm.margins(p, R)
+        f = (np.random.default_rng(4).uniform(0.0, 0.01, len(p)) if floor == "wrench"
+             else np.full(len(p), floor))
+        got, binding = cm.margins_along(p, R, f)
+        same = got == exact
+        assert np.all(same | (got - f >= C.SWEEP_SLACK_M))  # a bound clear of the floor...
+        assert np.all(got <= exact)                          # ... below the true margin
+        assert np.all(same[exact < f + C.SWEEP_SLACK_M])
+        assert list(binding[same]) == list(exact_binding[same])
+        assert np.all(binding[~same] == None)  # noqa: E711  (elementwise)
+
+
+@pytest.mark.parametrize("platform", [True, False])
+def test_combine_along_a_motion_is_combine(platform):
+    """``combine(..., motion=True)`` (collision margins only where they may be the lesser)
+    gives ``combine``'s margins and bindings, bit for bit, wherever the wrench margins lie
+    (some below the collision margins, some above)."""
+    from cdh_planner.scene.margin import combine
+    cm = model(platform)
+    for p, R in (straight(500), walk(500, 0.0005, 5)):
+        wrench = np.random.default_rng(6).uniform(-0.05, 0.3, len(p))
+        wrench[7] = -np.inf  # singular
+        names = np.array(["tension_max[2]"] * len(p), dtype=object)
+        m0, b0 = combine(wrench, names, cm, p, R)
+        m1, b1 = combine(wrench, names, cm, p, R, motion=True)
+        assert np.array_equal(m0, m1) and list(b0) == list(b1)
+        assert 0 < np.sum(b0 == "tension_max[2]") < len(p)  # both kinds bind

@@ -95,7 +95,7 @@ def run(args):
     feas = wrench_feasibility(robot, poses.positions, R=poses.rotations)
     if collision is not None:  # margins and bindings of wrench feasibility and collision
         margin, binding = combine(feas.margin, feas.binding, collision, poses.positions,
-                                  poses.rotations)
+                                  poses.rotations, motion=True)
         feas = dataclasses.replace(feas, margin=margin, binding=binding)
     # The segments' ends are the poses (poses.rotations is Rotation.from_quat's): their
     # margins are those above, not evaluated again (wrench_margin's are the same numbers).

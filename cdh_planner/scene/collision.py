@@ -303,30 +303,40 @@ class CollisionModel:
     def blocked_along(self, p, R):
         """Which of N poses (p (N, 3) m, R (N, 3, 3)) of a motion, in order, are within the
         scene's clearance: ``margins(p, R)[0] < 0``, the same answers, from fewer exact
-        checks. Every SWEEP_STRIDE-th pose and the last are checked; a pose between is
-        checked only where the checked poses before and after it do not clear it: margin
-        there less ``reach`` x (how far any point of the robot can have moved since,
-        ``sweep_steps``) below SWEEP_SLACK_M. Sound because every distance checked is between
-        two bodies of which each point moves at most that far (``sweep_steps``), and a
-        least distance of sets moves no more than their points do."""
+        checks (``margins_along`` with floor 0)."""
+        return self.margins_along(p, R)[0] < 0
+
+    def margins_along(self, p, R, floor=0.0):
+        """Collision margins (m) and bindings of N poses (p (N, 3) m, R (N, 3, 3)) of a
+        motion, in order: ``margins``'s numbers wherever they may lie below ``floor`` (m,
+        scalar or (N,)); elsewhere a lower bound of the margin at least SWEEP_SLACK_M above
+        the floor, binding None. Every SWEEP_STRIDE-th pose and the last are checked; a pose
+        between is checked only where the checked poses before and after it do not clear it:
+        margin there less ``reach`` x (how far any point of the robot can have moved since,
+        ``sweep_steps``) below floor + SWEEP_SLACK_M. Sound because every distance checked is
+        between two bodies of which each point moves at most that far (``sweep_steps``), and
+        a least distance of sets moves no more than their points do."""
         p = np.ascontiguousarray(p, dtype=float).reshape(-1, 3)
         R = np.ascontiguousarray(R, dtype=float).reshape(-1, 3, 3)
         n = len(p)
         if n <= 2:
-            return self.margins(p, R)[0] < 0
+            return self.margins(p, R)
         moved = np.concatenate([[0.0], np.cumsum(self.sweep_steps(p, R))])  # m, from pose 0
         exact = np.zeros(n, dtype=bool)
         exact[::SWEEP_STRIDE] = exact[-1] = True
-        margin = np.full(n, -np.inf)
-        margin[exact] = self.margins(p[exact], R[exact])[0]
+        margin, binding = np.full(n, -np.inf), np.full(n, None, dtype=object)
+        margin[exact], binding[exact] = self.margins(p[exact], R[exact])
         known = np.flatnonzero(exact)
         before = known[np.searchsorted(known, np.arange(n), side="right") - 1]
         after = known[np.searchsorted(known, np.arange(n), side="left")]
-        bound = np.maximum(margin[before] - (moved - moved[before]),
-                           margin[after] - (moved[after] - moved))
-        check = ~exact & ~(bound >= SWEEP_SLACK_M)  # nan (inf - inf: no bound) is checked
-        margin[check] = self.margins(p[check], R[check])[0]
-        return (margin < 0) & (exact | check)
+        with np.errstate(invalid="ignore"):  # nan (inf - inf: no bound) is checked
+            bound = np.maximum(margin[before] - (moved - moved[before]),
+                               margin[after] - (moved[after] - moved))
+            check = ~exact & ~(bound - floor >= SWEEP_SLACK_M)
+        margin[check], binding[check] = self.margins(p[check], R[check])
+        cleared = ~(exact | check)
+        margin[cleared] = bound[cleared]
+        return margin, binding
 
     def sweep_steps(self, p, R):
         """(N - 1,) m: between consecutive poses (p (N, 3) m, R (N, 3, 3)), ``reach`` times the
