@@ -285,20 +285,34 @@ class CollisionModel:
         ball") of N poses: p (N, 3) m, R (N, 3, 3); equal to ``clearance`` pose by pose.
         One compiled call for the batch; coal only for the poses where a lower bound is
         below the kernel's least distance (near an obstacle or the platform's mesh)."""
+        best, least, resolved = self._least_distances(p, R)
+        kind, index = least[:, 1].astype(int), least[:, 2].astype(int)
+        binding = np.where(kind == 1, self.own_binding[np.where(kind == 1, index, 0)],
+                           np.where(kind == 2, self.obstacle_binding[np.where(kind == 2, index, 0)],
+                                    self.pair_binding[np.where(kind == 0, index, -1)]))
+        for n, what in resolved.items():
+            binding[n] = f"collision {self._answer(best[n], what).binding}"
+        return best - self.scene.clearance, binding
+
+    def margins_only(self, p, R):
+        """``margins(p, R)[0]`` (N,) m, the same numbers, without naming what binds (the
+        search's and the sweep's yes / no questions)."""
+        return self._least_distances(p, R)[0] - self.scene.clearance
+
+    def _least_distances(self, p, R):
+        """(least distance (N,) m, the kernel's least rows (N, 3), {pose index: what binds}
+        where coal resolved it) of N poses p (N, 3) m, R (N, 3, 3): ``margins``' numbers."""
         p = np.ascontiguousarray(p, dtype=float).reshape(-1, 3)
         R = np.ascontiguousarray(R, dtype=float).reshape(-1, 3, 3)
         buffers = lb, frames, frames_p, _, _, least = self._buffers(len(p))
         self._run(p, R, buffers)
         best = least[:, 0].copy()
-        kind, index = least[:, 1].astype(int), least[:, 2].astype(int)
-        binding = np.where(kind == 1, self.own_binding[np.where(kind == 1, index, 0)],
-                           np.where(kind == 2, self.obstacle_binding[np.where(kind == 2, index, 0)],
-                                    self.pair_binding[np.where(kind == 0, index, -1)]))
         near = np.flatnonzero(lb.reshape(len(p), -1).min(axis=1) < best) if len(p) else ()
+        resolved = {}
         for n in near:
-            best[n], what = self._resolve(p[n], R[n], lb[n], least[n], frames[n], frames_p[n])
-            binding[n] = f"collision {self._answer(best[n], what).binding}"
-        return best - self.scene.clearance, binding
+            best[n], resolved[n] = self._resolve(p[n], R[n], lb[n], least[n], frames[n],
+                                                 frames_p[n])
+        return best, least, resolved
 
     def blocked_along(self, p, R):
         """Which of N poses (p (N, 3) m, R (N, 3, 3)) of a motion, in order, are within the
@@ -313,19 +327,19 @@ class CollisionModel:
         R = np.ascontiguousarray(R, dtype=float).reshape(-1, 3, 3)
         n = len(p)
         if n <= 2:
-            return self.margins(p, R)[0] < 0
+            return self.margins_only(p, R) < 0
         moved = np.concatenate([[0.0], np.cumsum(self.sweep_steps(p, R))])  # m, from pose 0
         exact = np.zeros(n, dtype=bool)
         exact[::SWEEP_STRIDE] = exact[-1] = True
         margin = np.full(n, -np.inf)
-        margin[exact] = self.margins(p[exact], R[exact])[0]
+        margin[exact] = self.margins_only(p[exact], R[exact])
         known = np.flatnonzero(exact)
         before = known[np.searchsorted(known, np.arange(n), side="right") - 1]
         after = known[np.searchsorted(known, np.arange(n), side="left")]
         bound = np.maximum(margin[before] - (moved - moved[before]),
                            margin[after] - (moved[after] - moved))
         check = ~exact & ~(bound >= SWEEP_SLACK_M)  # nan (inf - inf: no bound) is checked
-        margin[check] = self.margins(p[check], R[check])[0]
+        margin[check] = self.margins_only(p[check], R[check])
         return (margin < 0) & (exact | check)
 
     def sweep_steps(self, p, R):
