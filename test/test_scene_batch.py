@@ -1,5 +1,6 @@
 """The collision kernel over batches of poses: ``CollisionModel.margins`` (one compiled
-call for the batch, coal only near obstacles) equals ``clearance`` pose by pose; the
+call for the batch, coal only near obstacles) equals ``clearance`` pose by pose, and
+``margins_only`` its margins bit for bit; the
 ahead-of-time kernel (scene/aot.py) is the JIT kernel's twin and a fresh process with it
 compiles nothing (numba is never imported; its naming: test_kernel_aot.py)."""
 
@@ -53,6 +54,7 @@ def test_batch_margins_equal_the_clearance_of_each_pose(platform):
         cm = crowded_model(rng, platform)
         p, R = poses(rng, 60)
         margin, binding = cm.margins(p, R)
+        assert np.array_equal(cm.margins_only(p, R), margin)  # the same numbers, unnamed
         for n in range(len(p)):
             c = cm.clearance(p[n], R[n])
             assert margin[n] == pytest.approx(c.margin, abs=1e-12)
@@ -66,7 +68,7 @@ def test_batch_of_one_pose_and_of_none():
     p, R = poses(np.random.default_rng(6), 1)
     assert cm.margins(p[0], R[0])[0][0] == pytest.approx(cm.clearance(p[0], R[0]).margin, abs=1e-12)
     margin, binding = cm.margins(np.empty((0, 3)), np.empty((0, 3, 3)))
-    assert margin.shape == binding.shape == (0,)
+    assert margin.shape == binding.shape == cm.margins_only(np.empty((0, 3)), np.empty((0, 3, 3))).shape == (0,)
 
 
 def test_an_empty_scene_batch_names_cable_pairs():

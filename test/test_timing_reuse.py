@@ -165,3 +165,30 @@ def test_the_limit_curve_is_solved_when_asked_and_is_the_same(ball, monkeypatch)
     assert calls == [1]
     assert np.array_equal(limit, np.sqrt(np.maximum(eager[-1][:, 1], 0.0)))
     assert np.all(limit >= timing.sd - 1e-9)  # the timing's s' stays under its limit curve
+
+
+def test_the_wrench_constraint_given_once_times_as_per_gridpoint(ball, monkeypatch):
+    """The wrench constraint's F is one matrix for every gridpoint (``identical``: toppra's
+    seidel wrapper forms F a, F b, F c in one product): the timing, its limit curve and the
+    timed path are bit for bit those of the same F handed to toppra per gridpoint."""
+    robot, path = ball
+    fast = D.dynamic_timing(robot, path, robot.mass, robot.inertia, 0.05, 0.2)
+
+    class PerGridpoint(D._WrenchConstraint):
+        def __init__(self, *args):
+            super().__init__(*args)
+            self.identical = False
+
+        def compute_constraint_params(self, path, gridpoints, *args, **kwargs):
+            a, b, c, F, g, ubound, xbound = super().compute_constraint_params(path, gridpoints)
+            assert F.ndim == 2
+            return a, b, c, np.broadcast_to(F, (len(a),) + F.shape).copy(), g, ubound, xbound
+
+    monkeypatch.setattr(D, "_WrenchConstraint", PerGridpoint)
+    reference = D.dynamic_timing(robot, path, robot.mass, robot.inertia, 0.05, 0.2)
+    assert fast.feasible and reference.feasible
+    assert fast.duration == reference.duration and fast.slowdown == reference.slowdown
+    for name in ("s", "sd", "limit"):
+        assert np.array_equal(getattr(fast, name), getattr(reference, name)), name
+    assert np.array_equal(fast.path.t, reference.path.t)
+    assert np.array_equal(fast.path.p, reference.path.p)

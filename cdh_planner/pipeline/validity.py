@@ -80,7 +80,7 @@ class Validity:
     def clear_of_collision(self, p, R):
         """Which poses (p (N, 3) m, R (N, 3, 3)) are clear of collision by the margin floor
         (the collision margin in units of COLLISION_UNIT_M): (N,) bool, one batch."""
-        return self.collision.margins(p, R)[0] / COLLISION_UNIT_M >= self.margin_floor
+        return self.collision.margins_only(p, R) / COLLISION_UNIT_M >= self.margin_floor
 
     def accuracy_violation(self, p, tau):
         """None, or one line saying which accuracy limit the pose (p (3,) m, tau (3,) rad)

@@ -285,28 +285,42 @@ class CollisionModel:
         ball") of N poses: p (N, 3) m, R (N, 3, 3); equal to ``clearance`` pose by pose.
         One compiled call for the batch; coal only for the poses where a lower bound is
         below the kernel's least distance (near an obstacle or the platform's mesh)."""
+        best, least, resolved = self._least_distances(p, R)
+        kind, index = least[:, 1].astype(int), least[:, 2].astype(int)
+        binding = np.where(kind == 1, self.own_binding[np.where(kind == 1, index, 0)],
+                           np.where(kind == 2, self.obstacle_binding[np.where(kind == 2, index, 0)],
+                                    self.pair_binding[np.where(kind == 0, index, -1)]))
+        for n, what in resolved.items():
+            binding[n] = f"collision {self._answer(best[n], what).binding}"
+        return best - self.scene.clearance, binding
+
+    def margins_only(self, p, R):
+        """``margins(p, R)[0]`` (N,) m, the same numbers, without naming what binds (the
+        search's and the sweep's yes / no questions)."""
+        return self._least_distances(p, R)[0] - self.scene.clearance
+
+    def _least_distances(self, p, R):
+        """(least distance (N,) m, the kernel's least rows (N, 3), {pose index: what binds}
+        where coal resolved it) of N poses p (N, 3) m, R (N, 3, 3): ``margins``' numbers."""
         p = np.ascontiguousarray(p, dtype=float).reshape(-1, 3)
         R = np.ascontiguousarray(R, dtype=float).reshape(-1, 3, 3)
         buffers = lb, frames, frames_p, _, _, least = self._buffers(len(p))
         self._run(p, R, buffers)
         best = least[:, 0].copy()
-        kind, index = least[:, 1].astype(int), least[:, 2].astype(int)
-        binding = np.where(kind == 1, self.own_binding[np.where(kind == 1, index, 0)],
-                           np.where(kind == 2, self.obstacle_binding[np.where(kind == 2, index, 0)],
-                                    self.pair_binding[np.where(kind == 0, index, -1)]))
         near = np.flatnonzero(lb.reshape(len(p), -1).min(axis=1) < best) if len(p) else ()
+        resolved = {}
         for n in near:
-            best[n], what = self._resolve(p[n], R[n], lb[n], least[n], frames[n], frames_p[n])
-            binding[n] = f"collision {self._answer(best[n], what).binding}"
-        return best - self.scene.clearance, binding
+            best[n], resolved[n] = self._resolve(p[n], R[n], lb[n], least[n], frames[n],
+                                                 frames_p[n])
+        return best, least, resolved
 
     def blocked_along(self, p, R):
         """Which of N poses (p (N, 3) m, R (N, 3, 3)) of a motion, in order, are within the
         scene's clearance: ``margins(p, R)[0] < 0``, the same answers, from fewer exact
         checks (``margins_along`` with floor 0)."""
-        return self.margins_along(p, R)[0] < 0
+        return self.margins_along(p, R, named=False)[0] < 0
 
-    def margins_along(self, p, R, floor=0.0):
+    def margins_along(self, p, R, floor=0.0, named=True):
         """Collision margins (m) and bindings of N poses (p (N, 3) m, R (N, 3, 3)) of a
         motion, in order: ``margins``'s numbers wherever they may lie below ``floor`` (m,
         scalar or (N,)); elsewhere a lower bound of the margin at least SWEEP_SLACK_M above
@@ -315,17 +329,19 @@ class CollisionModel:
         margin there less ``reach`` x (how far any point of the robot can have moved since,
         ``sweep_steps``) below floor + SWEEP_SLACK_M. Sound because every distance checked is
         between two bodies of which each point moves at most that far (``sweep_steps``), and
-        a least distance of sets moves no more than their points do."""
+        a least distance of sets moves no more than their points do. ``named=False``: no
+        bindings (None everywhere; ``margins_only``, the yes / no questions)."""
         p = np.ascontiguousarray(p, dtype=float).reshape(-1, 3)
         R = np.ascontiguousarray(R, dtype=float).reshape(-1, 3, 3)
         n = len(p)
+        measure = self.margins if named else (lambda p, R: (self.margins_only(p, R), None))
         if n <= 2:
-            return self.margins(p, R)
+            return measure(p, R)
         moved = np.concatenate([[0.0], np.cumsum(self.sweep_steps(p, R))])  # m, from pose 0
         exact = np.zeros(n, dtype=bool)
         exact[::SWEEP_STRIDE] = exact[-1] = True
         margin, binding = np.full(n, -np.inf), np.full(n, None, dtype=object)
-        margin[exact], binding[exact] = self.margins(p[exact], R[exact])
+        margin[exact], binding[exact] = measure(p[exact], R[exact])
         known = np.flatnonzero(exact)
         before = known[np.searchsorted(known, np.arange(n), side="right") - 1]
         after = known[np.searchsorted(known, np.arange(n), side="left")]
@@ -333,7 +349,7 @@ class CollisionModel:
             bound = np.maximum(margin[before] - (moved - moved[before]),
                                margin[after] - (moved[after] - moved))
             check = ~exact & ~(bound - floor >= SWEEP_SLACK_M)
-        margin[check], binding[check] = self.margins(p[check], R[check])
+        margin[check], binding[check] = measure(p[check], R[check])
         cleared = ~(exact | check)
         margin[cleared] = bound[cleared]
         return margin, binding
