@@ -57,7 +57,7 @@ def test_tf_gives_the_platform_pose_during_an_execution(tmp_path):
             PlannerClient(domain_id=domain) as client:
         tf = Collector(client.node, TFMessage, "/tf", TF_QOS)
         static = Collector(client.node, TFMessage, "/tf_static", TF_STATIC_QOS)
-        poses = Collector(client.node, PoseStamped, "/cdh_planner/platform_pose", 10)
+        poses = Collector(client.node, PoseStamped, "/cdh_planner/platform_pose", 100)
         measured = Collector(client.node, JointState, JOINT_STATES, 100)
         cables = Collector(client.node, JointState, "/cdh_planner/cable_state", 100)
         margins = Collector(client.node, Float64, "/cdh_planner/least_margin", 100)
@@ -74,9 +74,11 @@ def test_tf_gives_the_platform_pose_during_an_execution(tmp_path):
         assert M.status_values(status)["outcome"] == "completed", node.log()
         client.spin(0.3)
 
-        def settled():   # the newest platform pose and cable state are of one joint state
-            return bool(cables.messages and tf.messages[first:]) and (
-                cables.messages[-1].header.stamp == tf.messages[-1].transforms[-1].header.stamp)
+        def settled():   # the newest TF, platform pose and cable state are of one joint state
+            if not (cables.messages and poses.messages and tf.messages[first:]):
+                return False
+            stamp = tf.messages[-1].transforms[-1].header.stamp
+            return cables.messages[-1].header.stamp == stamp == poses.messages[-1].header.stamp
 
         assert client.spin_until(settled, 10.0)   # the winches rest at the goal: it comes
         [fixed] = [t for m in static.messages for t in m.transforms]
