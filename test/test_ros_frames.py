@@ -173,15 +173,26 @@ def test_a_goal_in_the_z_up_frame_plans_the_same_path_as_in_the_paper_frame(tmp_
         ends = M.path_arrays(again.path)[0][[0, -1]]
         np.testing.assert_allclose(ends, offline.path.p[[0, -1]], rtol=0, atol=1e-9)
 
-        # a moving frame on /tf (read by the node when a request needs it, not a callback)
+        # a moving frame on /tf, broadcast at 20 Hz as a TF broadcaster does (read by the
+        # node when a request needs it, not a callback); /tf is volatile and arrives on the
+        # node's own thread, so a request is refused until the first one is in: ask again
         cart = TransformStamped()
         cart.header.frame_id, cart.child_frame_id = "world", "cart"
         cart.transform.translation.y, cart.transform.rotation.w = -0.2, 1.0
         moving_tf = client.node.create_publisher(TFMessage, "/tf", TF_QOS)
+
+        def broadcast():
+            cart.header.stamp = client.node.get_clock().now().to_msg()
+            moving_tf.publish(TFMessage(transforms=[cart]))
+
+        client.node.create_timer(0.05, broadcast)
         assert client.spin_until(lambda: moving_tf.get_subscription_count() > 0, 30.0)
-        moving_tf.publish(TFMessage(transforms=[cart]))
-        moving = client.plan(_shifted(_z_up(start), "cart", (0, -0.2, 0)),
-                             _shifted(_z_up(goal), "cart", (0, -0.2, 0)), timeout_s=120)
+        for _ in range(60):
+            moving = client.plan(_shifted(_z_up(start), "cart", (0, -0.2, 0)),
+                                 _shifted(_z_up(goal), "cart", (0, -0.2, 0)), timeout_s=120)
+            if moving.success or "no transform from 'cart'" not in moving.values["error_msg"]:
+                break
+            client.spin(0.5)
         assert moving.success, moving.values
         np.testing.assert_allclose(M.path_arrays(moving.path)[0][[0, -1]], offline.path.p[[0, -1]],
                                    rtol=0, atol=1e-9)
