@@ -17,6 +17,9 @@ RUNS=${RUNS:-3}
 HOGS=${HOGS:-$(nproc)}
 HOG_S=${HOG_S:-3600}
 PYTHON=${PYTHON:-.venv/bin/python}
+# the environment `make test` exports (Makefile), so a run here is the CI's run under load
+export ROS_AUTOMATIC_DISCOVERY_RANGE=${ROS_AUTOMATIC_DISCOVERY_RANGE:-LOCALHOST}
+export AMENT_PREFIX_PATH=${AMENT_PREFIX_PATH:-$PWD/.venv}
 LOGS=${LOGS:-$(mktemp -d /tmp/loaded_suite.XXXXXX)}   # each run's pytest output
 mkdir -p "$LOGS"
 hogs=()
