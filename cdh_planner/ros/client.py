@@ -460,11 +460,9 @@ class PlannerClient:
                 self.spin_until(ended, LATCHED_WAIT_S)
             run.end = self.execution_results[ends] if len(self.execution_results) > ends \
                 else None
-            if run.outcome == "completed" and run.goal is not None:
-                # the result and the stream are two topics: its last commands may come after
-                self.spin_until(streamed_to_the_goal, LATCHED_WAIT_S)
+            # the result and the stream are two topics: its last commands may come after
             run.arrived = (run.outcome == "completed" and run.goal is not None
-                           and streamed_to_the_goal())
+                           and self.spin_until(streamed_to_the_goal, LATCHED_WAIT_S))
         run.commands = self.commands[first:]
         return run
 
