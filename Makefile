@@ -30,7 +30,7 @@ $(VENV)/bin/python:
 $(STAMP): $(VENV)/bin/python requirements.txt test/requirements-urdf.txt setup.py setup.cfg package.xml cdh_planner/manifold/kernels.py \
           cdh_planner/manifold/layout.py cdh_planner/manifold/aot.py cdh_planner/aot.py \
           cdh_planner/scene/kernels.py cdh_planner/scene/aot.py cdh_planner/model/shape_forms.py \
-          $(addprefix cdh_planner/wrench/,kernel.py centred.py linalg.py compiled.py threaded.py aot.py) \
+          $(addprefix cdh_planner/wrench/,kernel.py centred.py linalg.py compiled.py aot.py) \
           cdh_planner/model/elastic_kernel.py cdh_planner/model/elastic_aot.py \
           cdh_planner/accuracy_kernel.py cdh_planner/accuracy_aot.py cdh_planner/kernel_linalg.py \
           cdh_planner/trajectory/motion_kernel.py cdh_planner/trajectory/motion_aot.py \
@@ -39,8 +39,8 @@ $(STAMP): $(VENV)/bin/python requirements.txt test/requirements-urdf.txt setup.p
 	$(PY) -m pip install --no-deps -r test/requirements-urdf.txt
 	$(PY) -m pip install -e .
 	@# the F / F_x, the collision, the wrench, the elastic, the accuracy, the timing's motion and verify's JSON rows kernels compiled ahead of time (first call
-	@# ~10 ms instead of 0.4 - 1 s; without a C compiler this warms numba's JIT cache instead;
-	@# the threaded wrench kernels into numba's cache), and the package's bytecode (read even
+	@# ~10 ms instead of 0.4 - 1 s; without a C compiler this warms numba's JIT cache instead),
+	@# and the package's bytecode (read even
 	@# where PYTHONDONTWRITEBYTECODE=1 keeps Python from writing it)
 	$(PY) -m cdh_planner.manifold.aot
 	$(PY) -m cdh_planner.scene.aot

@@ -1,4 +1,4 @@
-"""The compiled kernels in a fresh process, and when numba's threads pay for the wrench kernels.
+"""The compiled kernels in a fresh process, and the wrench kernels on threads.
 
     .venv/bin/python benchmarks/wrench_kernels.py [--runs 3] [--poses 4096 20000 100000]
 
@@ -6,12 +6,9 @@
    collision kernel, the wrench entries' pose geometry, facet test and centred rule of
    CoGiRo), ms wall and CPU, median of ``--runs`` processes, and whether numba was imported.
    Target: under 20 ms each, numba never imported (built ahead of time by ``make``).
-2. The threaded wrench kernels (``wrench/threaded.py``, JIT only: numba.pycc builds no
-   ``parallel=True`` code): what loading them costs a fresh process (numba's import, its
-   cached machine code, the thread pool's start), CPU s; and the facet test plus the centred
-   rule on CoGiRo batches of ``--poses`` poses, serial (ahead of time) against threaded,
-   wall s, median of ``--runs``. Printed: the batch size from which the threads repay their
-   load on this machine (``compiled.THREADS_PAY_MIN`` is that, rounded).
+2. The facet test plus the centred rule on CoGiRo batches of ``--poses`` poses, on the
+   caller's thread (``CDH_PLANNER_THREADS=1``) against blocks on one thread a core
+   (``cdh_planner.parallel``: the builds release the GIL), wall s, median of ``--runs``.
 
 On a shared machine wall figures are inflated by the load (printed); CPU figures are not,
 except that threads spend CPU time waiting. Exit code 0 always.
@@ -66,15 +63,6 @@ CALLS = {  # name: (untimed preparation, timed first use: the kernel's import an
                                             "wrench.wrench_feasibility(robot, p, R=R)"),
     "wrench centred rule (+geometry)": ("from cdh_planner import wrench\n",
                                         "wrench.rule_tensions(robot, p, R)"),
-    "threaded wrench kernels (load, call)": (
-        "from cdh_planner.wrench import compiled as k\n"
-        "_, _, J, cc = k.pose_geometry(p, R, robot.base_anchors, robot.platform_anchors, "
-        "robot.load_point)\n"
-        "from cdh_planner.wrench.geometry import inverse_factor\n"
-        "e = (robot.wrench_center_local, inverse_factor(robot), True, robot.tension_min, "
-        "robot.tension_max)\nok = np.ones(1, bool)\n",
-        "t = k.threaded_kernels()\nt.facet_kernel(J, cc, *e, np.zeros((0, 5), np.int64), 1e-9)\n"
-        "t.centred_kernel(J, cc, *e, ok, ok)"),
 }
 
 
@@ -106,30 +94,26 @@ def batch(robot, n, seed=0):
 
 
 def serial_and_threaded(robot, n, runs):
-    """Median wall s of the facet test + centred rule on n poses: serial, threaded."""
+    """Median wall s of the facet test + centred rule on n poses: on the caller's thread,
+    in blocks on threads."""
     from cdh_planner.wrench import compiled
     J, c, e, subsets = batch(robot, n)
-    threaded = compiled.threaded_kernels()
-    entries = compiled.aot.entries(compiled)
-    chunk = compiled.PARALLEL_CHUNK if n >= compiled.PARALLEL_MIN else n
 
-    def serial():
-        out = entries["facet_kernel"](J, c, *e, subsets, 1e-9)
-        entries["centred_kernel"](J, c, *e, out[-1], out[-1] & (out[2] > 0), chunk)
-
-    def threads():
-        out = threaded.facet_kernel(J, c, *e, subsets, 1e-9)
-        threaded.centred_kernel(J, c, *e, out[-1], out[-1] & (out[2] > 0))
+    def run():
+        out = compiled.facet_batch(J, c, *e, subsets, 1e-9)
+        compiled.centred_batch(J, c, *e, out[-1], out[-1] & (out[2] > 0))
 
     times = {}
-    for name, f in (("serial", serial), ("threaded", threads)):
-        f()
+    for name, threads in (("serial", "1"), ("threaded", "")):
+        os.environ["CDH_PLANNER_THREADS"] = threads
+        run()
         samples = []
         for _ in range(runs):
             t = time.perf_counter()
-            f()
+            run()
             samples.append(time.perf_counter() - t)
         times[name] = statistics.median(samples)
+    os.environ.pop("CDH_PLANNER_THREADS")
     return times["serial"], times["threaded"]
 
 
@@ -141,24 +125,19 @@ def main(argv=None):
     print(f"load average {os.getloadavg()[0]:.1f} on {os.cpu_count()} CPUs")
     print(f"1. first call in a fresh process, median of {args.runs} (target < {TARGET_MS:.0f} ms, "
           "no numba)")
-    load_cpu = None
     for name, (prepare, call) in CALLS.items():
         rows = [first_call(prepare, call) for _ in range(args.runs)]
         wall, cpu = (statistics.median(r[i] for r in rows) for i in (0, 1))
         numba = any(r[2] for r in rows)
-        if name.startswith("threaded"):
-            load_cpu = cpu / 1e3
         print(f"  {name:38s} {wall:8.1f} ms wall {cpu:8.1f} ms CPU  numba imported: {numba}")
     robot = load_robot(COGIRO)
-    print(f"2. CoGiRo facet test + centred rule, median of {args.runs}: serial (ahead of time) "
-          "vs numba's threads")
+    from cdh_planner import parallel
+    print(f"2. CoGiRo facet test + centred rule, median of {args.runs}: the caller's thread vs "
+          f"blocks on {parallel.threads()} threads")
     for n in args.poses:
         s, t = serial_and_threaded(robot, n, args.runs)
-        saved = s - t
-        pays = f"{load_cpu / saved * n:,.0f}" if saved > 0 else "never (no saving)"
-        print(f"  {n:>9,d} poses: serial {s:.3f} s ({n / s:,.0f} poses/s), threaded {t:.3f} s "
-              f"({s / t:.2f}x); the threads' load ({load_cpu:.2f} s CPU) is repaid from "
-              f"about {pays} poses")
+        print(f"  {n:>9,d} poses: one thread {s:.3f} s ({n / s:,.0f} poses/s), threads {t:.3f} s "
+              f"({n / t:,.0f} poses/s, {s / t:.2f}x)")
     return 0
 
 

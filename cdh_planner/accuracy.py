@@ -43,6 +43,7 @@ from .errors import InputError
 from .wrench import rule_tensions
 from .model import elastic
 from .model.pose import rotation_tt
+from .parallel import blocks
 
 PARALLEL_TOL = 1e-6   # sin of the angle between two generators below which they count as parallel
 ORTHO_TOL = 1e-9      # |g_k . c| / (|g_k| |c|) below which g_k counts as in the plane of a pair
@@ -100,7 +101,8 @@ def pose_accuracy(robot, p, tau=None, R=None, tensions=None):
     """The Accuracy of poses (p (N, 3) m, tau (N, 3) rad or R (N, 3, 3)) of a robot with
     ``length_error`` (module docstring); ``tensions``: as ``error_map``'s. One compiled pass
     (``accuracy_kernel.accuracy_kernel``: the error map and the zonotope maximum of its
-    rows, the same numbers as ``box_max_norm`` of ``error_map``'s) where the pose is
+    rows, the same numbers as ``box_max_norm`` of ``error_map``'s; a large batch in blocks
+    on threads, ``parallel.blocks``) where the pose is
     regular and its generators are not degenerate; the others (singular, a tiny, parallel
     or coplanar generator) by ``error_map`` and ``box_max_norm``."""
     from .accuracy_kernel import accuracy_kernel, error_map_kernel
@@ -109,9 +111,11 @@ def pose_accuracy(robot, p, tau=None, R=None, tensions=None):
     inputs = _map_inputs(robot, p, R, tensions)
     m = len(robot.base_anchors)
     e = np.ascontiguousarray(np.broadcast_to(np.asarray(robot.length_error, dtype=float), (m,)))
-    out, other = accuracy_kernel(*inputs, SINGULAR_SCALE, e, TINY, PARALLEL_TOL, ORTHO_TOL)
+    a, b, p, R, EA, t, stiff = inputs
+    out, other = blocks(lambda i, j: accuracy_kernel(a, b, p[i:j], R[i:j], EA, t[i:j], stiff,
+                                                     SINGULAR_SCALE, e, TINY, PARALLEL_TOL,
+                                                     ORTHO_TOL), len(p))
     if other.any():
-        a, b, p, R, EA, t, stiff = inputs
         G = error_map_kernel(a, b, p[other], R[other], EA, t[other], stiff, SINGULAR_SCALE)
         out[other, 0], out[other, 1] = box_max_norm(G[:, :3], e), box_max_norm(G[:, 3:], e)
     return Accuracy(out[:, 0].copy(), out[:, 1].copy())

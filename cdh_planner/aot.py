@@ -22,6 +22,7 @@ the build fails (no C compiler), ``main`` warms numba's JIT cache instead and ex
 
 import importlib
 import sys
+from contextlib import contextmanager
 import time
 import warnings
 from pathlib import Path
@@ -34,9 +35,9 @@ except ImportError:  # 3.12 renamed it; hashlib's is the same function
 
 def source_digest(kernels):
     """12 hex digits of sha256 over the kernel module's AOT_SOURCES (paths relative to its
-    folder): what the machine code is of."""
+    folder) and this file (how it is built): what the machine code is of."""
     folder = Path(kernels.__file__).resolve().parent
-    h = sha256()
+    h = sha256(Path(__file__).read_bytes())
     for name in kernels.AOT_SOURCES:
         h.update((folder / name).read_bytes())
     return h.hexdigest()[:12]
@@ -66,15 +67,15 @@ def entries(kernels):
 
 def jit(namespace, helpers, inline=()):
     """Turn the functions ``helpers`` of a kernel module's globals ``namespace`` into numba
-    functions (cache=True; those in ``inline`` inlined), once; entries then compile with
-    ``njit(cache=True)`` and call them."""
+    functions (cache=True, nogil=True as the ahead-of-time build; those in ``inline``
+    inlined), once; entries then compile with the ``njit`` returned and call them."""
     from numba import njit
 
     for name in helpers:
         if not hasattr(namespace[name], "py_func"):
             options = {"inline": "always"} if name in inline else {}
-            namespace[name] = njit(cache=True, **options)(namespace[name])
-    return njit(cache=True)
+            namespace[name] = njit(cache=True, nogil=True, **options)(namespace[name])
+    return njit(cache=True, nogil=True)
 
 
 def build(kernels, output_dir=None):
@@ -92,7 +93,8 @@ def build(kernels, output_dir=None):
     jit = kernels.jit_kernels()  # the helpers as numba functions, which the exports call
     for entry, signature in kernels.AOT_EXPORTS.items():
         cc.export(entry, signature)(jit[entry].py_func)
-    cc.compile()  # object files go to a temporary directory of pycc's own
+    with _releasing_gil():
+        cc.compile()  # object files go to a temporary directory of pycc's own
     built = [p for p in output_dir.glob(f"{name}.*") if p.suffix in (".so", ".pyd")]
     if not built:
         raise RuntimeError(f"numba.pycc wrote no {name}.* in {output_dir}")
@@ -100,6 +102,26 @@ def build(kernels, output_dir=None):
         if not old.name.startswith(name + "."):
             old.unlink()
     return built[0]
+
+
+@contextmanager
+def _releasing_gil():
+    """pycc's exports release the GIL while their machine code runs, as ``njit(nogil=True)``
+    does (pycc has no option for it: its compile flags, made by ``Flags()``, get
+    ``release_gil``): threads then run kernels side by side (``parallel.blocks``)."""
+    from numba.core.compiler import Flags
+    from numba.pycc import compiler
+
+    def releasing():
+        flags = Flags()
+        flags.release_gil = True
+        return flags
+
+    compiler.Flags = releasing
+    try:
+        yield
+    finally:
+        compiler.Flags = Flags
 
 
 def main(label, kernels, warm_jit):

@@ -14,7 +14,7 @@ from pathlib import Path
 import numpy as np
 import pytest
 
-from cdh_planner import accuracy_kernel, aot as aot_helper
+from cdh_planner import accuracy_kernel, aot as aot_helper, parallel
 from cdh_planner.commands import json_rows
 from cdh_planner.manifold import kernels
 from cdh_planner.model import elastic_kernel
@@ -38,7 +38,7 @@ NOT_BUILT = ("no ahead-of-time kernels built (make, or python -m "
 
 SOURCES = [(kernels, ("kernels.py", "layout.py", "../kernel_linalg.py")),
            (scene_kernels, ("kernels.py", "../model/shape_forms.py")),
-           (wrench_kernels, ("compiled.py", "kernel.py", "centred.py", "linalg.py")),
+           (wrench_kernels, ("compiled.py", "kernel.py", "centred.py", "linalg.py", "../kernel_linalg.py")),
            (elastic_kernel, ("elastic_kernel.py",)),
            (accuracy_kernel, ("accuracy_kernel.py", "kernel_linalg.py")), (json_rows, ("json_rows.py",)),
            (motion_kernel, ("motion_kernel.py",))]
@@ -52,8 +52,10 @@ BUILDERS = {"manifold": "cdh_planner.manifold.aot", "scene": "cdh_planner.scene.
 
 @pytest.mark.parametrize("module, sources", SOURCES, ids=MODULES)
 def test_the_aot_module_is_named_after_the_digest_of_the_kernel_source(module, sources):
+    """... and of aot.py, which says how it is built (release_gil)."""
     d = Path(module.__file__).resolve().parent
-    h = hashlib.sha256(b"".join((d / name).read_bytes() for name in sources))
+    h = hashlib.sha256(Path(aot_helper.__file__).read_bytes()
+                       + b"".join((d / name).read_bytes() for name in sources))
     assert aot_helper.module_name(module) == module.AOT_PREFIX + h.hexdigest()[:12]
 
 
@@ -251,23 +253,60 @@ def test_aot_and_jit_json_rows_kernels_agree_byte_for_byte():
                                               + b"{a: [3, 4], b: c}")
 
 
-def test_the_threaded_wrench_kernels_give_the_serial_answers():
-    """The same chunks on numba's threads (loaded here whatever the batch size) as in the
-    serial entries from PARALLEL_MIN poses: the same numbers, the centred rule's warm starts
-    included."""
+def test_the_wrench_kernels_on_threads_give_the_serial_answers(monkeypatch):
+    """A large batch in blocks on threads (``parallel``; the entries release the GIL) gives
+    the numbers of one call on the caller's thread: the blocks start at the centred rule's
+    chunks, whose first poses start Newton cold either way."""
     robot = load_robot(CONFIG / "cogiro.yaml")
-    geometry, ellipsoid, subsets = _wrench_inputs(robot, wrench_kernels.PARALLEL_MIN + 300, 6)
+    geometry, ellipsoid, subsets = _wrench_inputs(robot, parallel.MIN_POSES + 1300, 6)
     _, _, J, c = wrench_kernels.pose_geometry(*geometry)
-    serial = wrench_kernels.facet_batch(J, c, *ellipsoid, subsets, 1e-9)
-    threaded = wrench_kernels.threaded_kernels()
-    assert wrench_kernels.threads_pay(len(J))  # from PARALLEL_MIN once they are loaded
-    for a, t in zip(serial, threaded.facet_kernel(J, c, *ellipsoid, subsets, 1e-9)):
+    answers = {}
+    for threads in ("1", "3"):
+        monkeypatch.setenv("CDH_PLANNER_THREADS", threads)
+        assert len(parallel.block_bounds(len(J), wrench_kernels.PARALLEL_CHUNK)) == int(threads)
+        out = wrench_kernels.facet_batch(J, c, *ellipsoid, subsets, 1e-9)
+        ranked, feasible = out[-1], out[-1] & (out[2] > 0)
+        t0, v = wrench_kernels.centred_batch(J, c, *ellipsoid, ranked, feasible)
+        W = (robot.cable_stiffness + t0) / 9.0
+        band = wrench_kernels.stiffness_band_batch(J, c, *ellipsoid[:3], W, ranked)
+        answers[threads] = out + (t0, v, band)
+    assert answers["1"][-1].shape == (len(J), 8) and np.isfinite(answers["1"][-1]).all()
+    for a, t in zip(answers["1"], answers["3"]):
         np.testing.assert_array_equal(a, t)
-    ranked, feasible = serial[-1], serial[-1] & (serial[2] > 0)
-    cold = wrench_kernels.aot.entries(wrench_kernels)["centred_kernel"](
-        J, c, *ellipsoid, ranked, feasible, wrench_kernels.PARALLEL_CHUNK)
-    for a, t in zip(cold, threaded.centred_kernel(J, c, *ellipsoid, ranked, feasible)):
-        np.testing.assert_array_equal(a, t)
+
+
+@pytest.mark.parametrize("name", ["robot2_8", "cogiro", "ipanema2"])
+def test_the_stiffness_band_kernel_is_the_weighted_pseudo_inverse(name):
+    """|rows of P_W L|, P_W = W J^T (J W J^T)^-1 (``rules.weighted_pseudo_inverse``, numpy's
+    batched solve), to 1e-12, with positive and negative weights; inf where J W J^T is
+    singular (every weight 0), nan off ``ok``."""
+    from cdh_planner.wrench.rules import weighted_pseudo_inverse
+    from cdh_planner.wrench.geometry import inverse_ellipsoid_factor
+    robot = load_robot(CONFIG / f"{name}.yaml")
+    geometry, ellipsoid, _ = _wrench_inputs(robot, 200, 8)
+    _, _, J, c = wrench_kernels.pose_geometry(*geometry)
+    W = np.random.default_rng(8).uniform(0.5, 2.0, (len(J), 8)) * 1e4
+    W[:20, 3] *= -0.01  # a cable of negative weight: J W J^T still invertible
+    W[20] = 0.0
+    ok = np.ones(len(J), dtype=bool)
+    ok[21] = False
+    band = wrench_kernels.stiffness_band_batch(J, c, *ellipsoid[:3], W, ok)
+    keep = ok & (np.arange(len(J)) != 20)
+    P = weighted_pseudo_inverse(J[keep], W[keep])
+    expected = np.linalg.norm(P @ inverse_ellipsoid_factor(robot, c[keep]), axis=-1)
+    np.testing.assert_allclose(band[keep], expected, rtol=1e-12)
+    assert np.all(np.isinf(band[20])) and np.all(np.isnan(band[21]))
+
+
+@pytest.mark.skipif(not ALL_BUILT, reason=NOT_BUILT)
+def test_every_ahead_of_time_build_releases_the_gil():
+    """Each build's entries release the GIL while their machine code runs (``aot.build``
+    compiles them with numba's ``release_gil``, whose wrappers call PyEval_SaveThread; a
+    build without it imports no such symbol), so ``parallel``'s threads run side by side."""
+    for module in (kernels, scene_kernels, wrench_kernels, elastic_kernel, accuracy_kernel,
+                   json_rows, motion_kernel):
+        built = importlib.import_module(f"{module.__package__}.{aot_helper.module_name(module)}")
+        assert b"PyEval_SaveThread" in Path(built.__file__).read_bytes(), module.__name__
 
 
 def test_the_wrench_entries_take_any_layout_and_type():

@@ -47,6 +47,7 @@ from ..wrench import wrench_feasibility
 from .outputs import check_output, write_text
 from ..parsing.poses import load_poses, parse_angle, parse_length
 from ..model.robot import load_robot
+from ..parallel import beside, map_blocks
 from ..scene.margin import combine
 from ..scene.schema import default_scene, load_scene
 from ..trajectory.path_check import DEFAULT_STEP_M, DEFAULT_STEP_RAD, check_motion
@@ -97,14 +98,15 @@ def run(args):
         margin, binding = combine(feas.margin, feas.binding, collision, poses.positions,
                                   poses.rotations, motion=True)
         feas = dataclasses.replace(feas, margin=margin, binding=binding)
+    # the accuracy's kernel beside the dense check (numpy, mostly under the GIL)
+    acc = beside(lambda: pose_accuracy(robot, poses.positions, R=poses.rotations,  # the tensions: once
+                                       tensions=feas.tension_nominal) if has_accuracy(robot) else None)
     # The segments' ends are the poses (poses.rotations is Rotation.from_quat's): their
     # margins are those above, not evaluated again (wrench_margin's are the same numbers).
     segments = check_motion(robot, poses.positions, poses.quaternions, step_m, step_rad,
                             collision, waypoints=feas)
     ok = bool(np.all(feas.feasible)) and bool(np.all(segments.feasible))
-
-    acc = (pose_accuracy(robot, poses.positions, R=poses.rotations,  # the tensions: once
-                         tensions=feas.tension_nominal) if has_accuracy(robot) else None)
+    acc = acc.result()
     print_report(robot, poses, feas, segments, ok, acc,
                  every=args.all_poses or len(poses) <= FULL_REPORT_POSES)
     if json_out:
@@ -128,12 +130,13 @@ def result_json(robot, poses, feas, segments, ok, step_m, step_rad, accuracy=Non
     rows are assembled by the compiled ``json_rows`` (the encoder per row costs 3x more for
     10^4 poses, a template per row 2x); ``accuracy``: the poses' ``accuracy.Accuracy``
     (robots with length_error), or None."""
+    pose_rows = beside(_rows_text, pose_columns(poses, feas, accuracy))  # both at once
+    segment_rows = _rows_text(segment_columns(segments)) if segments else []
     return [piece.encode("ascii") if isinstance(piece, str) else piece
             for piece in _layout_pieces({
         "robot": _encode(robot.name), "robot_file": _encode(robot.source),
         "max_step_m": _encode(step_m), "max_step_rad": _encode(step_rad),
-        "poses": _rows_text(pose_columns(poses, feas, accuracy)),
-        "segments": _rows_text(segment_columns(segments)) if segments else [],
+        "poses": pose_rows.result(), "segments": segment_rows,
         "all_feasible": _encode(bool(ok))})]
 
 
@@ -173,11 +176,24 @@ class _Texts(list):
 def _rows_text(columns):
     """The JSON object texts of the rows of ``columns`` (name -> array, list of strings,
     nested mapping of them, or a ``_Texts`` of ready texts), joined as ``layout_rows`` joins
-    list entries: a list of that one text. Each column's texts lie in one buffer (numbers by
-    one orjson call a column); the compiled ``json_rows`` finds the numbers' entries and
-    puts the rows together (the text as its uint8 array of ASCII)."""
-    from .json_rows import assemble_rows  # machine code: loaded only for a --json
+    list entries: the list of the texts of blocks of rows (``parallel.map_blocks``: a large
+    document's blocks on threads, whose compiled assembly runs side by side)."""
     literals, cols = _row_literals(columns)
+    return map_blocks(lambda a, b: _block_text(literals, [_rows(col, a, b) for col in cols]),
+                      len(cols[0]))
+
+
+def _rows(col, a, b):
+    """Rows a <= r < b of a column."""
+    return _Texts(col[a:b]) if isinstance(col, _Texts) else col[a:b]
+
+
+def _block_text(literals, cols):
+    """The rows of the flat columns ``cols`` around ``literals`` (``_row_literals``) joined
+    by ROW_SEPARATOR, as a uint8 array of ASCII: each column's texts lie in one buffer
+    (numbers by one orjson call a column); the compiled ``json_rows`` finds the numbers'
+    entries and puts the rows together."""
+    from .json_rows import assemble_rows  # machine code: loaded only for a --json
     starts, ends = (np.zeros((len(cols[0]), len(cols)), dtype=np.int64) for _ in range(2))
     buffers, layout, base = [], [], 0
     for k, col in enumerate(cols):
@@ -187,9 +203,8 @@ def _rows_text(columns):
         layout.append(kind)
         base += len(data)
     bounds = np.cumsum([0] + [len(t) for t in literals])
-    out = assemble_rows(np.concatenate(buffers), starts, ends, np.array(layout, dtype=np.int64),
-                        _ascii("".join(literals)), bounds, _ascii(ROW_SEPARATOR))
-    return [out]
+    return assemble_rows(np.concatenate(buffers), starts, ends, np.array(layout, dtype=np.int64),
+                         _ascii("".join(literals)), bounds, _ascii(ROW_SEPARATOR))
 
 
 def _ascii(text):

@@ -8,6 +8,7 @@ from dataclasses import dataclass
 
 import numpy as np
 
+from ..parallel import blocks
 from .pose import cross
 
 
@@ -145,15 +146,17 @@ def soft_poses(robot, p, R, t, where, kappa):
     finite with its least eigenvalue below kappa (N/m, N m/rad). Compiled, one pose at a
     time (``elastic_kernel``: the same K, decided by a Cholesky factor of K - kappa I
     rather than an eigenvalue solver; a pose within rounding of kappa may fall either
-    way)."""
+    way; a large batch in blocks on threads)."""
     from .elastic_kernel import soft_kernel  # machine code: loaded only for elastic robots
     m = len(robot.base_anchors)
     f64 = [np.ascontiguousarray(x, dtype=float) for x in
            (robot.base_anchors, robot.platform_anchors, robot.load_point,
             np.broadcast_to(np.asarray(robot.cable_stiffness, dtype=float), (m,)), p, R, t)]
     force, moment, arm = (np.ascontiguousarray(x[0], dtype=float) for x in static_load(robot, 1))
-    return soft_kernel(*f64, force, moment, arm, np.ascontiguousarray(where, dtype=bool),
-                       float(kappa))
+    a, b, g, EA, p, R, t = f64
+    where = np.ascontiguousarray(where, dtype=bool)
+    return blocks(lambda i, j: soft_kernel(a, b, g, EA, p[i:j], R[i:j], t[i:j], force, moment, arm,
+                                           where[i:j], float(kappa)), len(p))
 
 
 def equilibrium_poses(robot, L0, p0, R0, force, moment, arm,

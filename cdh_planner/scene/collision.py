@@ -33,6 +33,7 @@ from dataclasses import dataclass
 
 import numpy as np
 
+from ..parallel import map_blocks
 from ..model.shape_forms import COAL_FORM
 from .kernels import cable_obstacle_batch, collision_batch
 from .margin import COLLISION_UNIT_M, combine  # noqa: F401  (their home; re-exported)
@@ -132,9 +133,12 @@ class CollisionModel:
                 np.empty((n, len(self.pairs))), np.empty((n, m)), np.empty((n, 3)))
 
     def _run(self, p, R, buffers):
-        """The compiled kernel on poses p (N, 3) m, R (N, 3, 3) into ``buffers``."""
-        collision_batch(np.ascontiguousarray(p, dtype=float), np.ascontiguousarray(R, dtype=float),
-                        self.static, self.pairs, *buffers)
+        """The compiled kernel on poses p (N, 3) m, R (N, 3, 3) into ``buffers`` (a large
+        batch in blocks on threads: ``parallel.map_blocks``)."""
+        p = np.ascontiguousarray(p, dtype=float)
+        R = np.ascontiguousarray(R, dtype=float)
+        map_blocks(lambda a, b: collision_batch(p[a:b], R[a:b], self.static, self.pairs,
+                                                *(x[a:b] for x in buffers)), len(p))
 
     def _coal(self):
         """coal's shapes, placements and distance functors (cables, platform, obstacles),

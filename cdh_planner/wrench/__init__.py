@@ -47,7 +47,8 @@ K = diag(EA / L0) at t0 (``stiffness_band``).
 The compiled kernels (``compiled``: built ahead of time by ``make``, else numba's JIT) are
 imported on first use by an m > 6 robot, or by a six-cable robot's ``rule_responses`` (the
 trajectory's tensions at thousands of samples); built ahead of time, no command loads numba
-for them (test_startup_imports), except batches large enough to repay numba's threads.
+for them (test_startup_imports). They release the GIL: from ``parallel.MIN_POSES`` poses a
+batch runs in blocks on threads, with the same numbers.
 """
 
 import numpy as np

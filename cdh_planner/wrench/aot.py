@@ -1,5 +1,4 @@
-"""Build the wrench kernels (compiled.py) ahead of time next to their sources, and compile
-the threaded ones (threaded.py: JIT only) into numba's cache.
+"""Build the wrench kernels (compiled.py) ahead of time next to their sources.
 
     python -m cdh_planner.wrench.aot
 
@@ -49,20 +48,10 @@ def warm_jit():
                                 np.zeros((1, 1, 6)), 1e-12)
 
 
-def warm_threads():
-    """Compile the threaded kernels once, so that their cache is there."""
-    threaded = compiled.threaded_kernels()
-    args = warm_inputs()
-    ranked = threaded.facet_kernel(*args, np.array(list(combinations(range(8), 5))), 1e-9)[-1]
-    threaded.centred_kernel(*args, ranked, ranked)
-
-
 def main():
-    """The ahead-of-time build (else the JIT warmed), then the threaded kernels."""
+    """The ahead-of-time build (else the JIT warmed)."""
     clear_jit_cache()
-    code = aot.main("wrench kernels", compiled, warm_jit)
-    warm_threads()
-    return code
+    return aot.main("wrench kernels", compiled, warm_jit)
 
 
 if __name__ == "__main__":

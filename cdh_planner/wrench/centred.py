@@ -1,7 +1,6 @@
 """The centred tension rule (package docstring): per pose its nominal t0 and band v, t0
 centred in the null space of J by ``_centre``'s Newton. Units: m, N, N m. Plain Python
-compiled by numba (``compiled``: ahead of time, else the JIT; ``threaded``: on threads; no
-numba import here).
+compiled by numba (``compiled``: ahead of time, else the JIT; no numba import here).
 
 The rule's map is P = D J^T (J D J^T)^-1 (``rules.weighted_pseudo_inverse``, the one place
 it is written). This kernel applies the same map in an equivalent algebraic form, from the

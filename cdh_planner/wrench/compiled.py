@@ -1,17 +1,15 @@
-"""The wrench kernels as machine code (kernel.py: the pose geometry and the facet test;
-centred.py: the centred rule; linalg.py: their linear algebra; plain Python, no numba
-import): four entries built ahead of time into one extension module (``python -m
-cdh_planner.wrench.aot``, run by ``make``; ``cdh_planner.aot``), else compiled by numba's JIT
-with ``cache=True``. Ahead of time, importing this module and a first call take about 10 ms
-and numba is not imported; the JIT costs 0.5 - 1 s of a fresh process (the cached code).
-
-numba.pycc compiles no ``parallel=True`` code (a parfor needs numba's threading layer at run
-time), so the threaded variants (``threaded``) are JIT only: ``facet_batch`` and
-``centred_batch`` use them only where they pay for loading numba (``threads_pay``).
+"""The wrench kernels as machine code (kernel.py: the pose geometry, the facet test, the
+band of elastic cables and the six-cable rule; centred.py: the centred rule; linalg.py and
+../kernel_linalg.py: their linear algebra; plain Python, no numba import): five entries
+built ahead of time into one extension module (``python -m cdh_planner.wrench.aot``, run
+by ``make``; ``cdh_planner.aot``), else compiled by numba's JIT with ``cache=True``. Ahead
+of time, importing this module and a first call take about 10 ms and numba is not
+imported; the JIT costs 0.5 - 1 s of a fresh process (the cached code). The entries
+release the GIL: large batches run in blocks of poses on threads (``cdh_planner.parallel``).
 
 The entries take C-contiguous float64 arrays, bool arrays, a bool and an int, as
-AOT_EXPORTS says, unchecked: ``pose_geometry``, ``facet_batch``, ``centred_batch`` and
-``six_cable_batch`` pass them so. Units: m, N, N m.
+AOT_EXPORTS says, unchecked: ``pose_geometry``, ``facet_batch``, ``centred_batch``,
+``stiffness_band_batch`` and ``six_cable_batch`` pass them so. Units: m, N, N m.
 """
 
 import sys
@@ -19,14 +17,9 @@ import sys
 import numpy as np
 
 from .. import aot
+from ..parallel import blocks
 from . import centred, kernel
 from .kernel import PARALLEL_CHUNK, PARALLEL_MIN
-
-# from this many poses the threaded kernels repay loading numba and themselves in a fresh
-# process (0.47 s of CPU): CoGiRo's facet test and centred rule take 19 - 25 us a pose
-# serially, so two idle cores repay it from ~43,000 poses, eight from ~24,000; measured on 2
-# loaded cores, from ~72,000 (benchmarks/wrench_kernels.py). verify's 20,000 stay serial.
-THREADS_PAY_MIN = 50_000
 
 _F64_1, _F64_2, _F64_3 = "float64[::1]", "float64[:, ::1]", "float64[:, :, ::1]"
 # J, c, the ellipsoid (w_local, L3, load_frame), tmin, tmax
@@ -38,19 +31,21 @@ AOT_EXPORTS = {
                     f"({_POSES_AND_LIMITS}, int64[:, ::1], float64)",
     "centred_kernel": f"Tuple(({_F64_2}, {_F64_2}))"
                       f"({_POSES_AND_LIMITS}, boolean[::1], boolean[::1], int64)",
+    "stiffness_band_kernel": f"{_F64_2}({_F64_3}, {_F64_2}, {_F64_1}, {_F64_2}, boolean, "
+                             f"{_F64_2}, boolean[::1])",
     "six_cable_kernel": f"Tuple(({_F64_2}, {_F64_2}, {_F64_3}, boolean[::1]))"
                         f"({_F64_2}, {_F64_3}, {_F64_2}, {_F64_2}, {_F64_1}, {_F64_1}, {_F64_2}, "
                         f"boolean, {_F64_3}, float64)",
 }
 AOT_PREFIX = "_kernels_aot_"
 # the functions the entries call, by module: numba functions under the JIT
-KERNEL_HELPERS = ("gauss_jordan", "householder_r", "null_vector", "_subset_normal", "load_wrench",
+KERNEL_HELPERS = ("eliminate", "gauss_jordan", "_off_subsets", "_subset_structure", "householder_r", "null_vector", "_subset_normal", "load_wrench",
                   "_facet_outputs", "_facet_poses", "lu_factor6", "lu_solve6")
 CENTRED_HELPERS = ("householder_r", "forward_substitute", "null_basis", "cholesky_solve",
                    "load_wrench", "_log_product", "_slacks", "_centre", "_centred_poses")
 
 
-AOT_SOURCES = ("compiled.py", "kernel.py", "centred.py", "linalg.py")  # what the machine code is of: the kernels' sources and this file (the signatures)
+AOT_SOURCES = ("compiled.py", "kernel.py", "centred.py", "linalg.py", "../kernel_linalg.py")  # what the machine code is of: the kernels' sources and this file (the signatures)
 
 
 def jit_helpers():
@@ -65,6 +60,7 @@ def jit_kernels():
     njit = jit_helpers()
     return {"pose_geometry": njit(kernel.pose_geometry), "facet_kernel": njit(kernel.facet_kernel),
             "centred_kernel": njit(centred.centred_kernel),
+            "stiffness_band_kernel": njit(kernel.stiffness_band_kernel),
             "six_cable_kernel": njit(kernel.six_cable_kernel)}
 
 
@@ -92,38 +88,32 @@ def six_cable_batch(p, R, a, b, g, w_local, L3, load_frame, W, singular_det):
                                         *_typed((W,)), float(singular_det))
 
 
-def threaded_kernels():
-    """The module ``threaded`` (its facet_kernel and centred_kernel), the helpers it calls
-    made numba functions first."""
-    jit_helpers()
-    from . import threaded
-    return threaded
-
-
-def threads_pay(n):
-    """Whether n poses go to numba's threads (``threaded``): from PARALLEL_MIN poses once the
-    threaded kernels are loaded in this process, from THREADS_PAY_MIN before."""
-    loaded = f"{__package__}.threaded" in sys.modules
-    return n >= (PARALLEL_MIN if loaded else THREADS_PAY_MIN)
-
-
 def facet_batch(J, c, w_local, L3, load_frame, tmin, tmax, subsets, singular_det):
-    """``kernel.facet_kernel`` (its arguments and outputs), on threads where that pays."""
+    """``kernel.facet_kernel`` (its arguments and outputs), a large batch in blocks on
+    threads."""
     J, c, w_local, L3, tmin, tmax = _typed((J, c, w_local, L3, tmin, tmax))
-    args = (J, c, w_local, L3, bool(load_frame), tmin, tmax,
-            np.ascontiguousarray(subsets, dtype=np.int64), float(singular_det))
-    if threads_pay(len(J)):
-        return threaded_kernels().facet_kernel(*args)
-    return _entries["facet_kernel"](*args)
+    subsets = np.ascontiguousarray(subsets, dtype=np.int64)
+    kernel_ = _entries["facet_kernel"]
+    return blocks(lambda a, b: kernel_(J[a:b], c[a:b], w_local, L3, bool(load_frame), tmin,
+                                       tmax, subsets, float(singular_det)), len(J))
 
 
 def centred_batch(J, c, w_local, L3, load_frame, tmin, tmax, ranked, centre):
     """``centred.centred_kernel``'s t0 and v (N, m) N, in chunks of PARALLEL_CHUNK poses
-    from PARALLEL_MIN poses (else one chunk), on threads where that pays."""
+    from PARALLEL_MIN poses (else one chunk), a large batch in blocks of chunks on threads."""
     J, c, w_local, L3, tmin, tmax, ranked, centre = _typed((J, c, w_local, L3, tmin, tmax),
                                                            (ranked, centre))
-    args = (J, c, w_local, L3, bool(load_frame), tmin, tmax, ranked, centre)
     n = len(J)
-    if threads_pay(n):
-        return threaded_kernels().centred_kernel(*args)
-    return _entries["centred_kernel"](*args, PARALLEL_CHUNK if n >= PARALLEL_MIN else max(n, 1))
+    chunk = PARALLEL_CHUNK if n >= PARALLEL_MIN else max(n, 1)
+    kernel_ = _entries["centred_kernel"]
+    return blocks(lambda a, b: kernel_(J[a:b], c[a:b], w_local, L3, bool(load_frame), tmin, tmax,
+                                       ranked[a:b], centre[a:b], chunk), n, chunk)
+
+
+def stiffness_band_batch(J, c, w_local, L3, load_frame, W, ok):
+    """``kernel.stiffness_band_kernel`` (its arguments and output), a large batch in blocks
+    on threads."""
+    J, c, w_local, L3, W, ok = _typed((J, c, w_local, L3, W), (ok,))
+    kernel_ = _entries["stiffness_band_kernel"]
+    return blocks(lambda a, b: kernel_(J[a:b], c[a:b], w_local, L3, bool(load_frame), W[a:b],
+                                       ok[a:b]), len(J))

@@ -1,6 +1,5 @@
 """The facet test (maths: the package docstring, docs/more-cables.md), plain Python
-compiled by numba (``compiled``: ahead of time, else the JIT; ``threaded``: on threads; no
-numba import here).
+compiled by numba (``compiled``: ahead of time, else the JIT; no numba import here).
 
 ``facet_kernel`` is the facet test in the coordinates of a basis of 6 columns: with
 E = J_B^-1 (Gauss-Jordan, complete pivoting), N = E J has unit columns on the basis, so a
@@ -11,44 +10,53 @@ L^T c = (E L)^T y touch only the rows of y's support. The direct transcription (
 per subset from J's columns) is the reference the tests compare it with
 (test/wrench_reference.py).
 
+``stiffness_band_kernel`` is the band of weighted cables, |rows of P_W L| with
+P_W = W J^T (J W J^T)^-1 (``rules.stiffness_band``'s, W the elastic cables' stiffness):
+numpy's batched solve one pose at a time, by the same Gaussian elimination with partial
+pivoting (``kernel_linalg.eliminate``), to rounding.
+
 ``six_cable_kernel`` is the six-cable rule P = J^-1 (``closed_form``'s envelope, its numpy
 reference) at many poses, for the trajectory's per-sample tensions. Units: m, N, N m.
 """
 
 import numpy as np
 
+from ..kernel_linalg import eliminate
 from .linalg import gauss_jordan, householder_r, lu_factor6, lu_solve6, null_vector
 
 # a 5-subset whose last pivot is below this fraction of its first one is rank 4: it spans
 # no facet (every facet hyperplane is spanned by some 5 independent columns)
 RANK_TOL = 1e-12
 # from PARALLEL_MIN poses the kernels work in chunks of PARALLEL_CHUNK poses (the centred
-# rule's Newton starts cold at a chunk's first pose), which numba's threads may share out
-# (``compiled.threads_pay``): the chunks, not the threads, fix the numbers
+# rule's Newton starts cold at a chunk's first pose), which threads may share out
+# (``cdh_planner.parallel``): the chunks, not the threads, fix the numbers
 PARALLEL_CHUNK = 512
 PARALLEL_MIN = 4096
 
 
-def _subset_normal(T, zrow, xcol, nx, M, y, perm):
-    """y (nx + 1,) on the basis rows ``zrow`` off a subset, orthogonal to its off-basis
-    columns ``xcol`` of N (T's first columns); closed forms for nx <= 2 (m = 8 needs no
+def _subset_normal(T, zrows, xcols, k, nx, M, y, perm):
+    """y (nx + 1,) on the basis rows ``zrows[k]`` off subset k, orthogonal to its off-basis
+    columns ``xcols[k]`` of N (T's first columns); closed forms for nx <= 2 (m = 8 needs no
     more). False when those columns are dependent (the subset has rank 4)."""
     if nx == 0:
         y[0] = 1.0
         return True
     if nx == 1:
-        a0, a1 = T[zrow[0], xcol[0]], T[zrow[1], xcol[0]]
+        x0 = xcols[k, 0]
+        a0, a1 = T[zrows[k, 0], x0], T[zrows[k, 1], x0]
         y[0], y[1] = a1, -a0
         return max(abs(a0), abs(a1)) > RANK_TOL
     if nx == 2:
-        a0, a1, a2 = T[zrow[0], xcol[0]], T[zrow[1], xcol[0]], T[zrow[2], xcol[0]]
-        b0, b1, b2 = T[zrow[0], xcol[1]], T[zrow[1], xcol[1]], T[zrow[2], xcol[1]]
+        x0, x1 = xcols[k, 0], xcols[k, 1]
+        z0, z1, z2 = zrows[k, 0], zrows[k, 1], zrows[k, 2]
+        a0, a1, a2 = T[z0, x0], T[z1, x0], T[z2, x0]
+        b0, b1, b2 = T[z0, x1], T[z1, x1], T[z2, x1]
         y[0], y[1], y[2] = a1 * b2 - a2 * b1, a2 * b0 - a0 * b2, a0 * b1 - a1 * b0
         return max(abs(y[0]), abs(y[1]), abs(y[2])) > RANK_TOL * max(
             abs(a0), abs(a1), abs(a2), abs(b0), abs(b1), abs(b2), 1.0)
     for i in range(nx):
         for b in range(nx + 1):
-            M[i, b] = T[zrow[b], xcol[i]]
+            M[i, b] = T[zrows[k, b], xcols[k, i]]
     return null_vector(M, nx, y, perm) > RANK_TOL
 
 
@@ -129,11 +137,11 @@ def _facet_poses(q0, q1, J, c, w_local, L3, load_frame, tmin, tmax, subsets, sin
     K = subsets.shape[0]
     T = np.empty((6, m + 13))  # [J | I | w0 | L] -> [N | E | E w0 | E L]
     pivcol = np.empty(6, np.int64)
+    basis = np.full(6, -1, np.int64)  # the pivot columns the subsets' structure is of
     rowof = np.empty(m, np.int64)
-    zrow = np.empty(6, np.int64)
-    zpos = np.empty(6, np.int64)
-    xcol = np.empty(6, np.int64)
-    inS = np.zeros(m, np.bool_)
+    off = _off_subsets(subsets, m)
+    nxs, xcols = np.empty(K, np.int64), np.empty((K, 6), np.int64)
+    nzs, zrows, zposs = np.empty(K, np.int64), np.empty((K, 6), np.int64), np.empty((K, 6), np.int64)
     M = np.empty((5, 6))
     y = np.empty(6)
     perm = np.empty(6, np.int64)
@@ -172,35 +180,28 @@ def _facet_poses(q0, q1, J, c, w_local, L3, load_frame, tmin, tmax, subsets, sin
                     sg += T[r, m + 7 + j] * T[r2, m + 7 + j]
                 EE[r, r2], EE[r2, r], GG[r, r2], GG[r2, r] = se, se, sg, sg
         best_n, best_r = np.inf, np.inf
-        for k in range(K):
-            S = subsets[k]
-            nx = 0
-            for s in range(5):
-                inS[S[s]] = True
-                if rowof[S[s]] < 0:
-                    xcol[nx] = S[s]
-                    nx += 1
-            nz = 0
+        same = True
+        for r in range(6):
+            same = same and basis[r] == pivcol[r]
+        if not same:  # a new basis (rarely between neighbouring poses)
+            _subset_structure(subsets, pivcol, rowof, nxs, xcols, nzs, zrows, zposs)
             for r in range(6):
-                if not inS[pivcol[r]]:
-                    zrow[nz], zpos[r] = r, nz
-                    nz += 1
-            if not _subset_normal(T, zrow, xcol, nx, M, y, perm):
-                for s in range(5):
-                    inS[S[s]] = False
+                basis[r] = pivcol[r]
+        for k in range(K):
+            nx, nz = nxs[k], nzs[k]
+            if not _subset_normal(T, zrows, xcols, k, nx, M, y, perm):
                 continue  # rank 4: no facet
             # p_i = c.J_i = y.N_i for the cables off S (0 on S: exactly)
             hp, hm, width = 0.0, 0.0, 0.0
             up, down = 0, 0
-            for i in range(m):
-                if inS[i]:
-                    continue
+            for o in range(m - 5):
+                i = off[k, o]
                 if rowof[i] >= 0:
-                    p = y[zpos[rowof[i]]]
+                    p = y[zposs[k, rowof[i]]]
                 else:
                     p = 0.0
                     for b in range(nz):
-                        p += y[b] * T[zrow[b], i]
+                        p += y[b] * T[zrows[k, b], i]
                 lo, hi = p * tmin[i], p * tmax[i]
                 if lo > hi:
                     hp += lo
@@ -211,28 +212,111 @@ def _facet_poses(q0, q1, J, c, w_local, L3, load_frame, tmin, tmax, subsets, sin
                     hm -= lo
                     up |= 1 << i
                 width += abs(p) * (tmax[i] - tmin[i])
-            for s in range(5):
-                inS[S[s]] = False
             cw, cc, lt = 0.0, 0.0, 0.0
             for b in range(nz):
-                rb = zrow[b]
+                rb = zrows[k, b]
                 cw += y[b] * T[rb, m + 6]
                 se, sg = 0.0, 0.0
                 for b2 in range(nz):
-                    se += EE[rb, zrow[b2]] * y[b2]
-                    sg += GG[rb, zrow[b2]] * y[b2]
+                    se += EE[rb, zrows[k, b2]] * y[b2]
+                    sg += GG[rb, zrows[k, b2]] * y[b2]
                 cc += y[b] * se
                 lt += y[b] * sg
             lt, norm = np.sqrt(max(lt, 0.0)), np.sqrt(cc)
-            for sign in range(2):
-                slack = (hp - cw - lt) if sign == 0 else (hm + cw - lt)
-                if slack / norm < best_n:
-                    best_n = slack / norm
-                sr = slack / width if width > 0.0 else (-np.inf if slack < 0.0 else np.inf)
-                if sr < best_r:
-                    best_r, arg_r[q] = sr, 2 * k + sign
-                    hi_r[q] = up if sign == 0 else down
+            # the lesser slack of the two sides, divided once: dividing by a positive number
+            # keeps the order (rounding too), so these are the least of both quotients
+            slack, sign = hp - cw - lt, 0
+            if hm + cw - lt < slack:
+                slack, sign = hm + cw - lt, 1
+            if slack / norm < best_n:
+                best_n = slack / norm
+            sr = slack / width if width > 0.0 else (-np.inf if slack < 0.0 else np.inf)
+            if sr < best_r:
+                best_r, arg_r[q] = sr, 2 * k + sign
+                hi_r[q] = up if sign == 0 else down
         out_n[q], out_r[q] = best_n, best_r
+
+
+def _off_subsets(subsets, m):
+    """The cables off each subset (K, m - 5), ascending."""
+    K = subsets.shape[0]
+    off = np.empty((K, m - 5), np.int64)
+    inS = np.zeros(m, np.bool_)
+    for k in range(K):
+        for s in range(5):
+            inS[subsets[k, s]] = True
+        o = 0
+        for i in range(m):
+            if not inS[i]:
+                off[k, o] = i
+                o += 1
+        for s in range(5):
+            inS[subsets[k, s]] = False
+    return off
+
+
+def _subset_structure(subsets, pivcol, rowof, nxs, xcols, nzs, zrows, zposs):
+    """Per subset k, in the basis ``pivcol`` / ``rowof`` (``gauss_jordan``'s): its nxs[k]
+    cables off the basis xcols[k], and the nzs[k] basis rows zrows[k] whose pivot cable is
+    off the subset (zposs[k][r]: row r's place among them)."""
+    m = rowof.shape[0]
+    inS = np.zeros(m, np.bool_)
+    for k in range(subsets.shape[0]):
+        nx = 0
+        for s in range(5):
+            inS[subsets[k, s]] = True
+            if rowof[subsets[k, s]] < 0:
+                xcols[k, nx] = subsets[k, s]
+                nx += 1
+        nz = 0
+        for r in range(6):
+            if not inS[pivcol[r]]:
+                zrows[k, nz], zposs[k, r] = r, nz
+                nz += 1
+        nxs[k], nzs[k] = nx, nz
+        for s in range(5):
+            inS[subsets[k, s]] = False
+
+
+def stiffness_band_kernel(J, c, w_local, L3, load_frame, W, ok):
+    """The band v (N, m) N = |rows of P_W L| at poses with J (N, 6, m), load points c (N, 3)
+    (the ellipsoid as ``facet_kernel``'s) and cable weights W (N, m) (elastic cables: their
+    stiffness, N/m), P_W = W J^T (J W J^T)^-1, where ``ok`` (N,); inf where J W J^T is
+    singular, nan off ``ok``."""
+    n, m = J.shape[0], J.shape[2]
+    v = np.full((n, m), np.nan)
+    M = np.empty((6, 6))
+    X = np.empty((6, m))
+    w0 = np.empty(6)
+    L = np.empty((6, 6))
+    for q in range(n):
+        if not ok[q]:
+            continue
+        Jq, Wq = J[q], W[q]
+        for r in range(6):  # X = J W, M = J W J^T
+            for i in range(m):
+                X[r, i] = Jq[r, i] * Wq[i]
+        for r in range(6):
+            for r2 in range(6):
+                s = 0.0
+                for i in range(m):
+                    s += X[r, i] * Jq[r2, i]
+                M[r, r2] = s
+        solved, _ = eliminate(M, X)  # X = (J W J^T)^-1 J W = P_W^T
+        if not solved:
+            for i in range(m):
+                v[q, i] = np.inf
+            continue
+        load_wrench(q, c, w_local, L3, load_frame, w0, L)
+        for i in range(m):
+            vv = 0.0
+            for j in range(6):
+                s = 0.0
+                for r in range(6):
+                    s += X[r, i] * L[r, j]
+                vv += s * s
+            v[q, i] = np.sqrt(vv)
+    return v
 
 
 def six_cable_kernel(p, R, a, b, g, w_local, L3, load_frame, W, singular_det):

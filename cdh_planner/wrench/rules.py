@@ -104,19 +104,22 @@ def stiffness_band(robot, J, c, t0, lengths, v):
     the tensions of cables held at their lengths by P_K dw, P_K = K J^T (J K J^T)^-1,
     K = diag(EA / L0) = diag((EA + t0) / L) at the nominal t0 (N, m) N and lengths (N, m) m,
     whatever rule chose t0; over the ellipsoid that is +- |rows of P_K L| (L L^T = E^-1 at
-    the load points c (N, 3) m). J (N, 6, m). Rigid cables (no ``robot.cable_stiffness``),
-    six cables (P_K = J^-1 = P, whatever K: kept exact rather than rounded) and poses where
-    t0 is not finite: ``v`` unchanged."""
+    the load points c (N, 3) m; inf where J K J^T is singular). J (N, 6, m). Compiled
+    (``compiled.stiffness_band_batch``: ``weighted_pseudo_inverse``'s algebra one pose at a
+    time, to rounding). Rigid cables (no ``robot.cable_stiffness``), six cables (P_K = J^-1
+    = P, whatever K: kept exact rather than rounded) and poses where t0 is not finite:
+    ``v`` unchanged."""
     if robot.cable_stiffness is None or J.shape[-1] == 6:
         return v
     ok = np.all(np.isfinite(t0), axis=1)
     if not ok.any():
         return v
-    rows = slice(None) if ok.all() else ok  # every pose (verify's): views, not copies
-    P = weighted_pseudo_inverse(J[rows], (robot.cable_stiffness + t0[rows]) / lengths[rows])
-    v = v.copy()
-    v[rows] = np.linalg.norm(P @ inverse_ellipsoid_factor(robot, c[rows]), axis=-1)
-    return v
+    from .compiled import stiffness_band_batch
+    with np.errstate(invalid="ignore"):  # t0 not finite: those poses are not ``ok``
+        K = (robot.cable_stiffness + t0) / lengths
+    band = stiffness_band_batch(J, c, robot.wrench_center_local, inverse_factor(robot),
+                                robot.ellipsoid_frame == "load", K, ok)
+    return np.where(ok[:, None], band, v)
 
 
 STIFFNESS_ITERATIONS = 30   # linearised projections at most
