@@ -1,7 +1,8 @@
 """Large batches of poses on the machine's cores. The compiled kernels release the GIL
 while their machine code runs (``aot``), so a batch cut into blocks of poses runs on
-threads side by side: ``blocks`` (``map_blocks`` for other work in blocks, such as
-``verify``'s JSON rows; ``beside`` for a step beside the caller's). Blocks start at multiples of a kernel's chunk (the
+threads side by side: ``blocks`` (``map_blocks`` for other work in blocks; ``in_order``
+for a stream of blocks, such as ``verify``'s JSON rows; ``beside`` for a step beside the
+caller's). Blocks start at multiples of a kernel's chunk (the
 centred rule's Newton starts cold at a chunk's first pose), so the answers are the same
 bits on any number of threads.
 
@@ -13,7 +14,7 @@ below MIN_POSES stay on the calling thread: a hand-over costs ~0.1 ms, the kerne
 
 import os
 import threading
-from concurrent.futures import ThreadPoolExecutor
+from collections import deque
 
 import numpy as np
 
@@ -60,6 +61,22 @@ def map_blocks(work, n, chunk=1):
     return [work(*bounds[0])] + [f.result() for f in rest]
 
 
+def in_order(work, calls):
+    """``work(*args)`` for each ``args`` of ``calls``, yielded in order, the next ones
+    (as many as ``threads()``) computed ahead on threads meanwhile: a stream whose consumer
+    (a file's writes) runs beside its producers."""
+    if threads() == 1:
+        yield from (work(*args) for args in calls)
+        return
+    ahead = deque()
+    for args in calls:
+        ahead.append(_threads().submit(work, *args))
+        if len(ahead) > threads():
+            yield ahead.popleft().result()
+    while ahead:
+        yield ahead.popleft().result()
+
+
 def beside(work, *args):
     """``work(*args)`` on a thread beside the caller's (a Future): independent steps of one
     command at once, where their compiled kernels or their I/O release the GIL."""
@@ -70,5 +87,7 @@ def _threads():
     global _pool
     with _pool_made:  # the node calls kernels from more than one thread
         if _pool is None:
+            # imported here: 2.4 ms (logging with it) that a small command never needs
+            from concurrent.futures import ThreadPoolExecutor
             _pool = ThreadPoolExecutor(MAX_THREADS - 1, thread_name_prefix="cdh_blocks")
     return _pool

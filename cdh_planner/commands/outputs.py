@@ -69,20 +69,21 @@ def writing(option, path):
 
 
 def write_text(option, path, text):
-    """Write ``text`` (a str, bytes written as they are, or a list of bytes-like pieces
-    written one after another) to ``path``; an OSError becomes an InputError naming
-    ``option``."""
+    """Write ``text`` (a str, bytes written as they are, or an iterable of bytes-like
+    pieces written one after another as they come) to ``path``; an OSError becomes an
+    InputError naming ``option``."""
     with writing(option, path):
-        if isinstance(text, list):
-            write_pieces(path, text)
+        if isinstance(text, str):
+            Path(path).write_text(text)
         elif isinstance(text, bytes):
             Path(path).write_bytes(text)
         else:
-            Path(path).write_text(text)
+            write_pieces(path, text)
 
 
 def write_pieces(path, pieces):
-    """Write the bytes-like ``pieces`` to ``path`` one after another (not joined first)."""
+    """Write the bytes-like ``pieces`` (an iterable: a stream is written as it comes) to
+    ``path`` one after another (not joined first)."""
     with open(path, "wb") as f:
         f.writelines(pieces)
 

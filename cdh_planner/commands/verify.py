@@ -47,7 +47,7 @@ from ..wrench import wrench_feasibility
 from .outputs import check_output, write_text
 from ..parsing.poses import load_poses, parse_angle, parse_length
 from ..model.robot import load_robot
-from ..parallel import beside, map_blocks
+from ..parallel import beside, in_order
 from ..scene.margin import combine
 from ..scene.schema import default_scene, load_scene
 from ..trajectory.path_check import DEFAULT_STEP_M, DEFAULT_STEP_RAD, check_motion
@@ -123,21 +123,21 @@ def _positive(value, option, text):
 
 
 def result_json(robot, poses, feas, segments, ok, step_m, step_rad, accuracy=None):
-    """The JSON document as ``dump_rows`` lays it out (a pose or a segment a line), as the
-    list of its pieces in order (ASCII bytes, and the rows as uint8 arrays: written one
-    after another, the 27 MB are not copied into one string; ``b"".join`` makes the
-    document), built column by column: each array goes through the C encoder once, then the
-    rows are assembled by the compiled ``json_rows`` (the encoder per row costs 3x more for
-    10^4 poses, a template per row 2x); ``accuracy``: the poses' ``accuracy.Accuracy``
-    (robots with length_error), or None."""
-    pose_rows = beside(_rows_text, pose_columns(poses, feas, accuracy))  # both at once
-    segment_rows = _rows_text(segment_columns(segments)) if segments else []
-    return [piece.encode("ascii") if isinstance(piece, str) else piece
+    """The JSON document as ``dump_rows`` lays it out (a pose or a segment a line), as an
+    iterator of its pieces in order (ASCII bytes, and blocks of rows as uint8 arrays),
+    made as they are written: ROWS_PER_BLOCK rows at a time, the next blocks on threads
+    meanwhile (``_rows_text``), so memory stays bounded and no 30 MB document is built;
+    ``b"".join`` makes the document. Built column by column: each array of a block goes
+    through the C encoder once, then the rows are assembled by the compiled ``json_rows``
+    (the encoder per row costs 3x more for 10^4 poses, a template per row 2x);
+    ``accuracy``: the poses' ``accuracy.Accuracy`` (robots with length_error), or None."""
+    return (piece.encode("ascii") if isinstance(piece, str) else piece
             for piece in _layout_pieces({
         "robot": _encode(robot.name), "robot_file": _encode(robot.source),
         "max_step_m": _encode(step_m), "max_step_rad": _encode(step_rad),
-        "poses": pose_rows.result(), "segments": segment_rows,
-        "all_feasible": _encode(bool(ok))})]
+        "poses": _rows_text(pose_columns(poses, feas, accuracy)),
+        "segments": _rows_text(segment_columns(segments)) if segments else [],
+        "all_feasible": _encode(bool(ok))}))
 
 
 def pose_columns(poses, feas, accuracy=None):
@@ -173,14 +173,19 @@ class _Texts(list):
     """A column given as the JSON text of each entry."""
 
 
+ROWS_PER_BLOCK = 2048  # rows a block of the JSON: ~3 MB of eight-cable poses
+
+
 def _rows_text(columns):
     """The JSON object texts of the rows of ``columns`` (name -> array, list of strings,
-    nested mapping of them, or a ``_Texts`` of ready texts), joined as ``layout_rows`` joins
-    list entries: the list of the texts of blocks of rows (``parallel.map_blocks``: a large
-    document's blocks on threads, whose compiled assembly runs side by side)."""
+    nested mapping of them, or a ``_Texts`` of ready texts), as ``layout_rows`` joins
+    list entries: an iterator of the texts of blocks of ROWS_PER_BLOCK rows, the next
+    blocks made on threads while one is written (``parallel.in_order``; their compiled
+    assembly runs side by side)."""
     literals, cols = _row_literals(columns)
-    return map_blocks(lambda a, b: _block_text(literals, [_rows(col, a, b) for col in cols]),
-                      len(cols[0]))
+    n = len(cols[0])
+    return in_order(lambda a, b: _block_text(literals, [_rows(col, a, b) for col in cols]),
+                    [(a, min(n, a + ROWS_PER_BLOCK)) for a in range(0, n, ROWS_PER_BLOCK)])
 
 
 def _rows(col, a, b):
@@ -317,18 +322,19 @@ def layout_rows(texts):
 
 def _layout_pieces(texts):
     """The pieces of ``layout_rows``'s text in order (the texts given, and the keys, brackets
-    and separators around them)."""
-    pieces = []
-    for key, text in texts.items():
-        pieces += [",\n  " if pieces else "{\n  ", _encode(key), ": "]
-        if isinstance(text, list) and text:
-            rows = [ROW_SEPARATOR] * (2 * len(text) - 1)
-            rows[::2] = text
-            pieces += ["[\n    ", *rows, "\n  ]"]
-        else:
-            pieces.append("[]" if isinstance(text, list) else text)
-    pieces.append("\n}\n")
-    return pieces
+    and separators around them), as they come: a list's entries may be an iterator."""
+    for i, (key, text) in enumerate(texts.items()):
+        yield (",\n  " if i else "{\n  ") + _encode(key) + ": "
+        if isinstance(text, str):
+            yield text
+            continue
+        opened = False
+        for row in text:
+            yield ROW_SEPARATOR if opened else "[\n    "
+            opened = True
+            yield row
+        yield "\n  ]" if opened else "[]"
+    yield "\n}\n"
 
 
 _ENCODER = json.JSONEncoder(allow_nan=False)

@@ -52,7 +52,7 @@ def _centred_poses(q0, q1, J, c, w_local, L3, load_frame, tmin, tmax, ranked, ce
     Q2 = np.empty((m, max(m - 6, 0)))
     room_lo = np.empty(m)
     room_hi = np.empty(m)
-    zc = np.empty(max(m - 6, 0))
+    zc = np.zeros(max(m - 6, 0) + 1)  # the shift z, then the last centring's gap
     col = np.empty(6)
     a = np.empty(6)
     mid = 0.5 * (tmin + tmax)
@@ -130,8 +130,10 @@ def _centre(lo, hi, Q2, z, warm=False):
     Newton's method with an Armijo line search that stays inside. Strictly concave, so the
     maximiser is unique and smooth in the data; defined whether or not the band fits
     (s < 0 then). At most CENTRE_ITERATIONS steps (about 12 for 8 cables from z = 0).
-    ``warm``: start from the given z (a neighbouring pose's answer: along a motion Newton
-    then needs a few steps; the maximiser is the same, the start only changes rounding)."""
+    ``warm``: start from the given z[:k] (a neighbouring pose's answer) with s below the
+    least slack by z[k], that pose's gap (along a motion Newton then needs a few steps; the
+    maximiser is the same, the start only changes rounding). z[k] <- this answer's gap: its
+    least slack less s (> 0)."""
     m, k = Q2.shape
     n = k + 1
     mu = CENTRE_MU
@@ -141,7 +143,7 @@ def _centre(lo, hi, Q2, z, warm=False):
         for a in range(k):
             x[a] = z[a]
         _slacks(lo, hi, Q2, x, r)
-        x[k] = r.min() - mu  # strictly inside
+        x[k] = r.min() - (z[k] if z[k] > 0.0 else mu)  # strictly inside
     else:
         x[k] = min(lo.min(), hi.min()) - mu  # strictly inside
     g = np.empty(n)
@@ -211,6 +213,8 @@ def _centre(lo, hi, Q2, z, warm=False):
         x[:] = xt
     for a in range(k):
         z[a] = x[a]
+    _slacks(lo, hi, Q2, x, r)
+    z[k] = r.min()
 
 def _log_product(r):
     """sum_j log(r_j) of positive r, by one log per 8 factors (the line search's hot loop);
