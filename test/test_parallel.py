@@ -47,3 +47,13 @@ def test_the_thread_count_is_the_setting_or_the_cores(given, monkeypatch):
     assert parallel.threads() == expected
     together = threading.Barrier(expected, timeout=120)
     assert len(parallel.map_blocks(lambda a, b: together.wait(), 10 * parallel.MIN_POSES)) == expected
+
+
+@pytest.mark.parametrize("threads", ["1", "3"])
+def test_in_order_yields_every_result_in_order(threads, monkeypatch):
+    """A stream of blocks (``verify``'s JSON rows): every call once, in the order given,
+    however many are computed ahead."""
+    monkeypatch.setenv("CDH_PLANNER_THREADS", threads)
+    calls = [(a, a + 3) for a in range(0, 30, 3)]
+    assert list(parallel.in_order(lambda a, b: list(range(a, b)), calls)) == [
+        list(range(a, b)) for a, b in calls]

@@ -178,8 +178,6 @@ def _centre(lo, hi, Q2, z, warm=False):
             # POLISH more full steps: Newton converges quadratically here (an error e becomes
             # ~e^2 / r), so the answer is the maximiser to rounding whatever the start (cold,
             # or a neighbour's warm one; one step left 2e-11 of the range between them)
-            if polished == POLISH:
-                break
             polished += 1
             for a in range(n):
                 xt[a] = x[a] + dx[a]
@@ -187,6 +185,8 @@ def _centre(lo, hi, Q2, z, warm=False):
             if not rt.min() > 0.0:
                 break
             x[:] = xt
+            if polished == POLISH:
+                break  # (a gradient at the last step's end would only be looked at)
             continue
         phi = x[k] + mu * _log_product(r)
         # the slacks are affine in x: start the line search inside (ratio test), so that
