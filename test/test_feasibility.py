@@ -229,3 +229,22 @@ def test_robot2_q2_to_q3_straight_leaves_c_early():
     assert 0.0 < check.first_unsafe.s < 0.10
     assert check.first_unsafe.s == pytest.approx(0.043, abs=0.005)  # "after about 4 %"
     assert check.first_unsafe.margin <= 0
+
+
+def test_a_large_batch_in_blocks_on_threads_is_the_one_call(monkeypatch):
+    """closed_form cuts a batch of parallel.MIN_POSES poses or more into blocks on threads
+    (numpy releases the GIL): every field bit for bit that of one call on one thread."""
+    from cdh_planner import parallel
+    from cdh_planner.wrench.closed_form import closed_form
+    robot = load_robot(CONFIG / "robot2.yaml")
+    rng = np.random.default_rng(12)
+    n = parallel.MIN_POSES + 777
+    p = rng.uniform(-0.1, 0.1, (n, 3)) + [0.0, 0.0, 0.3]
+    R = rotation_tt(rng.uniform(-0.5, 0.5, (n, 3)) + [0.0, 0.5, 0.0])
+    answers = {}
+    for threads in ("1", "3"):
+        monkeypatch.setenv("CDH_PLANNER_THREADS", threads)
+        answers[threads] = closed_form(robot, p, R)
+    assert 0 < answers["1"].feasible.sum() < n
+    for f in dataclasses.fields(answers["1"]):
+        np.testing.assert_array_equal(getattr(answers["1"], f.name), getattr(answers["3"], f.name))

@@ -10,7 +10,8 @@ B^-1 = J^-1 E^-1 J^-T, the largest change of tension i over the wrench ellipsoid
 import numpy as np
 
 from .geometry import cable_vectors, inverse_ellipsoid_factor, load_point, nominal_wrench, screw_jacobian
-from .record import SINGULAR_DET, Feasibility, constraint_names, normalised_margins
+from ..parallel import map_blocks
+from .record import SINGULAR_DET, Feasibility, constraint_names, joined, normalised_margins
 
 
 def inverse_jacobian(robot, p, R):
@@ -43,7 +44,13 @@ def _envelope(robot, J_inv, c):
 
 
 def closed_form(robot, p, R):
-    """``Feasibility`` of poses of a six-cable robot: positions p (N, 3) m, R (N, 3, 3)."""
+    """``Feasibility`` of poses of a six-cable robot: positions p (N, 3) m, R (N, 3, 3). A
+    large batch in blocks on threads (numpy's loops and LAPACK release the GIL; each
+    pose's numbers are its own, whatever the block)."""
+    return joined(map_blocks(lambda a, b: _closed_form(robot, p[a:b], R[a:b]), len(p)))
+
+
+def _closed_form(robot, p, R):
     n = p.shape[0]
     lengths, u, det, J_inv, c, singular = inverse_jacobian(robot, p, R)
     f0, spread = _envelope(robot, J_inv, c)

@@ -2,7 +2,7 @@
 names they give constraints ("tension_max[3]", a facet "tension_max[2]+tension_min[7,8]").
 Units: m, N, N m."""
 
-from dataclasses import dataclass
+from dataclasses import dataclass, fields
 from functools import cached_property, lru_cache
 
 import numpy as np
@@ -52,6 +52,14 @@ class Feasibility:
     @cached_property
     def singular(self):
         return ~np.isfinite(self.margin)
+
+
+def joined(records):
+    """One record (a Feasibility or a subclass) of the poses of ``records`` in order."""
+    if len(records) == 1:
+        return records[0]
+    return type(records[0])(**{f.name: np.concatenate([getattr(r, f.name) for r in records])
+                               for f in fields(records[0])})
 
 
 @dataclass
