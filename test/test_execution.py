@@ -717,3 +717,27 @@ def test_joint_state_monitor_waits_a_bounded_time_for_a_message(ros):
     assert lengths is None and "s old" in why and polls.calls == 3, (why, polls.calls)
     assert age_in(why) < 60.0                         # not the whole wait
     side.retire(publisher, missing, late)
+
+
+def test_eight_cables_prefer_the_pose_that_explains_the_lengths():
+    """With more than six cables a converged forward kinematics may be a least-squares
+    local minimum: CoGiRo's lengths with 5 mm of noise are explained to 2.5 mm by the
+    pose, and to 0.20 m by a point 2.3 rad tilted that a wrench check calls feasible.
+    Feasibility and tilt choose only among solutions that explain the lengths alike
+    (``likeliest_pose``): of the two it returns the pose even where a caller's hook says
+    only the far point hangs (feasibility first, the order before, returned that point);
+    so does the seed search."""
+    robot = load_robot(CONFIG / "cogiro.yaml")
+    p, R = np.array([0.3, -0.2, 2.4]), rotation_tt([0.2, 0.1, -0.1])
+    L = cable_lengths(robot, p, R) + [0.00305, 0.00308, 0.00015, -0.00214, -0.00446,
+                                      -0.00117, -0.00092, -0.00455]
+    true = forward_kinematics(robot, L, p, R)
+    far = forward_kinematics(robot, L, [1.423, 2.252, 2.809], rotation_tt([-1.062, 0.348, 1.897]))
+    assert true.ok and far.ok and true.residual < 3e-3 and far.residual > 0.19
+    assert rotation_angle_between(far.R, R) > 2.0
+    assert wrench_feasibility(robot, far.p[None], R=far.R[None]).feasible[0]
+    only_far = lambda q, Q: rotation_angle_between(Q, far.R) < 1e-3  # noqa: E731
+    from cdh_planner.model.forward_kinematics import current_pose, likeliest_pose
+    assert likeliest_pose([far, true], np.max(L), only_far) is true
+    q, Q = current_pose(robot, L, feasible=only_far)
+    assert np.linalg.norm(q - p) < 0.02 and rotation_angle_between(Q, R) < 0.02

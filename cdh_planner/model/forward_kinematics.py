@@ -113,16 +113,18 @@ def measured_cable_lengths(robot, lengths, tensions):
 
 
 def current_pose(robot, lengths, guess=None, feasible=None):
-    """The platform pose (p (3,) m, R (3, 3)) whose cable lengths are ``lengths`` (6,) m,
+    """The platform pose (p (3,) m, R (3, 3)) whose cable lengths are ``lengths`` (m,) m,
     by Newton (``forward_kinematics``) from ``guess`` = (p, R), the last known pose.
 
     A hexapod's forward kinematics has several solutions (for planar anchor sets, at
     least the mirror image through the base plane); Newton from the last known pose finds
     the one the platform is on as long as it moved little since. Without a guess, Newton
     runs from 20 orientations (level, turned about z, tilted by 0.4 rad), each with one or
-    two positions fitted to the lengths (``_position_seeds``), ~30 ms; of the solutions a
-    wrench-feasible one is preferred (the platform hangs in taut cables), then the least
-    tilted (z axis nearest the base's). Lengths alone cannot tell feasible solutions apart:
+    two positions fitted to the lengths (``_position_seeds``), ~30 ms; of the solutions
+    that explain the lengths best (``likeliest_pose``: with more than six cables a
+    least-squares point may be a worse local minimum) a wrench-feasible one is preferred
+    (the platform hangs in taut cables), then the least tilted (z axis nearest the
+    base's). Lengths alone cannot tell feasible solutions apart:
     Robot 2's free-flight goal (config/problems) has a feasible twin with the same lengths
     tilted 3.06 rad, nearly upside down, and its pose p (0.02, -0.01, 0.30) m, tau (0.3,
     0.4, 0.1) rad one 9 cm higher and less tilted, which is what the search returns. Pass a
@@ -147,7 +149,7 @@ def current_pose(robot, lengths, guess=None, feasible=None):
         # the platform is far from the last known pose (moved while not watched, a stale
         # guess): search as without a guess rather than refuse
         near = fk.message
-    best, reasons = None, []
+    found, reasons = [], []
     for R0 in _rotation_seeds():
         for p0 in _position_seeds(robot, L, R0):
             try:
@@ -158,19 +160,34 @@ def current_pose(robot, lengths, guess=None, feasible=None):
             if not fk.ok:
                 reasons.append(fk.message)
                 continue
-            # every converged solution has a residual at rounding level, so the residual
-            # cannot choose: feasibility does, then the tilt (angle of the platform's z axis
-            # from the base's), since a platform hanging in cables is seldom upside down
-            hangs = feasible is None or bool(feasible(fk.p, fk.R))
-            tilt = float(np.arccos(np.clip(fk.R[2, 2], -1.0, 1.0)))
-            key = (not hangs, round(tilt, 6), fk.residual)
-            if best is None or key < best[0]:
-                best = (key, fk)
-    if best is None:
+            found.append(fk)
+    if not found:
         not_near = "near the last known one nor " if near else ""
         raise InputError("joint_states", L.tolist(), f"no pose {not_near}from "
                                                      f"{len(reasons)} seeds: {near or reasons[0]}")
-    return best[1].p, best[1].R
+    best = likeliest_pose(found, np.max(L), feasible)
+    return best.p, best.R
+
+
+def likeliest_pose(solutions, longest_m, feasible=None):
+    """Of converged forward kinematics ``solutions`` (ForwardKinematics) of one set of
+    lengths, the pose the platform most likely is in. With more than six cables a
+    solution may be a least-squares point that explains the lengths worse than another
+    (a local minimum of the length error): only those within CONSISTENT of the least
+    residual (twice it, and LSQ_FLOOR_M per m of the longest cable ``longest_m`` m for
+    exact lengths) are candidates. Their residuals are alike (six cables: rounding;
+    measured lengths: their noise), so they cannot choose: feasibility (``feasible(p, R)``,
+    None: all) does, then the tilt (the platform's z axis from the base's), since a
+    platform hanging in cables is seldom upside down."""
+    least = min(fk.residual for fk in solutions)
+    band = 2.0 * least + LSQ_FLOOR_M * max(longest_m, 1.0)
+
+    def key(fk):
+        hangs = feasible is None or bool(feasible(fk.p, fk.R))
+        return (not hangs, round(float(np.arccos(np.clip(fk.R[2, 2], -1.0, 1.0))), 6),
+                fk.residual)
+
+    return min((fk for fk in solutions if fk.residual <= band), key=key)
 
 
 def _rotation_seeds():
