@@ -741,3 +741,24 @@ def test_eight_cables_prefer_the_pose_that_explains_the_lengths():
     assert likeliest_pose([far, true], np.max(L), only_far) is true
     q, Q = current_pose(robot, L, feasible=only_far)
     assert np.linalg.norm(q - p) < 0.02 and rotation_angle_between(Q, R) < 0.02
+
+
+def test_a_guess_whose_newton_turns_far_is_not_trusted():
+    """From a guess far from the platform (a stale last pose) Newton may converge to a
+    least-squares local minimum 2.3 rad away (CoGiRo, noisy lengths); a result turned more
+    than GUESS_TURN_RAD from its guess goes to the seed search, which finds the pose. A
+    guess near the pose is trusted as before."""
+    from cdh_planner.model.forward_kinematics import GUESS_TURN_RAD, current_pose
+    robot = load_robot(CONFIG / "cogiro.yaml")
+    p, R = np.array([0.3, -0.2, 2.4]), rotation_tt([0.2, 0.1, -0.1])
+    L = cable_lengths(robot, p, R) + [0.00305, 0.00308, 0.00015, -0.00214, -0.00446,
+                                      -0.00117, -0.00092, -0.00455]
+    stale = (np.array([1.423, 2.252, 2.809]), rotation_tt([-1.062, 0.348, 1.897]))
+    far = forward_kinematics(robot, L, *stale)
+    assert far.ok and rotation_angle_between(far.R, stale[1]) > GUESS_TURN_RAD
+    assert rotation_angle_between(far.R, R) > 2.0
+    q, Q = current_pose(robot, L, guess=stale)
+    assert np.linalg.norm(q - p) < 0.02 and rotation_angle_between(Q, R) < 0.02
+    near = forward_kinematics(robot, L, p + 0.01, R)
+    q, Q = current_pose(robot, L, guess=(p + 0.01, R))
+    assert np.array_equal(q, near.p) and np.array_equal(Q, near.R)

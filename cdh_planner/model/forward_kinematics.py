@@ -20,8 +20,13 @@ from ..ports import Rotation
 from ..errors import InputError
 from .elastic import stretched_lengths
 from .kinematics import LSQ_RTOL, TOL_M, cable_lengths, forward_kinematics, rotation_vector_exp
+from .pose import rotation_angle_between
 
 MAX_ITERATIONS = 20
+# rad: a pose found from the last known one but turned further than this from it is not
+# taken on trust (a platform does not turn so far between two readings; Newton does, to a
+# twin or, with more than six cables, a least-squares local minimum): the seeds decide
+GUESS_TURN_RAD = 0.5
 LSQ_FLOOR_M = 1e-9  # m > 6 cables: a length error this small (per m of cable) is converged
 
 
@@ -129,7 +134,8 @@ def current_pose(robot, lengths, guess=None, feasible=None):
     tilted 3.06 rad, nearly upside down, and its pose p (0.02, -0.01, 0.30) m, tau (0.3,
     0.4, 0.1) rad one 9 cm higher and less tilted, which is what the search returns. Pass a
     guess whenever a pose is known; when Newton fails from it (the platform moved far
-    since), the seeds are searched as without one.
+    since) or ends turned more than GUESS_TURN_RAD from it, the seeds are searched as
+    without one (that end one of the solutions).
 
     InputError (field ``joint_states``) naming why when no pose is found (singular cable
     Jacobian, no convergence) or the lengths are not numbers > 0. ``feasible(p, R) -> bool``
@@ -140,16 +146,19 @@ def current_pose(robot, lengths, guess=None, feasible=None):
     if L.shape != (len(robot.winch_names),) or not np.all(np.isfinite(L)) or np.any(L <= 0):
         raise InputError("joint_states", np.asarray(lengths).tolist(),
                          "expected one finite cable length > 0 (m) per winch")
-    near = None
+    near, found = None, []
     if guess is not None:
         p0, R0 = guess
         fk = forward_kinematics(robot, L, p0, R0)
-        if fk.ok:
+        turned = rotation_angle_between(fk.R, np.asarray(R0, dtype=float))
+        if fk.ok and turned <= GUESS_TURN_RAD:
             return fk.p, fk.R
         # the platform is far from the last known pose (moved while not watched, a stale
-        # guess): search as without a guess rather than refuse
-        near = fk.message
-    found, reasons = [], []
+        # guess), or Newton wandered off to another solution or a least-squares local
+        # minimum: search as without a guess rather than refuse, that solution a candidate
+        near = fk.message if not fk.ok else f"Newton from the last known pose turned {turned:.2f} rad"
+        found = [fk] if fk.ok else []
+    reasons = []
     for R0 in _rotation_seeds():
         for p0 in _position_seeds(robot, L, R0):
             try:
