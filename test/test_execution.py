@@ -762,3 +762,24 @@ def test_a_guess_whose_newton_turns_far_is_not_trusted():
     near = forward_kinematics(robot, L, p + 0.01, R)
     q, Q = current_pose(robot, L, guess=(p + 0.01, R))
     assert np.array_equal(q, near.p) and np.array_equal(Q, near.R)
+
+
+def test_a_wrong_last_pose_does_not_outvote_the_plans_ends():
+    """robot2_8 (8 cables) at a pose with exact lengths; the node's last pose a least-squares
+    local minimum of them (11 mm residual, turned > 0.5 rad; Newton from it stays there) and
+    nearer in cable lengths than the plan's end it knows (3 cm off the pose). Newton runs
+    from each known pose (``current_pose(..., known=)``) and the ends that explain the
+    lengths worse are dropped: the pose, not the last one (choosing the start nearest in
+    lengths first, as before, kept the wrong pose)."""
+    robot = load_robot(CONFIG / "robot2_8.yaml")
+    p, R = np.array([0.02, -0.01, 0.30]), rotation_tt([0.3, 0.2, 0.1])
+    L = cable_lengths(robot, p, R)
+    wrong = forward_kinematics(robot, L, [-0.1298, 0.0803, 0.3828],
+                               rotation_tt([-0.1743, 1.0773, 1.3407]))
+    assert wrong.ok and wrong.residual > 0.01 and rotation_angle_between(wrong.R, R) > 0.5
+    stays = forward_kinematics(robot, L, wrong.p, wrong.R)
+    assert rotation_angle_between(stays.R, wrong.R) < 1e-9
+    end = (p + [0.03, 0.0, 0.0], R)
+    assert X.nearest_pose(robot, L, [(wrong.p, wrong.R), end])[0] is wrong.p
+    q, Q = X.current_pose(robot, L, (wrong.p, wrong.R), known=[end])
+    assert np.max(np.abs(q - p)) < 1e-9 and rotation_angle_between(Q, R) < 1e-9

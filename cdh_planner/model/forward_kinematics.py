@@ -95,9 +95,12 @@ def nearest_pose(robot, lengths, poses):
     """Of the poses (p (3,) m, R (3, 3)) in ``poses``, the one whose cable lengths are
     nearest ``lengths`` (m, largest difference): the best start for ``current_pose``'s
     Newton, since a hexapod has several poses for the same lengths. None if there are none."""
-    L = np.asarray(lengths, dtype=float)
-    return min(poses, key=lambda pose: float(np.max(np.abs(cable_lengths(robot, *pose) - L))),
-               default=None)
+    return min(poses, key=lambda pose: _mismatch(robot, lengths, pose), default=None)
+
+
+def _mismatch(robot, lengths, pose):
+    """The largest difference (m) between the cable lengths of ``pose`` (p, R) and ``lengths``."""
+    return float(np.max(np.abs(cable_lengths(robot, *pose) - np.asarray(lengths, dtype=float))))
 
 
 def measured_cable_lengths(robot, lengths, tensions):
@@ -117,7 +120,7 @@ def measured_cable_lengths(robot, lengths, tensions):
     return stretched_lengths(robot, L, np.maximum(t, 0.0))
 
 
-def current_pose(robot, lengths, guess=None, feasible=None):
+def current_pose(robot, lengths, guess=None, feasible=None, known=()):
     """The platform pose (p (3,) m, R (3, 3)) whose cable lengths are ``lengths`` (m,) m,
     by Newton (``forward_kinematics``) from ``guess`` = (p, R), the last known pose.
 
@@ -135,7 +138,11 @@ def current_pose(robot, lengths, guess=None, feasible=None):
     0.4, 0.1) rad one 9 cm higher and less tilted, which is what the search returns. Pass a
     guess whenever a pose is known; when Newton fails from it (the platform moved far
     since) or ends turned more than GUESS_TURN_RAD from it, the seeds are searched as
-    without one (that end one of the solutions).
+    without one (that end one of the solutions). ``known``: more poses the platform may be
+    near (a plan's ends), Newton from each as from the guess; of the ends that explain the
+    lengths alike (``likeliest_pose``'s band: with more than six cables a wrong last pose
+    can be a least-squares local minimum, which Newton from it keeps), the one from the
+    start nearest in cable lengths (a twin is told apart by where it was last).
 
     InputError (field ``joint_states``) naming why when no pose is found (singular cable
     Jacobian, no convergence) or the lengths are not numbers > 0. ``feasible(p, R) -> bool``
@@ -146,18 +153,22 @@ def current_pose(robot, lengths, guess=None, feasible=None):
     if L.shape != (len(robot.winch_names),) or not np.all(np.isfinite(L)) or np.any(L <= 0):
         raise InputError("joint_states", np.asarray(lengths).tolist(),
                          "expected one finite cable length > 0 (m) per winch")
-    near, found = None, []
-    if guess is not None:
-        p0, R0 = guess
+    near, found, trusted = None, [], []
+    for p0, R0 in ([guess] if guess is not None else []) + list(known):
         fk = forward_kinematics(robot, L, p0, R0)
         turned = rotation_angle_between(fk.R, np.asarray(R0, dtype=float))
         if fk.ok and turned <= GUESS_TURN_RAD:
-            return fk.p, fk.R
-        # the platform is far from the last known pose (moved while not watched, a stale
-        # guess), or Newton wandered off to another solution or a least-squares local
-        # minimum: search as without a guess rather than refuse, that solution a candidate
-        near = fk.message if not fk.ok else f"Newton from the last known pose turned {turned:.2f} rad"
-        found = [fk] if fk.ok else []
+            trusted.append((_mismatch(robot, L, (p0, R0)), fk))
+            continue
+        # the platform is far from that pose (moved while not watched, a stale guess), or
+        # Newton wandered off to another solution or a least-squares local minimum: search
+        # as without a guess rather than refuse, that solution a candidate
+        near = near or (fk.message if not fk.ok else f"Newton from a known pose turned {turned:.2f} rad")
+        found += [fk] if fk.ok else []
+    if trusted:
+        band = _residual_band([fk for _, fk in trusted], np.max(L))
+        best = min((t for t in trusted if t[1].residual <= band), key=lambda t: t[0])[1]
+        return best.p, best.R
     reasons = []
     for R0 in _rotation_seeds():
         for p0 in _position_seeds(robot, L, R0):
@@ -182,14 +193,13 @@ def likeliest_pose(solutions, longest_m, feasible=None):
     """Of converged forward kinematics ``solutions`` (ForwardKinematics) of one set of
     lengths, the pose the platform most likely is in. With more than six cables a
     solution may be a least-squares point that explains the lengths worse than another
-    (a local minimum of the length error): only those within CONSISTENT of the least
-    residual (twice it, and LSQ_FLOOR_M per m of the longest cable ``longest_m`` m for
-    exact lengths) are candidates. Their residuals are alike (six cables: rounding;
+    (a local minimum of the length error): only those within ``_residual_band`` of the
+    least residual (twice it, and LSQ_FLOOR_M per m of the longest cable ``longest_m`` m
+    for exact lengths) are candidates. Their residuals are alike (six cables: rounding;
     measured lengths: their noise), so they cannot choose: feasibility (``feasible(p, R)``,
     None: all) does, then the tilt (the platform's z axis from the base's), since a
     platform hanging in cables is seldom upside down."""
-    least = min(fk.residual for fk in solutions)
-    band = 2.0 * least + LSQ_FLOOR_M * max(longest_m, 1.0)
+    band = _residual_band(solutions, longest_m)
 
     def key(fk):
         hangs = feasible is None or bool(feasible(fk.p, fk.R))
@@ -197,6 +207,12 @@ def likeliest_pose(solutions, longest_m, feasible=None):
                 fk.residual)
 
     return min((fk for fk in solutions if fk.residual <= band), key=key)
+
+
+def _residual_band(solutions, longest_m):
+    """The largest residual (m) of solutions that explain the lengths as well as the best
+    of ``solutions``: twice its residual, and LSQ_FLOOR_M per m of the longest cable."""
+    return 2.0 * min(fk.residual for fk in solutions) + LSQ_FLOOR_M * max(longest_m, 1.0)
 
 
 def _rotation_seeds():

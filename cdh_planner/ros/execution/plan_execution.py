@@ -299,9 +299,8 @@ class PlanExecution:
     # ------------------------------------------------------------------ where it is
 
     def current_start(self, config, plan=None, cancelled=lambda: False):
-        """The MeasuredStart: the pose by forward kinematics from the winches' lengths,
-        Newton from the nearest known pose (the last forward kinematics, the ends of
-        ``plan``), or why not. Without recent lengths it waits up to
+        """The MeasuredStart: the pose by forward kinematics from the winches' lengths
+        (``forward_kinematics``: from the last pose and the ends of ``plan``), or why not. Without recent lengths it waits up to
         ``execution.joint_states_wait_s`` for them, or until ``cancelled()``."""
         values = config.values
         lengths, why = self.joints.wait_lengths(values["execution.joint_states_max_age_s"],
@@ -321,8 +320,10 @@ class PlanExecution:
     def forward_kinematics(self, robot, lengths, plan=None, tensions=None):
         """The pose (p (3,) m, R (3, 3)) of the winches' cable lengths ``lengths`` (m),
         stretched by the measured ``tensions`` (N) when the cables are elastic (without
-        them: taken as rigid, said once in the log): Newton from the nearest known pose
-        (the last forward kinematics, the ends of ``plan``), kept as the next one's guess.
+        them: taken as rigid, said once in the log): Newton from the last forward
+        kinematics and the ends of ``plan`` (``winches.current_pose``: of the ends that
+        explain the lengths alike, the one from the start nearest in lengths), kept as the
+        next one's guess.
         InputError when Newton finds none."""
         if is_elastic(robot):
             if tensions is None and not self._said_rigid:
@@ -331,8 +332,7 @@ class PlanExecution:
                     "the joint states carry no efforts (measured tensions): forward kinematics "
                     "takes the cables as rigid, not stretched by robot.cable_stiffness")
             lengths = measured_cable_lengths(robot, lengths, tensions)
-        guess = winches.nearest_pose(robot, lengths, self._known_poses(plan))
-        p, R = winches.current_pose(robot, lengths, guess)
+        p, R = winches.current_pose(robot, lengths, self._last_pose, self._plan_ends(plan))
         self._last_pose = (p, R)
         # m > 6: least squares; the residual (m) tells how consistent the lengths are
         self.forward_kinematics_residual_m = float(np.max(np.abs(cable_lengths(robot, p, R) - lengths)))
@@ -348,13 +348,13 @@ class PlanExecution:
         acc = pose_accuracy(robot, p[None], R=R[None])
         return float(acc.position_m[0]), float(acc.orientation_rad[0])
 
-    def _known_poses(self, plan):
-        """Platform poses (p, R): the last forward kinematics and the ends of ``plan``."""
-        known = [self._last_pose] if self._last_pose is not None else []
-        if plan is not None:
-            path = plan[0]
-            known += [(path.p[k], rotation_from_quaternion(path.quaternion[k])) for k in (0, -1)]
-        return known
+    @staticmethod
+    def _plan_ends(plan):
+        """The platform poses (p, R) at the ends of ``plan`` (none without one)."""
+        if plan is None:
+            return []
+        path = plan[0]
+        return [(path.p[k], rotation_from_quaternion(path.quaternion[k])) for k in (0, -1)]
 
     def _stamp(self):
         return self._node.get_clock().now().to_msg()

@@ -153,10 +153,10 @@ def start_mismatch(measured, planned_first, tolerance_m, winch_names):
 
 # ----------------------------------------------------------------------------- pose
 
-def current_pose(robot, lengths, guess=None):
+def current_pose(robot, lengths, guess=None, known=()):
     """``model.forward_kinematics.current_pose``, wrench-feasible solutions preferred."""
     return _current_pose(robot, lengths, guess, feasible=lambda p, R: bool(
-        wrench_feasibility(robot, p[None], R=R[None]).feasible[0]))
+        wrench_feasibility(robot, p[None], R=R[None]).feasible[0]), known=known)
 
 
 # ----------------------------------------------------------------------------- joint states
