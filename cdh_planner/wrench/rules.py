@@ -115,8 +115,8 @@ def stiffness_band(robot, J, c, t0, lengths, v):
     if not ok.any():
         return v
     from .compiled import stiffness_band_batch
-    with np.errstate(invalid="ignore"):  # t0 not finite: those poses are not ``ok``
-        K = (robot.cable_stiffness + t0) / lengths
+    K = np.ones_like(t0)  # weights of the poses not ``ok`` are not read
+    K[ok] = (robot.cable_stiffness + t0[ok]) / lengths[ok]
     band = stiffness_band_batch(J, c, robot.wrench_center_local, inverse_factor(robot),
                                 robot.ellipsoid_frame == "load", K, ok)
     return np.where(ok[:, None], band, v)
