@@ -783,3 +783,19 @@ def test_a_wrong_last_pose_does_not_outvote_the_plans_ends():
     assert X.nearest_pose(robot, L, [(wrong.p, wrong.R), end])[0] is wrong.p
     q, Q = X.current_pose(robot, L, (wrong.p, wrong.R), known=[end])
     assert np.max(np.abs(q - p)) < 1e-9 and rotation_angle_between(Q, R) < 1e-9
+
+
+def test_the_nearest_waypoint_is_the_nearest_pose():
+    """``nearest_waypoint`` (the executing path's start for the live state's forward
+    kinematics, all waypoints at once) picks what ``nearest_pose`` picks one by one."""
+    from cdh_planner.model.forward_kinematics import nearest_waypoint
+    robot = load_robot(CONFIG / "robot2_8.yaml")
+    rng = np.random.default_rng(9)
+    p = np.array([0.0, 0.0, 0.3]) + rng.uniform(-0.05, 0.05, (40, 3))
+    R = rotation_tt(rng.uniform(-0.3, 0.3, (40, 3)) + [0.0, 0.3, 0.0])
+    for k in (0, 17, 39):
+        L = cable_lengths(robot, p[k], R[k]) + 1e-4
+        q, Q = nearest_waypoint(robot, L, p, R)
+        assert np.array_equal(q, p[k]) and np.array_equal(Q, R[k])
+        assert np.array_equal(X.nearest_pose(robot, L, list(zip(p, R)))[0], q)
+    assert nearest_waypoint(robot, L, p[:0], R[:0]) is None

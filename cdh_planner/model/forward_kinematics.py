@@ -98,6 +98,17 @@ def nearest_pose(robot, lengths, poses):
     return min(poses, key=lambda pose: _mismatch(robot, lengths, pose), default=None)
 
 
+def nearest_waypoint(robot, lengths, p, R):
+    """Of a path's waypoints (p (N, 3) m, R (N, 3, 3)), the pose (p_k, R_k) whose cable
+    lengths are nearest ``lengths`` (m, largest difference), found at once for all of
+    them (``nearest_pose`` one by one); None for no waypoints."""
+    if not len(p):
+        return None
+    d = p[:, None, :] + np.einsum("nij,kj->nki", R, robot.platform_anchors) - robot.base_anchors
+    k = int(np.argmin(np.max(np.abs(np.linalg.norm(d, axis=2) - np.asarray(lengths)), axis=1)))
+    return p[k], R[k]
+
+
 def _mismatch(robot, lengths, pose):
     """The largest difference (m) between the cable lengths of ``pose`` (p, R) and ``lengths``."""
     return float(np.max(np.abs(cable_lengths(robot, *pose) - np.asarray(lengths, dtype=float))))

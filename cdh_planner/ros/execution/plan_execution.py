@@ -33,7 +33,7 @@ import numpy as np
 from ...accuracy import has_accuracy, pose_accuracy
 from ...errors import InputError, exception_line
 from ...model.elastic import is_elastic
-from ...model.forward_kinematics import measured_cable_lengths
+from ...model.forward_kinematics import measured_cable_lengths, nearest_waypoint
 from ...model.kinematics import cable_lengths
 from ...model.pose import rotation_from_quaternion
 from . import winches
@@ -65,6 +65,7 @@ class PlanExecution:
         self._timer = None
         self._timer_period = None
         self._last_pose = None         # (p, R) of the last forward kinematics, its next guess
+        self._waypoints = None         # (p (N, 3), R (N, 3, 3)) of the path executing now
         self.forward_kinematics_residual_m = None  # its largest cable length error, m
         self._said_rigid = False       # logged that joint states without efforts are rigid
         values = config.values
@@ -117,6 +118,7 @@ class PlanExecution:
         run = self.runs.begin(values["execution.mode"])
         if run is None:
             return False, f"refused: already executing{self._where()}; call ~/stop first"
+        self._waypoints = (path.p, rotation_from_quaternion(path.quaternion))
         try:
             outlet = self._outlet(run.mode)
             if not outlet.streamed:
@@ -267,7 +269,7 @@ class PlanExecution:
         latched and ``on_end(publish_pending)``. Later calls for the same run do nothing."""
         if not self.runs.end(run, outcome, message):
             return   # ended already (stop and the last tick, shutdown and the controller)
-        self._stream = None
+        self._stream, self._waypoints = None, None
         self._quietly("cancelling the stream timer",
                       lambda: self._timer is not None and self._timer.cancel())
         self._quietly("logging the end", lambda: self._log_end(outcome, message))
@@ -321,9 +323,11 @@ class PlanExecution:
         """The pose (p (3,) m, R (3, 3)) of the winches' cable lengths ``lengths`` (m),
         stretched by the measured ``tensions`` (N) when the cables are elastic (without
         them: taken as rigid, said once in the log): Newton from the last forward
-        kinematics and the ends of ``plan`` (``winches.current_pose``: of the ends that
-        explain the lengths alike, the one from the start nearest in lengths), kept as the
-        next one's guess.
+        kinematics, the ends of ``plan`` and, while a path executes, its waypoint nearest in
+        lengths (``winches.current_pose``: of the ends that explain the lengths alike, the
+        one from the start nearest in lengths; a wrong last pose, a least-squares local
+        minimum with more than six cables, is left as soon as a waypoint explains the
+        lengths better), kept as the next one's guess.
         InputError when Newton finds none."""
         if is_elastic(robot):
             if tensions is None and not self._said_rigid:
@@ -332,7 +336,11 @@ class PlanExecution:
                     "the joint states carry no efforts (measured tensions): forward kinematics "
                     "takes the cables as rigid, not stretched by robot.cable_stiffness")
             lengths = measured_cable_lengths(robot, lengths, tensions)
-        p, R = winches.current_pose(robot, lengths, self._last_pose, self._plan_ends(plan))
+        known = self._plan_ends(plan)
+        waypoints = self._waypoints   # while executing: the path's waypoint nearest in lengths
+        if waypoints is not None:
+            known.append(nearest_waypoint(robot, lengths, *waypoints))
+        p, R = winches.current_pose(robot, lengths, self._last_pose, known)
         self._last_pose = (p, R)
         # m > 6: least squares; the residual (m) tells how consistent the lengths are
         self.forward_kinematics_residual_m = float(np.max(np.abs(cable_lengths(robot, p, R) - lengths)))
