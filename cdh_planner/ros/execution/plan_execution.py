@@ -302,7 +302,8 @@ class PlanExecution:
 
     def current_start(self, config, plan=None, cancelled=lambda: False):
         """The MeasuredStart: the pose by forward kinematics from the winches' lengths
-        (``forward_kinematics``: from the last pose and the ends of ``plan``), or why not. Without recent lengths it waits up to
+        (``forward_kinematics``: from the last pose and the ends of ``plan``), or why not;
+        what it started from and found is logged. Without recent lengths it waits up to
         ``execution.joint_states_wait_s`` for them, or until ``cancelled()``."""
         values = config.values
         lengths, why = self.joints.wait_lengths(values["execution.joint_states_max_age_s"],
@@ -310,13 +311,21 @@ class PlanExecution:
                                                 cancelled)
         if lengths is None:
             return MeasuredStart(why=why)
+        had_last, tensions = self._last_pose is not None, self.joints.tensions
         try:
-            p, R = self.forward_kinematics(config.robot, lengths, plan, self.joints.tensions)
+            p, R = self.forward_kinematics(config.robot, lengths, plan, tensions)
         except InputError as exc:
             return MeasuredStart(why=str(exc))
         except Exception as exc:  # noqa: BLE001 - the goal still gets a result, with why
             self._node.get_logger().error(f"forward kinematics failed: {traceback.format_exc()}")
             return MeasuredStart(why=f"forward kinematics failed: {exception_line(exc)}")
+        # m > 6 has least-squares local minima: what a wrong start was made of, in the log
+        self._node.get_logger().info(
+            f"measured start: p {np.round(p, 5).tolist()} m, tilt "
+            f"{float(np.arccos(np.clip(R[2, 2], -1.0, 1.0))):.4f} rad, residual "
+            f"{self.forward_kinematics_residual_m:.3g} m; from the last pose: {had_last}, the "
+            f"plan's ends: {plan is not None}, efforts: {tensions is not None}; lengths "
+            f"{np.round(lengths, 6).tolist()} m")
         return MeasuredStart(pose=M.pose_stamped_msg(p, R, config.base_frame, self._stamp()))
 
     def forward_kinematics(self, robot, lengths, plan=None, tensions=None):
