@@ -306,12 +306,12 @@ class PlanExecution:
         what it started from and found is logged. Without recent lengths it waits up to
         ``execution.joint_states_wait_s`` for them, or until ``cancelled()``."""
         values = config.values
-        lengths, why = self.joints.wait_lengths(values["execution.joint_states_max_age_s"],
-                                                values["execution.joint_states_wait_s"],
-                                                cancelled)
+        lengths, tensions, why = self.joints.wait_measured(
+            values["execution.joint_states_max_age_s"], values["execution.joint_states_wait_s"],
+            cancelled)
         if lengths is None:
             return MeasuredStart(why=why)
-        had_last, tensions = self._last_pose is not None, self.joints.tensions
+        had_last = self._last_pose is not None
         try:
             p, R = self.forward_kinematics(config.robot, lengths, plan, tensions)
         except InputError as exc:

@@ -3,7 +3,7 @@ winches are (library code for the node: rclpy, no Node subclass).
 
     goal = fjt_goal(cable_trajectory)                 # control_msgs FollowJointTrajectory goal
     monitor = JointStateMonitor(node, "/joint_states", robot.winch_names)
-    lengths, why = monitor.lengths(max_age_s=0.5)     # (6,) m, or None and why not
+    lengths, why = monitor.lengths(max_age_s=0.5)     # (m,) m, or None and why not
     problem = start_mismatch(lengths, planned_first, 0.005, robot.winch_names)
     p, R = current_pose(robot, lengths, guess=(p_last, R_last))
     executor = TrajectoryExecutor(node, "/cable_controller/follow_joint_trajectory")
@@ -165,10 +165,13 @@ class JointStateMonitor:
     """The latest sensor_msgs/JointState on ``topic`` and when it arrived (monotonic),
     read when asked (``polled.PolledSubscription``: no executor work per message).
 
-    ``lengths(max_age_s)`` gives the winches' cable lengths (6,) m in the order of
-    ``winch_names``, or None and why not: nothing received yet, the last message older than
-    ``max_age_s`` (s), or a winch missing or not a length in it. ``wait_lengths`` also
-    waits, a bounded time, for a message when there is none recent enough.
+    ``measured(max_age_s)`` gives the winches' cable lengths (m,) m in the order of
+    ``winch_names`` and the efforts (measured tensions, N, or None) of the same message, or
+    None and why not: nothing received yet, the last message older than ``max_age_s`` (s),
+    or a winch missing or not a length in it. ``wait_measured`` also waits, a bounded time,
+    for a message when there is none recent enough; ``lengths`` / ``wait_lengths`` are
+    those without the efforts. Lengths and efforts come from one message read once: the
+    live state and a plan's measured start read it from two threads.
     """
 
     def __init__(self, node, topic, winch_names):
@@ -176,7 +179,6 @@ class JointStateMonitor:
         self.winch_names = check_joint_names(winch_names, "winch_names")
         self._lock = threading.Lock()
         self._latest = None          # (JointState, time.monotonic() of arrival)
-        self.tensions = None         # N: the efforts of the message ``lengths`` last read
         self.subscription = PolledSubscription(node, JointState, topic, JOINT_STATE_QOS)
         self.topic = self.subscription.topic_name
 
@@ -190,7 +192,12 @@ class JointStateMonitor:
             return self._latest
 
     def wait_lengths(self, max_age_s, wait_s, cancelled=lambda: False):
-        """``lengths(max_age_s)``, waiting up to ``wait_s`` (s) for a message while none is
+        """``wait_measured`` without the efforts: (lengths, why)."""
+        lengths, _, why = self.wait_measured(max_age_s, wait_s, cancelled)
+        return lengths, why
+
+    def wait_measured(self, max_age_s, wait_s, cancelled=lambda: False):
+        """``measured(max_age_s)``, waiting up to ``wait_s`` (s) for a message while none is
         recent enough (processes started together can take a DDS announcement period,
         about 3 s, to find each other), looking every CANCEL_POLL_S, and no longer once
         ``cancelled()`` is true. A message that names the winches wrongly is answered at once."""
@@ -200,28 +207,33 @@ class JointStateMonitor:
             recent = latest is not None and time.monotonic() - latest[1] <= max_age_s
             left = end - time.monotonic()
             if recent or left <= 0 or cancelled():
-                return self.lengths(max_age_s)
+                return self.measured(max_age_s)
             time.sleep(min(left, CANCEL_POLL_S))
 
     def lengths(self, max_age_s):
-        """(cable lengths (6,) m, "") or (None, the reason)."""
+        """``measured`` without the efforts: (cable lengths (m,) m, "") or (None, why)."""
+        lengths, _, why = self.measured(max_age_s)
+        return lengths, why
+
+    def measured(self, max_age_s):
+        """(cable lengths (m,) m, efforts (m,) N or None, "") of the latest message, or
+        (None, None, the reason)."""
         latest = self.latest
         if latest is None:
             # Which of the two: a name or discovery problem, or a publisher that is silent.
             seen = self._node.count_publishers(self.topic)
-            return None, (f"nothing received on {self.topic} "
-                          f"({'no' if seen == 0 else seen} publisher{'s' * (seen != 1)} seen)")
+            return None, None, (f"nothing received on {self.topic} "
+                                f"({'no' if seen == 0 else seen} publisher{'s' * (seen != 1)} seen)")
         msg, arrived = latest
         age = time.monotonic() - arrived
         if age > max_age_s:
-            return None, (f"the last joint state on {self.topic} is {age:.2f} s old "
-                          f"(at most {max_age_s:g} s)")
+            return None, None, (f"the last joint state on {self.topic} is {age:.2f} s old "
+                                f"(at most {max_age_s:g} s)")
         try:
-            lengths = measured_lengths(msg, self.winch_names)
-            self.tensions = measured_tensions(msg, self.winch_names)
-            return lengths, ""
+            return (measured_lengths(msg, self.winch_names),
+                    measured_tensions(msg, self.winch_names), "")
         except InputError as exc:
-            return None, f"joint state on {self.topic}: {exc}"
+            return None, None, f"joint state on {self.topic}: {exc}"
 
     def destroy(self):
         self.subscription.destroy()

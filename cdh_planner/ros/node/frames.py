@@ -148,13 +148,12 @@ class NodeFrames:
             return
         self._seen = msg = latest[0]
         config = node.config
-        lengths, _ = node.execution.joints.lengths(
+        lengths, tensions, _ = node.execution.joints.measured(
             config.values["execution.joint_states_max_age_s"])
         if lengths is None:
             return
         try:
-            p, R = node.execution.forward_kinematics(config.robot, lengths,
-                                                     tensions=node.execution.joints.tensions)
+            p, R = node.execution.forward_kinematics(config.robot, lengths, tensions=tensions)
         except InputError:
             return              # no pose for these lengths: nothing to show
         stamp = msg.header.stamp if (msg.header.stamp.sec or msg.header.stamp.nanosec) \
