@@ -348,7 +348,7 @@ def test_current_pose_prefers_what_the_feasibility_hook_accepts():
     """model.forward_kinematics.current_pose (no ROS, no wrenches): of Robot 2's free-flight
     goal and its nearly upside-down twin (same lengths), the hook decides which one a search
     without a guess returns; both have the measured lengths."""
-    from cdh_planner.model.forward_kinematics import current_pose, nearest_pose
+    from cdh_planner.model.forward_kinematics import current_pose, nearest_waypoint
     from cdh_planner.model.kinematics import forward_kinematics as fk1
     from cdh_planner.model.pose import rotation_angle_between, rotation_tt
     pr = load_problem(PROBLEMS / "robot2_q2_q3_free_flight.yaml")
@@ -361,7 +361,8 @@ def test_current_pose_prefers_what_the_feasibility_hook_accepts():
     q, Q = current_pose(pr.robot, L, feasible=lambda p_, R_: rotation_angle_between(R_, twin.R) < 1e-6)
     assert rotation_angle_between(Q, twin.R) < 1e-9
     np.testing.assert_allclose(cable_lengths(pr.robot, q, Q), L, rtol=0, atol=1e-12)
-    assert nearest_pose(pr.robot, L, [(twin.p, twin.R), (p + 0.01, R)])[0] is twin.p
+    q, _ = nearest_waypoint(pr.robot, L, np.array([twin.p, p + 0.01]), np.array([twin.R, R]))
+    assert np.array_equal(q, twin.p)
 
 
 def test_unique_sorted_is_np_unique():

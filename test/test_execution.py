@@ -29,6 +29,7 @@ from cdh_planner.parsing.problem import load_problem  # noqa: E402
 from cdh_planner.model.kinematics import (cable_lengths, forward_kinematics,  # noqa: E402
                                           rotation_vector_exp)
 from cdh_planner.model.pose import rotation_angle_between, rotation_tt  # noqa: E402
+from cdh_planner.model.forward_kinematics import nearest_waypoint  # noqa: E402
 from cdh_planner.model.robot import load_robot  # noqa: E402
 from cdh_planner.ros.execution import winches as X  # noqa: E402
 from cdh_planner.ros.msgs.messages import cable_trajectory_msg, to_seconds  # noqa: E402
@@ -208,8 +209,9 @@ def test_current_pose_without_a_guess_picks_the_level_one_of_two_feasible_soluti
 
 
 def test_nearest_known_pose_chooses_newtons_start_between_twins():
-    """Of the poses the node knows, the one whose cable lengths are nearest the measured:
-    from it Newton lands on that pose, not on its twin of the same lengths."""
+    """Of the poses the node knows (``current_pose(..., known=)``), the one whose cable
+    lengths are nearest the measured: from it Newton lands on that pose, not on its twin of
+    the same lengths (both explain the lengths alike)."""
     pr = load_problem(PROBLEMS / "robot2_q2_q3_free_flight.yaml")
     p, R = pr.goal.p, rotation_tt(pr.goal.tau)
     L = cable_lengths(pr.robot, p, R)
@@ -218,12 +220,12 @@ def test_nearest_known_pose_chooses_newtons_start_between_twins():
     near_twin = (twin.p + 0.005, twin.R)
     near_goal = (p + 0.01, R)
     far = (pr.start.p, rotation_tt(pr.start.tau))
-    assert X.nearest_pose(pr.robot, L, []) is None
+    assert nearest_waypoint(pr.robot, L, np.empty((0, 3)), np.empty((0, 3, 3))) is None
     for known, nearest, expected in (([far, near_goal], near_goal, R),
                                      ([near_twin, far], near_twin, twin.R)):
-        guess = X.nearest_pose(pr.robot, L, known)
-        assert guess is nearest
-        _, Q = X.current_pose(pr.robot, L, guess)
+        q, Q = nearest_waypoint(pr.robot, L, *map(np.array, zip(*known)))
+        assert np.array_equal(q, nearest[0]) and np.array_equal(Q, nearest[1])
+        _, Q = X.current_pose(pr.robot, L, known=known)
         assert rotation_angle_between(Q, expected) < 1e-9
 
 
@@ -780,15 +782,15 @@ def test_a_wrong_last_pose_does_not_outvote_the_plans_ends():
     stays = forward_kinematics(robot, L, wrong.p, wrong.R)
     assert rotation_angle_between(stays.R, wrong.R) < 1e-9
     end = (p + [0.03, 0.0, 0.0], R)
-    assert X.nearest_pose(robot, L, [(wrong.p, wrong.R), end])[0] is wrong.p
+    assert np.array_equal(nearest_waypoint(robot, L, np.array([wrong.p, end[0]]),
+                                           np.array([wrong.R, end[1]]))[0], wrong.p)
     q, Q = X.current_pose(robot, L, (wrong.p, wrong.R), known=[end])
     assert np.max(np.abs(q - p)) < 1e-9 and rotation_angle_between(Q, R) < 1e-9
 
 
-def test_the_nearest_waypoint_is_the_nearest_pose():
-    """``nearest_waypoint`` (the executing path's start for the live state's forward
-    kinematics, all waypoints at once) picks what ``nearest_pose`` picks one by one."""
-    from cdh_planner.model.forward_kinematics import nearest_waypoint
+def test_the_nearest_waypoint_is_the_nearest_in_lengths():
+    """``nearest_waypoint`` (all poses at once) picks the pose whose cable lengths differ
+    least (largest difference) from the measured, as one by one."""
     robot = load_robot(CONFIG / "robot2_8.yaml")
     rng = np.random.default_rng(9)
     p = np.array([0.0, 0.0, 0.3]) + rng.uniform(-0.05, 0.05, (40, 3))
@@ -797,23 +799,6 @@ def test_the_nearest_waypoint_is_the_nearest_pose():
         L = cable_lengths(robot, p[k], R[k]) + 1e-4
         q, Q = nearest_waypoint(robot, L, p, R)
         assert np.array_equal(q, p[k]) and np.array_equal(Q, R[k])
-        assert np.array_equal(X.nearest_pose(robot, L, list(zip(p, R)))[0], q)
+        one_by_one = min(range(len(p)), key=lambda j: np.max(np.abs(cable_lengths(robot, p[j], R[j]) - L)))
+        assert one_by_one == k
     assert nearest_waypoint(robot, L, p[:0], R[:0]) is None
-
-
-def test_lengths_and_efforts_come_from_one_message(ros):
-    """``measured``: the lengths and the efforts (measured tensions) of the same message,
-    read once. The efforts were a shared attribute set by every read: the live state's read
-    of a newer message could pair a plan's lengths with other tensions (the stretched
-    lengths of neither; an 8-cable measured start then fitted a wrong least-squares pose)."""
-    side, double = ros
-    monitor = X.JointStateMonitor(side.node, "/paired/joint_states", WINCHES)
-    publisher = side.node.create_publisher(X.JointState, "/paired/joint_states", 10)
-    assert until(lambda: publisher.get_subscription_count() == 1, 5.0)
-    for k in range(3):
-        sent = X.JointState(name=WINCHES, position=[0.3 + k] * 6, effort=[1.0 + k] * 6)
-        publisher.publish(sent)
-        assert until(lambda: monitor.latest is not None and monitor.latest[0].position[0] == 0.3 + k, 5.0)
-        lengths, tensions, why = monitor.measured(30.0)
-        assert why == "" and np.all(lengths == 0.3 + k) and np.all(np.asarray(tensions) == 1.0 + k)
-    side.retire(publisher, monitor)

@@ -91,17 +91,11 @@ _SEED_TILTS = (np.zeros(3), np.array([0.4, 0.0, 0.0]), np.array([-0.4, 0.0, 0.0]
                np.array([0.0, 0.4, 0.0]), np.array([0.0, -0.4, 0.0]))
 
 
-def nearest_pose(robot, lengths, poses):
-    """Of the poses (p (3,) m, R (3, 3)) in ``poses``, the one whose cable lengths are
-    nearest ``lengths`` (m, largest difference): the best start for ``current_pose``'s
-    Newton, since a hexapod has several poses for the same lengths. None if there are none."""
-    return min(poses, key=lambda pose: _mismatch(robot, lengths, pose), default=None)
-
-
 def nearest_waypoint(robot, lengths, p, R):
-    """Of a path's waypoints (p (N, 3) m, R (N, 3, 3)), the pose (p_k, R_k) whose cable
-    lengths are nearest ``lengths`` (m, largest difference), found at once for all of
-    them (``nearest_pose`` one by one); None for no waypoints."""
+    """Of poses (a path's waypoints: p (N, 3) m, R (N, 3, 3)), the pose (p_k, R_k) whose
+    cable lengths are nearest ``lengths`` (m, largest difference), all at once: a start for
+    ``current_pose``'s Newton, since a hexapod has several poses for the same lengths.
+    None for no poses."""
     if not len(p):
         return None
     d = p[:, None, :] + np.einsum("nij,kj->nki", R, robot.platform_anchors) - robot.base_anchors

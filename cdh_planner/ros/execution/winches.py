@@ -33,7 +33,7 @@ from trajectory_msgs.msg import JointTrajectory, JointTrajectoryPoint
 
 from ...errors import InputError, check_finite, exception_line
 from ...wrench import wrench_feasibility
-from ...model.forward_kinematics import current_pose as _current_pose, nearest_pose  # noqa: F401 (API)
+from ...model.forward_kinematics import current_pose as _current_pose
 from ..interface import ACTION_QOS
 from ..core.live_state import measured_tensions
 from ..msgs.messages import check_joint_names, duration_msg
