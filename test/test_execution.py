@@ -802,3 +802,21 @@ def test_the_nearest_waypoint_is_the_nearest_in_lengths():
         one_by_one = min(range(len(p)), key=lambda j: np.max(np.abs(cable_lengths(robot, p[j], R[j]) - L)))
         assert one_by_one == k
     assert nearest_waypoint(robot, L, p[:0], R[:0]) is None
+
+
+def test_lengths_and_efforts_come_from_one_message(ros):
+    """``measured``: the lengths and the efforts (measured tensions) of the same message,
+    read once. The efforts were a shared attribute set by every read: the live state's read
+    of a newer message could pair a plan's lengths with other tensions (the stretched
+    lengths of neither; an 8-cable measured start then fitted a wrong least-squares pose)."""
+    side, double = ros
+    monitor = X.JointStateMonitor(side.node, "/paired/joint_states", WINCHES)
+    publisher = side.node.create_publisher(X.JointState, "/paired/joint_states", 10)
+    assert until(lambda: publisher.get_subscription_count() == 1, 5.0)
+    for k in range(3):
+        sent = X.JointState(name=WINCHES, position=[0.3 + k] * 6, effort=[1.0 + k] * 6)
+        publisher.publish(sent)
+        assert until(lambda: monitor.latest is not None and monitor.latest[0].position[0] == 0.3 + k, 5.0)
+        lengths, tensions, why = monitor.measured(30.0)
+        assert why == "" and np.all(lengths == 0.3 + k) and np.all(np.asarray(tensions) == 1.0 + k)
+    side.retire(publisher, monitor)
