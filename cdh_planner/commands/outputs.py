@@ -6,7 +6,7 @@ P.yaml`` is refused before the work, through symbolic and hard links too.
 """
 
 import os
-from contextlib import contextmanager
+from contextlib import contextmanager, suppress
 from pathlib import Path
 
 from ..errors import InputError
@@ -69,22 +69,56 @@ def writing(option, path):
 
 
 def write_text(option, path, text):
-    """Write ``text`` (a str, bytes written as they are, or an iterable of bytes-like
-    pieces written one after another as they come) to ``path``; an OSError becomes an
-    InputError naming ``option``."""
+    """Write ``text`` (a str, as UTF-8; bytes as they are; or an iterable of bytes-like
+    pieces written one after another as they come) to ``path`` whole or not at all
+    (``write_pieces``); an OSError becomes an InputError naming ``option``."""
+    if isinstance(text, str):
+        text = text.encode("utf-8")
     with writing(option, path):
-        if isinstance(text, str):
-            Path(path).write_text(text)
-        elif isinstance(text, bytes):
-            Path(path).write_bytes(text)
-        else:
-            write_pieces(path, text)
+        write_pieces(path, (text,) if isinstance(text, bytes) else text)
 
 
 def write_pieces(path, pieces):
-    """Write the bytes-like ``pieces`` (an iterable: a stream is written as it comes) to
-    ``path`` one after another (not joined first)."""
-    with open(path, "wb") as f:
+    """Write the bytes-like ``pieces`` (an iterable: a stream is written as it comes, not
+    joined first) to ``path`` whole or not at all: into a new file beside it (``.NAME.PID.part``)
+    that then replaces it, so an interrupted or failed write (Ctrl-C, a full disk) leaves
+    the file as it was and no part of a document. The file keeps its permissions (a new
+    one gets 0o666 less the umask, as ``open`` gives); a symbolic link is written through.
+    A path that is not a regular file (/dev/null, a pipe), or one in a directory where no
+    file can be made (a writable file in a read-only directory), is written in place."""
+    target = Path(os.path.realpath(path))
+    if target.exists() and not target.is_file():
+        return _write_in_place(target, pieces)
+    part = target.with_name(f".{target.name}.{os.getpid()}.part")
+    try:
+        fd = _create(part)
+    except PermissionError:
+        return _write_in_place(target, pieces)
+    try:
+        with os.fdopen(fd, "wb") as f:
+            f.writelines(pieces)
+        with suppress(FileNotFoundError):
+            os.chmod(part, os.stat(target).st_mode & 0o7777)
+        os.replace(part, target)
+    except BaseException:
+        with suppress(OSError):
+            os.unlink(part)
+        raise
+
+
+def _create(path):
+    """A new file at ``path`` opened for writing (its descriptor), mode 0o666 less the umask;
+    one left there by an earlier process of this pid (killed mid-write) is replaced."""
+    flags = os.O_WRONLY | os.O_CREAT | os.O_EXCL | getattr(os, "O_NOFOLLOW", 0)
+    try:
+        return os.open(path, flags, 0o666)
+    except FileExistsError:
+        os.unlink(path)
+        return os.open(path, flags, 0o666)
+
+
+def _write_in_place(target, pieces):
+    with open(target, "wb") as f:
         f.writelines(pieces)
 
 
