@@ -21,7 +21,9 @@ setup(
     version='0.1.0',
     packages=find_packages(exclude=['test', 'test.*']),
     # the directions' draws (atlas/domain.py: read instead of importing numpy.random)
-    package_data={'cdh_planner.atlas': ['directions.npy']},
+    package_data={'cdh_planner.atlas': ['directions.npy'],
+                  # verify's JSON rows writer, compiled where it is installed (commands/json_text.py)
+                  'cdh_planner.commands': ['json_text.c', 'ryu/*']},
     data_files=[
         ('share/ament_index/resource_index/packages', ['resource/' + package_name]),
         ('share/' + package_name, ['package.xml', 'LICENSE']),

@@ -15,7 +15,6 @@ import numpy as np
 import pytest
 
 from cdh_planner import accuracy_kernel, aot as aot_helper, parallel
-from cdh_planner.commands import json_rows
 from cdh_planner.manifold import kernels
 from cdh_planner.model import elastic_kernel
 from cdh_planner.trajectory import motion_kernel
@@ -30,23 +29,22 @@ from conftest import CONFIG, aot_built
 
 AOT_BUILT = aot_built(kernels)
 ALL_BUILT = aot_built(kernels, scene_kernels, wrench_kernels, elastic_kernel, accuracy_kernel,
-                      json_rows, motion_kernel)
+                      motion_kernel)
 NOT_BUILT = ("no ahead-of-time kernels built (make, or python -m "
              "cdh_planner.<manifold|scene|wrench>.aot, cdh_planner.model.elastic_aot, "
-             "cdh_planner.accuracy_aot, cdh_planner.commands.json_rows_aot, "
+             "cdh_planner.accuracy_aot, "
              "cdh_planner.trajectory.motion_aot)")
 
 SOURCES = [(kernels, ("kernels.py", "layout.py", "../kernel_linalg.py")),
            (scene_kernels, ("kernels.py", "../model/shape_forms.py")),
            (wrench_kernels, ("compiled.py", "kernel.py", "centred.py", "linalg.py", "../kernel_linalg.py")),
            (elastic_kernel, ("elastic_kernel.py",)),
-           (accuracy_kernel, ("accuracy_kernel.py", "kernel_linalg.py")), (json_rows, ("json_rows.py",)),
+           (accuracy_kernel, ("accuracy_kernel.py", "kernel_linalg.py")),
            (motion_kernel, ("motion_kernel.py",))]
-MODULES = ["manifold", "scene", "wrench", "elastic", "accuracy", "json_rows", "motion"]
+MODULES = ["manifold", "scene", "wrench", "elastic", "accuracy", "motion"]
 BUILDERS = {"manifold": "cdh_planner.manifold.aot", "scene": "cdh_planner.scene.aot",
             "wrench": "cdh_planner.wrench.aot", "elastic": "cdh_planner.model.elastic_aot",
             "accuracy": "cdh_planner.accuracy_aot",
-            "json_rows": "cdh_planner.commands.json_rows_aot",
             "motion": "cdh_planner.trajectory.motion_aot"}
 
 
@@ -60,7 +58,7 @@ def test_the_aot_module_is_named_after_the_digest_of_the_kernel_source(module, s
 
 
 @pytest.mark.parametrize("module", [kernels, scene_kernels, wrench_kernels, elastic_kernel,
-                                    accuracy_kernel, json_rows, motion_kernel], ids=MODULES)
+                                    accuracy_kernel, motion_kernel], ids=MODULES)
 def test_a_build_of_other_source_is_never_loaded(module, monkeypatch):
     monkeypatch.setattr(module, "AOT_SOURCES", ("__init__.py",))  # another source's digest
     assert aot_helper.load(module) is None
@@ -231,28 +229,6 @@ def test_aot_and_jit_accuracy_kernels_agree_bit_for_bit(name):
             np.testing.assert_array_equal(a, j)
 
 
-@pytest.mark.skipif(not ALL_BUILT, reason=NOT_BUILT)
-def test_aot_and_jit_json_rows_kernels_agree_byte_for_byte():
-    """verify's rows of a small document put together by both builds, and the rows are
-    those written by hand."""
-    from cdh_planner.commands.verify import ROW_SEPARATOR, _rows_text
-    columns = {"p": np.array([[1.5, -2e-5], [np.nan, 3.0]]), "ok": np.array([True, False]),
-               "worst": {"binding": ["tension_min[2,5]", "singular"], "n": np.array([7, 8])}}
-    expected = ('{"p": [1.5, -2e-05], "ok": true, "worst": {"binding": "tension_min[2,5]", "n": 7}}'
-                + ROW_SEPARATOR +
-                '{"p": [null, 3.0], "ok": false, "worst": {"binding": "singular", "n": 8}}')
-    (rows,) = _rows_text(columns)
-    assert rows.tobytes().decode() == expected
-    src = np.frombuffer(b"[[1.5,2],[3,4]]abc", dtype=np.uint8).copy()  # ROWS, then GIVEN
-    args = (src, np.array([[0, 15], [0, 17]]), np.array([[15, 17], [15, 18]]),
-            np.array([2, 0]), np.frombuffer(b"{a: , b: }", dtype=np.uint8).copy(),
-            np.array([0, 4, 9, 10]), np.frombuffer(ROW_SEPARATOR.encode(), dtype=np.uint8).copy())
-    aot = aot_helper.load(json_rows)["assemble_rows"](*args)
-    jit = json_rows.jit_kernels()["assemble_rows"](*args)
-    assert aot.tobytes() == jit.tobytes() == (b"{a: [1.5, 2], b: ab}" + ROW_SEPARATOR.encode()
-                                              + b"{a: [3, 4], b: c}")
-
-
 def test_the_wrench_kernels_on_threads_give_the_serial_answers(monkeypatch):
     """A large batch in blocks on threads (``parallel``; the entries release the GIL) gives
     the numbers of one call on the caller's thread: the blocks start at the centred rule's
@@ -304,7 +280,7 @@ def test_every_ahead_of_time_build_releases_the_gil():
     compiles them with numba's ``release_gil``, whose wrappers call PyEval_SaveThread; a
     build without it imports no such symbol), so ``parallel``'s threads run side by side."""
     for module in (kernels, scene_kernels, wrench_kernels, elastic_kernel, accuracy_kernel,
-                   json_rows, motion_kernel):
+                   motion_kernel):
         built = importlib.import_module(f"{module.__package__}.{aot_helper.module_name(module)}")
         assert b"PyEval_SaveThread" in Path(built.__file__).read_bytes(), module.__name__
 

@@ -76,16 +76,15 @@ def _kernels_built():
     from cdh_planner.model import elastic_kernel
     from cdh_planner.wrench import compiled
     from cdh_planner import accuracy_kernel
-    from cdh_planner.commands import json_rows
     from cdh_planner.trajectory import motion_kernel
-    return aot_built(kernels, scene_kernels, compiled, elastic_kernel, accuracy_kernel, json_rows,
+    return aot_built(kernels, scene_kernels, compiled, elastic_kernel, accuracy_kernel,
                      motion_kernel)
 
 
 @pytest.mark.skipif(not _kernels_built(), reason="no ahead-of-time kernels built (make)")
 def test_an_eight_cable_plan_and_verify_compile_nothing(tmp_path):
     """robot2_8 planned over charts (the manifold's kernel, the band test: the centred
-    rule), CoGiRo poses verified (the facet test, the accuracy's zonotope, the JSON rows):
+    rule), CoGiRo poses verified (the facet test, the accuracy's zonotope):
     with the kernels built ahead of time numba is never imported, so nothing is compiled."""
     problem = REPO / "config" / "problems" / "robot2_8_pivot.yaml"
     poses = tmp_path / "poses.json"

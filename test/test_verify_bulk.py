@@ -149,23 +149,6 @@ def test_at_most_ten_not_feasible_poses_are_listed(tmp_path, capsys):
     assert "summary: 25/40 poses" in out
 
 
-def test_number_text_is_the_json_modules_text_of_every_float():
-    """orjson's digits with Python's layout: every magnitude (subnormals to the largest,
-    the [1e-5, 1e-4) range orjson writes positionally, one-digit exponents), signed zeros,
-    non-finite numbers as null, integers and booleans; 1-D and 2-D."""
-    rng = np.random.default_rng(5)
-    n = 20_000
-    with np.errstate(over="ignore"):
-        wide = rng.uniform(1, 10, n) * 10.0 ** rng.integers(-330, 309, n) * rng.choice([-1, 1], n)
-    values = np.concatenate([wide, rng.uniform(0, 1e6, n), rng.uniform(1e-5, 1e-4, n),
-                             2.0 ** np.arange(-1074, 1024), [0.0, -0.0, np.nan, -np.inf, 47740.00003585525],
-                             [1e-4, np.nextafter(1e-4, 0), 1e16, np.nextafter(1e16, 0), -1e-5]])
-    for arr in (values, values[: len(values) // 6 * 6].reshape(-1, 6)):
-        assert verify.number_text(arr) == json.dumps(np.where(np.isfinite(arr), arr, None).tolist())
-    for arr in (np.array([True, False]), np.arange(5), np.array([[1, 2], [3, 4]]), np.float32([0.1, 1e-5])):
-        assert verify.number_text(arr) == json.dumps(arr.tolist())
-
-
 def test_the_largest_document_the_bulk_parse_accepts_is_within_the_json_limits(tmp_path):
     """load_poses skips files.check_structure when _bulk_poses accepts a file: the largest
     such document (MAX_POSES quaternion poses in the {"poses": ...} wrapper) must pass it."""

@@ -37,13 +37,14 @@ SUMMARY = "check poses and the motion between them for wrench feasibility"
 import dataclasses
 import json
 import math
+from itertools import chain
 
 import numpy as np
-import orjson
 
 from ..accuracy import has_accuracy, pose_accuracy
 from ..errors import InputError
 from ..wrench import wrench_feasibility
+from . import json_text
 from .outputs import check_output, write_text
 from ..parsing.poses import load_poses, parse_angle, parse_length
 from ..model.robot import load_robot
@@ -127,9 +128,8 @@ def result_json(robot, poses, feas, segments, ok, step_m, step_rad, accuracy=Non
     iterator of its pieces in order (ASCII bytes, and blocks of rows as uint8 arrays),
     made as they are written: ROWS_PER_BLOCK rows at a time, the next blocks on threads
     meanwhile (``_rows_text``), so memory stays bounded and no 30 MB document is built;
-    ``b"".join`` makes the document. Built column by column: each array of a block goes
-    through the C encoder once, then the rows are assembled by the compiled ``json_rows``
-    (the encoder per row costs 3x more for 10^4 poses, a template per row 2x);
+    ``b"".join`` makes the document. Built column by column, each block of rows in one
+    pass by compiled C (``json_text``: the json module's numbers, the GIL released);
     ``accuracy``: the poses' ``accuracy.Accuracy`` (robots with length_error), or None."""
     return (piece.encode("ascii") if isinstance(piece, str) else piece
             for piece in _layout_pieces({
@@ -180,8 +180,8 @@ def _rows_text(columns):
     """The JSON object texts of the rows of ``columns`` (name -> array, list of strings,
     nested mapping of them, or a ``_Texts`` of ready texts), as ``layout_rows`` joins
     list entries: an iterator of the texts of blocks of ROWS_PER_BLOCK rows, the next
-    blocks made on threads while one is written (``parallel.in_order``; their compiled
-    assembly runs side by side)."""
+    blocks made on threads while one is written (``parallel.in_order``; the compiled
+    writer releases the GIL)."""
     literals, cols = _row_literals(columns)
     n = len(cols[0])
     return in_order(lambda a, b: _block_text(literals, [_rows(col, a, b) for col in cols]),
@@ -195,26 +195,30 @@ def _rows(col, a, b):
 
 def _block_text(literals, cols):
     """The rows of the flat columns ``cols`` around ``literals`` (``_row_literals``) joined
-    by ROW_SEPARATOR, as a uint8 array of ASCII: each column's texts lie in one buffer
-    (numbers by one orjson call a column); the compiled ``json_rows`` finds the numbers'
-    entries and puts the rows together."""
-    from .json_rows import assemble_rows  # machine code: loaded only for a --json
-    starts, ends = (np.zeros((len(cols[0]), len(cols)), dtype=np.int64) for _ in range(2))
-    buffers, layout, base = [], [], 0
-    for k, col in enumerate(cols):
-        data, a, b, kind = _column_bytes(col)
-        buffers.append(np.frombuffer(data, dtype=np.uint8))
-        starts[:, k], ends[:, k] = a + base, b + base
-        layout.append(kind)
-        base += len(data)
-    bounds = np.cumsum([0] + [len(t) for t in literals])
-    return assemble_rows(np.concatenate(buffers), starts, ends, np.array(layout, dtype=np.int64),
-                         _ascii("".join(literals)), bounds, _ascii(ROW_SEPARATOR))
+    by ROW_SEPARATOR: by the compiled writer (``json_text.rows_text``, a uint8 array of
+    ASCII), or without its build by the json module (bytes, the same)."""
+    cols = [list(col) if isinstance(col, _Texts) else _numbers_or_texts(np.asarray(col))
+            for col in cols]
+    text = json_text.rows_text(literals, cols, ROW_SEPARATOR)
+    return _python_rows(literals, cols) if text is None else text
 
 
-def _ascii(text):
-    """``text`` as a (writable) uint8 array of its ASCII bytes, as the kernel takes it."""
-    return np.frombuffer(text.encode("ascii"), dtype=np.uint8).copy()
+def _numbers_or_texts(arr):
+    """A numeric or boolean array as it is; one of strings (binding names: few distinct,
+    each encoded once) as the list of its entries' JSON texts."""
+    if arr.dtype.kind in "biuf":
+        return arr
+    values = arr.tolist()
+    texts = {v: _encode(v) for v in set(values)}
+    return list(map(texts.__getitem__, values))
+
+
+def _python_rows(literals, cols):
+    """``_block_text``'s rows by the json module, entry by entry (no compiled writer)."""
+    texts = [col if isinstance(col, list) else list(map(_encode, finite_or_none(col.tolist())))
+             for col in cols]
+    rows = ("".join(chain.from_iterable(zip(literals, row))) + literals[-1] for row in zip(*texts))
+    return ROW_SEPARATOR.join(rows).encode("ascii")
 
 
 def _row_literals(columns):
@@ -233,68 +237,6 @@ def _row_literals(columns):
             cols.append(col)
     literals[-1] += "}"
     return literals, cols
-
-
-def _column_bytes(col):
-    """(the JSON texts of ``col``'s entries in one ASCII buffer, where each entry starts (N,)
-    and ends (N,) in it, its ``json_rows`` layout): numbers and booleans by one
-    ``number_bytes`` of the whole array, the array's text whose entries the kernel finds
-    (ENTRIES, or ROWS for a 2-D column; the start and end given are the whole text's);
-    strings (binding names, few distinct) each distinct one encoded once, a ``_Texts`` as
-    given (GIVEN)."""
-    from .json_rows import ENTRIES, GIVEN, ROWS
-    if not isinstance(col, _Texts):
-        arr = np.asarray(col)
-        if arr.dtype.kind in "biuf":
-            data = number_bytes(arr)
-            return data, 0, len(data), ENTRIES if arr.ndim == 1 else ROWS
-        values = arr.tolist()
-        texts = {v: _encode(v) for v in set(values)}
-        col = list(map(texts.__getitem__, values))
-    lengths = np.fromiter(map(len, col), dtype=np.int64, count=len(col))
-    ends = np.cumsum(lengths)
-    return "".join(col).encode("ascii"), ends - lengths, ends, GIVEN
-
-
-def number_text(arr):
-    """The JSON text of a numeric or boolean array as ``json.dumps(arr.tolist())`` writes it
-    (Python's float repr, ", " between entries), non-finite numbers as null: ``number_bytes``
-    with the spaces."""
-    return number_bytes(arr).decode().replace(",", ", ")
-
-
-def number_bytes(arr):
-    """``number_text`` without the spaces after its commas, as bytes: written by orjson (10x
-    faster than the json module's encoder), whose shortest round-trip digits are Python's,
-    laid out as Python does for 1e-4 <= |x| < 1e16; the entries outside that range
-    (orjson: ``1e-8``, ``0.00005``; Python: ``1e-08``, ``5e-05``) are Python's repr."""
-    arr = np.ascontiguousarray(arr, dtype=np.float64 if arr.dtype.kind == "f" else None)
-    raw = orjson.dumps(arr, option=orjson.OPT_SERIALIZE_NUMPY)
-    if arr.dtype.kind == "f":
-        flat = arr.ravel()
-        mag = np.abs(flat)
-        odd = np.flatnonzero(((mag > 0) & (mag < 1e-4)) | ((mag >= 1e16) & (mag < np.inf)))
-        if odd.size:
-            raw = _with_python_repr(raw, odd, flat[odd])
-    return raw
-
-
-def _with_python_repr(raw, entries, values):
-    """orjson's text ``raw`` (bytes) of an array with its entries ``entries`` (flat indices,
-    ascending) written as Python's repr of ``values``: entry k lies between the k-th comma
-    and the next, within its brackets (found for all entries at once, then one join)."""
-    commas = np.flatnonzero(np.frombuffer(raw, dtype=np.uint8) == ord(","))
-    starts = np.r_[0, commas + 1][entries].tolist()
-    ends = np.r_[commas, len(raw)][entries].tolist()
-    parts, done = [], 0
-    for a, b, value in zip(starts, ends, values.tolist()):
-        token = raw[a:b]
-        a += len(token) - len(token.lstrip(b"["))
-        b -= len(token) - len(token.rstrip(b"]"))
-        parts += [raw[done:a], repr(value).encode()]
-        done = b
-    parts.append(raw[done:])
-    return b"".join(parts)
 
 
 def _point_dict(pt):
