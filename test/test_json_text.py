@@ -56,7 +56,9 @@ def test_every_float_is_written_as_the_json_module_writes_it():
     assert _c_rows(values) == _json_rows(values)
     square = values[: len(values) // 6 * 6].reshape(-1, 6)  # a list of six a row
     assert _c_rows(square) == _json_rows(square)
-    assert _c_rows(values.astype(np.float32)) == _json_rows(values.astype(np.float32).astype(float))
+    with np.errstate(over="ignore", invalid="ignore"):  # beyond float32: inf, nan
+        single = values.astype(np.float32)
+    assert _c_rows(single) == _json_rows(single.astype(float))
 
 
 @pytest.mark.skipif(not BUILT, reason=NOT_BUILT)
