@@ -34,13 +34,13 @@ $(STAMP): $(VENV)/bin/python requirements.txt test/requirements-urdf.txt setup.p
           cdh_planner/model/elastic_kernel.py cdh_planner/model/elastic_aot.py \
           cdh_planner/accuracy_kernel.py cdh_planner/accuracy_aot.py cdh_planner/kernel_linalg.py \
           cdh_planner/trajectory/motion_kernel.py cdh_planner/trajectory/motion_aot.py \
-          cdh_planner/commands/json_text.py cdh_planner/commands/json_text.c
+          cdh_planner/compiled_json.py cdh_planner/compiled_json.c
 	$(PY) -m pip install -r requirements.txt
 	$(PY) -m pip install --no-deps -r test/requirements-urdf.txt
 	$(PY) -m pip install -e .
 	@# the F / F_x, the collision, the wrench, the elastic, the accuracy, the timing's motion kernels compiled ahead of time (first call
 	@# ~10 ms instead of 0.4 - 1 s; without a C compiler this warms numba's JIT cache instead),
-	@# verify's JSON rows writer compiled from C (without a compiler: the json module's, slower),
+	@# verify's JSON reader and rows writer compiled from C (without a compiler: Python's, slower),
 	@# and the package's bytecode (read even
 	@# where PYTHONDONTWRITEBYTECODE=1 keeps Python from writing it)
 	$(PY) -m cdh_planner.manifold.aot
@@ -49,7 +49,7 @@ $(STAMP): $(VENV)/bin/python requirements.txt test/requirements-urdf.txt setup.p
 	$(PY) -m cdh_planner.model.elastic_aot
 	$(PY) -m cdh_planner.accuracy_aot
 	$(PY) -m cdh_planner.trajectory.motion_aot
-	$(PY) -m cdh_planner.commands.json_text
+	$(PY) -m cdh_planner.compiled_json
 	$(PY) -m compileall -q cdh_planner
 	touch $(STAMP)
 

@@ -22,8 +22,8 @@ setup(
     packages=find_packages(exclude=['test', 'test.*']),
     # the directions' draws (atlas/domain.py: read instead of importing numpy.random)
     package_data={'cdh_planner.atlas': ['directions.npy'],
-                  # verify's JSON rows writer, compiled where it is installed (commands/json_text.py)
-                  'cdh_planner.commands': ['json_text.c', 'ryu/*']},
+                  # verify's compiled JSON, built where it is installed (compiled_json.py)
+                  'cdh_planner': ['compiled_json.c', 'ryu/*']},
     data_files=[
         ('share/ament_index/resource_index/packages', ['resource/' + package_name]),
         ('share/' + package_name, ['package.xml', 'LICENSE']),

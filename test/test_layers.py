@@ -9,6 +9,7 @@ from conftest import PACKAGE
 # lower number = lower layer; a module may import its own layer and those below
 LAYER = {"cdh_planner": 0, "aot": 0, "errors": 0, "fields": 0, "files": 0, "ports": 0, "progress": 0, "status": 0, "model": 1,
          "wrench": 2, "scene": 2, "accuracy": 2, "accuracy_kernel": 0, "accuracy_aot": 0, "kernel_linalg": 0, "parallel": 0,
+         "compiled_json": 0,
          "manifold": 3, "atlas": 3, "search": 4, "trajectory": 4, "settings": 5,
          "planner": 6, "pipeline": 6, "parsing": 7, "pictures": 7, "recording": 7, "studies": 7, "sim": 7,
          "ros": 8, "commands": 9, "cli": 10, "cli_reference": 10}

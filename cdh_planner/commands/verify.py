@@ -44,7 +44,7 @@ import numpy as np
 from ..accuracy import has_accuracy, pose_accuracy
 from ..errors import InputError
 from ..wrench import wrench_feasibility
-from . import json_text
+from .. import compiled_json
 from .outputs import check_output, write_text
 from ..parsing.poses import load_poses, parse_angle, parse_length
 from ..model.robot import load_robot
@@ -129,7 +129,7 @@ def result_json(robot, poses, feas, segments, ok, step_m, step_rad, accuracy=Non
     made as they are written: ROWS_PER_BLOCK rows at a time, the next blocks on threads
     meanwhile (``_rows_text``), so memory stays bounded and no 30 MB document is built;
     ``b"".join`` makes the document. Built column by column, each block of rows in one
-    pass by compiled C (``json_text``: the json module's numbers, the GIL released);
+    pass by compiled C (``compiled_json``: the json module's numbers, the GIL released);
     ``accuracy``: the poses' ``accuracy.Accuracy`` (robots with length_error), or None."""
     return (piece.encode("ascii") if isinstance(piece, str) else piece
             for piece in _layout_pieces({
@@ -195,11 +195,11 @@ def _rows(col, a, b):
 
 def _block_text(literals, cols):
     """The rows of the flat columns ``cols`` around ``literals`` (``_row_literals``) joined
-    by ROW_SEPARATOR: by the compiled writer (``json_text.rows_text``, a uint8 array of
+    by ROW_SEPARATOR: by the compiled writer (``compiled_json.rows_text``, a uint8 array of
     ASCII), or without its build by the json module (bytes, the same)."""
     cols = [list(col) if isinstance(col, _Texts) else _numbers_or_texts(np.asarray(col))
             for col in cols]
-    text = json_text.rows_text(literals, cols, ROW_SEPARATOR)
+    text = compiled_json.rows_text(literals, cols, ROW_SEPARATOR)
     return _python_rows(literals, cols) if text is None else text
 
 

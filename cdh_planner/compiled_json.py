@@ -1,16 +1,19 @@
-"""``verify --json``'s rows written by compiled C (json_text.c) in one pass, numbers as
-Python's json module writes them (floats by repr: Ryu's shortest round-trip digits, vendored
-in ryu/, as orjson and CPython find them), with the GIL released: blocks of rows are written
-on threads side by side (``parallel.in_order``). For 20,000 eight-cable poses the JSON's
-25 MB took orjson (under the GIL), a pass rewriting its odd numbers as repr does and a
-compiled assembly of the rows 0.085 - 0.105 s; measurements in docs/performance.md.
+"""JSON in and out by compiled C (compiled_json.c), with the GIL released (ctypes), where
+the Python libraries cost most: ``verify --json``'s rows (``rows_text``: in one pass, numbers
+as Python's json module writes them, floats by repr: Ryu's shortest round-trip digits,
+vendored in ryu/, as orjson and CPython find them; blocks of rows on threads side by side)
+and a poses file in its plain form (``read_poses``: straight into arrays, numbers by
+correctly rounded strtod, as the json module reads them). For 20,000 eight-cable poses the
+JSON's 25 MB took orjson (under the GIL), a pass rewriting its odd numbers as repr does and
+a compiled assembly of the rows 0.085 - 0.107 s, now 0.042 - 0.056; reading the poses
+with orjson and lists 0.025 s, now ...; docs/performance.md.
 
-    python -m cdh_planner.commands.json_text     # the build, which ``make`` runs
+    python -m cdh_planner.compiled_json     # the build, which ``make`` runs
 
-builds ``_json_text_<digest>.so`` beside the source (the digest: of the C sources and this
-file, so an edited source never runs a stale build), loaded with ctypes. Without a build (no
-C compiler), ``rows_text`` returns None and verify writes the rows with the json module:
-the same bytes, some ten times slower.
+builds ``_compiled_json_<digest>.so`` beside the source (the digest: of the C sources and
+this file, so an edited source never runs a stale build), loaded with ctypes. Without a
+build (no C compiler) both return None and their callers take the Python way: the same
+bytes and numbers, slower.
 """
 
 import ctypes
@@ -26,17 +29,17 @@ try:  # CPython's built-in SHA-256 (to 3.11): hashlib's import loads OpenSSL (cd
 except ImportError:
     from hashlib import sha256
 
-FLOAT, INT, BOOL, TEXT = 0, 1, 2, 3  # a field's kind, as json_text.c reads it
-SOURCES = ("json_text.c", "ryu/d2s.c", "ryu/common.h", "ryu/d2s_full_table.h",
+FLOAT, INT, BOOL, TEXT = 0, 1, 2, 3  # a field's kind, as compiled_json.c reads it
+SOURCES = ("compiled_json.c", "ryu/d2s.c", "ryu/common.h", "ryu/d2s_full_table.h",
            "ryu/d2s_intrinsics.h", "ryu/digit_table.h", "ryu/ryu.h")
-PREFIX = "_json_text_"
+PREFIX = "_compiled_json_"
 FLAGS = ("-O2", "-shared", "-fPIC")
 FOLDER = Path(__file__).resolve().parent
 # the most bytes a number's text takes: a float's repr ("-2.2250738585072014e-308"), an int64
 MAX_TEXT = {FLOAT: 24, INT: 20, BOOL: 5}
-SLACK = 48  # json_text.c writes up to 16 bytes past a number's text; it is overwritten
+SLACK = 48  # compiled_json.c writes up to 16 bytes past a number's text; it is overwritten
 
-_entry = None  # json_rows of the loaded build, False if there is none
+_library = None  # the loaded build's functions (a dict), False if there is none
 
 
 def library_path():
@@ -48,19 +51,23 @@ def library_path():
 
 
 def built():
-    """The C function ``json_rows`` of the current sources' build, or None if not built."""
-    global _entry
-    if _entry is None:
+    """The C functions of the current sources' build (``json_rows``, ``read_poses``), or
+    None if it is not built."""
+    global _library
+    if _library is None:
         try:
-            function = ctypes.CDLL(str(library_path())).json_rows
+            lib = ctypes.CDLL(str(library_path()))
         except OSError:  # not built (or a build of other sources only)
-            _entry = False
+            _library = False
         else:
-            function.restype = ctypes.c_int64
-            function.argtypes = ([ctypes.c_int64, ctypes.c_int32] + [ctypes.c_void_p] * 7
-                                 + [ctypes.c_int64, ctypes.c_void_p])
-            _entry = function
-    return _entry or None
+            rows, read = lib.json_rows, lib.read_poses
+            rows.restype = read.restype = ctypes.c_int64
+            rows.argtypes = ([ctypes.c_int64, ctypes.c_int32] + [ctypes.c_void_p] * 7
+                             + [ctypes.c_int64, ctypes.c_void_p])
+            read.argtypes = [ctypes.c_char_p, ctypes.c_int64, ctypes.c_int64, ctypes.c_void_p,
+                             ctypes.c_void_p]
+            _library = {"json_rows": rows, "read_poses": read}
+    return _library or None
 
 
 def rows_text(literals, columns, separator):
@@ -68,8 +75,8 @@ def rows_text(literals, columns, separator):
     without a build: row r is literals[0], field 0's text, literals[1], ..., literals[F]
     (``literals``: F + 1 str). A column is a numeric or boolean array, first axis the rows
     (a 2-D one a list a row), or a list of the rows' JSON texts (ASCII), written as given."""
-    function = built()
-    if function is None:
+    library = built()
+    if library is None:
         return None
     n = len(columns[0])
     kinds, widths, data, offsets = [], [], [], []
@@ -89,7 +96,7 @@ def rows_text(literals, columns, separator):
     # every array the C function reads is held here for the call (an address alone is not)
     held = (np.array(kinds, dtype=np.int32), np.array(widths, dtype=np.int64), _addresses(data),
             _addresses(offsets), bounds)
-    size = function(n, len(columns), *(a.ctypes.data for a in held[:4]), text,
+    size = library["json_rows"](n, len(columns), *(a.ctypes.data for a in held[:4]), text,
                     bounds.ctypes.data, sep, len(sep), out.ctypes.data)
     return out[:size]
 
@@ -122,10 +129,30 @@ def _addresses(arrays):
     return np.array([0 if a is None else a.ctypes.data for a in arrays], dtype=np.uint64)
 
 
+MIN_POSE_BYTES = 30  # the shortest pose text: {"tau":[0,0,0],"position":[0,0,0]} less 5
+
+
+def read_poses(data, max_poses):
+    """The poses of a poses file's bytes ``data`` in its plain form (compiled_json.c says
+    which): (values (N, 7), quaternion (N,) bool) with row k the position (m) then pose
+    k's quaternion (x, y, z, w) if quaternion[k] else its tau (rad) and a nan; None for
+    any other document (or more than ``max_poses`` poses), or without a build."""
+    library = built()
+    if library is None:
+        return None
+    rows = min(max_poses, len(data) // MIN_POSE_BYTES + 1)
+    values = np.full((rows, 7), np.nan)
+    quaternion = np.zeros(rows, dtype=np.int8)
+    n = library["read_poses"](data, len(data), rows, values.ctypes.data, quaternion.ctypes.data)
+    if n < 0:
+        return None
+    return values[:n], quaternion[:n].astype(bool)
+
+
 # ----- the build ---------------------------------------------------------------------------
 
 def build():
-    """Compile json_text.c into ``library_path()`` (CC, else Python's compiler, else cc);
+    """Compile compiled_json.c into ``library_path()`` (CC, else Python's compiler, else cc);
     older builds (PREFIX*) are removed. Its path."""
     import shlex  # the build's only: 5 ms of every verify's start
     import subprocess
@@ -147,7 +174,7 @@ def build():
 
 
 def main():
-    """Build; if that fails, say so and exit 0 (verify then writes with the json module)."""
+    """Build; if that fails, say so and exit 0 (the callers then take the Python way)."""
     import subprocess
     import time
 
@@ -156,10 +183,10 @@ def main():
         path = build()
     except (OSError, subprocess.CalledProcessError) as exc:
         detail = getattr(exc, "stderr", "") or ""
-        print(f"JSON rows: the C build failed ({type(exc).__name__}: {exc} {detail.strip()[:300]}); "
-              "verify --json writes with the json module instead", file=sys.stderr)
+        print(f"compiled JSON: the C build failed ({type(exc).__name__}: {exc} {detail.strip()[:300]}); "
+              "verify reads and writes JSON with Python's libraries instead", file=sys.stderr)
         return 0
-    print(f"JSON rows: {path.name} built in {time.perf_counter() - t:.1f} s")
+    print(f"compiled JSON: {path.name} built in {time.perf_counter() - t:.1f} s")
     return 0
 
 

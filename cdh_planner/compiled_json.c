@@ -1,0 +1,334 @@
+/* JSON in and out for compiled_json.py, called through ctypes (the GIL released).
+ *
+ * Writing: verify's JSON rows in one pass. Row r is literals piece 0, field 0, piece 1, ...,
+ * field F - 1, piece F, rows joined by a separator. A field is a column of numbers written
+ * as Python's json module writes their .tolist() (floats in repr's layout from Ryu's
+ * shortest round-trip digits, vendored in ryu/; non-finite floats as null; a row of several
+ * as "[a, b]"), or of given texts.
+ *
+ * Reading: a poses file in its plain form, straight into arrays (read_poses, at the end). */
+
+#include <math.h>
+#include <stdlib.h>
+
+#include "ryu/d2s.c"
+
+enum { FLOAT = 0, INT = 1, BOOL = 2, TEXT = 3 };  /* compiled_json.py's kinds */
+
+/* The decimal digits of m < 10^17 (Ryu's output), ending just before end: two at a time,
+ * in 32-bit arithmetic below 10^8 (as Ryu's to_chars). */
+static inline void write_digits(uint64_t m, char* end) {
+  if ((m >> 32) != 0) {
+    const uint64_t q = div1e8(m);
+    uint32_t low = ((uint32_t) m) - 100000000 * ((uint32_t) q);
+    m = q;
+    for (int k = 0; k < 4; ++k) {
+      end -= 2;
+      memcpy(end, DIGIT_TABLE + 2 * (low % 100), 2);
+      low /= 100;
+    }
+  }
+  uint32_t m32 = (uint32_t) m;
+  while (m32 >= 100) {
+    end -= 2;
+    memcpy(end, DIGIT_TABLE + 2 * (m32 % 100), 2);
+    m32 /= 100;
+  }
+  if (m32 >= 10) {
+    end -= 2;
+    memcpy(end, DIGIT_TABLE + 2 * m32, 2);
+  } else {
+    *--end = (char) ('0' + m32);
+  }
+}
+
+/* Python's repr of the double with bits `bits` ("null" if not finite) at r: at most 24
+ * bytes, though up to 40 are written (what follows is overwritten). Its length. */
+static int py_repr(const uint64_t bits, char* const r) {
+  const bool sign = (bits >> 63) != 0;
+  const uint64_t mantissa = bits & ((1ull << DOUBLE_MANTISSA_BITS) - 1);
+  const uint32_t exponent = (uint32_t) ((bits >> DOUBLE_MANTISSA_BITS) & 0x7ffu);
+  if (exponent == 0x7ffu) {
+    memcpy(r, "null", 4);
+    return 4;
+  }
+  int i = 0;
+  if (sign) {
+    r[i++] = '-';
+  }
+  if (exponent == 0 && mantissa == 0) {
+    memcpy(r + i, "0.0", 3);
+    return i + 3;
+  }
+  floating_decimal_64 v;
+  if (d2d_small_int(mantissa, exponent, &v)) {  /* an integer below 2^53: its zeros dropped */
+    while (v.mantissa % 10 == 0) {
+      v.mantissa /= 10;
+      ++v.exponent;
+    }
+  } else {
+    v = d2d(mantissa, exponent);
+  }
+  /* the digits in a scratch with room for copies of fixed size (a few moves each, where
+   * one of n bytes would call memcpy) */
+  char digits[48];
+  const int n = (int) decimalLength17(v.mantissa);
+  write_digits(v.mantissa, digits + n);
+  const int decpt = v.exponent + n;  /* the value is 0.DIGITS x 10^decpt */
+  if (decpt > -4 && decpt <= 16) {   /* positional, as repr: from 1e-4 to below 1e16 */
+    if (decpt <= 0) {
+      memcpy(r + i, "0.000", 5);
+      i += 2 - decpt;
+      memcpy(r + i, digits, 17);
+      return i + n;
+    }
+    if (decpt >= n) {
+      memcpy(r + i, digits, 17);
+      i += n;
+      for (int k = n; k < decpt; ++k) r[i++] = '0';
+      memcpy(r + i, ".0", 2);
+      return i + 2;
+    }
+    memcpy(r + i, digits, 16);
+    r[i + decpt] = '.';
+    memcpy(r + i + decpt + 1, digits + decpt, 16);
+    return i + n + 1;
+  }
+  r[i++] = digits[0];  /* d[.ddd]e+XX: a sign and at least two exponent digits, as repr */
+  if (n > 1) {
+    r[i++] = '.';
+    memcpy(r + i, digits + 1, 16);
+    i += n - 1;
+  }
+  int e = decpt - 1;
+  r[i++] = 'e';
+  r[i++] = e < 0 ? '-' : '+';
+  if (e < 0) e = -e;
+  if (e >= 100) {
+    r[i++] = (char) ('0' + e / 100);
+    e %= 100;
+  }
+  r[i++] = (char) ('0' + e / 10);
+  r[i++] = (char) ('0' + e % 10);
+  return i;
+}
+
+/* The decimal text of an int64 at r (at most 20 bytes); its length. */
+static int int_text(const int64_t value, char* const r) {
+  int i = 0;
+  uint64_t m = (uint64_t) value;
+  if (value < 0) {
+    r[i++] = '-';
+    m = 0 - m;
+  }
+  char digits[20];  /* up to 20 digits: write_digits takes at most 17 */
+  int n = 0;
+  do {
+    digits[19 - n++] = (char) ('0' + m % 10);
+    m /= 10;
+  } while (m != 0);
+  memcpy(r + i, digits + 20 - n, n);
+  return i + n;
+}
+
+/* One entry k of a numeric column (data: float64, int64 or uint8 values) at r; its length. */
+static inline int64_t number_text(const int32_t kind, const void* const data, const int64_t k,
+                                  char* const r) {
+  if (kind == FLOAT) {
+    uint64_t bits;
+    memcpy(&bits, (const char*) data + 8 * k, sizeof bits);
+    return py_repr(bits, r);
+  }
+  if (kind == INT) {
+    return int_text(((const int64_t*) data)[k], r);
+  }
+  if (((const uint8_t*) data)[k]) {
+    memcpy(r, "true", 4);
+    return 4;
+  }
+  memcpy(r, "false", 5);
+  return 5;
+}
+
+/* n rows of F fields into out (room as compiled_json.py allows: 48 bytes more than the text);
+ * field k: kind[k], width[k] (-1: one entry a row; w >= 0: a list of w), data[k] (the column's
+ * values, row after row; TEXT: the texts' bytes) and, for TEXT, offsets[k] (n + 1 int64:
+ * row r's text is bytes offsets[r] to offsets[r + 1]); literals with bounds (F + 2: piece k
+ * is bytes bounds[k] to bounds[k + 1]). The text's length. */
+int64_t json_rows(const int64_t n, const int32_t F, const int32_t* const kind,
+                  const int64_t* const width, const void* const* const data,
+                  const int64_t* const* const offsets, const char* const literals,
+                  const int64_t* const bounds, const char* const separator,
+                  const int64_t separator_size, char* const out) {
+  int64_t o = 0;
+  for (int64_t r = 0; r < n; ++r) {
+    if (r > 0) {
+      memcpy(out + o, separator, separator_size);
+      o += separator_size;
+    }
+    for (int32_t k = 0; k <= F; ++k) {
+      const int64_t size = bounds[k + 1] - bounds[k];
+      memcpy(out + o, literals + bounds[k], size);
+      o += size;
+      if (k == F) break;
+      if (kind[k] == TEXT) {
+        const int64_t a = offsets[k][r], b = offsets[k][r + 1];
+        memcpy(out + o, (const char*) data[k] + a, b - a);
+        o += b - a;
+      } else if (width[k] < 0) {
+        o += number_text(kind[k], data[k], r, out + o);
+      } else {
+        out[o++] = '[';
+        for (int64_t j = 0; j < width[k]; ++j) {
+          if (j > 0) {
+            out[o++] = ',';
+            out[o++] = ' ';
+          }
+          o += number_text(kind[k], data[k], r * width[k] + j, out + o);
+        }
+        out[o++] = ']';
+      }
+    }
+  }
+  return o;
+}
+
+/* ----- reading: a poses file ----------------------------------------------------------- */
+
+/* The document of a poses file in its plain form, read into arrays: a list of poses, or
+ * {"poses": [...]}, each pose {"position": [x, y, z], "quaternion": [x, y, z, w]} or
+ * {"position": [...], "tau": [phi, theta, sigma]} (its two keys in either order), JSON
+ * numbers only, JSON whitespace anywhere allowed. Anything else (an empty list, another
+ * key, a key twice, escapes, null, true, a string, a number JSON does not allow) is not
+ * read: -1, and parsing/poses.py's json module parse says what is wrong. */
+
+typedef struct {
+  const char* s;
+  const char* end;
+} cursor;
+
+static inline void skip_ws(cursor* c) {
+  while (c->s < c->end && (*c->s == ' ' || *c->s == '\n' || *c->s == '\r' || *c->s == '\t')) {
+    ++c->s;
+  }
+}
+
+static inline bool take(cursor* c, const char ch) {
+  skip_ws(c);
+  if (c->s < c->end && *c->s == ch) {
+    ++c->s;
+    return true;
+  }
+  return false;
+}
+
+static inline bool is_digit(const char ch) {
+  return ch >= '0' && ch <= '9';
+}
+
+/* A JSON number at c into *out, as Python's json module reads it: a float by correctly
+ * rounded strtod (the C locale's decimal point: any other is caught, the text not taken
+ * whole), an integer as float(int) (so "-0" is 0.0); not finite: false. */
+static bool take_number(cursor* c, double* const out) {
+  skip_ws(c);
+  const char* p = c->s;
+  const char* const start = p;
+  bool integer = true;
+  if (p < c->end && *p == '-') ++p;
+  if (p >= c->end) return false;
+  if (*p == '0') {
+    ++p;
+  } else if (*p >= '1' && *p <= '9') {
+    while (p < c->end && is_digit(*p)) ++p;
+  } else {
+    return false;
+  }
+  if (p < c->end && *p == '.') {
+    integer = false;
+    ++p;
+    if (p >= c->end || !is_digit(*p)) return false;
+    while (p < c->end && is_digit(*p)) ++p;
+  }
+  if (p < c->end && (*p == 'e' || *p == 'E')) {
+    integer = false;
+    ++p;
+    if (p < c->end && (*p == '+' || *p == '-')) ++p;
+    if (p >= c->end || !is_digit(*p)) return false;
+    while (p < c->end && is_digit(*p)) ++p;
+  }
+  if (p >= c->end) return false;  /* a number never ends a document: strtod needs a stop */
+  char* stop;
+  const double value = strtod(start, &stop);
+  if (stop != p || !isfinite(value)) return false;
+  *out = (integer && value == 0.0) ? 0.0 : value;
+  c->s = p;
+  return true;
+}
+
+/* The key at c: 1 "position", 2 "quaternion", 3 "tau", 0 any other (or not a plain key). */
+static int take_key(cursor* c) {
+  skip_ws(c);
+  static const char* const keys[] = {"\"position\"", "\"quaternion\"", "\"tau\""};
+  for (int k = 0; k < 3; ++k) {
+    const size_t n = strlen(keys[k]);
+    if ((size_t) (c->end - c->s) >= n && memcmp(c->s, keys[k], n) == 0) {
+      c->s += n;
+      return k + 1;
+    }
+  }
+  return 0;
+}
+
+/* "[a, b, ...]" of exactly n numbers at c into out. */
+static bool take_numbers(cursor* c, const int n, double* const out) {
+  if (!take(c, '[')) return false;
+  for (int k = 0; k < n; ++k) {
+    if ((k > 0 && !take(c, ',')) || !take_number(c, out + k)) return false;
+  }
+  return take(c, ']');
+}
+
+/* One pose at c into row (7 values: position, then the quaternion or tau) and *quaternion. */
+static bool take_pose(cursor* c, double* const row, int8_t* const quaternion) {
+  if (!take(c, '{')) return false;
+  int seen = 0;  /* bit k: key k + 1 taken */
+  for (int field = 0; field < 2; ++field) {
+    if (field > 0 && !take(c, ',')) return false;
+    const int key = take_key(c);
+    if (key == 0 || (seen & (1 << (key - 1))) || !take(c, ':')) return false;
+    seen |= 1 << (key - 1);
+    if (key == 1) {
+      if (!take_numbers(c, 3, row)) return false;
+    } else {
+      *quaternion = key == 2;
+      if (!take_numbers(c, key == 2 ? 4 : 3, row + 3)) return false;
+    }
+  }
+  return (seen & 1) && seen != 7 && take(c, '}');
+}
+
+/* The poses of the document text[0:size] into values (room for max_poses rows of 7) and
+ * quaternion (max_poses: 1 where the pose gives a quaternion, 0 tau): their number, or -1
+ * if the document is not in the plain form or holds more than max_poses poses. */
+int64_t read_poses(const char* const text, const int64_t size, const int64_t max_poses,
+                   double* const values, int8_t* const quaternion) {
+  cursor c = {text, text + size};
+  bool wrapped = false;
+  if (take(&c, '{')) {
+    skip_ws(&c);
+    static const char key[] = "\"poses\"";
+    if ((size_t) (c.end - c.s) < sizeof key - 1 || memcmp(c.s, key, sizeof key - 1) != 0) return -1;
+    c.s += sizeof key - 1;
+    if (!take(&c, ':')) return -1;
+    wrapped = true;
+  }
+  if (!take(&c, '[')) return -1;
+  int64_t n = 0;
+  do {
+    if (n == max_poses || !take_pose(&c, values + 7 * n, quaternion + n)) return -1;
+    ++n;
+  } while (take(&c, ','));
+  if (!take(&c, ']') || (wrapped && !take(&c, '}'))) return -1;
+  skip_ws(&c);
+  return c.s == c.end ? n : -1;
+}
