@@ -90,6 +90,12 @@ JSON_LIMITS = Limits(max_bytes=16 << 20, max_items=100_000, max_nodes=2_000_000)
 def read_text(path, where, max_bytes=YAML_LIMITS.max_bytes):
     """The UTF-8 text of the regular file ``path`` (at most ``max_bytes``); InputError
     naming ``where`` otherwise."""
+    return decode_text(read_bytes(path, where, max_bytes), path, where)
+
+
+def read_bytes(path, where, max_bytes=YAML_LIMITS.max_bytes):
+    """The bytes of the regular file ``path`` (at most ``max_bytes``), not yet known to be
+    text (``decode_text``); InputError naming ``where`` otherwise."""
     path = Path(path)
     try:
         st = os.stat(path)
@@ -111,6 +117,12 @@ def read_text(path, where, max_bytes=YAML_LIMITS.max_bytes):
         raise InputError(where, str(path), f"cannot read: {_strerror(exc)}") from None
     if len(data) > max_bytes:
         raise InputError(where, str(path), f"file too large: over {max_bytes} bytes")
+    return data
+
+
+def decode_text(data, path, where):
+    """``read_bytes``'s ``data`` of ``path`` as UTF-8 text without NUL characters;
+    InputError naming ``where`` otherwise."""
     try:
         text = data.decode("utf-8")
     except UnicodeDecodeError as exc:

@@ -26,7 +26,7 @@ import orjson
 
 from .. import compiled_json
 from ..errors import MAX_POSITION_M, InputError, check_keys, check_numbers
-from ..files import JSON_LIMITS, parse_json_text, read_text
+from ..files import JSON_LIMITS, decode_text, parse_json_text, read_bytes
 from ..model.pose import check_quaternion, quaternion_from_tau, rotation_from_quaternion, \
     tau_from_quaternion
 
@@ -54,23 +54,26 @@ class PoseList:
 def load_poses(path, where="poses"):
     """Read and validate a poses JSON file; InputError on any bad content (the file's size,
     depth and list lengths bounded by ``files.JSON_LIMITS``, at most MAX_POSES poses)."""
-    text = read_text(path, where, JSON_LIMITS.max_bytes)
-    bulk = _compiled_poses(text)
-    if bulk is None:
-        with _no_collection():
-            bulk = _bulk_text(text)
+    data = read_bytes(path, where, JSON_LIMITS.max_bytes)
+    bulk = _compiled_poses(data)
+    if bulk is not None:
+        return bulk
+    text = decode_text(data, path, where)
+    with _no_collection():
+        bulk = _bulk_text(text)
     if bulk is not None:
         return bulk
     return poses_from_obj(parse_json_text(text, where, str(path)), where)
 
 
-def _compiled_poses(text):
-    """The PoseList of a poses file's ``text`` in its plain form, read straight into arrays
+def _compiled_poses(data):
+    """The PoseList of a poses file's bytes ``data`` in its plain form (ASCII JSON, so no
+    text to decode), read straight into arrays
     by compiled C (``compiled_json.read_poses``: 0.008 s for 20,000 poses, orjson and the
     lists 0.025 s), or None for any other form, a value ``_bulk_poses`` would refuse, or
     without the build: then orjson and the json module (``_bulk_text``). The same numbers
     (both read as correctly rounded doubles) and checks."""
-    read = compiled_json.read_poses(text.encode("utf-8"), MAX_POSES)
+    read = compiled_json.read_poses(data, MAX_POSES)
     if read is None:
         return None
     values, has_q = read
