@@ -226,20 +226,38 @@ static inline bool is_digit(const char ch) {
   return ch >= '0' && ch <= '9';
 }
 
-/* A JSON number at c into *out, as Python's json module reads it: a float by correctly
- * rounded strtod (the C locale's decimal point: any other is caught, the text not taken
- * whole), an integer as float(int) (so "-0" is 0.0); not finite: false. */
+/* Exact powers of ten as doubles (10^22 is the largest). */
+static const double POW10[23] = {1e0,  1e1,  1e2,  1e3,  1e4,  1e5,  1e6,  1e7,
+                                 1e8,  1e9,  1e10, 1e11, 1e12, 1e13, 1e14, 1e15,
+                                 1e16, 1e17, 1e18, 1e19, 1e20, 1e21, 1e22};
+
+/* A JSON number at c into *out, as Python's json module reads it: a float correctly
+ * rounded (Clinger's fast path where the digits w <= 2^53 and the exponent q is within
+ * 10^+-22, both exact doubles so one rounding is the only one; else strtod, which rounds
+ * correctly in the C locale, any other caught by the text not taken whole), an integer as
+ * float(int) (so "-0" is 0.0); not finite: false. */
 static bool take_number(cursor* c, double* const out) {
   skip_ws(c);
   const char* p = c->s;
   const char* const start = p;
-  bool integer = true;
-  if (p < c->end && *p == '-') ++p;
+  bool integer = true, negative = false;
+  uint64_t w = 0;         /* the significant digits, while they fit */
+  int digits = 0;         /* how many of them (leading zeros not counted) */
+  int64_t q = 0;          /* the decimal exponent of w */
+  if (p < c->end && *p == '-') {
+    negative = true;
+    ++p;
+  }
   if (p >= c->end) return false;
   if (*p == '0') {
     ++p;
   } else if (*p >= '1' && *p <= '9') {
-    while (p < c->end && is_digit(*p)) ++p;
+    while (p < c->end && is_digit(*p)) {
+      if (digits < 19) w = 10 * w + (uint64_t) (*p - '0');
+      else ++q;  /* beyond 19 digits: not the fast path (see below) */
+      ++digits;
+      ++p;
+    }
   } else {
     return false;
   }
@@ -247,19 +265,43 @@ static bool take_number(cursor* c, double* const out) {
     integer = false;
     ++p;
     if (p >= c->end || !is_digit(*p)) return false;
-    while (p < c->end && is_digit(*p)) ++p;
+    while (p < c->end && is_digit(*p)) {
+      if (digits > 0 || *p != '0') {
+        if (digits < 19) {
+          w = 10 * w + (uint64_t) (*p - '0');
+          --q;
+        }
+        ++digits;
+      } else {
+        --q;  /* a leading zero of the fraction */
+      }
+      ++p;
+    }
   }
   if (p < c->end && (*p == 'e' || *p == 'E')) {
     integer = false;
     ++p;
-    if (p < c->end && (*p == '+' || *p == '-')) ++p;
+    bool minus = false;
+    if (p < c->end && (*p == '+' || *p == '-')) minus = *p++ == '-';
     if (p >= c->end || !is_digit(*p)) return false;
-    while (p < c->end && is_digit(*p)) ++p;
+    int64_t e = 0;
+    while (p < c->end && is_digit(*p)) {
+      if (e < 100000) e = 10 * e + (*p - '0');
+      ++p;
+    }
+    q += minus ? -e : e;
   }
   if (p >= c->end) return false;  /* a number never ends a document: strtod needs a stop */
-  char* stop;
-  const double value = strtod(start, &stop);
-  if (stop != p || !isfinite(value)) return false;
+  double value;
+  if (digits <= 19 && w <= (1ull << 53) && q >= -22 && q <= 22) {
+    value = q < 0 ? (double) w / POW10[-q] : (double) w * POW10[q];
+    if (negative) value = -value;
+  } else {
+    char* stop;
+    value = strtod(start, &stop);
+    if (stop != p) return false;
+  }
+  if (!isfinite(value)) return false;
   *out = (integer && value == 0.0) ? 0.0 : value;
   c->s = p;
   return true;

@@ -295,3 +295,26 @@ def test_load_poses_gives_the_same_poses_either_way(tmp_path, monkeypatch):
     python = poses_module.load_poses(path)
     for field in ("positions", "quaternions", "rotations", "tau"):
         assert getattr(compiled, field).tobytes() == getattr(python, field).tobytes(), field
+
+
+@pytest.mark.skipif(not BUILT, reason=NOT_BUILT)
+def test_numbers_of_every_form_are_read_as_float_reads_them():
+    """Clinger's fast path (digits <= 2^53, exponent within 10^+-22) and strtod beyond it:
+    60,000 numbers of every form (long digit strings, leading zeros, exponents at the
+    path's edges, integers) equal float() of their text, bit for bit."""
+    rng = np.random.default_rng(17)
+    forms = [lambda: repr(float(rng.normal() * 10.0 ** rng.integers(-30, 30))),
+             lambda: str(int(rng.integers(-10**18, 10**18))),
+             lambda: (f"{'-' if rng.random() < 0.5 else ''}{rng.integers(0, 10**int(rng.integers(1, 19)))}."
+                      + "".join(rng.choice(list("0123456789"), rng.integers(1, 25)))),
+             lambda: f"{rng.integers(1, 10**16)}e{rng.integers(-40, 40)}",
+             lambda: f"0.{'0' * int(rng.integers(0, 25))}{rng.integers(1, 10**int(rng.integers(1, 18)))}",
+             lambda: f"{rng.integers(1, 2**53 + 1)}E-{rng.integers(0, 24)}",
+             lambda: f"{rng.integers(1, 2**53 + 1)}.{rng.integers(0, 10**6)}e{rng.integers(-25, 25)}"]
+    texts = [forms[rng.integers(0, len(forms))]() for _ in range(60_000)]
+    doc = ",".join('{"position":[%s,%s,%s],"tau":[0,0,0]}' % tuple(texts[k:k + 3])
+                   for k in range(0, len(texts), 3))
+    values, _ = compiled_json.read_poses(f"[{doc}]".encode(), len(texts))
+    expected = np.array([float(t) if float(t) != 0.0 or "." in t or "e" in t.lower() else 0.0
+                         for t in texts])
+    assert values[:, :3].ravel().tobytes() == expected.tobytes()

@@ -101,7 +101,7 @@ def facet_test(robot, p, R):
     margins = normalised_margins(robot, lengths, t0, v)
     status = np.where(mr > 0, np.where(margins[:, 2:, :].reshape(n, -1).min(axis=1) > 0,
                                        STATUS_OK, STATUS_EXCEEDS), STATUS_INFEASIBLE)
-    status = np.where(singular, STATUS_SINGULAR, status).astype(object)
+    status = np.where(singular, STATUS_SINGULAR, status)
     mn, mr = np.where(singular, -np.inf, mn), np.where(singular, -np.inf, mr)
     t0 = np.where(singular[:, None], np.nan, t0)
     v = np.where(singular[:, None], np.inf, v)
@@ -110,7 +110,7 @@ def facet_test(robot, p, R):
                              margin_newtons=mn, wrench_margin=mr,
                              wrench_facet=np.where(singular | (arg < 0), -1, arg // 2),
                              wrench_facet_up=hi,
-                             tension_status=status.astype(str))
+                             tension_status=status)
 
 
 def _band(robot, p, R):
