@@ -53,15 +53,21 @@ def test_forward_command_drives_a_joint_group_position_controller(tmp_path):
         status = client.wait_execution_result(0, timeout_s=30.0)
         assert status is not None and M.status_values(status) == {
             "outcome": "completed", "mode": "forward_command"}, node.log()
-        client.spin(0.3)
+        goal = client.trajectories[-1].points[-1].positions      # robot order
+        expected = [goal[ROBOT.winch_names.index(n)] for n in ORDER]
+
+        def last_is_the_goal():  # the result can come before the last commands are read
+            commands = double.events("command")
+            return bool(commands) and np.allclose(commands[-1]["data"], expected, rtol=0,
+                                                  atol=1e-12)
+
+        assert client.spin_until(last_is_the_goal, 30.0), (
+            f"last command {double.events('command')[-1:]}, the goal {expected}")
         assert double.events("command_rejected") == []
         commands = double.events("command")
         # a stream, not one jump (116 commands at 50 Hz alone; a starved timer sends fewer,
         # each sampled at its own time: 10 in a loaded full run)
         assert len(commands) >= 3
-        goal = client.trajectories[-1].points[-1].positions      # robot order
-        expected = [goal[ROBOT.winch_names.index(n)] for n in ORDER]
-        np.testing.assert_allclose(commands[-1]["data"], expected, rtol=0, atol=1e-12)
         first = [start[n] for n in ORDER]      # sampled a few ms after the start
         np.testing.assert_allclose(commands[0]["data"], first, rtol=0, atol=1e-4)
     # the recorded commands move the robot: replay leaves them out unless asked
