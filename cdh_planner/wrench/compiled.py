@@ -39,7 +39,7 @@ AOT_EXPORTS = {
 }
 AOT_PREFIX = "_kernels_aot_"
 # the functions the entries call, by module: numba functions under the JIT
-KERNEL_HELPERS = ("eliminate", "gauss_jordan", "_off_subsets", "_subset_structure", "householder_r", "null_vector", "_subset_normal", "load_wrench",
+KERNEL_HELPERS = ("eliminate", "gauss_jordan", "_off_subsets", "_subset_structure", "householder_r", "null_vector", "_null_normal", "load_wrench",
                   "_facet_outputs", "_facet_poses", "lu_factor6", "lu_solve6")
 CENTRED_HELPERS = ("householder_r", "forward_substitute", "null_basis", "cholesky_solve",
                    "load_wrench", "_log_product", "_slacks", "_centre", "_centred_poses")

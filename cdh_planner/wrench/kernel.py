@@ -34,26 +34,11 @@ PARALLEL_CHUNK = 512
 PARALLEL_MIN = 4096
 
 
-def _subset_normal(T, zrows, xcols, k, nx, M, y, perm):
-    """y (nx + 1,) on the basis rows ``zrows[k]`` off subset k, orthogonal to its off-basis
-    columns ``xcols[k]`` of N (T's first columns); closed forms for nx <= 2 (m = 8 needs no
-    more). False when those columns are dependent (the subset has rank 4)."""
-    if nx == 0:
-        y[0] = 1.0
-        return True
-    if nx == 1:
-        x0 = xcols[k, 0]
-        a0, a1 = T[zrows[k, 0], x0], T[zrows[k, 1], x0]
-        y[0], y[1] = a1, -a0
-        return max(abs(a0), abs(a1)) > RANK_TOL
-    if nx == 2:
-        x0, x1 = xcols[k, 0], xcols[k, 1]
-        z0, z1, z2 = zrows[k, 0], zrows[k, 1], zrows[k, 2]
-        a0, a1, a2 = T[z0, x0], T[z1, x0], T[z2, x0]
-        b0, b1, b2 = T[z0, x1], T[z1, x1], T[z2, x1]
-        y[0], y[1], y[2] = a1 * b2 - a2 * b1, a2 * b0 - a0 * b2, a0 * b1 - a1 * b0
-        return max(abs(y[0]), abs(y[1]), abs(y[2])) > RANK_TOL * max(
-            abs(a0), abs(a1), abs(a2), abs(b0), abs(b1), abs(b2), 1.0)
+def _null_normal(T, zrows, xcols, k, nx, M, y, perm):
+    """y (nx + 1,) on the basis rows ``zrows[k]`` off subset k, orthogonal to its nx > 2
+    off-basis columns ``xcols[k]`` of N (T's first columns; ``_facet_poses`` writes nx <= 2,
+    all m = 8 needs, in closed form). False when those columns are dependent (the subset
+    has rank 4)."""
     for i in range(nx):
         for b in range(nx + 1):
             M[i, b] = T[zrows[k, b], xcols[k, i]]
@@ -189,7 +174,28 @@ def _facet_poses(q0, q1, J, c, w_local, L3, load_frame, tmin, tmax, subsets, sin
                 basis[r] = pivcol[r]
         for k in range(K):
             nx, nz = nxs[k], nzs[k]
-            if not _subset_normal(T, zrows, xcols, k, nx, M, y, perm):
+            # y (nx + 1,) on the basis rows zrows[k] off subset k, orthogonal to its off-basis
+            # columns xcols[k] of N; closed forms for nx <= 2 written out here (a call that
+            # passes arrays costs numba's reference counting: 40 % of this kernel's time)
+            if nx == 0:
+                y[0] = 1.0
+                spans = True
+            elif nx == 1:
+                x0 = xcols[k, 0]
+                a0, a1 = T[zrows[k, 0], x0], T[zrows[k, 1], x0]
+                y[0], y[1] = a1, -a0
+                spans = max(abs(a0), abs(a1)) > RANK_TOL
+            elif nx == 2:
+                x0, x1 = xcols[k, 0], xcols[k, 1]
+                z0, z1, z2 = zrows[k, 0], zrows[k, 1], zrows[k, 2]
+                a0, a1, a2 = T[z0, x0], T[z1, x0], T[z2, x0]
+                b0, b1, b2 = T[z0, x1], T[z1, x1], T[z2, x1]
+                y[0], y[1], y[2] = a1 * b2 - a2 * b1, a2 * b0 - a0 * b2, a0 * b1 - a1 * b0
+                spans = max(abs(y[0]), abs(y[1]), abs(y[2])) > RANK_TOL * max(
+                    abs(a0), abs(a1), abs(a2), abs(b0), abs(b1), abs(b2), 1.0)
+            else:
+                spans = _null_normal(T, zrows, xcols, k, nx, M, y, perm)
+            if not spans:
                 continue  # rank 4: no facet
             # p_i = c.J_i = y.N_i for the cables off S (0 on S: exactly)
             hp, hm, width = 0.0, 0.0, 0.0
