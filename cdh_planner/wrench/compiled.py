@@ -42,7 +42,7 @@ AOT_PREFIX = "_kernels_aot_"
 KERNEL_HELPERS = ("eliminate", "gauss_jordan", "_off_subsets", "_subset_structure", "householder_r", "null_vector", "_null_normal", "load_wrench",
                   "_facet_outputs", "_facet_poses", "lu_factor6", "lu_solve6")
 CENTRED_HELPERS = ("householder_r", "forward_substitute", "null_basis", "cholesky_solve",
-                   "load_wrench", "_log_product", "_slacks", "_centre", "_centred_poses")
+                   "load_wrench", "_log_product", "_slacks", "_centre_scratch", "_centre", "_centred_poses")
 
 
 AOT_SOURCES = ("compiled.py", "kernel.py", "centred.py", "linalg.py", "../kernel_linalg.py")  # what the machine code is of: the kernels' sources and this file (the signatures)
