@@ -48,14 +48,14 @@ def _centred_poses(q0, q1, J, c, w_local, L3, load_frame, tmin, tmax, ranked, ce
     Y = np.empty((6, 6))
     hv0 = np.empty(6)
     hvv = np.empty(6)
-    y = np.empty(6)
+    Y_J = np.empty((6, m))  # R^-T J, a cable a column
     Q2 = np.empty((m, max(m - 6, 0)))
     room_lo = np.empty(m)
     room_hi = np.empty(m)
     zc = np.zeros(max(m - 6, 0) + 1)  # the shift z, then the last centring's gap
     scratch = _centre_scratch(m, max(m - 6, 0))
-    col = np.empty(6)
-    a = np.empty(6)
+    col = np.empty((6, 1))
+    a = np.empty((6, 1))
     mid = 0.5 * (tmin + tmax)
     sqd = tmax - tmin  # D^(1/2)
     shift = np.zeros(m)  # the last centred pose's normalised null-space shift Q2 z
@@ -70,32 +70,25 @@ def _centred_poses(q0, q1, J, c, w_local, L3, load_frame, tmin, tmax, ranked, ce
             for r in range(6):
                 A[i, r] = sqd[i] * Jq[r, i]
         householder_r(A, R, hv0, hvv)
-        for j in range(6):  # Y = R^-T L
-            for r in range(6):
-                col[r] = L[r, j]
-            forward_substitute(R, col, a)
-            for r in range(6):
-                Y[r, j] = a[r]
+        forward_substitute(R, L, Y)  # Y = R^-T L
         for r in range(6):  # col = R^-T (w0 - J mid)
             s = w0[r]
             for i in range(m):
                 s -= Jq[r, i] * mid[i]
-            a[r] = s
+            a[r, 0] = s
         forward_substitute(R, a, col)
+        forward_substitute(R, Jq, Y_J)  # column i: R^-T J_i
         for i in range(m):
-            for r in range(6):
-                a[r] = Jq[r, i]
-            forward_substitute(R, a, y)  # y = R^-T J_i
             d = sqd[i] * sqd[i]
             s = 0.0
             for r in range(6):
-                s += y[r] * col[r]
+                s += Y_J[r, i] * col[r, 0]
             t0[q, i] = mid[i] + d * s
             vv = 0.0
             for j in range(6):
                 s = 0.0
                 for r in range(6):
-                    s += y[r] * Y[r, j]
+                    s += Y_J[r, i] * Y[r, j]
                 vv += s * s
             v[q, i] = d * np.sqrt(vv)
         # the centred nominal (wrench-feasible poses): t0 + D^(1/2) Q2 z, Q2 spanning

@@ -146,13 +146,15 @@ def cholesky_solve(H, g, n, x):
             s -= H[k, i] * x[k]
         x[i] = s / H[i, i]
 
-def forward_substitute(R, b, x):
-    """x = R^-T b for upper-triangular R (6, 6)."""
-    for i in range(6):
-        s = b[i]
-        for k in range(i):
-            s -= R[k, i] * x[k]
-        x[i] = s / R[i, i]
+def forward_substitute(R, B, X):
+    """X = R^-T B (6, c) for upper-triangular R (6, 6), column by column (one call for all
+    of them: a call passing arrays costs numba's reference counting)."""
+    for j in range(B.shape[1]):
+        for i in range(6):
+            s = B[i, j]
+            for k in range(i):
+                s -= R[k, i] * X[k, j]
+            X[i, j] = s / R[i, i]
 
 
 def lu_factor6(A, perm):
