@@ -307,16 +307,20 @@ static bool take_number(cursor* c, double* const out) {
   return true;
 }
 
+/* Whether the exact text `word` (a key with its quotes) is at c, taken if so. */
+static bool take_word(cursor* c, const char* const word) {
+  skip_ws(c);
+  const size_t n = strlen(word);
+  if ((size_t) (c->end - c->s) < n || memcmp(c->s, word, n) != 0) return false;
+  c->s += n;
+  return true;
+}
+
 /* The key at c: 1 "position", 2 "quaternion", 3 "tau", 0 any other (or not a plain key). */
 static int take_key(cursor* c) {
-  skip_ws(c);
   static const char* const keys[] = {"\"position\"", "\"quaternion\"", "\"tau\""};
   for (int k = 0; k < 3; ++k) {
-    const size_t n = strlen(keys[k]);
-    if ((size_t) (c->end - c->s) >= n && memcmp(c->s, keys[k], n) == 0) {
-      c->s += n;
-      return k + 1;
-    }
+    if (take_word(c, keys[k])) return k + 1;
   }
   return 0;
 }
@@ -346,7 +350,7 @@ static bool take_pose(cursor* c, double* const row, int8_t* const quaternion) {
       if (!take_numbers(c, key == 2 ? 4 : 3, row + 3)) return false;
     }
   }
-  return (seen & 1) && seen != 7 && take(c, '}');
+  return (seen & 1) && take(c, '}');  /* two distinct keys, position one of them */
 }
 
 /* The poses of the document text[0:size] into values (room for max_poses rows of 7) and
@@ -357,11 +361,7 @@ int64_t read_poses(const char* const text, const int64_t size, const int64_t max
   cursor c = {text, text + size};
   bool wrapped = false;
   if (take(&c, '{')) {
-    skip_ws(&c);
-    static const char key[] = "\"poses\"";
-    if ((size_t) (c.end - c.s) < sizeof key - 1 || memcmp(c.s, key, sizeof key - 1) != 0) return -1;
-    c.s += sizeof key - 1;
-    if (!take(&c, ':')) return -1;
+    if (!take_word(&c, "\"poses\"") || !take(&c, ':')) return -1;
     wrapped = true;
   }
   if (!take(&c, '[')) return -1;

@@ -2,11 +2,11 @@
 the Python libraries cost most: ``verify --json``'s rows (``rows_text``: in one pass, numbers
 as Python's json module writes them, floats by repr: Ryu's shortest round-trip digits,
 vendored in ryu/, as orjson and CPython find them; blocks of rows on threads side by side)
-and a poses file in its plain form (``read_poses``: straight into arrays, numbers by
-correctly rounded strtod, as the json module reads them). For 20,000 eight-cable poses the
-JSON's 25 MB took orjson (under the GIL), a pass rewriting its odd numbers as repr does and
-a compiled assembly of the rows 0.085 - 0.107 s, now 0.042 - 0.056; reading the poses
-with orjson and lists 0.025 s, now ...; docs/performance.md.
+and a poses file in its plain form (``read_poses``: straight into arrays, numbers
+correctly rounded as the json module reads them: Clinger's exact fast path, else strtod).
+For 20,000 eight-cable poses the JSON's 25 MB took orjson (under the GIL), a pass rewriting
+its odd numbers as repr does and a compiled assembly of the rows 0.085 - 0.107 s, now 0.042
+- 0.056; reading the poses with orjson and lists 0.025 s, now 0.010; docs/performance.md.
 
     python -m cdh_planner.compiled_json     # the build, which ``make`` runs
 
@@ -24,10 +24,7 @@ from pathlib import Path
 
 import numpy as np
 
-try:  # CPython's built-in SHA-256 (to 3.11): hashlib's import loads OpenSSL (cdh_planner.aot)
-    from _sha256 import sha256
-except ImportError:
-    from hashlib import sha256
+from .aot import sha256  # CPython's own SHA-256: hashlib's import loads OpenSSL
 
 FLOAT, INT, BOOL, TEXT = 0, 1, 2, 3  # a field's kind, as compiled_json.c reads it
 SOURCES = ("compiled_json.c", "ryu/d2s.c", "ryu/common.h", "ryu/d2s_full_table.h",
@@ -93,11 +90,13 @@ def rows_text(literals, columns, separator):
     bounds = np.cumsum([0] + [len(t) for t in literals], dtype=np.int64)
     sep = separator.encode("ascii")
     out = np.empty(room, dtype=np.uint8)
-    # every array the C function reads is held here for the call (an address alone is not)
-    held = (np.array(kinds, dtype=np.int32), np.array(widths, dtype=np.int64), _addresses(data),
-            _addresses(offsets), bounds)
-    size = library["json_rows"](n, len(columns), *(a.ctypes.data for a in held[:4]), text,
-                    bounds.ctypes.data, sep, len(sep), out.ctypes.data)
+    # the arrays the C function reads, named so that they live through the call (their
+    # addresses alone do not keep them)
+    kinds, widths = np.array(kinds, dtype=np.int32), np.array(widths, dtype=np.int64)
+    data_at, offsets_at = _addresses(data), _addresses(offsets)
+    size = library["json_rows"](n, len(columns), kinds.ctypes.data, widths.ctypes.data,
+                                data_at.ctypes.data, offsets_at.ctypes.data, text,
+                                bounds.ctypes.data, sep, len(sep), out.ctypes.data)
     return out[:size]
 
 

@@ -68,18 +68,18 @@ def load_poses(path, where="poses"):
 
 def _compiled_poses(data):
     """The PoseList of a poses file's bytes ``data`` in its plain form (ASCII JSON, so no
-    text to decode), read straight into arrays
-    by compiled C (``compiled_json.read_poses``: 0.008 s for 20,000 poses, orjson and the
-    lists 0.025 s), or None for any other form, a value ``_bulk_poses`` would refuse, or
-    without the build: then orjson and the json module (``_bulk_text``). The same numbers
-    (both read as correctly rounded doubles) and checks."""
+    text to decode), read straight into arrays by compiled C (``compiled_json.read_poses``:
+    0.010 s for 20,000 poses, orjson and the lists 0.025 s), or None for any other form, a
+    value ``_bulk_poses`` would refuse, or without the build: then orjson and the json
+    module (``_bulk_text``). The same numbers (both read as correctly rounded doubles) and
+    checks (the C reads finite numbers only; ``_within`` the limits)."""
     read = compiled_json.read_poses(data, MAX_POSES)
     if read is None:
         return None
     values, has_q = read
     p = np.ascontiguousarray(values[:, :3])
     q, tau = values[has_q, 3:7], values[~has_q, 3:6]  # copies, C-contiguous
-    if np.any(np.abs(p) > MAX_POSITION_M) or np.any(np.abs(q) > 2.0):
+    if not (_within(p, MAX_POSITION_M) and _within(q, QUATERNION_LIMIT)):
         return None
     return _pose_list(p, has_q, q, tau)
 
@@ -163,7 +163,8 @@ def _bulk_poses(doc):
     has_q = np.fromiter(("quaternion" in d for d in doc), bool, len(doc))
     q = tau = None
     if has_q.any():
-        q = _bulk_numbers([d["quaternion"] for d in doc if "quaternion" in d], 4, 2.0)
+        q = _bulk_numbers([d["quaternion"] for d in doc if "quaternion" in d], 4,
+                          QUATERNION_LIMIT)
     if not has_q.all():
         tau = _bulk_numbers([d["tau"] for d in doc if "tau" in d], 3, None)
     if (q is None and has_q.any()) or (tau is None and not has_q.all()):
@@ -198,6 +199,7 @@ _Q_KEYS, _TAU_KEYS = frozenset(("position", "quaternion")), frozenset(("position
 # MAX_POSES poses of 10 values (a mapping, two lists, 7 numbers), 4 levels deep with the
 # {"poses": ...} wrapper; load_poses skips the check_structure walk for it.
 QUATERNION_TOL = 1e-3  # check_quaternion's default tolerance on |q| - 1
+QUATERNION_LIMIT = 2.0  # |entry| of a given quaternion beyond this: refused before its norm
 
 
 def _bulk_numbers(rows, n, limit):
@@ -212,9 +214,14 @@ def _bulk_numbers(rows, n, limit):
         values = np.array(flat, dtype=float).reshape(-1, n)
     except OverflowError:  # an integer beyond the float range
         return None
-    if not np.all(np.isfinite(values)) or (limit is not None and np.any(np.abs(values) > limit)):
+    if not (np.all(np.isfinite(values)) and _within(values, limit)):
         return None
     return values
+
+
+def _within(values, limit):
+    """Whether every entry of ``values`` lies within +-``limit`` (None: no limit)."""
+    return limit is None or not np.any(np.abs(values) > limit)
 
 
 def _tau_in_range(tau):
@@ -241,7 +248,8 @@ def _pose_fields(d, where):
         raise InputError(where, d, "give exactly one of 'quaternion' or 'tau'")
     p = number_list(f"{where}.position", d["position"], 3, limit=MAX_POSITION_M)
     if has_q:
-        q = check_quaternion(number_list(f"{where}.quaternion", d["quaternion"], 4, limit=2.0),
+        q = check_quaternion(number_list(f"{where}.quaternion", d["quaternion"], 4,
+                                         limit=QUATERNION_LIMIT),
                              field=f"{where}.quaternion")
         return p, "quaternion", -q if q[3] < 0 else q
     return p, "tau", check_tau(number_list(f"{where}.tau", d["tau"], 3), f"{where}.tau")
