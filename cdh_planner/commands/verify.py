@@ -197,7 +197,7 @@ def _block_text(literals, cols):
     """The rows of the flat columns ``cols`` around ``literals`` (``_row_literals``) joined
     by ROW_SEPARATOR: by the compiled writer (``compiled_json.rows_text``, a uint8 array of
     ASCII), or without its build by the json module (bytes, the same)."""
-    cols = [list(col) if isinstance(col, _Texts) else _numbers_or_texts(np.asarray(col))
+    cols = [col if isinstance(col, _Texts) else _numbers_or_texts(np.asarray(col))
             for col in cols]
     text = compiled_json.rows_text(literals, cols, ROW_SEPARATOR)
     return _python_rows(literals, cols) if text is None else text
