@@ -93,3 +93,44 @@ def test_a_part_file_left_by_a_killed_run_is_replaced(tmp_path):
     (tmp_path / f".out.json.{os.getpid()}.part").write_text("stale")
     write_text("--json", out, b"new")
     assert out.read_text() == "new" and _names(tmp_path) == ["out.json"]
+
+
+def test_an_existing_file_is_exchanged_in_one_step_and_a_new_one_renamed(tmp_path, monkeypatch):
+    """Over an existing file the new one is swapped in (renameat2 RENAME_EXCHANGE, where the
+    file system has it) and the old one unlinked; a new file is renamed into place; either
+    way the document is whole and nothing else is left. An interruption between the swap and
+    the unlink leaves the new document and removes the old one."""
+    out, other = tmp_path / "out.json", tmp_path / "link.json"
+    out.write_text("old")
+    os.link(out, other)  # a second name of the old file keeps the old document
+    calls = []
+    exchange = outputs._exchange
+    monkeypatch.setattr(outputs, "_exchange", lambda a, b: calls.append(exchange(a, b)) or calls[-1])
+    write_text("--json", out, b"new")
+    write_text("--json", tmp_path / "fresh.json", b"fresh")
+    assert out.read_text() == "new" and other.read_text() == "old"
+    assert (tmp_path / "fresh.json").read_text() == "fresh"
+    assert _names(tmp_path) == ["fresh.json", "link.json", "out.json"]
+    assert calls[1] is False  # nothing to exchange with
+    if calls[0]:  # ext4, tmpfs, xfs, btrfs
+        monkeypatch.setattr(outputs.os, "unlink", _interrupted_once(outputs.os.unlink))
+        with pytest.raises(KeyboardInterrupt):
+            write_text("--json", out, b"newer")
+        assert out.read_text() == "newer" and _names(tmp_path) == ["fresh.json", "link.json", "out.json"]
+
+
+def _interrupted_once(unlink):
+    """``unlink`` that raises KeyboardInterrupt (before unlinking) the first time only."""
+    state = {"first": True}
+
+    def interrupted(path):
+        if state.pop("first", False):
+            raise KeyboardInterrupt
+        return unlink(path)
+    return interrupted
+
+
+def test_exchange_refuses_a_missing_file_and_changes_nothing(tmp_path):
+    (tmp_path / "a").write_text("a")
+    assert outputs._exchange(tmp_path / "a", tmp_path / "b") is False
+    assert _names(tmp_path) == ["a"]

@@ -99,11 +99,34 @@ def write_pieces(path, pieces):
             f.writelines(pieces)
         with suppress(FileNotFoundError):
             os.chmod(part, os.stat(target).st_mode & 0o7777)
-        os.replace(part, target)
+        if _exchange(part, target):
+            os.unlink(part)  # the old file now
+        else:
+            os.replace(part, target)
     except BaseException:
         with suppress(OSError):
             os.unlink(part)
         raise
+
+
+RENAME_EXCHANGE = 2  # renameat2's flag (linux/fs.h)
+AT_FDCWD = -100  # renameat2's "paths as they are"
+
+
+def _exchange(a, b):
+    """Swap the files at paths ``a`` and ``b`` in one step (Linux's renameat2 with
+    RENAME_EXCHANGE); False, nothing changed, where that cannot be done (``b`` does not
+    exist, a file system or C library without it: ``os.replace`` then). Why not always
+    ``os.replace``: replacing an existing file makes ext4 (auto_da_alloc) start writing the
+    new file to disk within the call, 20 - 25 ms for 30 MB (measured), where the exchange and
+    the old file's unlink take 2 - 3 ms; the data reaches the disk by the kernel's usual
+    writeback, as a new file's does."""
+    if not os.path.exists(b):
+        return False
+    import ctypes  # here: the 3 ms of its import only where an output is replaced
+    renameat2 = getattr(ctypes.CDLL(None), "renameat2", None)
+    return renameat2 is not None and renameat2(
+        AT_FDCWD, os.fsencode(a), AT_FDCWD, os.fsencode(b), RENAME_EXCHANGE) == 0
 
 
 def _create(path):
