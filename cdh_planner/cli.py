@@ -190,7 +190,10 @@ def main(argv: list[str] | None = None) -> int:
         if func is None:  # a subcommand module that forgot set_defaults(func=run)
             return _error(f'command {args.command!r} has no handler', EXIT_INTERNAL)
         rc = func(args)
-        return 0 if rc is None else int(rc)
+        rc = 0 if rc is None else int(rc)
+        if own and getattr(sys.modules.get(func.__module__), 'QUICK_EXIT', False):
+            _quick_exit(rc)
+        return rc
     except InputError as exc:
         return _error(str(exc), EXIT_USAGE, debug)
     except BrokenPipeError:  # stdout closed by its reader (`| head`): stop quietly
@@ -213,6 +216,18 @@ def main(argv: list[str] | None = None) -> int:
             return _error(_text(exc), EXIT_USAGE, debug)
         return _error(f'internal error: {type(exc).__name__}: {_text(exc)} (run with --debug '
                       'for the traceback)', EXIT_INTERNAL, debug)
+
+
+def _quick_exit(rc: int):
+    """End the process with ``rc`` now, once stdout and stderr are written (a closed stdout
+    raises BrokenPipeError here, as at any print), without the interpreter's teardown: for
+    a command that declares ``QUICK_EXIT = True``, whose run closes whatever it writes and
+    leaves no thread working. The teardown frees every object and runs the cycle collector
+    over what is left: 20 - 35 ms after ``verify`` of 20,000 poses (measured), nothing a
+    file or a reader of the output would see."""
+    sys.stdout.flush()
+    sys.stderr.flush()
+    os._exit(rc)
 
 
 def _caused_by_input(exc) -> bool:

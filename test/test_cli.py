@@ -194,3 +194,35 @@ def test_input_exception_names_are_the_libraries_own():
         pytest.importorskip(module.split('.')[0])
         cls = getattr(importlib.import_module(module), name)
         assert issubclass(cls, Exception) and cls.__module__ == module, qualified
+
+
+_TEARDOWN_PROBE = """import atexit, json, sys
+from cdh_planner import cli
+atexit.register(lambda: print('TEARDOWN'))
+sys.argv = ['cdh-planner', *json.loads(sys.argv[1])]
+sys.exit(cli.main())
+"""
+
+
+@pytest.mark.parametrize('quick', [True, False])
+def test_a_quick_exit_command_ends_without_teardown_and_loses_no_output(tmp_path, quick):
+    """``verify`` declares QUICK_EXIT: its process ends once its outputs are closed and
+    stdout is written (every report line, the JSON whole, its exit code), without the
+    interpreter's teardown (an atexit handler does not run); ``urdf`` does not declare it."""
+    from pathlib import Path
+    import json
+    repo = Path(__file__).resolve().parents[1]
+    poses = tmp_path / 'poses.json'
+    poses.write_text(json.dumps([{'position': [0.0, 0.0, 0.3 + 1e-4 * k], 'tau': [0.0, 0.1, 0.0]}
+                                 for k in range(300)]))
+    out = tmp_path / ('out.json' if quick else 'out.urdf')
+    argv = (['verify', str(repo / 'config/robot2.yaml'), str(poses), '--all', '--json', str(out)]
+            if quick else ['urdf', str(repo / 'config/robot2.yaml'), '-o', str(out)])
+    proc = subprocess.run([sys.executable, '-c', _TEARDOWN_PROBE, json.dumps(argv)],
+                          capture_output=True, text=True, timeout=120, cwd=repo)
+    assert proc.returncode == 0 and proc.stderr == '', proc.stderr
+    lines = proc.stdout.splitlines()
+    assert lines[-1] == ('TEARDOWN' if not quick else f'wrote {out}')
+    if quick:
+        assert sum(line.startswith('pose ') for line in lines) == 300
+        assert len(json.loads(out.read_text())['poses']) == 300

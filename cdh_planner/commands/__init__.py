@@ -15,6 +15,9 @@ error), one line too (``cdh_planner.cli`` holds the contract). Check output path
 the work with ``cdh_planner.commands.outputs.check_output``, giving it the command's input files
 (and its other outputs) as ``inputs`` so that no output overwrites them, and write them
 with its ``write_text`` / ``writing``.
+A module may also declare ``QUICK_EXIT = True`` when its ``run`` closes everything it
+writes and leaves no thread working: its process then ends without the interpreter's
+teardown (``cli._quick_exit``, 20 - 35 ms after a large ``verify``).
 
 Example::
 

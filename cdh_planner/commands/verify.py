@@ -33,6 +33,7 @@ pose (``accuracy.pose_accuracy``, exact over the box of errors).
 
 ORDER = 10  # its place in `cdh-planner --help`
 SUMMARY = "check poses and the motion between them for wrench feasibility"
+QUICK_EXIT = True  # run() closes what it writes and leaves no thread working (cli._quick_exit)
 
 import dataclasses
 import json
