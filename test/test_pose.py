@@ -71,6 +71,19 @@ def test_quaternion_round_trip(theta):
         assert np.all(angle_diff(back[:, 0], tau[:, 0]) < 1e-9)
 
 
+def test_quaternion_from_tau_is_the_checked_conversion_bit_for_bit():
+    """quaternion_from_tau assumes rotation_tt's matrices valid (no orthogonality test): the
+    same quaternions as the checked conversion, over wide and singular angles."""
+    from cdh_planner.ports.rotation import Rotation as Port
+    rng = np.random.default_rng(5)
+    tau = np.concatenate([rng.uniform([-10, -1, -10], [10, 4, 10], (20_000, 3)),
+                          random_tau(200, theta=0.0), random_tau(200, theta=np.pi),
+                          [[0.0, 0.0, 0.0], [np.pi, np.pi, -np.pi], [1e-300, 1e-300, 0.0]]])
+    checked = Port.from_matrix(rotation_tt(tau)).as_quat()
+    checked = np.where(checked[:, 3:4] < 0, -checked, checked)
+    assert np.array_equal(quaternion_from_tau(tau), checked)
+
+
 def test_identity_quaternion_is_theta_zero():
     tau = tau_from_quaternion(np.array([0.0, 0.0, 0.0, 1.0]), phi_hint=0.4)
     np.testing.assert_allclose(tau, [0.4, 0.0, 0.0], atol=1e-12)  # theta = 0: R = Rz(sigma)

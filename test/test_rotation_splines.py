@@ -45,6 +45,12 @@ def test_quaternion_matrix_rotvec_and_magnitude_agree_with_scipy():
     m = np.concatenate([theirs.as_matrix(), _special_matrices()])
     np.testing.assert_allclose(Rotation.from_matrix(m).as_quat(),
                                ScipyRotation.from_matrix(m).as_quat(), atol=TOL, rtol=0)
+    # valid rotations assumed valid: scipy's quaternions, and the checked path's bits
+    np.testing.assert_allclose(Rotation.from_matrix(m, assume_valid=True).as_quat(),
+                               ScipyRotation.from_matrix(m, assume_valid=True).as_quat(),
+                               atol=TOL, rtol=0)
+    assert np.array_equal(Rotation.from_matrix(m, assume_valid=True).as_quat(),
+                          Rotation.from_matrix(m).as_quat())
     v = np.concatenate([theirs.as_rotvec(), 1e-5 * rng.normal(size=(20, 3))])
     np.testing.assert_allclose(Rotation.from_rotvec(v).as_quat(),
                                ScipyRotation.from_rotvec(v).as_quat(), atol=TOL, rtol=0)

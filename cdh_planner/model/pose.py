@@ -127,7 +127,8 @@ def on_singular_set(tau):
 def quaternion_from_tau(tau):
     """Quaternion (x, y, z, w) of tilt-and-torsion angles, shape (..., 4), w >= 0."""
     tau = np.asarray(tau, dtype=float)
-    q = Rotation.from_matrix(rotation_tt(tau).reshape(-1, 3, 3)).as_quat()
+    # rotation_tt's products of sines and cosines are rotations to rounding
+    q = Rotation.from_matrix(rotation_tt(tau).reshape(-1, 3, 3), assume_valid=True).as_quat()
     q = np.where(q[:, 3:4] < 0, -q, q)
     return q.reshape(tau.shape[:-1] + (4,))
 
