@@ -22,7 +22,6 @@ traceback; ``cdh-planner --debug COMMAND ...`` prints the traceback as well.
 from __future__ import annotations
 
 import argparse
-import ast
 import atexit
 import gc
 import importlib
@@ -30,7 +29,6 @@ import importlib.util
 import os
 import re
 import sys
-import traceback
 from pathlib import Path
 
 from cdh_planner import __version__
@@ -48,6 +46,13 @@ def declared_commands(folder=COMMANDS_DIR) -> dict[str, tuple[int, str]]:
     ``ORDER = <an integer>``) without importing them: a run imports only the module of the
     command it runs (a module imports what its command needs, the planner, plotting, ROS: up
     to seconds), and a new command is its one file."""
+    import ast  # here: 4 ms of a start that only --help needs
+    return {name: (order, ast.literal_eval(summary))
+            for name, (order, summary) in _declarations(folder).items()}
+
+
+def _declarations(folder=COMMANDS_DIR) -> dict[str, tuple[int, str]]:
+    """``declared_commands`` with each SUMMARY as its source text (not yet evaluated)."""
     out = {}
     for path in sorted([*folder.glob('*.py'), *folder.glob('*/__init__.py')]):
         text = path.read_text(encoding='utf-8')
@@ -55,16 +60,27 @@ def declared_commands(folder=COMMANDS_DIR) -> dict[str, tuple[int, str]]:
         if summary:
             order = _ORDER.search(text)
             name = path.parent.name if path.name == '__init__.py' else path.stem
-            out[name] = (int(order.group(1)) if order else 0, ast.literal_eval(summary.group(1)))
+            out[name] = (int(order.group(1)) if order else 0, summary.group(1))
     return out
 
 
 _SUMMARY = re.compile(r'^SUMMARY = (.*(?:\n[ \t]+.*)*)', re.M)
 _ORDER = re.compile(r'^ORDER = (\d+)', re.M)
-_DECLARED = declared_commands()
-# in the order of --help (ORDER, then name), and the one-line summaries it shows
-COMMANDS = sorted(_DECLARED, key=lambda n: (_DECLARED[n][0], n))
-SUMMARIES = {name: _DECLARED[name][1] for name in COMMANDS}
+_DECLARED = _declarations()
+COMMANDS = sorted(_DECLARED, key=lambda n: (_DECLARED[n][0], n))  # in the order of --help
+
+
+def summaries() -> dict[str, str]:
+    """{name: SUMMARY} of COMMANDS: the one-line summaries --help shows, their literals
+    evaluated when asked for (``declared_commands``), not at every start."""
+    declared = declared_commands()
+    return {name: declared[name][1] for name in COMMANDS if name in declared}
+
+
+def __getattr__(name):  # cli.SUMMARIES: summaries()
+    if name == 'SUMMARIES':
+        return summaries()
+    raise AttributeError(f'module {__name__!r} has no attribute {name!r}')
 
 EXIT_OK = 0
 EXIT_NO = 1  # no path, infeasible
@@ -135,6 +151,7 @@ def build_parser(commands: list[str] | None = None, others: bool = True) -> argp
                         help='on an error, also print the traceback (exit codes: 0 ok, 1 no '
                              'path / infeasible, 2 bad input, 3 internal error)')
     subparsers = parser.add_subparsers(dest='command', required=True, metavar='COMMAND')
+    help_texts = summaries() if others else {}
     for name in COMMANDS:
         full = commands is None or name in commands
         if not (full or others):
@@ -145,7 +162,7 @@ def build_parser(commands: list[str] | None = None, others: bool = True) -> argp
         if full:
             module.add_parser(subparsers)
         else:
-            subparsers.add_parser(name, help=SUMMARIES.get(name), add_help=False)
+            subparsers.add_parser(name, help=help_texts.get(name), add_help=False)
     return parser
 
 
@@ -153,6 +170,7 @@ def _error(message: str, code: int = EXIT_USAGE, debug: bool = False) -> int:
     """Print ``message`` as one line on stderr (and the traceback being handled when
     ``debug``); return ``code``."""
     if debug:
+        import traceback  # here: 5 ms of every start otherwise
         traceback.print_exc()
     print(f'{PROG}: error: {clip(message, MAX_MESSAGE_CHARS)}', file=sys.stderr)
     return code
