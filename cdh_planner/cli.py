@@ -241,8 +241,9 @@ def _quick_exit(rc: int):
     raises BrokenPipeError here, as at any print), without the interpreter's teardown: for
     a command that declares ``QUICK_EXIT = True``, whose run closes whatever it writes and
     leaves no thread working. The teardown frees every object and runs the cycle collector
-    over what is left: 20 - 35 ms after ``verify`` of 20,000 poses (measured), nothing a
-    file or a reader of the output would see."""
+    over what is left: nothing a file or a reader of the output would see, and 13 ms of a
+    CoGiRo ``verify`` of 20,000 poses (strace: the process gone 6 - 10 ms after its last
+    line, against 19 - 26 ms)."""
     sys.stdout.flush()
     sys.stderr.flush()
     os._exit(rc)
