@@ -128,3 +128,44 @@ def test_the_race_free_client_completes_every_future(graph, kind):
         assert future.result() is not None
     finally:
         client.destroy()
+
+
+class _DestroyingExecutor(rclpy.executors.SingleThreadedExecutor):
+    """An executor that destroys ``victim`` right after gathering it for a wait set, before
+    entering it: the moment a node's cleanup on another thread can hit (ros2/rclpy#1284)."""
+
+    victim = None
+
+    def can_execute(self, entity):
+        if entity is self.victim:
+            self.victim = None
+            entity.destroy()
+        return super().can_execute(entity)
+
+
+@pytest.mark.parametrize("base", [ActionClient, RaceFreeActionClient])
+def test_a_client_destroyed_while_its_wait_set_is_gathered(base):
+    """rclpy's client stops the executor ("action client pointer is invalid"); the race-free
+    one is left out of the wait set and the executor goes on (a timer still fires)."""
+    from control_msgs.action import FollowJointTrajectory
+    with claimed_domain() as domain:
+        context = rclpy.Context()
+        rclpy.init(context=context, domain_id=domain)
+        node = rclpy.create_node("destroyed_client", context=context)
+        fired = threading.Event()
+        node.create_timer(0.01, fired.set)
+        executor = _DestroyingExecutor(context=context)
+        executor.add_node(node)
+        try:
+            executor.victim = base(node, FollowJointTrajectory, "follow", **ACTION_QOS)
+            if base is ActionClient:
+                with pytest.raises(Exception, match="action client pointer is invalid"):
+                    executor.spin_once(timeout_sec=LIMIT_S)
+            else:
+                while not fired.is_set():
+                    executor.spin_once(timeout_sec=LIMIT_S)
+                assert executor.victim is None  # it was destroyed mid-gather
+        finally:
+            executor.shutdown()
+            node.destroy_node()
+            context.try_shutdown()

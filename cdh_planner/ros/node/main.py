@@ -24,7 +24,7 @@ def main(ros_args=(), planner_factory=default_planner_factory, log=print):
     (run file closed), 1 when the executor stopped on an error (a crash is never exit 0),
     2 when it cannot start (bad parameters: one line naming the parameter and value).
     ``ros_args``: what follows ``--ros-args``."""
-    from rclpy.executors import MultiThreadedExecutor
+    from ..executors import NodeExecutor
 
     stop = threading.Event()
     for signum in (signal.SIGINT, signal.SIGTERM):
@@ -41,7 +41,7 @@ def main(ros_args=(), planner_factory=default_planner_factory, log=print):
         log(f"cdh-planner node: error: {exc if isinstance(exc, InputError) else clip(exc, 400)}")
         rclpy.try_shutdown(context=context)
         return 2
-    executor = MultiThreadedExecutor(num_threads=EXECUTOR_THREADS, context=context)
+    executor = NodeExecutor(num_threads=EXECUTOR_THREADS, context=context)
     executor.add_node(node)
     crashed = []
 
