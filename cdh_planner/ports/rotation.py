@@ -54,8 +54,8 @@ class Rotation:
         """Rotation matrices (3, 3) or (N, 3, 3); a matrix not orthogonal to 1e-12 is
         replaced by its nearest rotation (U V^T of its SVD), as scipy does. ``assume_valid``
         (scipy's too): the caller knows them rotations (orthogonal to rounding, det 1), so
-        neither the determinant nor the orthogonality is checked (the same quaternions where
-        they are: 1/3 of the time)."""
+        neither the determinant nor the orthogonality is checked: the same quaternions for
+        such matrices, in half the time."""
         m = np.array(matrix, dtype=float)
         single = m.ndim == 2
         m = m.reshape(-1, 3, 3)

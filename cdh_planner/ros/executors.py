@@ -5,9 +5,10 @@ handlers of every publisher and subscription, action clients and servers), then 
 each: one destroyed in between, as a lifecycle cleanup on another thread destroys the
 joint-state subscription and the outlets' publishers, is left out of the count but added
 all the same, and the InvalidHandle raised there ends ``spin()``: the node stops answering
-(ros2/rclpy#1284, #1385; seen under load as a get_state never answered after cleanup).
-Gathering again leaves the destroyed entity out. An action client fails there with an
-RCLError instead (``actions.RaceFreeActionClient`` keeps itself out of the wait set).
+(ros2/rclpy#1284, #1385). Gathering again leaves the destroyed entity out. An action client
+fails there with an RCLError instead, which is what a loaded test run met (a get_state
+never answered after cleanup): ``actions.RaceFreeActionClient`` keeps itself out of the
+wait set.
 """
 
 from rclpy.exceptions import InvalidHandle
