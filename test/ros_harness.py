@@ -94,6 +94,30 @@ def in_process_nodes(log_dir):
                 rclpy.try_shutdown(context=context)
 
 
+@contextlib.contextmanager
+def spun_node(name, executor_class, **executor_kwargs):
+    """(node, executor, ticked): a node in a fresh rclpy context on a domain of its own,
+    added to an ``executor_class`` of that context (not spinning: the caller spins it), and
+    an Event a 100 Hz timer of the node sets (the executor still runs callbacks); all shut
+    down after."""
+    import threading
+    import rclpy
+    with claimed_domain() as domain:
+        context = rclpy.Context()
+        rclpy.init(context=context, domain_id=domain)
+        node = rclpy.create_node(name, context=context)
+        ticked = threading.Event()
+        node.create_timer(0.01, ticked.set)
+        executor = executor_class(context=context, **executor_kwargs)
+        executor.add_node(node)
+        try:
+            yield node, executor, ticked
+        finally:
+            executor.shutdown()
+            node.destroy_node()
+            context.try_shutdown()
+
+
 def until(condition, timeout_s=10.0):
     """Whether ``condition()`` held within ``timeout_s`` (s), polled every 10 ms. The
     timeout only bounds a hang: tests wait for events with it, they do not time them."""

@@ -15,7 +15,7 @@ from rclpy.executors import MultiThreadedExecutor  # noqa: E402
 
 from cdh_planner.ros.actions import RaceFreeActionClient  # noqa: E402
 from cdh_planner.ros.interface import ACTION_QOS  # noqa: E402
-from ros_harness import claimed_domain  # noqa: E402
+from ros_harness import claimed_domain, spun_node  # noqa: E402
 
 LIMIT_S = 60.0  # a bound for a hang, not a timing
 
@@ -148,24 +148,12 @@ def test_a_client_destroyed_while_its_wait_set_is_gathered(base):
     """rclpy's client stops the executor ("action client pointer is invalid"); the race-free
     one is left out of the wait set and the executor goes on (a timer still fires)."""
     from control_msgs.action import FollowJointTrajectory
-    with claimed_domain() as domain:
-        context = rclpy.Context()
-        rclpy.init(context=context, domain_id=domain)
-        node = rclpy.create_node("destroyed_client", context=context)
-        fired = threading.Event()
-        node.create_timer(0.01, fired.set)
-        executor = _DestroyingExecutor(context=context)
-        executor.add_node(node)
-        try:
-            executor.victim = base(node, FollowJointTrajectory, "follow", **ACTION_QOS)
-            if base is ActionClient:
-                with pytest.raises(Exception, match="action client pointer is invalid"):
-                    executor.spin_once(timeout_sec=LIMIT_S)
-            else:
-                while not fired.is_set():
-                    executor.spin_once(timeout_sec=LIMIT_S)
-                assert executor.victim is None  # it was destroyed mid-gather
-        finally:
-            executor.shutdown()
-            node.destroy_node()
-            context.try_shutdown()
+    with spun_node("destroyed_client", _DestroyingExecutor) as (node, executor, ticked):
+        executor.victim = base(node, FollowJointTrajectory, "follow", **ACTION_QOS)
+        if base is ActionClient:
+            with pytest.raises(Exception, match="action client pointer is invalid"):
+                executor.spin_once(timeout_sec=LIMIT_S)
+        else:
+            while not ticked.is_set():
+                executor.spin_once(timeout_sec=LIMIT_S)
+            assert executor.victim is None  # it was destroyed mid-gather

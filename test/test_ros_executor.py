@@ -3,8 +3,6 @@
 right after the executor gathered its event handlers and before it entered them, the
 moment a lifecycle cleanup on another thread can hit."""
 
-import threading
-
 import pytest
 
 rclpy = pytest.importorskip("rclpy")
@@ -14,7 +12,7 @@ from rclpy.executors import MultiThreadedExecutor  # noqa: E402
 from std_msgs.msg import String  # noqa: E402
 
 from cdh_planner.ros.executors import NodeExecutor  # noqa: E402
-from ros_harness import claimed_domain  # noqa: E402
+from ros_harness import spun_node  # noqa: E402
 
 LIMIT_S = 60.0  # a bound for a hang, not a timing
 
@@ -37,27 +35,16 @@ def _destroying(base):
 def test_a_subscription_destroyed_while_the_wait_set_is_gathered(base):
     """rclpy's executor stops on InvalidHandle; the node's gathers again and goes on (a
     timer still fires)."""
-    with claimed_domain() as domain:
-        context = rclpy.Context()
-        rclpy.init(context=context, domain_id=domain)
-        node = rclpy.create_node("destroyed_subscription", context=context)
-        fired = threading.Event()
-        node.create_timer(0.01, fired.set)
-        executor = _destroying(base)(num_threads=2, context=context)
-        executor.add_node(node)
-        try:
-            victim = node.create_subscription(String, "joint_states_like", lambda _: None, 10)
-            victim.node = node
-            assert victim.event_handlers, "rclpy makes a subscription's event handlers"
-            executor.victim = victim
-            if base is MultiThreadedExecutor:
-                with pytest.raises(InvalidHandle):
-                    executor.spin_once(timeout_sec=LIMIT_S)
-            else:
-                while not fired.is_set():
-                    executor.spin_once(timeout_sec=LIMIT_S)
-                assert executor.victim is None  # destroyed mid-gather
-        finally:
-            executor.shutdown()
-            node.destroy_node()
-            context.try_shutdown()
+    with spun_node("destroyed_subscription", _destroying(base), num_threads=2) as (
+            node, executor, ticked):
+        victim = node.create_subscription(String, "joint_states_like", lambda _: None, 10)
+        victim.node = node
+        assert victim.event_handlers, "rclpy makes a subscription's event handlers"
+        executor.victim = victim
+        if base is MultiThreadedExecutor:
+            with pytest.raises(InvalidHandle):
+                executor.spin_once(timeout_sec=LIMIT_S)
+        else:
+            while not ticked.is_set():
+                executor.spin_once(timeout_sec=LIMIT_S)
+            assert executor.victim is None  # destroyed mid-gather
