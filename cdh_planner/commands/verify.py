@@ -85,9 +85,9 @@ def add_parser(subparsers):
 
 def run(args):
     """Verify, print the tables, optionally write JSON; exit code 0 / 1."""
-    poses = beside(load_poses, args.poses)  # its compiled read beside the robot file's
+    reading = beside(load_poses, args.poses)  # its compiled read beside the robot file's
     robot = load_robot(args.robot)
-    poses = poses.result()
+    poses = reading.result()
     step_m = _positive(parse_length(args.step, "--step"), "--step", args.step)
     step_rad = _positive(parse_angle(args.angle_step, "--angle-step"), "--angle-step", args.angle_step)
     json_out = None if args.json is None else check_output(
