@@ -334,7 +334,8 @@ static bool take_numbers(cursor* c, const int n, double* const out) {
   return take(c, ']');
 }
 
-/* One pose at c into row (7 values: position, then the quaternion or tau) and *quaternion. */
+/* One pose at c into row (7 values: position, then the quaternion, or tau and a nan) and
+ * *quaternion. */
 static bool take_pose(cursor* c, double* const row, int8_t* const quaternion) {
   if (!take(c, '{')) return false;
   int seen = 0;  /* bit k: key k + 1 taken */
@@ -348,6 +349,7 @@ static bool take_pose(cursor* c, double* const row, int8_t* const quaternion) {
     } else {
       *quaternion = key == 2;
       if (!take_numbers(c, key == 2 ? 4 : 3, row + 3)) return false;
+      if (key == 3) row[6] = NAN;  /* the rows are not filled before: untouched memory */
     }
   }
   return (seen & 1) && take(c, '}');  /* two distinct keys, position one of them */

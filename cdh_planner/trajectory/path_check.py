@@ -428,5 +428,7 @@ def _points(samples, segs, s, margin, binding):
 
 
 def _quaternions(R):
-    q = Rotation.from_matrix(R).as_quat()
+    """Quaternions (M, 4), w >= 0, of the paths' rotation matrices (M, 3, 3): products of
+    rotations' formulas, orthogonal to rounding, so not checked (``assume_valid``)."""
+    q = Rotation.from_matrix(R, assume_valid=True).as_quat()
     return np.where(q[:, 3:4] < 0, -q, q)
