@@ -3,10 +3,11 @@ the Python libraries cost most: ``verify --json``'s rows (``rows_text``: in one 
 as Python's json module writes them, floats by repr: Ryu's shortest round-trip digits,
 vendored in ryu/, as orjson and CPython find them; blocks of rows on threads side by side)
 and a poses file in its plain form (``read_poses``: straight into arrays, numbers
-correctly rounded as the json module reads them: Clinger's exact fast path, else strtod).
+correctly rounded as the json module reads them: Clinger's exact fast path, else Eisel and
+Lemire's for up to 19 digits (its table of powers of ten written by the build), else strtod).
 For 20,000 eight-cable poses the JSON's 25 MB took orjson (under the GIL), a pass rewriting
 its odd numbers as repr does and a compiled assembly of the rows 0.085 - 0.107 s, now 0.042
-- 0.056; reading the poses with orjson and lists 0.025 s, now 0.010; docs/performance.md.
+- 0.056; reading the poses with orjson and lists 0.025 s, now 0.004; docs/performance.md.
 
     python -m cdh_planner.compiled_json     # the build, which ``make`` runs
 
@@ -152,19 +153,48 @@ def read_poses(data, max_poses):
 
 # ----- the build ---------------------------------------------------------------------------
 
+POW10_RANGE = (-342, 308)  # 10^q for the reader's Eisel-Lemire (beyond: strtod)
+
+
+def pow10_mantissa(q):
+    """The 128 leading bits of 10^q, truncated: the integer T with 2^127 <= T < 2^128 and
+    T <= 10^q 2^s < T + 1 for some integer s (exact, Python's integers)."""
+    if q >= 0:
+        v = 10 ** q
+        n = v.bit_length()
+        return v >> (n - 128) if n > 128 else v << (128 - n)
+    d = 10 ** -q  # not a power of two: 2^(127 + bits) / d lies strictly within [2^127, 2^128)
+    return (1 << (127 + d.bit_length())) // d
+
+
+def pow10_table():
+    """The C header of ``pow10_mantissa`` over POW10_RANGE (compiled_json.c's POW10_128:
+    {high word, low word} a row), which ``build`` writes into a temporary folder for the
+    compiler."""
+    lo, hi = POW10_RANGE
+    rows = [f"  {{0x{t >> 64:016X}u, 0x{t & (2**64 - 1):016X}u}},  /* 1e{q} */"
+            for q in range(lo, hi + 1) for t in [pow10_mantissa(q)]]
+    return (f"/* written by cdh_planner/compiled_json.py (pow10_table) */\n"
+            f"enum {{ POW10_MIN = {lo}, POW10_MAX = {hi} }};\n"
+            f"static const uint64_t POW10_128[{hi - lo + 1}][2] = {{\n" + "\n".join(rows) + "\n};\n")
+
 def build():
     """Compile compiled_json.c into ``library_path()`` (CC, else Python's compiler, else cc);
     older builds (PREFIX*) are removed. Its path."""
     import shlex  # the build's only: 5 ms of every verify's start
     import subprocess
     import sysconfig
+    import tempfile
 
     target = library_path()
     part = target.with_name(f".{target.name}.{os.getpid()}.part")
     compiler = shlex.split(os.environ.get("CC") or sysconfig.get_config_var("CC") or "cc")
     try:
-        subprocess.run([*compiler, *FLAGS, f"-I{FOLDER}", str(FOLDER / SOURCES[0]), "-o", str(part)],
-                       check=True, capture_output=True, text=True)
+        with tempfile.TemporaryDirectory() as generated:
+            (Path(generated) / "pow10_128.h").write_text(pow10_table())
+            subprocess.run([*compiler, *FLAGS, f"-I{FOLDER}", f"-I{generated}",
+                            str(FOLDER / SOURCES[0]), "-o", str(part)],
+                           check=True, capture_output=True, text=True)
         os.replace(part, target)
     finally:
         part.unlink(missing_ok=True)
