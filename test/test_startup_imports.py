@@ -234,3 +234,30 @@ def test_a_runs_parser_holds_only_its_command_and_help_holds_every_one():
         return set(next(a for a in parser._actions if a.dest == "command").choices)
     assert choices(cli.build_parser(["plan"], others=False)) == {"plan"}
     assert choices(cli.build_parser([])) == set(cli.COMMANDS)
+
+
+@pytest.mark.parametrize("columns", [None, "57", "200", "0", "wide"])
+def test_help_is_as_wide_as_argparse_makes_it(monkeypatch, columns):
+    """The parsers' formatters get their width from ``cli.help_width``, not from argparse
+    (which imports shutil for it): the same width as argparse's default, COLUMNS or the
+    terminal's (here none: stdout is captured) less 2."""
+    import shutil
+    if columns is None:
+        monkeypatch.delenv("COLUMNS", raising=False)
+    else:
+        monkeypatch.setenv("COLUMNS", columns)
+    assert cli.help_width() == shutil.get_terminal_size().columns - 2
+    parser = cli.build_parser(["verify"], others=False)
+    subparser = parser._subparsers._group_actions[0].choices["verify"]
+    for p in (parser, subparser):
+        assert p._get_formatter()._width == cli.help_width()
+
+
+def test_a_commands_parsing_imports_no_shutil():
+    """argparse imports shutil (with bz2 and lzma, 3 ms) for a formatter without a width."""
+    probe = ("import sys\nfrom cdh_planner import cli\n"
+             "p = cli.build_parser(['verify'], others=False)\n"
+             "p.parse_args(['verify', 'robot.yaml', 'poses.json'])\n"
+             "print(sorted({'shutil', 'bz2', 'lzma'} & set(sys.modules)))")
+    out = subprocess.run([sys.executable, "-c", probe], capture_output=True, text=True, check=True)
+    assert out.stdout.strip() == "[]"
