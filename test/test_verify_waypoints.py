@@ -139,3 +139,26 @@ def test_verify_evaluates_each_pose_once(tmp_path, monkeypatch):
     interior = sum(seg["samples"] for seg in segments) - 2 * (n - 1)
     assert interior > 0
     assert counts == {"poses": n, "samples": interior}
+
+
+def test_the_worst_sample_of_a_segment_is_the_first_least_as_sorting_finds_it():
+    """``_least_in_segments`` against a sort by (segment, margin, index): margins with many
+    ties, -inf (singular samples), 0.0 and -0.0, segments of 2 to 9 samples."""
+    rng = np.random.default_rng(5)
+    for _ in range(200):
+        sizes = rng.integers(2, 10, rng.integers(1, 40))
+        seg = np.repeat(np.arange(len(sizes)), sizes)
+        margin = rng.choice([-np.inf, -0.5, -0.0, 0.0, 0.25, 0.5, 1.0], seg.size)
+        bounds = np.searchsorted(seg, np.arange(len(sizes) + 1))
+        order = np.lexsort((np.arange(seg.size), margin, seg))
+        assert np.array_equal(pc._least_in_segments(margin, bounds), order[bounds[:-1]])
+
+
+def test_samples_in_order_are_recognised():
+    """``_Samples.add`` keeps a first batch as given only when it is in (segment, s) order
+    (the initial grid); anything else is sorted."""
+    seg, s = pc._initial_grid(pc.SlerpPath(*_walk(12)), 1e-3, np.deg2rad(0.2))
+    assert pc._in_order(seg, s)
+    assert not pc._in_order(seg[::-1], s[::-1])
+    assert not pc._in_order(np.array([0, 0]), np.array([0.5, 0.5]))  # a tie: lexsort decides
+    assert not pc._in_order(np.array([1, 0]), np.array([0.0, 1.0]))

@@ -242,6 +242,9 @@ class _Samples:
     def __init__(self, robot, path, collision=None, feasibility=wrench_margin, waypoints=None):
         self.robot, self.path, self.collision = robot, path, collision
         self.feasibility, self.waypoints = feasibility, waypoints
+        # the waypoints' bindings as the samples hold them (Python strings), made once:
+        # each of them ends two segments (20,000 strings made again each time were 3 ms)
+        self.waypoint_binding = None if waypoints is None else np.asarray(waypoints.binding, dtype=object)
         self.seg = np.empty(0, dtype=int)
         self.s = np.empty(0)
         self.margin = np.empty(0)
@@ -253,7 +256,7 @@ class _Samples:
         todo = np.ones(s.size, dtype=bool)
         if self.waypoints is not None:  # the ends are waypoints: their values are known
             end, k = waypoint_samples(seg, s)
-            margin[end], binding[end] = self.waypoints.margin[k], self.waypoints.binding[k]
+            margin[end], binding[end] = self.waypoints.margin[k], self.waypoint_binding[k]
             todo[end] = False
         todo = np.flatnonzero(todo)
         for a in range(0, todo.size, CHUNK):
@@ -265,6 +268,9 @@ class _Samples:
 
     def add(self, seg, s):
         margin, binding = self.evaluate(seg, s)
+        if not self.s.size and _in_order(seg, s):  # the initial grid: nothing to merge or sort
+            self.seg, self.s, self.margin, self.binding = seg, s, margin, binding
+            return
         self.seg = np.concatenate([self.seg, seg])
         self.s = np.concatenate([self.s, s])
         self.margin = np.concatenate([self.margin, margin])
@@ -272,6 +278,13 @@ class _Samples:
         order = np.lexsort((self.s, self.seg))
         self.seg, self.s = self.seg[order], self.s[order]
         self.margin, self.binding = self.margin[order], self.binding[order]
+
+
+def _in_order(seg, s):
+    """Whether samples (seg, s) are in strictly increasing (segment, s) order: the order
+    ``_Samples.add``'s lexsort gives them."""
+    step = np.diff(seg)
+    return bool(np.all((step > 0) | ((step == 0) & (np.diff(s) > 0))))
 
 
 def _refine(samples):
@@ -357,9 +370,7 @@ def _segment_results(samples, first, unresolved):
     segments are evaluated in one call each (linear in the number of segments)."""
     n = samples.path.n_segments
     bounds = np.searchsorted(samples.seg, np.arange(n + 1))
-    # least margin of each segment, the first sample of it on ties (as argmin)
-    order = np.lexsort((np.arange(samples.s.size), samples.margin, samples.seg))
-    i = order[bounds[:-1]]
+    i = _least_in_segments(samples.margin, bounds)
     worst = _points(samples, np.arange(n), samples.s[i], samples.margin[i], samples.binding[i])
     segs = np.array(sorted(first), dtype=int)
     unsafe = _points(samples, segs, *(np.array([first[k][j] for k in segs.tolist()])
@@ -368,6 +379,17 @@ def _segment_results(samples, first, unresolved):
     feasible[segs] = False
     return SegmentChecks(feasible=feasible, worst=worst, unsafe_index=segs, unsafe=unsafe,
                          samples=np.diff(bounds), unresolved=np.asarray(unresolved))
+
+
+def _least_in_segments(margin, bounds):
+    """The index of the least ``margin`` of each segment (samples bounds[j] <= i <
+    bounds[j + 1]; none empty, no nan: a segment has its ends, evaluate gives -inf for
+    nan), the first on ties: what sorting by (segment, margin, index) puts first."""
+    if len(bounds) < 2:
+        return np.empty(0, dtype=int)
+    least = np.minimum.reduceat(margin, bounds[:-1])
+    at_least = np.flatnonzero(margin == np.repeat(least, np.diff(bounds)))
+    return at_least[np.searchsorted(at_least, bounds[:-1])]
 
 
 @dataclass(frozen=True)
