@@ -11,7 +11,7 @@ import numpy as np
 
 from .geometry import cable_vectors, inverse_ellipsoid_factor, load_point, nominal_wrench, screw_jacobian
 from ..parallel import map_blocks
-from .record import SINGULAR_DET, Feasibility, constraint_names, joined, normalised_margins
+from .record import SINGULAR_DET, Feasibility, constraint_names, joined, normalised_margins, row_min
 
 
 def inverse_jacobian(robot, p, R):
@@ -32,7 +32,7 @@ def _singular(J, lengths):
     cable of no length (lengths (N, 6) m)."""
     with np.errstate(divide="ignore", invalid="ignore"):  # singular J: reported by callers
         det = np.linalg.det(J)
-    return det, ~(np.abs(det) > SINGULAR_DET) | (lengths.min(axis=1) <= 0)
+    return det, ~(np.abs(det) > SINGULAR_DET) | (row_min(lengths) <= 0)
 
 
 def _envelope(robot, J_inv, c):

@@ -11,7 +11,7 @@ from .geometry import inverse_factor
 from .compiled import facet_batch, pose_geometry
 from .record import (SINGULAR_DET, STATUS_EXCEEDS, STATUS_INFEASIBLE, STATUS_OK,
                      STATUS_SINGULAR, Feasibility, Margin, WrenchFeasibility, constraint_names,
-                     length_margins, normalised_margins)
+                     length_margins, normalised_margins, row_min)
 from .rules import rule_of, stiff_nominal, stiffness_band
 
 NO_SUBSETS = np.empty((0, 5), dtype=np.int64)  # the kernel without the facet test
@@ -74,7 +74,7 @@ def _facet_margin(robot, lengths, scale, mr, arg, hi):
     """The facet test's margin (N,) (-inf where singular), binding (N,) str and singular
     (N,) bool: the least of the length margins and the wrench margin ``mr``."""
     n, m = lengths.shape
-    singular = ~(scale > SINGULAR_DET) | (lengths.min(axis=1) <= 0)
+    singular = ~(scale > SINGULAR_DET) | (row_min(lengths) <= 0)
     length_flat = np.concatenate(length_margins(robot, lengths), axis=1)
     kl = np.argmin(length_flat, axis=1)
     ml = length_flat[np.arange(n), kl]
@@ -99,7 +99,7 @@ def facet_test(robot, p, R):
     lengths, u, scale, mn, mr, arg, hi, t0, v = _poses(robot, p, R, facet_subsets(m))
     margin, binding, singular = _facet_margin(robot, lengths, scale, mr, arg, hi)
     margins = normalised_margins(robot, lengths, t0, v)
-    status = np.where(mr > 0, np.where(margins[:, 2:, :].reshape(n, -1).min(axis=1) > 0,
+    status = np.where(mr > 0, np.where(row_min(margins[:, 2:, :].reshape(n, -1)) > 0,
                                        STATUS_OK, STATUS_EXCEEDS), STATUS_INFEASIBLE)
     status = np.where(singular, STATUS_SINGULAR, status)
     mn, mr = np.where(singular, -np.inf, mn), np.where(singular, -np.inf, mr)
@@ -125,7 +125,7 @@ def band_margin(robot, p, R):
     Feasibility record per pose would cost more than the kernel."""
     lengths, _, scale, _, _, margins = _band(robot, p, R)
     margin = margins.reshape(len(margins), -1).min(axis=1)  # nan where singular
-    ok = (scale > SINGULAR_DET) & (lengths.min(axis=1) > 0) & ~np.isnan(margin)
+    ok = (scale > SINGULAR_DET) & (row_min(lengths) > 0) & ~np.isnan(margin)
     return np.where(ok, margin, -np.inf)
 
 
@@ -136,7 +136,7 @@ def band_feasibility(robot, p, R):
     facet test). The kernels without the facet test."""
     lengths, u, scale, t0, v, margins = _band(robot, p, R)
     n, m = margins.shape[0], margins.shape[2]
-    singular = ~(scale > SINGULAR_DET) | (lengths.min(axis=1) <= 0)
+    singular = ~(scale > SINGULAR_DET) | (row_min(lengths) <= 0)
     flat = margins.reshape(n, -1)
     k = np.argmin(np.where(np.isnan(flat), -np.inf, flat), axis=1)
     margin = flat[np.arange(n), k]
@@ -153,5 +153,5 @@ def band_tensions(robot, p, R):
     centred at every pose: equal to ``facet_test``'s where that holds); nan / inf where
     singular."""
     lengths, _, scale, t0, v, _ = _band(robot, p, R)
-    singular = ~(scale > SINGULAR_DET) | (lengths.min(axis=1) <= 0)
+    singular = ~(scale > SINGULAR_DET) | (row_min(lengths) <= 0)
     return np.where(singular[:, None], np.nan, t0), np.where(singular[:, None], np.inf, v)
