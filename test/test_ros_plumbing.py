@@ -16,7 +16,7 @@ import pytest
 
 pytest.importorskip("rclpy")
 
-from diagnostic_msgs.msg import DiagnosticStatus  # noqa: E402
+from diagnostic_msgs.msg import DiagnosticArray, DiagnosticStatus  # noqa: E402
 from nav_msgs.srv import GetPlan  # noqa: E402
 from rclpy.qos import DurabilityPolicy, QoSProfile, ReliabilityPolicy  # noqa: E402
 from sensor_msgs.msg import JointState  # noqa: E402
@@ -56,6 +56,7 @@ def ros(tmp_path_factory):
                 client.trajectory = Collector(client.node, JointTrajectory,
                                               "/cdh_planner/planned_cable_trajectory",
                                               LATCHED)
+                client.diagnostics = Collector(client.node, DiagnosticArray, "/diagnostics", 10)
                 # the collectors have found the node's publishers
                 assert client.spin_until(lambda: all(client.node.count_publishers(t) for t in (
                     "/cdh_planner/cable_command", "/cdh_planner/plan_progress",
@@ -111,16 +112,21 @@ def test_bad_request_answered_with_reason_then_next_served(ros, label, mutate, e
 
 def test_requests_queue_then_busy_is_refused_at_once_and_progress_is_published(ros):
     """While one plan is computed, PLAN_QUEUE_DEPTH more requests wait their turn (and are
-    planned in order); the next is refused at once with ``busy``."""
-    ros.delay_file.write_text("1.5")
+    planned in order); the next is refused at once with ``busy``. The first plans for 3 s:
+    long enough for the node's 1 Hz /diagnostics to report the others queued before it
+    ends (the test waits for that report, not for a time)."""
+    ros.delay_file.write_text("3.0")
     request = GetPlan.Request(start=sphere_pose_msg(Q1), goal=sphere_pose_msg(Q2))
     try:
         n_progress = len(ros.progress.items)
         first = ros.plan_client.call_async(request)
         # the first is being planned once its progress is published
         assert ros.spin_until(lambda: len(ros.progress.items) > n_progress, 10.0)
+        n_diagnostics = len(ros.diagnostics.items)
         queued = [ros.plan_client.call_async(request) for _ in range(PLAN_QUEUE_DEPTH)]
-        ros.spin(0.2)                  # let the node take them before the next one
+        # the node has taken them (its queue is full) before the next one is sent
+        assert ros.spin_until(lambda: _reported_queue(ros, n_diagnostics) == 1 + PLAN_QUEUE_DEPTH,
+                              10.0)
         ros.delay_file.unlink()        # the waiting ones plan at once when their turn comes
         refused = plan(ros)
         assert not refused.success
@@ -134,11 +140,22 @@ def test_requests_queue_then_busy_is_refused_at_once_and_progress_is_published(r
     finally:
         ros.delay_file.unlink(missing_ok=True)
     progress = [m for m in ros.progress.messages[n_progress:]]
-    assert len(progress) >= 5       # at most 10 Hz over 1.5 s of planning
+    assert len(progress) >= 5       # at most 10 Hz over 3 s of planning
     values = {kv.key: kv.value for kv in progress[-1].values}
     assert set(values) == {"charts", "time_s", "best_h", "run_id"}
     assert float(values["time_s"]) > 0.5
     assert plan(ros).success
+
+
+def _reported_queue(ros, since):
+    """The plan requests in the node's queue (the one planned and those waiting) by its
+    latest /diagnostics report after the first ``since`` ones (None before one arrives)."""
+    for msg in reversed(ros.diagnostics.messages[since:]):
+        for status in msg.status:
+            values = {kv.key: kv.value for kv in status.values}
+            if "queued" in values:
+                return int(values["queued"])
+    return None
 
 
 # --------------------------------------------------------------------------- parameters
