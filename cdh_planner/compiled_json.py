@@ -176,7 +176,9 @@ def pow10_table():
             for q in range(lo, hi + 1) for t in [pow10_mantissa(q)]]
     return (f"/* written by cdh_planner/compiled_json.py (pow10_table) */\n"
             f"enum {{ POW10_MIN = {lo}, POW10_MAX = {hi} }};\n"
-            f"static const uint64_t POW10_128[{hi - lo + 1}][2] = {{\n" + "\n".join(rows) + "\n};\n")
+            f"static const uint64_t POW10_128[{hi - lo + 1}][2] = {{\n"
+            + "\n".join(rows) + "\n};\n")
+
 
 def build():
     """Compile compiled_json.c into ``library_path()`` (CC, else Python's compiler, else cc);

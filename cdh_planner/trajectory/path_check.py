@@ -244,7 +244,8 @@ class _Samples:
         self.feasibility, self.waypoints = feasibility, waypoints
         # the waypoints' bindings as the samples hold them (Python strings), made once:
         # each of them ends two segments (20,000 strings made again each time were 3 ms)
-        self.waypoint_binding = None if waypoints is None else np.asarray(waypoints.binding, dtype=object)
+        self.waypoint_binding = (None if waypoints is None
+                                 else np.asarray(waypoints.binding, dtype=object))
         self.seg = np.empty(0, dtype=int)
         self.s = np.empty(0)
         self.margin = np.empty(0)
