@@ -47,9 +47,14 @@ def declared_commands(folder=COMMANDS_DIR) -> dict[str, tuple[int, str]]:
     ``ORDER = <an integer>``) without importing them: a run imports only the module of the
     command it runs (a module imports what its command needs, the planner, plotting, ROS: up
     to seconds), and a new command is its one file."""
+    return _evaluated(_declarations(folder))
+
+
+def _evaluated(declarations):
+    """``_declarations``' entries with each SUMMARY literal evaluated."""
     import ast  # here: 4 ms of a start that only --help needs
     return {name: (order, ast.literal_eval(summary))
-            for name, (order, summary) in _declarations(folder).items()}
+            for name, (order, summary) in declarations.items()}
 
 
 def _declarations(folder=COMMANDS_DIR) -> dict[str, tuple[int, str]]:
@@ -73,15 +78,10 @@ COMMANDS = sorted(_DECLARED, key=lambda n: (_DECLARED[n][0], n))  # in the order
 
 def summaries() -> dict[str, str]:
     """{name: SUMMARY} of COMMANDS: the one-line summaries --help shows, their literals
-    evaluated when asked for (``declared_commands``), not at every start."""
-    declared = declared_commands()
+    evaluated when asked for, not at every start (the files as read at import)."""
+    declared = _evaluated(_DECLARED)
     return {name: declared[name][1] for name in COMMANDS if name in declared}
 
-
-def __getattr__(name):  # cli.SUMMARIES: summaries()
-    if name == 'SUMMARIES':
-        return summaries()
-    raise AttributeError(f'module {__name__!r} has no attribute {name!r}')
 
 EXIT_OK = 0
 EXIT_NO = 1  # no path, infeasible

@@ -137,14 +137,14 @@ def test_requested_command(argv, expected):
 def test_summaries_are_the_commands_own_help():
     sub = next(a for a in cli.build_parser()._actions if a.dest == "command")
     helps = {a.dest: a.help for a in sub._choices_actions}
-    assert helps == {name: cli.SUMMARIES[name] for name in helps}
+    assert helps == {name: cli.summaries()[name] for name in helps}
     assert set(helps) == set(cli.COMMANDS)
 
 
 def test_top_level_help_lists_every_summary(capsys):
     assert cli.main(["--help"]) == 0
     out = " ".join(capsys.readouterr().out.split())
-    for name, summary in cli.SUMMARIES.items():
+    for name, summary in cli.summaries().items():
         assert name in out and " ".join(summary.split()) in out
 
 
